@@ -1,0 +1,6 @@
+"""Side-by-side benchmarks with the peers named in the issues (``make bench``).
+
+Each module ``benchmarks/bench_<area>.py`` defines ``run(quick: bool = False) -> list[Row]``.
+``python -m benchmarks [AREA ...] [--quick]`` runs them, prints one table and writes
+``out/bench/<area>.json``. Timings are medians of repeats after a warm-up, on this machine.
+"""

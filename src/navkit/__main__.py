@@ -1,0 +1,3 @@
+from navkit.cli.main import app
+
+app()

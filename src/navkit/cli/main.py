@@ -1,0 +1,59 @@
+"""The ``navkit`` command.
+
+Each capability contributes a module ``navkit/cli/cmd_<name>.py`` that defines
+``register(app: typer.Typer) -> None`` (adding its sub-command group or commands); modules are
+found automatically, so a capability lands without editing this file.
+"""
+
+from __future__ import annotations
+
+import importlib
+import logging
+import pkgutil
+from typing import Optional
+
+import typer
+
+import navkit.cli
+from navkit import __version__
+from navkit.cli.common import STATE
+
+app = typer.Typer(
+    name="navkit",
+    help="See, map, localize and come home without satellite navigation.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"navkit {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main(
+    version: Optional[bool] = typer.Option(  # noqa: UP045 - typer needs Optional on 3.10
+        None, "--version", callback=_version, is_eager=True, help="Print the version and exit."
+    ),
+    debug: bool = typer.Option(False, "--debug", help="Show tracebacks and debug logging."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars, warnings only."),
+) -> None:
+    """navkit: obstacles, planes, stereo room maps, localization and path memory for robots."""
+    STATE.debug, STATE.quiet = debug, quiet
+    level = logging.DEBUG if debug else (logging.WARNING if quiet else logging.INFO)
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+
+
+def _register_commands() -> None:
+    for info in sorted(pkgutil.iter_modules(navkit.cli.__path__), key=lambda m: m.name):
+        if info.name.startswith("cmd_"):
+            importlib.import_module(f"navkit.cli.{info.name}").register(app)
+
+
+_register_commands()
+
+if __name__ == "__main__":  # pragma: no cover
+    app()

@@ -1,0 +1,44 @@
+"""Shared fixtures: the recorded data (skipped with a reason where absent), seeded RNGs, the CLI."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from navkit import datasets
+from navkit.errors import DataNotFoundError
+
+
+@pytest.fixture
+def rng() -> np.random.Generator:
+    return np.random.default_rng(12345)
+
+
+@pytest.fixture
+def data_path():
+    """``data_path("lidar/semantickitti-seq00/000000.bin")`` -> Path, or skip with the reason."""
+
+    def _find(relative: str) -> Path:
+        try:
+            return datasets.find(relative)
+        except DataNotFoundError as exc:
+            pytest.skip(f"recorded data absent: {exc}")
+
+    return _find
+
+
+@pytest.fixture
+def cli():
+    """Run ``navkit ARGS...`` in-process; returns the click Result (exit_code, stdout, stderr)."""
+    from typer.testing import CliRunner
+
+    from navkit.cli.main import app
+
+    runner = CliRunner()
+
+    def _run(*args: str):
+        return runner.invoke(app, [str(a) for a in args], catch_exceptions=False)
+
+    return _run
