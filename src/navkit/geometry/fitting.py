@@ -120,9 +120,22 @@ def canonical_plane(normal: ArrayLike, rho: float) -> tuple[NDArray[np.float64],
     if not np.isfinite(norm) or norm == 0:
         raise DegenerateGeometryError("plane normal has zero length")
     n, rho = n / norm, float(rho) / norm
-    if rho < 0 or (rho == 0 and n[np.flatnonzero(np.abs(n) > 1e-12)[0]] < 0):
+    return _orient(n, rho)
+
+
+_ZERO_RHO = 1e-12
+"""Distances below this (metres) count as zero: the plane/line passes through the origin."""
+
+
+def _orient(n: NDArray[np.float64], rho: float) -> tuple[NDArray[np.float64], float]:
+    """Flip ``(n, rho)`` so that ``rho >= 0``; through the origin, the first non-zero ``n_i > 0``."""
+    if abs(rho) <= _ZERO_RHO:
+        rho = 0.0
+        if n[np.flatnonzero(np.abs(n) > 1e-12)[0]] < 0:
+            n = -n
+    elif rho < 0:
         n, rho = -n, -rho
-    return n, abs(rho) if rho == 0 else rho
+    return n, rho
 
 
 def _tls(points: NDArray[np.float64], weights: ArrayLike | None) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -182,11 +195,8 @@ def line_from_points_2d(p0: ArrayLike, p1: ArrayLike) -> Line2D:
 
 
 def _canonical_line(normal: NDArray[np.float64], rho: float) -> tuple[NDArray[np.float64], float]:
-    n = normal / np.linalg.norm(normal)
-    rho = rho / np.linalg.norm(normal)
-    if rho < 0 or (rho == 0 and n[np.flatnonzero(np.abs(n) > 1e-12)[0]] < 0):
-        n, rho = -n, -rho
-    return n, abs(rho)
+    norm = np.linalg.norm(normal)
+    return _orient(normal / norm, rho / norm)
 
 
 def intersect_lines_2d(a: Line2D, b: Line2D, min_angle: float = 1e-6) -> NDArray[np.float64]:
