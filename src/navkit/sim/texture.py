@@ -25,7 +25,9 @@ _M2 = np.uint64(0xBF58476D1CE4E5B9)
 _M3 = np.uint64(0x94D049BB133111EB)
 
 
-def hash_uniform(i: NDArray[np.int64], j: NDArray[np.int64], seed: int, salt: int = 0) -> NDArray[np.float64]:
+def hash_uniform(
+    i: NDArray[np.int64], j: NDArray[np.int64], seed: int, salt: int = 0
+) -> NDArray[np.float64]:
     """Uniform floats in ``[0, 1)`` from integer lattice coordinates (splitmix64 finaliser).
 
     Parameters
@@ -36,9 +38,11 @@ def hash_uniform(i: NDArray[np.int64], j: NDArray[np.int64], seed: int, salt: in
         Texture seed and a per-use salt (different salts give independent streams).
     """
     with np.errstate(over="ignore"):
-        h = (np.asarray(i, dtype=np.int64).astype(np.uint64) * _M1
-             ^ np.asarray(j, dtype=np.int64).astype(np.uint64) * _M2
-             ^ np.uint64((seed * 1000003 + salt * 7919) & 0xFFFFFFFFFFFFFFFF) * _M3)
+        h = (
+            np.asarray(i, dtype=np.int64).astype(np.uint64) * _M1
+            ^ np.asarray(j, dtype=np.int64).astype(np.uint64) * _M2
+            ^ np.uint64((seed * 1000003 + salt * 7919) & 0xFFFFFFFFFFFFFFFF) * _M3
+        )
         h ^= h >> np.uint64(30)
         h *= _M2
         h ^= h >> np.uint64(27)
@@ -47,8 +51,9 @@ def hash_uniform(i: NDArray[np.int64], j: NDArray[np.int64], seed: int, salt: in
     return (h >> np.uint64(11)).astype(np.float64) / float(1 << 53)
 
 
-def _value_noise(s: NDArray[np.float64], t: NDArray[np.float64], cell: float, seed: int,
-                 salt: int) -> NDArray[np.float64]:
+def _value_noise(
+    s: NDArray[np.float64], t: NDArray[np.float64], cell: float, seed: int, salt: int
+) -> NDArray[np.float64]:
     """Smooth value noise in ``[0, 1]`` with lattice spacing ``cell`` metres (smoothstep blend)."""
     x, y = s / cell, t / cell
     i0, j0 = np.floor(x), np.floor(y)
@@ -104,12 +109,19 @@ class Texture:
 
     def __post_init__(self) -> None:
         if self.kind not in TEXTURE_KINDS:
-            raise ConfigError(f"unknown texture kind {self.kind!r}", field="kind",
-                              expected=" | ".join(TEXTURE_KINDS))
+            raise ConfigError(
+                f"unknown texture kind {self.kind!r}",
+                field="kind",
+                expected=" | ".join(TEXTURE_KINDS),
+            )
         if not (np.isfinite(self.scale) and self.scale > 0):
-            raise ConfigError(f"is {self.scale}", field="scale", expected="a positive size in metres")
+            raise ConfigError(
+                f"is {self.scale}", field="scale", expected="a positive size in metres"
+            )
         if not (0.0 <= self.variation <= 1.0):
-            raise ConfigError(f"is {self.variation}", field="variation", expected="a float in [0, 1]")
+            raise ConfigError(
+                f"is {self.variation}", field="variation", expected="a float in [0, 1]"
+            )
         object.__setattr__(self, "scale", float(self.scale))
         object.__setattr__(self, "seed", int(self.seed))
         object.__setattr__(self, "color", _as_rgb("color", self.color))
@@ -127,9 +139,11 @@ class Texture:
             parity = (np.floor(s / self.scale) + np.floor(t / self.scale)) % 2 == 1
             return np.where(parity[..., None], c2, c1)
         if k == "noise":
-            v = (0.55 * _value_noise(s, t, self.scale, self.seed, 1)
-                 + 0.30 * _value_noise(s, t, self.scale / 3.1, self.seed, 2)
-                 + 0.15 * _value_noise(s, t, self.scale / 9.7, self.seed, 3))
+            v = (
+                0.55 * _value_noise(s, t, self.scale, self.seed, 1)
+                + 0.30 * _value_noise(s, t, self.scale / 3.1, self.seed, 2)
+                + 0.15 * _value_noise(s, t, self.scale / 9.7, self.seed, 3)
+            )
             return c2 + (c1 - c2) * v[..., None]
         if k == "bricks":
             length, height = self.scale, self.scale / 3.0
@@ -140,8 +154,12 @@ class Texture:
             fs = (s + offset) - col * length
             ft = t - row * height
             joint = (fs < mortar) | (ft < mortar)
-            shade = 1.0 + self.variation * (hash_uniform(col.astype(np.int64), row.astype(np.int64),
-                                                         self.seed) - 0.5) * 2.0
+            shade = (
+                1.0
+                + self.variation
+                * (hash_uniform(col.astype(np.int64), row.astype(np.int64), self.seed) - 0.5)
+                * 2.0
+            )
             fine = 0.9 + 0.2 * _value_noise(s, t, self.scale / 12.0, self.seed, 5)
             brick = np.clip(c1 * (shade * fine)[..., None], 0.0, 1.0)
             return np.where(joint[..., None], c2, brick)
@@ -150,7 +168,11 @@ class Texture:
         i, j = np.floor(s / self.scale), np.floor(t / self.scale)
         fs, ft = s - i * self.scale, t - j * self.scale
         joint = (fs < grout) | (ft < grout)
-        shade = 1.0 + self.variation * (hash_uniform(i.astype(np.int64), j.astype(np.int64),
-                                                     self.seed) - 0.5) * 2.0
+        shade = (
+            1.0
+            + self.variation
+            * (hash_uniform(i.astype(np.int64), j.astype(np.int64), self.seed) - 0.5)
+            * 2.0
+        )
         tile = np.clip(c1 * shade[..., None], 0.0, 1.0)
         return np.where(joint[..., None], c2, tile)
