@@ -16,6 +16,10 @@ $(STAMP): pyproject.toml | $(BIN)/python
 
 $(VENV)/.bench-installed: $(STAMP)
 	$(BIN)/pip install --quiet -e ".[test,dev,bench]"
+	@# Open3D's wheel needs the system's libusb; install it where we can (Debian, root).
+	@if ! ldconfig -p 2>/dev/null | grep -q libusb-1.0 && command -v apt-get >/dev/null && [ "$$(id -u)" = 0 ]; then \
+	  apt-get install -y -qq libusb-1.0-0 >/dev/null 2>&1 || (apt-get update -qq && apt-get install -y -qq libusb-1.0-0) >/dev/null 2>&1 || \
+	  echo "note: libusb-1.0 missing; Open3D comparisons will be skipped"; fi
 	@touch $@
 
 demo: $(STAMP)
