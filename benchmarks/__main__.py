@@ -28,8 +28,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", default="out/bench", help="folder for the JSON results")
     args = parser.parse_args(argv)
 
-    names = sorted(m.name[len("bench_"):] for m in pkgutil.iter_modules(benchmarks.__path__)
-                   if m.name.startswith("bench_"))
+    names = sorted(
+        m.name[len("bench_") :]
+        for m in pkgutil.iter_modules(benchmarks.__path__)
+        if m.name.startswith("bench_")
+    )
     selected = args.areas or names
     unknown = set(selected) - set(names)
     if unknown:
@@ -51,15 +54,25 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
             failed.append(area)
             continue
-        (out / f"{area}.json").write_text(json.dumps([dataclasses.asdict(r) for r in rows], indent=2))
+        (out / f"{area}.json").write_text(
+            json.dumps([dataclasses.asdict(r) for r in rows], indent=2)
+        )
         all_rows.extend(rows)
 
     table = Table(title="navkit benchmarks (this machine)")
     for col in ("area", "benchmark", "unit", "navkit", "peer", "peer value", "ratio", "note"):
         table.add_column(col)
     for r in all_rows:
-        table.add_row(r.area, r.benchmark, r.unit, _fmt(r.navkit), r.peer_name, _fmt(r.peer),
-                      _fmt(r.ratio), r.note)
+        table.add_row(
+            r.area,
+            r.benchmark,
+            r.unit,
+            _fmt(r.navkit),
+            r.peer_name,
+            _fmt(r.peer),
+            _fmt(r.ratio),
+            r.note,
+        )
     console.print(table)
     if failed:
         console.print(f"[red]failed areas: {failed}[/red]")

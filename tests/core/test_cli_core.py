@@ -1,6 +1,7 @@
 """The CLI's shared conventions: --help, --version, error lines and exit codes, run files."""
 
 import json
+
 try:
     import tomllib
 except ModuleNotFoundError:  # Python 3.10

@@ -8,14 +8,25 @@ import pytest
 
 import navkit
 from navkit import datasets
-from navkit.errors import DataNotFoundError, FormatError, InputError, NavkitError, OptionalDependencyError, require_module
+from navkit.errors import (
+    DataNotFoundError,
+    FormatError,
+    InputError,
+    NavkitError,
+    OptionalDependencyError,
+    require_module,
+)
 from navkit.io.atomic import atomic_path, write_json
 
 
 def test_input_error_names_source_field_and_expectation():
-    err = FormatError("truncated", source="a/b.bin", field="points", expected="a multiple of 16 bytes")
+    err = FormatError(
+        "truncated", source="a/b.bin", field="points", expected="a multiple of 16 bytes"
+    )
     assert str(err) == "a/b.bin: field 'points': truncated (expected a multiple of 16 bytes)"
-    assert isinstance(err, InputError) and isinstance(err, NavkitError) and isinstance(err, ValueError)
+    assert (
+        isinstance(err, InputError) and isinstance(err, NavkitError) and isinstance(err, ValueError)
+    )
 
 
 def test_public_api():

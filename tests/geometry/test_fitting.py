@@ -24,7 +24,9 @@ def noisy_plane(rng, normal, rho, n, sigma, extent=5.0):
     u /= np.linalg.norm(u)
     v = np.cross(normal, u)
     ab = rng.uniform(-extent, extent, size=(n, 2))
-    return rho * normal + ab[:, :1] * u + ab[:, 1:] * v + sigma * rng.standard_normal((n, 1)) * normal
+    return (
+        rho * normal + ab[:, :1] * u + ab[:, 1:] * v + sigma * rng.standard_normal((n, 1)) * normal
+    )
 
 
 def test_plane_fit_recovers_parameters_under_noise(rng):
@@ -86,7 +88,9 @@ def test_line_fit_vertical_line_and_noise(rng):
     y = rng.uniform(-4, 4, n)
     P = np.c_[3.0 + sigma * rng.standard_normal(n), y]  # the line x = 3, where y = kx + b fails
     line = fit_line_2d(P)
-    np.testing.assert_allclose(np.abs(line.normal), [1, 0], atol=6 * sigma / (np.sqrt(n) * 8 / np.sqrt(12)))
+    np.testing.assert_allclose(
+        np.abs(line.normal), [1, 0], atol=6 * sigma / (np.sqrt(n) * 8 / np.sqrt(12))
+    )
     assert line.rho == pytest.approx(3.0, abs=6 * sigma / np.sqrt(n) + 0.01)
     assert abs(abs(line.angle) - np.pi / 2) < 0.01
     assert line.rms == pytest.approx(sigma, rel=0.15)

@@ -38,7 +38,11 @@ def test_points_in_polygon_matches_ray_crossing(rng):
     # an L-shaped (non-convex) polygon
     L = np.array([[0, 0], [3, 0], [3, 1], [1, 1], [1, 3], [0, 3.0]])
     pts = rng.uniform(-0.5, 3.5, size=(2000, 2))
-    inside = (pts[:, 0] > 0) & (pts[:, 1] > 0) & (((pts[:, 0] < 3) & (pts[:, 1] < 1)) | ((pts[:, 0] < 1) & (pts[:, 1] < 3)))
+    inside = (
+        (pts[:, 0] > 0)
+        & (pts[:, 1] > 0)
+        & (((pts[:, 0] < 3) & (pts[:, 1] < 1)) | ((pts[:, 0] < 1) & (pts[:, 1] < 3)))
+    )
     np.testing.assert_array_equal(points_in_polygon(pts, L), inside)
 
 

@@ -56,7 +56,9 @@ def test_batched_inverse_and_quat_round_trip(rng):
     t = rng.normal(size=(20, 3))
     T = se3_from_xyz_quat(t, q)
     assert T.shape == (20, 4, 4)
-    np.testing.assert_allclose(T @ se3_inverse(T), np.broadcast_to(np.eye(4), (20, 4, 4)), atol=1e-12)
+    np.testing.assert_allclose(
+        T @ se3_inverse(T), np.broadcast_to(np.eye(4), (20, 4, 4)), atol=1e-12
+    )
     t2, q2 = se3_to_xyz_quat(T)
     np.testing.assert_allclose(t2, t, atol=1e-12)
     # q and -q are the same rotation; the function returns w >= 0
@@ -72,7 +74,9 @@ def test_se2_round_trip_and_compose(x1, y1, a1, x2, y2, a2):
     np.testing.assert_allclose(xyt[:2], [x1, y1])
     assert abs(wrap_angle(xyt[2] - a1)) < 1e-9
     p = np.array([[1.0, 2.0]])
-    np.testing.assert_allclose(se2_apply(se2_compose(A, B), p), se2_apply(A, se2_apply(B, p)), atol=1e-8)
+    np.testing.assert_allclose(
+        se2_apply(se2_compose(A, B), p), se2_apply(A, se2_apply(B, p)), atol=1e-8
+    )
 
 
 def test_se2_is_the_planar_part_of_se3():

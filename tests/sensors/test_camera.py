@@ -57,7 +57,9 @@ def test_rgbd_frame_validates_and_marks_invalid_depth(cam):
     with pytest.raises(InputError, match="depth"):
         RGBDFrame(color, np.ones((10, 10)), cam)
     with pytest.raises(InputError, match="right"):
-        StereoPair(np.zeros((480, 640), np.uint8), np.zeros((480, 639), np.uint8), StereoRig(cam, 0.1))
+        StereoPair(
+            np.zeros((480, 640), np.uint8), np.zeros((480, 639), np.uint8), StereoRig(cam, 0.1)
+        )
     with pytest.raises(InputError, match="baseline"):
         StereoRig(cam, 0.0)
     with pytest.raises(InputError, match="fx"):

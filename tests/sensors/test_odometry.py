@@ -29,7 +29,9 @@ def test_zero_noise_reproduces_truth(rng):
 
 def test_scale_bias_scales_a_straight_line(rng):
     truth = np.c_[np.linspace(0, 10, 101), np.zeros(101), np.zeros(101)]
-    out = VisualOdometryNoise(scale_bias=0.05, scale_sigma=0.0, heading_sigma=0.0).corrupt(truth, rng)
+    out = VisualOdometryNoise(scale_bias=0.05, scale_sigma=0.0, heading_sigma=0.0).corrupt(
+        truth, rng
+    )
     assert out[-1, 0] == pytest.approx(10.5)
 
 

@@ -32,7 +32,9 @@ def test_tilted_mount_rotates_rays():
     R = Rotation.from_euler("y", 10, degrees=True).as_matrix()  # pitched down by 10 deg
     scan = RangeScan(np.array([[5.0]]), [0.0], [0.0], sensor_height=2.0, R_body_sensor=R)
     p = scan.points()[0, 0]
-    np.testing.assert_allclose(p, [5 * np.cos(np.radians(10)), 0, 2 - 5 * np.sin(np.radians(10))], atol=1e-12)
+    np.testing.assert_allclose(
+        p, [5 * np.cos(np.radians(10)), 0, 2 - 5 * np.sin(np.radians(10))], atol=1e-12
+    )
     np.testing.assert_allclose(scan.T_body_sensor[:3, 3], [0, 0, 2.0])
 
 

@@ -21,7 +21,9 @@ def _report() -> Report:
     ax.set_aspect("equal")
     r = Report("Test <report>", subtitle="made by the tests")
     r.section("A figure").add_figure(fig, caption="a red disc")
-    r.section("Figures").add_table("numbers", [("error", 0.123456), ("count", 3)], header=("what", "value"))
+    r.section("Figures").add_table(
+        "numbers", [("error", 0.123456), ("count", 3)], header=("what", "value")
+    )
     return r
 
 

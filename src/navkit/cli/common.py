@@ -61,10 +61,19 @@ def cli_errors() -> Iterator[None]:
         raise typer.Exit(code=2) from None
 
 
-def progress(items: Sequence[T] | Iterable[T], description: str, total: int | None = None) -> Iterator[T]:
+def progress(
+    items: Sequence[T] | Iterable[T], description: str, total: int | None = None
+) -> Iterator[T]:
     """Iterate with a rich progress bar on stderr (silent when stderr is not a terminal)."""
     from rich.console import Console
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        MofNCompleteColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
 
     if total is None and hasattr(items, "__len__"):
         total = len(items)  # type: ignore[arg-type]
@@ -106,12 +115,18 @@ def expand_inputs(inputs: Sequence[str], suffixes: Sequence[str]) -> list[Path]:
         else:
             matches = sorted(Path(m) for m in glob.glob(item) if Path(m).is_file())
             if not matches:
-                raise InputError("no such file, folder or matching glob", source=item,
-                                 expected=f"files ending in {', '.join(suffixes)}")
+                raise InputError(
+                    "no such file, folder or matching glob",
+                    source=item,
+                    expected=f"files ending in {', '.join(suffixes)}",
+                )
             found.extend(matches)
     if not found:
-        raise InputError("no input files found", source=", ".join(inputs),
-                         expected=f"files ending in {', '.join(suffixes)}")
+        raise InputError(
+            "no input files found",
+            source=", ".join(inputs),
+            expected=f"files ending in {', '.join(suffixes)}",
+        )
     return found
 
 
@@ -138,4 +153,6 @@ def write_run_files(out: Path, settings: Any, summary: dict[str, Any]) -> None:
 
     out.mkdir(parents=True, exist_ok=True)
     write_text(out / "settings.toml", settings_to_toml(settings))
-    write_json(out / "summary.json", {"navkit_version": __version__, "argv": sys.argv[1:], **summary})
+    write_json(
+        out / "summary.json", {"navkit_version": __version__, "argv": sys.argv[1:], **summary}
+    )

@@ -119,8 +119,7 @@ def canonical_plane(normal: ArrayLike, rho: float) -> tuple[NDArray[np.float64],
     norm = np.linalg.norm(n)
     if not np.isfinite(norm) or norm == 0:
         raise DegenerateGeometryError("plane normal has zero length")
-    n, rho = n / norm, float(rho) / norm
-    return _orient(n, rho)
+    return _orient(n / norm, float(rho) / float(norm))
 
 
 _ZERO_RHO = 1e-12
@@ -138,15 +137,20 @@ def _orient(n: NDArray[np.float64], rho: float) -> tuple[NDArray[np.float64], fl
     return n, rho
 
 
-def _tls(points: NDArray[np.float64], weights: ArrayLike | None) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def _tls(
+    points: NDArray[np.float64], weights: ArrayLike | None
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Weighted centroid, singular values and right singular vectors of the centred points."""
     if weights is None:
         w = np.ones(len(points))
     else:
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (len(points),) or np.any(w < 0) or not np.any(w > 0):
-            raise InputError("weights must be non-negative, one per point, not all zero",
-                             field="weights", expected=f"({len(points)},) array")
+            raise InputError(
+                "weights must be non-negative, one per point, not all zero",
+                field="weights",
+                expected=f"({len(points)},) array",
+            )
     finite = np.all(np.isfinite(points), axis=1) & (w > 0)
     P, w = points[finite], w[finite]
     if len(P) == 0:
@@ -169,7 +173,9 @@ def fit_plane(points: ArrayLike, weights: ArrayLike | None = None) -> Plane:
     if s.shape[0] < 3 or s[1] <= 1e-9 * max(s[0], 1e-300):
         raise DegenerateGeometryError("points are collinear: no unique plane")
     n, rho = canonical_plane(Vt[2], float(Vt[2] @ c))
-    return Plane(normal=n, rho=rho, centroid=c, rms=float(s[2]), count=int(np.isfinite(P).all(1).sum()))
+    return Plane(
+        normal=n, rho=rho, centroid=c, rms=float(s[2]), count=int(np.isfinite(P).all(1).sum())
+    )
 
 
 def plane_from_points(p0: ArrayLike, p1: ArrayLike, p2: ArrayLike) -> Plane:
@@ -185,8 +191,13 @@ def fit_line_2d(points: ArrayLike, weights: ArrayLike | None = None) -> Line2D:
     if s[0] <= 1e-12:
         raise DegenerateGeometryError("all points coincide: no unique line")
     n, rho = _canonical_line(Vt[-1], float(Vt[-1] @ c))
-    return Line2D(normal=n, rho=rho, centroid=c, rms=float(s[-1]) if len(s) > 1 else 0.0,
-                  count=int(np.isfinite(P).all(1).sum()))
+    return Line2D(
+        normal=n,
+        rho=rho,
+        centroid=c,
+        rms=float(s[-1]) if len(s) > 1 else 0.0,
+        count=int(np.isfinite(P).all(1).sum()),
+    )
 
 
 def line_from_points_2d(p0: ArrayLike, p1: ArrayLike) -> Line2D:
@@ -195,7 +206,7 @@ def line_from_points_2d(p0: ArrayLike, p1: ArrayLike) -> Line2D:
 
 
 def _canonical_line(normal: NDArray[np.float64], rho: float) -> tuple[NDArray[np.float64], float]:
-    norm = np.linalg.norm(normal)
+    norm = float(np.linalg.norm(normal))
     return _orient(normal / norm, rho / norm)
 
 
@@ -207,7 +218,9 @@ def intersect_lines_2d(a: Line2D, b: Line2D, min_angle: float = 1e-6) -> NDArray
     return np.linalg.solve(A, np.array([a.rho, b.rho]))
 
 
-def intersect_planes(*planes: Plane, min_angle: float = 1e-6) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.float64]]:
+def intersect_planes(
+    *planes: Plane, min_angle: float = 1e-6
+) -> NDArray[np.float64] | tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Intersection of two planes (a line: ``(point (3,), unit direction (3,))``, the point nearest
     the origin) or of three planes (a point ``(3,)``).
 

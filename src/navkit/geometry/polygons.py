@@ -57,7 +57,9 @@ def ensure_ccw(polygon: ArrayLike) -> NDArray[np.float64]:
     return P[::-1].copy() if signed_area(P) < 0 else P.copy()
 
 
-def points_in_polygon(points: ArrayLike, polygon: ArrayLike, tolerance: float = 0.0) -> NDArray[np.bool_]:
+def points_in_polygon(
+    points: ArrayLike, polygon: ArrayLike, tolerance: float = 0.0
+) -> NDArray[np.bool_]:
     """Which points ``(N, 2)`` lie inside (or within ``tolerance`` m of) a simple polygon."""
     P = as_points(points, 2)
     poly = ensure_ccw(as_points(polygon, 2, min_count=3))

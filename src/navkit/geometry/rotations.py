@@ -29,8 +29,8 @@ __all__ = [
     "quat_multiply",
     "quat_rotate",
     "quat_to_matrix",
-    "rotation_between",
     "rotation_angle",
+    "rotation_between",
 ]
 
 EULER_ORDER_PAPER = "ZXY"
@@ -52,7 +52,9 @@ def matrix_to_quat(R: ArrayLike) -> NDArray[np.float64]:
 
 def euler_zxy_to_matrix(phi: ArrayLike, psi: ArrayLike, theta: ArrayLike) -> NDArray[np.float64]:
     """``A_Z(phi) A_X(psi) A_Y(theta)`` (radians), batched over broadcast inputs."""
-    angles = np.stack(np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (phi, psi, theta))), -1)
+    angles = np.stack(
+        np.broadcast_arrays(*(np.asarray(a, dtype=np.float64) for a in (phi, psi, theta))), -1
+    )
     R = Rotation.from_euler(EULER_ORDER_PAPER, angles.reshape(-1, 3)).as_matrix()
     return R.reshape((*angles.shape[:-1], 3, 3))
 
@@ -108,21 +110,21 @@ def rotation_between(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
     This is paper 2's ``q1``: axis ``a x b``, angle ``arccos(a.b / |a||b|)``. Antiparallel inputs
     turn by pi about any axis perpendicular to ``a``.
     """
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    na, nb = np.linalg.norm(a), np.linalg.norm(b)
+    va = np.asarray(a, dtype=np.float64)
+    vb = np.asarray(b, dtype=np.float64)
+    na, nb = np.linalg.norm(va), np.linalg.norm(vb)
     if na == 0 or nb == 0:
         raise DegenerateGeometryError("cannot turn a zero-length vector")
-    a, b = a / na, b / nb
-    axis = np.cross(a, b)
+    va, vb = va / na, vb / nb
+    axis = np.cross(va, vb)
     s = np.linalg.norm(axis)
-    c = float(np.clip(a @ b, -1.0, 1.0))
+    c = float(np.clip(va @ vb, -1.0, 1.0))
     if s < 1e-12:
         if c > 0:
             return np.array([0.0, 0.0, 0.0, 1.0])
-        perp = np.cross(a, [1.0, 0.0, 0.0])
+        perp = np.cross(va, np.array([1.0, 0.0, 0.0]))
         if np.linalg.norm(perp) < 1e-6:
-            perp = np.cross(a, [0.0, 1.0, 0.0])
+            perp = np.cross(va, np.array([0.0, 1.0, 0.0]))
         return quat_from_axis_angle(perp, np.pi)
     return quat_from_axis_angle(axis, np.arctan2(s, c))
 

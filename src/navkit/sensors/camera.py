@@ -41,10 +41,14 @@ class PinholeCamera:
         for name in ("fx", "fy"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
-                raise InputError(f"is {v}", field=name, expected="a positive focal length in pixels")
+                raise InputError(
+                    f"is {v}", field=name, expected="a positive focal length in pixels"
+                )
         for name in ("width", "height"):
             if int(getattr(self, name)) <= 0:
-                raise InputError(f"is {getattr(self, name)}", field=name, expected="a positive pixel count")
+                raise InputError(
+                    f"is {getattr(self, name)}", field=name, expected="a positive pixel count"
+                )
 
     @classmethod
     def from_fov(cls, width: int, height: int, hfov_deg: float) -> PinholeCamera:
@@ -60,14 +64,19 @@ class PinholeCamera:
     def pixel_rays(self) -> NDArray[np.float64]:
         """``(H, W, 3)`` ray directions with ``z = 1`` (multiply by depth to get points)."""
         u, v = np.meshgrid(np.arange(self.width), np.arange(self.height))
-        return np.stack([(u - self.cx) / self.fx, (v - self.cy) / self.fy, np.ones(u.shape)], axis=-1)
+        return np.stack(
+            [(u - self.cx) / self.fx, (v - self.cy) / self.fy, np.ones(u.shape)], axis=-1
+        )
 
     def backproject(self, depth: ArrayLike) -> NDArray[np.float64]:
         """Points ``(H, W, 3)`` in the camera frame from a depth image (metres along z; NaN kept)."""
         d = np.asarray(depth, dtype=np.float64)
         if d.shape != (self.height, self.width):
-            raise InputError(f"has shape {d.shape}", field="depth",
-                             expected=f"({self.height}, {self.width}) image")
+            raise InputError(
+                f"has shape {d.shape}",
+                field="depth",
+                expected=f"({self.height}, {self.width}) image",
+            )
         return self.pixel_rays() * d[..., None]
 
     def project(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -78,7 +87,9 @@ class PinholeCamera:
         P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         z = P[:, 2]
         with np.errstate(divide="ignore", invalid="ignore"):
-            uv = np.stack([self.fx * P[:, 0] / z + self.cx, self.fy * P[:, 1] / z + self.cy], axis=1)
+            uv = np.stack(
+                [self.fx * P[:, 0] / z + self.cx, self.fy * P[:, 1] / z + self.cy], axis=1
+            )
         uv[z <= 0] = np.nan
         return uv, z
 
@@ -175,8 +186,14 @@ class StereoPair:
     def __post_init__(self) -> None:
         left, right = np.asarray(self.left), np.asarray(self.right)
         if left.shape != right.shape:
-            raise InputError(f"left {left.shape} and right {right.shape} differ", field="right",
-                             expected="images of the same shape")
+            raise InputError(
+                f"left {left.shape} and right {right.shape} differ",
+                field="right",
+                expected="images of the same shape",
+            )
         if left.shape[:2] != (self.rig.camera.height, self.rig.camera.width):
-            raise InputError(f"has shape {left.shape}", field="left",
-                             expected=f"({self.rig.camera.height}, {self.rig.camera.width}) image")
+            raise InputError(
+                f"has shape {left.shape}",
+                field="left",
+                expected=f"({self.rig.camera.height}, {self.rig.camera.width}) image",
+            )

@@ -51,7 +51,9 @@ class VisualOdometryNoise:
             if getattr(self, name) < 0:
                 raise InputError(f"is {getattr(self, name)}", field=name, expected=">= 0")
 
-    def corrupt(self, poses_xytheta: ArrayLike, rng: np.random.Generator | None = None) -> NDArray[np.float64]:
+    def corrupt(
+        self, poses_xytheta: ArrayLike, rng: np.random.Generator | None = None
+    ) -> NDArray[np.float64]:
         """Noisy VO poses ``(N, 3)`` from true poses ``(N, 3)`` sampled at the VO rate.
 
         The first pose is kept exactly (VO is relative: it starts where the robot starts).
@@ -59,13 +61,19 @@ class VisualOdometryNoise:
         rng = np.random.default_rng() if rng is None else rng
         P = np.asarray(poses_xytheta, dtype=np.float64)
         if P.ndim != 2 or P.shape[1] != 3 or len(P) == 0:
-            raise InputError(f"has shape {P.shape}", field="poses_xytheta", expected="(N, 3) rows x, y, theta")
+            raise InputError(
+                f"has shape {P.shape}", field="poses_xytheta", expected="(N, 3) rows x, y, theta"
+            )
         T = se2_from_xytheta(P[:, 0], P[:, 1], P[:, 2])
         steps = se2_to_xytheta(se2_inverse(T[:-1]) @ T[1:])  # body-frame increments
         n = len(steps)
         dist = np.hypot(steps[:, 0], steps[:, 1])
         scale = 1.0 + self.scale_bias + self.scale_sigma * rng.standard_normal(n)
-        dtheta = steps[:, 2] + self.heading_bias_per_m * dist + self.heading_sigma * rng.standard_normal(n)
+        dtheta = (
+            steps[:, 2]
+            + self.heading_bias_per_m * dist
+            + self.heading_sigma * rng.standard_normal(n)
+        )
         noisy = se2_from_xytheta(steps[:, 0] * scale, steps[:, 1] * scale, dtheta)
         out = np.empty_like(T)
         out[0] = T[0]

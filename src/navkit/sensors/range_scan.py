@@ -70,27 +70,39 @@ class RangeScan:
             try:
                 a = np.asarray(value, dtype=np.float64)
             except (TypeError, ValueError) as exc:
-                raise InputError(f"is not numeric: {exc}", field=name, expected="float array") from exc
+                raise InputError(
+                    f"is not numeric: {exc}", field=name, expected="float array"
+                ) from exc
             if a.ndim != ndim:
-                raise InputError(f"has {a.ndim} dimensions (shape {a.shape})", field=name,
-                                 expected=f"a {ndim}-D array")
+                raise InputError(
+                    f"has {a.ndim} dimensions (shape {a.shape})",
+                    field=name,
+                    expected=f"a {ndim}-D array",
+                )
             return a
 
         ranges = arr("ranges", self.ranges, 2)
         az = arr("azimuth", self.azimuth, 1)
         el = arr("elevation", self.elevation, 1)
         if ranges.shape != (az.size, el.size):
-            raise InputError(f"has shape {ranges.shape}", field="ranges",
-                             expected=f"shape (n_azimuth, n_elevation) = ({az.size}, {el.size})")
+            raise InputError(
+                f"has shape {ranges.shape}",
+                field="ranges",
+                expected=f"shape (n_azimuth, n_elevation) = ({az.size}, {el.size})",
+            )
         if ranges.size == 0:
             raise InputError("is empty", field="ranges", expected="at least one range")
         if not (np.all(np.isfinite(az)) and np.all(np.isfinite(el))):
-            raise InputError("contains NaN or inf", field="azimuth/elevation", expected="finite angles")
+            raise InputError(
+                "contains NaN or inf", field="azimuth/elevation", expected="finite angles"
+            )
         if np.any(np.abs(el) > np.pi / 2 + 1e-9):
             raise InputError("outside [-pi/2, pi/2]", field="elevation", expected="radians")
         R = arr("R_body_sensor", self.R_body_sensor, 2)
         if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6):
-            raise InputError("is not a rotation matrix", field="R_body_sensor", expected="(3, 3) orthonormal")
+            raise InputError(
+                "is not a rotation matrix", field="R_body_sensor", expected="(3, 3) orthonormal"
+            )
         if not np.isfinite(self.sensor_height):
             raise InputError("is not finite", field="sensor_height", expected="metres")
         ranges = ranges.copy()

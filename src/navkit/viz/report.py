@@ -95,8 +95,12 @@ class Report:
         )
         return self
 
-    def add_table(self, caption: str, rows: list[tuple[Any, ...]] | list[list[Any]],
-                  header: tuple[str, ...] | None = None) -> Report:
+    def add_table(
+        self,
+        caption: str,
+        rows: list[tuple[Any, ...]] | list[list[Any]],
+        header: tuple[str, ...] | None = None,
+    ) -> Report:
         """A table; numbers are right-aligned and shown with 4 significant digits."""
 
         def cell(v: Any, tag: str = "td") -> str:
@@ -120,8 +124,8 @@ class Report:
             sections.append(f"<section>{title}{''.join(s.parts)}</section>")
         subtitle = f'<p class="subtitle">{html.escape(self.subtitle)}</p>' if self.subtitle else ""
         return (
-            "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">"
+            '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+            f'<meta name="viewport" content="width=device-width, initial-scale=1">'
             f"<title>{html.escape(self.title)}</title><style>{_STYLE}</style>"
             '<link rel="icon" href="data:,"></head>'
             f"<body><h1>{html.escape(self.title)}</h1>{subtitle}{''.join(sections)}</body></html>\n"
