@@ -86,8 +86,8 @@ class Texture:
     kind : {"bricks", "tiles", "noise", "checker", "solid"}
         ``bricks``: running-bond courses of ``scale`` x ``scale/3`` bricks with mortar joints
         (each brick's shade drawn from the seed); ``tiles``: square tiles of side ``scale`` with
-        grout lines, shade per tile; ``noise``: three octaves of value noise, coarsest cell
-        ``scale``; ``checker``: squares of side ``scale`` alternating ``color`` / ``color2``;
+        grout lines, shade per tile; ``noise``: five octaves of value noise, coarsest cell
+        ``scale``, finest ``scale / 81``; ``checker``: squares of side ``scale`` alternating ``color`` / ``color2``;
         ``solid``: ``color`` everywhere.
     scale : float
         Size of the pattern's unit, metres (brick length, tile side, noise cell, checker square).
@@ -139,11 +139,12 @@ class Texture:
             parity = (np.floor(s / self.scale) + np.floor(t / self.scale)) % 2 == 1
             return np.where(parity[..., None], c2, c1)
         if k == "noise":
-            v = (
-                0.55 * _value_noise(s, t, self.scale, self.seed, 1)
-                + 0.30 * _value_noise(s, t, self.scale / 3.1, self.seed, 2)
-                + 0.15 * _value_noise(s, t, self.scale / 9.7, self.seed, 3)
-            )
+            # five octaves, cell scale / 3^i, amplitude 0.75^i (normalised): detail down to
+            # scale / 81, so close-up views (stereo on the ground) still see texture
+            v = np.zeros(s.shape)
+            for i in range(5):
+                v += 0.75**i * _value_noise(s, t, self.scale / 3.0**i, self.seed, 1 + i)
+            v /= sum(0.75**i for i in range(5))
             return c2 + (c1 - c2) * v[..., None]
         if k == "bricks":
             length, height = self.scale, self.scale / 3.0
@@ -165,13 +166,13 @@ class Texture:
             return np.where(joint[..., None], c2, brick)
         # tiles
         grout = 0.05 * self.scale
-        i, j = np.floor(s / self.scale), np.floor(t / self.scale)
-        fs, ft = s - i * self.scale, t - j * self.scale
+        ti, tj = np.floor(s / self.scale), np.floor(t / self.scale)
+        fs, ft = s - ti * self.scale, t - tj * self.scale
         joint = (fs < grout) | (ft < grout)
         shade = (
             1.0
             + self.variation
-            * (hash_uniform(i.astype(np.int64), j.astype(np.int64), self.seed) - 0.5)
+            * (hash_uniform(ti.astype(np.int64), tj.astype(np.int64), self.seed) - 0.5)
             * 2.0
         )
         tile = np.clip(c1 * shade[..., None], 0.0, 1.0)
