@@ -13,6 +13,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from navkit.geometry._validate import as_matrices, as_points
+from navkit.geometry.linalg import rows_matmul
 
 __all__ = [
     "se2_apply",
@@ -75,7 +76,7 @@ def se3_apply(T: ArrayLike, points: ArrayLike) -> NDArray[np.float64]:
     """Apply one transform ``(4, 4)`` to points ``(N, 3)``: ``points @ R.T + t``."""
     T = as_matrices(T, 4)
     P = as_points(points, 3)
-    return P @ T[:3, :3].T + T[:3, 3]
+    return rows_matmul(P, T[:3, :3].T) + T[:3, 3]
 
 
 def se3_from_xyz_quat(xyz: ArrayLike, quat_xyzw: ArrayLike) -> NDArray[np.float64]:

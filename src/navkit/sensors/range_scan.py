@@ -20,6 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
 from navkit.geometry import se3_from_rt
+from navkit.geometry.linalg import rows_matmul
 
 __all__ = ["RangeScan", "grid_directions"]
 
@@ -134,7 +135,7 @@ class RangeScan:
         if frame == "sensor":
             return d
         if frame == "body":
-            return d @ self.R_body_sensor.T
+            return rows_matmul(d, self.R_body_sensor.T)
         raise InputError(f"unknown frame {frame!r}", field="frame", expected="'sensor' or 'body'")
 
     def points(self, frame: str = "body") -> NDArray[np.float64]:

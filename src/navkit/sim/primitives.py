@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from navkit.errors import ConfigError
-from navkit.sim._linalg import rows_dot, rows_matmul, rows_norm
+from navkit.geometry.linalg import rows_dot, rows_matmul, rows_norm
 from navkit.sim.texture import Texture
 
 __all__ = [

@@ -18,7 +18,7 @@ from navkit.sensors import (
     StereoRig,
     grid_directions,
 )
-from navkit.sim._linalg import rows_dot, rows_matmul, rows_norm
+from navkit.geometry.linalg import rows_dot, rows_matmul, rows_norm
 from navkit.sim.scanners import RangeNoise, SpinningLidar, TiltingScanner
 from navkit.sim.scene import RayHits, Scene
 

@@ -12,7 +12,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
 from navkit.geometry import Plane, canonical_plane
-from navkit.sim._linalg import rows_dot, rows_norm
+from navkit.geometry.linalg import rows_dot, rows_norm
 from navkit.sim.primitives import Ground, Primitive
 
 __all__ = ["RayHits", "Scene"]

@@ -11,12 +11,14 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+__all__ = ["rows_dot", "rows_matmul", "rows_norm"]
+
 FloatArray = NDArray[np.float64]
 
 
 def rows_matmul(A: FloatArray, M: FloatArray) -> FloatArray:
-    """``A @ M`` for ``A`` of shape ``(N, 3)`` and ``M`` of shape ``(3, k)``."""
-    return A[:, 0:1] * M[0] + A[:, 1:2] * M[1] + A[:, 2:3] * M[2]
+    """``A @ M`` for ``A`` of shape ``(..., 3)`` and ``M`` of shape ``(3, k)``."""
+    return A[..., 0:1] * M[0] + A[..., 1:2] * M[1] + A[..., 2:3] * M[2]
 
 
 def rows_dot(A: FloatArray, v: FloatArray) -> FloatArray:
