@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -65,6 +66,12 @@ class SegmentationSettings:
         Upper bound on RANSAC rounds (walls extracted from one cloud).
     seed : int
         Seed of RANSAC's generator (results are reproducible).
+    absorb_factor : float
+        RANSAC: after a wall is accepted, the points within ``absorb_factor * split_distance``
+        of it (inside its extent) are removed with its inliers (its noise tail).
+    min_fraction : float
+        RANSAC: a wall also needs at least this fraction of the cloud's points (0 = off);
+        suppresses ghost walls made of stereo outliers in large clouds (default 3 %).
     """
 
     split_distance: float = 0.05
@@ -76,6 +83,8 @@ class SegmentationSettings:
     ransac_iterations: int = 256
     max_walls: int = 64
     seed: int = 0
+    absorb_factor: float = 3.0
+    min_fraction: float = 0.03
 
     def __post_init__(self) -> None:
         for name in ("split_distance", "gap", "min_length", "merge_rms"):
@@ -234,7 +243,7 @@ def _runs(points: NDArray[np.float64], settings: SegmentationSettings) -> list[t
     limit = settings.gap + settings.gap_per_metre * np.maximum(reach[:-1], reach[1:])
     cuts = np.flatnonzero(step > limit) + 1
     bounds = np.concatenate([[0], cuts, [len(points)]])
-    return [(int(i), int(j)) for i, j in zip(bounds[:-1], bounds[1:]) if j - i >= 2]
+    return [(int(i), int(j)) for i, j in pairwise(bounds) if j - i >= 2]
 
 
 def _chord_distances(P: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -247,7 +256,9 @@ def _chord_distances(P: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.abs((P - a) @ np.array([-d[1], d[0]])) / n
 
 
-def split_and_merge(points: ArrayLike, settings: SegmentationSettings | None = None) -> list[WallSegment]:
+def split_and_merge(
+    points: ArrayLike, settings: SegmentationSettings | None = None, *, closed: bool = False
+) -> list[WallSegment]:
     """Wall segments of points given in scan order (a laser scan, a floor profile).
 
     Stages (Nguyen et al. 2005, "split-and-merge"): cut the sequence at gaps; split each run
@@ -261,6 +272,9 @@ def split_and_merge(points: ArrayLike, settings: SegmentationSettings | None = N
         Points in scan order, metres, in the sensor frame (gaps scale with the distance from the
         origin); rows with NaN (no return) are dropped.
     settings : SegmentationSettings, optional
+    closed : bool
+        The scan is a full turn (the last point neighbours the first): a wall cut by the wrap
+        is joined again.
 
     Returns
     -------
@@ -291,7 +305,7 @@ def split_and_merge(points: ArrayLike, settings: SegmentationSettings | None = N
     # Stage 3: merge neighbours that are one line (joint TLS rms small, touching indices).
     merged: list[tuple[int, int]] = []
     for piece in pieces:
-        if merged and merged[-1][1] >= piece[0]:
+        if merged and merged[-1][1] > piece[0]:  # split pieces share their split point
             i0 = merged[-1][0]
             Q = P[i0 : piece[1]]
             c = Q.mean(axis=0)
@@ -300,6 +314,20 @@ def split_and_merge(points: ArrayLike, settings: SegmentationSettings | None = N
                 merged[-1] = (i0, piece[1])
                 continue
         merged.append(piece)
+    # A full turn: the first and last pieces may be one wall cut by the wrap.
+    if (
+        closed
+        and len(merged) > 1
+        and np.linalg.norm(P[-1] - P[0]) <= s.gap + s.gap_per_metre * np.linalg.norm(P[0])
+    ):
+        Q = np.concatenate([P[merged[-1][0] : merged[-1][1]], P[merged[0][0] : merged[0][1]]])
+        c = Q.mean(axis=0)
+        rms = float(np.sqrt(max(np.linalg.eigvalsh((Q - c).T @ (Q - c))[0], 0.0) / len(Q)))
+        if rms < s.merge_rms and _chord_distances(Q).max() <= 2.0 * s.split_distance:
+            last = merged.pop()
+            P = np.concatenate([P[last[0] :], P])  # the wrapped run becomes indices 0 .. n
+            shift = len(P) - (len(P) - (last[1] - last[0]))
+            merged = [(0, merged[0][1] + shift)] + [(i + shift, j + shift) for i, j in merged[1:]]
     # Stage 4: TLS fit, extent, uncertainty; drop short or thin pieces.
     out = []
     for i, j in merged:
@@ -311,7 +339,9 @@ def split_and_merge(points: ArrayLike, settings: SegmentationSettings | None = N
     return out
 
 
-def ransac_walls(points: ArrayLike, settings: SegmentationSettings | None = None) -> list[WallSegment]:
+def ransac_walls(
+    points: ArrayLike, settings: SegmentationSettings | None = None
+) -> list[WallSegment]:
     """Wall segments of an unordered 2D cloud by sequential RANSAC.
 
     Each round draws ``ransac_iterations`` two-point line hypotheses at once, keeps the one with
@@ -335,10 +365,11 @@ def ransac_walls(points: ArrayLike, settings: SegmentationSettings | None = None
     P = as_points(points, 2)
     P = P[np.all(np.isfinite(P), axis=1)]
     rng = np.random.default_rng(s.seed)
+    min_count = max(s.min_points, int(np.ceil(s.min_fraction * len(P))))
     segments: list[WallSegment] = []
     remaining = P
     for _ in range(s.max_walls):
-        if len(remaining) < s.min_points:
+        if len(remaining) < min_count:
             break
         # Hypotheses from pairs of points (vectorised over hypotheses and points; subsample the
         # scoring set for very large clouds - the winner is re-scored on all points).
@@ -357,7 +388,7 @@ def ransac_walls(points: ArrayLike, settings: SegmentationSettings | None = None
         dist = np.abs(np.einsum("hnk,hk->hn", score_set[None, :, :] - a[:, None, :], normals))
         best = int(np.argmax((dist < s.split_distance).sum(axis=1)))
         inl = np.abs((remaining - a[best]) @ normals[best]) < s.split_distance
-        if inl.sum() < s.min_points:
+        if inl.sum() < min_count:
             break
         # TLS refit, then inliers of the refined line.
         line = segment_from_points(remaining[inl])
@@ -369,12 +400,21 @@ def ransac_walls(points: ArrayLike, settings: SegmentationSettings | None = None
         cuts = np.flatnonzero(np.diff(t) > s.gap) + 1
         used = np.zeros(len(remaining), dtype=bool)
         for run in np.split(Q_idx, cuts):
-            if len(run) < s.min_points:
+            if len(run) < min_count:
                 continue
             seg = segment_from_points(remaining[run])
             if seg.length >= s.min_length:
                 segments.append(seg)
                 used[run] = True
+                # absorb the noise tail of this wall (points a little beyond the inlier band,
+                # within its extent) so it does not seed slanted ghost walls in later rounds
+                t_all = (remaining - seg.centroid) @ seg.direction
+                t_seg = (np.stack([seg.start, seg.end]) - seg.centroid) @ seg.direction
+                used |= (
+                    (np.abs(remaining @ seg.normal - seg.rho) < s.absorb_factor * s.split_distance)
+                    & (t_all >= t_seg.min() - s.split_distance)
+                    & (t_all <= t_seg.max() + s.split_distance)
+                )
         if not used.any():
             # The best line only had short pieces: remove its inliers so the search moves on.
             used = inl

@@ -28,9 +28,7 @@ def plane_frame(plane: Plane) -> tuple[NDArray[np.float64], NDArray[np.float64]]
     return plane.rho * plane.normal, plane.basis()
 
 
-def outline_from_points(
-    uv: NDArray[np.float64], cell: float
-) -> tuple[NDArray[np.float64], float]:
+def outline_from_points(uv: NDArray[np.float64], cell: float) -> tuple[NDArray[np.float64], float]:
     """Outline polygon and area of planar points given in plane coordinates.
 
     The points are rasterised at ``cell`` metres, the raster is closed (3 x 3) to bridge sampling
@@ -61,7 +59,7 @@ def outline_from_points(
         return outline_from_points(uv, cell * scale)
     grid = np.zeros((int(shape[1]), int(shape[0])), np.uint8)
     grid[ij[:, 1], ij[:, 0]] = 1
-    grid = cv2.morphologyEx(grid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8))
+    grid = np.asarray(cv2.morphologyEx(grid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)), np.uint8)
     area = float(grid.sum()) * cell * cell
     contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:

@@ -1,0 +1,359 @@
+"""``navkit path``: record a trajectory as a spline path, simulate the return to the operator.
+
+- ``navkit path record TRAJECTORY --tolerance 0.05 --out DIR`` -> ``path.json``, ``path.png``,
+  ``summary.json``, ``settings.toml``;
+- ``navkit path return PATH_JSON --runs 40 --out DIR`` -> ``returns.json``, ``returns.png``,
+  ``summary.json``, ``settings.toml``;
+- ``navkit path simulate --out DIR`` -> a simulated drive (true and VO-estimated TUM files) to
+  try the two commands on.
+
+The closed-loop return simulation lives in :mod:`navkit.sim.return_sim` (the path capability does
+not import the simulator).
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from navkit.cli.common import cli_errors, progress, write_run_files
+
+log = logging.getLogger(__name__)
+
+path_app = typer.Typer(
+    help="Path memory and return to the operator (paper 4).", no_args_is_help=True
+)
+
+
+class TrajFormat(str, Enum):
+    auto = "auto"
+    tum = "tum"
+    kitti = "kitti"
+    euroc = "euroc"
+    odometry = "odometry"
+
+
+class PlaneChoice(str, Enum):
+    auto = "auto"
+    xy = "xy"
+    xz = "xz"
+    yz = "yz"
+
+
+class VariantChoice(str, Enum):
+    start = "start"
+    start_tangent = "start_tangent"
+    endpoints = "endpoints"
+    endpoints_tangent = "endpoints_tangent"
+
+
+@dataclass(frozen=True)
+class RecordInput:
+    """Resolved input of ``path record`` (written to ``settings.toml``)."""
+
+    trajectory: str
+    format: str
+    plane: str
+
+
+def _check_out(out: Path) -> None:
+    from navkit.errors import ConfigError
+
+    if out.exists() and not out.is_dir():
+        raise ConfigError(
+            "exists and is not a folder", source=out, field="--out", expected="a folder path"
+        )
+
+
+def _looks_like_odometry(path: Path) -> bool:
+    """True if the first data line has 3 columns (``time v omega``)."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                s = line.strip()
+                if s and not s.startswith("#"):
+                    return len(s.replace(",", " ").split()) == 3
+    except OSError:
+        return False
+    return False
+
+
+def load_planar_track(
+    path: Path, fmt: str = "auto", plane: str = "auto"
+) -> tuple[Any, Any, dict[str, Any], str]:
+    """Read a trajectory file and map it to the ground plane.
+
+    Returns ``(timestamps (N,), xy (N, 2), frame dict, format used)``.
+    """
+    import numpy as np
+
+    from navkit.errors import DataNotFoundError
+    from navkit.io.trajectory import read_odometry_log, read_trajectory
+    from navkit.path.track import clean_track, ground_plane, integrate_odometry, to_plane
+
+    if not path.is_file():
+        raise DataNotFoundError(f"{path}: no such trajectory file")
+    if fmt == "odometry" or (fmt == "auto" and _looks_like_odometry(path)):
+        t_raw, v, w = read_odometry_log(path)
+        t_odo, vw = clean_track(t_raw, np.c_[v, w], source=str(path))
+        poses = integrate_odometry(t_raw if t_odo is None else t_odo, vw[:, 0], vw[:, 1])
+        frame = {
+            "kind": "odometry",
+            "source": str(path),
+            "note": "dead-reckoned from time v omega, start pose (0, 0, 0)",
+        }
+        return t_odo, poses[:, :2], frame, "odometry"
+    traj = read_trajectory(path, fmt)  # type: ignore[arg-type]
+    t_traj, P = clean_track(traj.timestamps, traj.positions, source=str(path))
+    gp = ground_plane(P, plane)
+    frame = {**gp.to_dict(), "source": str(path)}
+    return t_traj, to_plane(P, gp), frame, (fmt if fmt != "auto" else "detected")
+
+
+@path_app.command("record")
+def record(
+    trajectory: Path = typer.Argument(
+        ..., help="Trajectory file: TUM, KITTI, EuRoC or a 'time v omega' log."
+    ),
+    tolerance: float = typer.Option(
+        0.05, "--tolerance", "-e", help="eps: max distance of a point from the spline (m)."
+    ),
+    out: Path = typer.Option(Path("out/path"), "--out", "-o", help="Output folder."),
+    format: TrajFormat = typer.Option(TrajFormat.auto, "--format", help="Input format."),
+    plane: PlaneChoice = typer.Option(
+        PlaneChoice.auto,
+        "--plane",
+        help="Ground plane: fitted (auto) or two coordinates as they are.",
+    ),
+    variant: VariantChoice = typer.Option(
+        VariantChoice.endpoints, "--variant", help="Segment constraints (paper fig. 1)."
+    ),
+    keep_loops: bool = typer.Option(
+        False, "--keep-loops", help="Store the path without loop removal."
+    ),
+    precision: float = typer.Option(1e-4, "--precision", help="Loop search precision (m)."),
+) -> None:
+    """Record a trajectory point by point as a cubic spline over arc length (mode 1)."""
+    with cli_errors():
+        from navkit.errors import InputError
+        from navkit.path import ApproximatorSettings, approximate
+        from navkit.path.storage import write_path_json
+        from navkit.viz.path import plot_record
+
+        _check_out(out)
+        settings = ApproximatorSettings(
+            tolerance=tolerance,
+            variant=variant.value,
+            remove_loops=not keep_loops,
+            loop_precision=precision,
+        )
+        _, xy, frame, used = load_planar_track(trajectory, format.value, plane.value)
+        result = approximate(
+            xy,
+            settings,
+            frame=frame,
+            iterate=lambda items: progress(items, "recording", total=len(xy)),
+        )
+        if result.spline.n_segments == 0 or result.spline.total_length <= 0:
+            raise InputError(
+                f"{len(result.points)} distinct point(s): the path has zero length",
+                source=trajectory,
+                field="positions",
+                expected="at least two distinct positions",
+            )
+        out.mkdir(parents=True, exist_ok=True)
+        write_path_json(out / "path.json", result.spline)
+        plot_record(
+            result,
+            out / "path.png",
+            raw_points=xy,
+            title=f"{trajectory.name}: eps = {tolerance:g} m",
+        )
+        summary = {"input": str(trajectory), "format": used, **result.summary()}
+        write_run_files(
+            out,
+            {
+                "input": RecordInput(str(trajectory), format.value, plane.value),
+                "approximator": settings,
+            },
+            summary,
+        )
+        typer.echo(
+            f"{result.spline.n_segments} segments, {len(result.loops)} loops removed, "
+            f"L = {result.spline.total_length:.3f} m, max deviation {result.max_deviation:.4g} m, "
+            f"{summary['mean_us_per_point']:.1f} us/point mean -> {out / 'path.json'}"
+        )
+
+
+@path_app.command("return")
+def return_(
+    path_json: Path = typer.Argument(..., help="A path.json written by 'navkit path record'."),
+    runs: int = typer.Option(40, "--runs", help="Number of simulated returns (paper: 40)."),
+    out: Path = typer.Option(Path("out/path-return"), "--out", "-o", help="Output folder."),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    vo_rate_hz: float = typer.Option(10.0, "--vo-rate-hz", help="VO (and control) rate (Hz)."),
+    vo_scale_sigma: float = typer.Option(
+        0.02, "--vo-scale-sigma", help="VO per-step relative scale noise."
+    ),
+    vo_scale_bias: float = typer.Option(0.0, "--vo-scale-bias", help="VO relative scale bias."),
+    vo_heading_sigma_deg: float = typer.Option(
+        0.2, "--vo-heading-sigma-deg", help="VO per-step heading noise (deg)."
+    ),
+    vo_heading_bias_deg_per_m: float = typer.Option(
+        0.0, "--vo-heading-bias-deg-per-m", help="VO heading drift (deg/m)."
+    ),
+    delta: float = typer.Option(0.3, "--delta", help="Look-ahead along the path (m)."),
+    speed: float = typer.Option(0.3, "--speed", help="Linear speed (m/s)."),
+    stop_radius: float = typer.Option(
+        0.05, "--stop-radius", help="Stop radius around the start (m)."
+    ),
+) -> None:
+    """Simulate returns from the end of a stored path to its start (mode 2, paper fig. 4)."""
+    with cli_errors():
+        import numpy as np
+
+        from navkit.errors import ConfigError
+        from navkit.io.atomic import write_json
+        from navkit.path.control import ReturnSettings
+        from navkit.path.storage import read_path_json
+        from navkit.sensors import VisualOdometryNoise
+        from navkit.sim.return_sim import simulate_returns
+        from navkit.viz.path import plot_returns
+
+        _check_out(out)
+        if runs < 1:
+            raise ConfigError(f"is {runs}", field="--runs", expected="at least 1")
+        spline = read_path_json(path_json)
+        if spline.n_segments == 0 or spline.total_length <= 0:
+            raise ConfigError(
+                "the stored path has zero length",
+                source=path_json,
+                field="segments",
+                expected="at least one segment of positive length",
+            )
+        vo = VisualOdometryNoise(
+            rate_hz=vo_rate_hz,
+            scale_bias=vo_scale_bias,
+            scale_sigma=vo_scale_sigma,
+            heading_bias_per_m=np.radians(vo_heading_bias_deg_per_m),
+            heading_sigma=np.radians(vo_heading_sigma_deg),
+        )
+        ctrl = ReturnSettings(delta=delta, v_max=speed, stop_radius=stop_radius)
+        sim = simulate_returns(
+            spline, runs=runs, settings=ctrl, vo=vo, rng=np.random.default_rng(seed)
+        )
+        summary = sim.summary()
+        out.mkdir(parents=True, exist_ok=True)
+        write_json(
+            out / "returns.json",
+            {
+                **summary,
+                "start": sim.start,
+                "runs_detail": [
+                    {
+                        "final_xy": sim.final_true[i],
+                        "final_error_m": sim.final_error[i],
+                        "final_error_pct": sim.final_error_pct[i],
+                        "lateral_mean_m": sim.lateral_mean[i],
+                        "lateral_max_m": sim.lateral_max[i],
+                        "duration_s": sim.duration[i],
+                        "stopped": bool(sim.stopped[i]),
+                    }
+                    for i in range(runs)
+                ],
+            },
+        )
+        plot_returns(spline, sim, out / "returns.png", stop_radius=stop_radius)
+        write_run_files(
+            out,
+            {"path": str(path_json), "runs": runs, "seed": seed, "vo": vo, "controller": ctrl},
+            {"input": str(path_json), **summary},
+        )
+        typer.echo(
+            f"{runs} returns over L = {summary['path_length_m']:.3f} m: final error mean "
+            f"{summary['final_error_mean_pct']:.2f} %, p95 {summary['final_error_p95_pct']:.2f} % of L; "
+            f"lateral mean {summary['lateral_error_mean_m']:.3f} m -> {out / 'returns.json'}"
+        )
+
+
+@path_app.command("simulate")
+def simulate(
+    out: Path = typer.Option(Path("out/path-sim"), "--out", "-o", help="Output folder."),
+    legs: int = typer.Option(7, "--legs", help="Number of straight legs."),
+    leg_length: float = typer.Option(0.5, "--leg-length", help="Leg length (m) (paper: 0.5)."),
+    turn_deg: float = typer.Option(90.0, "--turn-deg", help="Turn between legs (deg) (paper: 90)."),
+    random_turns: bool = typer.Option(
+        False, "--random-turns", help="Turn left or right at random."
+    ),
+    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    vo_scale_sigma: float = typer.Option(
+        0.02, "--vo-scale-sigma", help="VO per-step relative scale noise."
+    ),
+    vo_heading_sigma_deg: float = typer.Option(
+        0.2, "--vo-heading-sigma-deg", help="VO per-step heading noise (deg)."
+    ),
+) -> None:
+    """Drive a simulated robot (legs and turns, like the paper's experiment): true.tum and vo.tum."""
+    with cli_errors():
+        import numpy as np
+
+        from navkit.errors import ConfigError
+        from navkit.geometry import se3_from_rt
+        from navkit.io.trajectory import Trajectory, write_tum
+        from navkit.sensors import VisualOdometryNoise
+        from navkit.sim.return_sim import leg_drive
+
+        _check_out(out)
+        if legs < 1 or not leg_length > 0:
+            raise ConfigError(
+                f"legs={legs}, leg_length={leg_length}",
+                field="--legs/--leg-length",
+                expected="at least one leg of positive length",
+            )
+        rng = np.random.default_rng(seed)
+        vo = VisualOdometryNoise(
+            scale_sigma=vo_scale_sigma, heading_sigma=np.radians(vo_heading_sigma_deg)
+        )
+        true = leg_drive(
+            legs, leg_length, turn_deg, rng=rng, random_turns=random_turns, rate_hz=vo.rate_hz
+        )
+        est = vo.corrupt(true, rng)
+        t = np.arange(len(true)) / vo.rate_hz
+
+        def traj(p: Any) -> Any:
+            c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+            R = np.zeros((len(p), 3, 3))
+            R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
+            return Trajectory(t, se3_from_rt(R, np.c_[p[:, :2], np.zeros(len(p))]))
+
+        out.mkdir(parents=True, exist_ok=True)
+        write_tum(out / "true.tum", traj(true))
+        write_tum(out / "vo.tum", traj(est))
+        length = float(np.hypot(*np.diff(true[:, :2], axis=0).T).sum())
+        write_run_files(
+            out,
+            {
+                "legs": legs,
+                "leg_length": leg_length,
+                "turn_deg": turn_deg,
+                "random_turns": random_turns,
+                "seed": seed,
+                "vo": vo,
+            },
+            {
+                "poses": len(true),
+                "length_m": length,
+                "vo_end_error_m": float(np.hypot(*(est[-1, :2] - true[-1, :2]))),
+            },
+        )
+        typer.echo(f"{len(true)} poses, {length:.2f} m -> {out / 'true.tum'}, {out / 'vo.tum'}")
+
+
+def register(app: typer.Typer) -> None:
+    """Add the ``path`` command group."""
+    app.add_typer(path_app, name="path")

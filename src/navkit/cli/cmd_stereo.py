@@ -1,0 +1,235 @@
+"""``navkit stereo``: dense disparity of a rectified pair, and simulated stereo rooms.
+
+- ``navkit stereo disparity LEFT RIGHT --calib FILE --out DIR`` -> ``disparity.pfm``,
+  ``disparity.png`` (coloured), ``points.ply`` (coloured 3D points, left camera frame),
+  ``summary.json`` (ms, density, bad-2.0 / bad-4.0 with ``--gt``), ``settings.toml``;
+- ``navkit stereo simulate ROOM --out DIR`` -> a folder of rendered stereo frames with poses
+  (``calib.yaml``, ``poses.tum``, ``left/``, ``right/``) and ``truth.json`` (the room's true walls
+  and corners), ready for ``navkit map build`` / ``navkit map locate``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+
+import typer
+
+from navkit.cli.common import cli_errors, progress, write_run_files
+
+log = logging.getLogger(__name__)
+
+stereo_app = typer.Typer(help="Stereo disparity and 3D points (paper 3).", no_args_is_help=True)
+
+
+class MatcherChoice(str, Enum):
+    sgbm = "sgbm"
+    sgbm3way = "sgbm3way"
+    hh = "hh"
+    bm = "bm"
+
+
+class FillChoice(str, Enum):
+    none = "none"
+    background = "background"
+
+
+class RoomChoice(str, Enum):
+    rectangle = "rectangle"
+    lshape = "lshape"
+    column = "column"
+    doorway = "doorway"
+
+
+@dataclass(frozen=True)
+class DisparityRun:
+    left: str
+    right: str
+    calib: str
+    ground_truth: str = ""
+    mask: str = ""
+
+
+@stereo_app.command("disparity")
+def disparity_cmd(
+    left: Path = typer.Argument(..., help="Left rectified image."),
+    right: Path = typer.Argument(..., help="Right rectified image."),
+    calib: Path = typer.Option(
+        ..., "--calib", help="Middlebury calib.txt, KITTI calib (P2/P3) or YAML (K, baseline)."
+    ),
+    out: Path = typer.Option(..., "--out", help="Output folder."),
+    matcher: MatcherChoice = typer.Option(MatcherChoice.sgbm, help="OpenCV matcher."),
+    num_disparities: int = typer.Option(
+        0, help="Search range (multiple of 16); 0 = from the calibration's ndisp, else 128."
+    ),
+    block_size: int = typer.Option(0, help="Matching window (odd); 0 = 3 for SGBM, 9 for BM."),
+    lr_check: bool = typer.Option(True, help="Left-right consistency check."),
+    fill: FillChoice = typer.Option(
+        FillChoice.background, help="Fill rejected pixels from the background."
+    ),
+    max_depth: float = typer.Option(
+        50.0, help="Metres; farther points are left out of points.ply."
+    ),
+    gt: Path | None = typer.Option(
+        None, "--gt", help="Ground-truth disparity (PFM) to score bad-2.0 / bad-4.0."
+    ),
+    mask: Path | None = typer.Option(
+        None, "--mask", help="Middlebury mask (255 = scored, e.g. mask0nocc.png)."
+    ),
+) -> None:
+    """Dense disparity (PFM + coloured PNG) and 3D points (PLY) of a rectified stereo pair."""
+    with cli_errors():
+        import numpy as np
+
+        from navkit.io.images import read_image, read_pfm, write_image, write_pfm
+        from navkit.io.pointcloud import write_ply
+        from navkit.io.stereo import read_middlebury_calib, read_stereo_calib
+        from navkit.stereo import (
+            DisparitySettings,
+            bad_pixel_rate,
+            compute_disparity,
+            disparity_to_points,
+        )
+        from navkit.viz.maps import colorize_disparity
+
+        L = read_image(left)
+        R = read_image(right)
+        rig = read_stereo_calib(calib, image_size=(L.shape[1], L.shape[0]))
+        if (rig.camera.height, rig.camera.width) != L.shape[:2]:
+            from navkit.errors import InputError
+
+            raise InputError(
+                f"image is {L.shape[1]} x {L.shape[0]}, calibration {rig.camera.width} x {rig.camera.height}",
+                source=left,
+                field="size",
+                expected="the calibrated image size",
+            )
+        nd = num_disparities
+        if nd <= 0:
+            try:
+                ndisp = read_middlebury_calib(calib)[1].get("ndisp", 0.0)
+            except Exception:  # not a Middlebury file
+                ndisp = 0.0
+            nd = int(16 * np.ceil(ndisp / 16)) if ndisp > 0 else 128
+        bs = block_size or (9 if matcher == MatcherChoice.bm else 3)
+        settings = DisparitySettings(
+            matcher=matcher.value,
+            num_disparities=nd,
+            block_size=bs,
+            lr_check=lr_check,
+            fill=fill.value,
+        )
+        res = compute_disparity(L, R, settings)
+        out.mkdir(parents=True, exist_ok=True)
+        write_pfm(
+            out / "disparity.pfm",
+            np.where(np.isfinite(res.disparity), res.disparity, np.inf).astype(np.float32),
+        )
+        write_image(out / "disparity.png", colorize_disparity(res.disparity))
+        P = disparity_to_points(res.checked, rig)
+        ok = np.all(np.isfinite(P), axis=-1) & (P[..., 2] <= max_depth)
+        colors = L[ok] if L.ndim == 3 else np.repeat(L[ok][:, None], 3, axis=1)
+        write_ply(out / "points.ply", P[ok], colors=colors)
+        summary = {
+            "ms": 1e3 * res.seconds,
+            "density": res.density,
+            "density_before_fill": float(np.isfinite(res.checked).mean()),
+            "points": int(ok.sum()),
+            "rig": {"fx": rig.camera.fx, "baseline_m": rig.baseline, "doffs": rig.doffs},
+        }
+        if gt is not None:
+            G = read_pfm(gt).astype(np.float64)
+            G[~np.isfinite(G)] = np.nan
+            M = None
+            if mask is not None:
+                m = read_image(mask)
+                M = (m if m.ndim == 2 else m[..., 0]) == 255
+            for t in (2.0, 4.0):
+                bad, bad_valid = bad_pixel_rate(res.disparity, G, t, M)
+                summary[f"bad_{t:.1f}_percent"] = bad
+                summary[f"bad_{t:.1f}_valid_percent"] = bad_valid
+        write_run_files(
+            out,
+            {
+                "input": DisparityRun(
+                    str(left), str(right), str(calib), str(gt or ""), str(mask or "")
+                ),
+                "disparity": settings,
+            },
+            summary,
+        )
+        typer.echo(
+            f"disparity: {100 * res.density:.1f}% valid, {1e3 * res.seconds:.0f} ms"
+            + (f", bad-2.0 {summary['bad_2.0_percent']:.2f}%" if gt is not None else "")
+            + f" -> {out}"
+        )
+
+
+@stereo_app.command("simulate")
+def simulate_cmd(
+    room: RoomChoice = typer.Argument(..., help="Which test room."),
+    out: Path = typer.Option(..., "--out", help="Output folder (a stereo frame folder)."),
+    random_poses: int = typer.Option(
+        0, "--random", help="Render N random poses instead of the survey."
+    ),
+    width: int = typer.Option(320, help="Image width (height = 3/4), pixels."),
+    hfov_deg: float = typer.Option(90.0, help="Horizontal field of view, degrees."),
+    baseline: float = typer.Option(0.2, help="Metres."),
+    height: float = typer.Option(1.2, help="Camera height, metres."),
+    turn: int = typer.Option(
+        1,
+        "--turn",
+        min=1,
+        help="Frames per place: the camera turns through N headings (use with map locate --group N).",
+    ),
+    seed: int = typer.Option(0, help="Seed of the random poses and the image noise."),
+    pixel_noise: float = typer.Option(1.0, help="Image noise, grey levels."),
+) -> None:
+    """Render a textured test room with a stereo rig (survey or random poses) into a frame folder."""
+    with cli_errors():
+        import numpy as np
+
+        from navkit.io.atomic import write_json
+        from navkit.io.stereo import write_stereo_frames
+        from navkit.sensors import PinholeCamera, StereoRig
+        from navkit.sim import render_stereo, scene_from_dict
+        from navkit.stereo import planar_camera_pose
+        from navkit.stereo.rooms import room as make_room
+        from navkit.stereo.rooms import sample_poses
+
+        truth = make_room(room.value)
+        scene = scene_from_dict(truth.scene)
+        rig = StereoRig(PinholeCamera.from_fov(width, width * 3 // 4, hfov_deg), baseline)
+        rng = np.random.default_rng(seed)
+        X = truth.survey if random_poses <= 0 else sample_poses(truth, random_poses, rng)
+        if turn > 1:  # each place seen in `turn` headings (the camera turns on its drive)
+            X = np.concatenate(
+                [X + np.array([0.0, 0.0, 2 * np.pi * k / turn]) for k in range(turn)], axis=1
+            )
+            X = X.reshape(-1, 3)
+        lefts, rights, poses = [], [], []
+        for x, y, th in progress(X, "rendering"):
+            T = planar_camera_pose(x, y, th, height)
+            st = render_stereo(scene, rig, T, rng=rng, pixel_noise=pixel_noise, supersample=1)
+            lefts.append(st.pair.left)
+            rights.append(st.pair.right)
+            poses.append(T)
+        write_stereo_frames(out, rig, lefts, rights, np.array(poses))
+        write_json(
+            out / "truth.json",
+            {
+                "room": room.value,
+                "walls": truth.walls,
+                "corners": truth.corners,
+                "outline": truth.outline,
+                "size": truth.size,
+                "poses_xytheta": X,
+            },
+        )
+        typer.echo(f"{len(X)} stereo frames of room '{room.value}' -> {out}")
+
+
+def register(app: typer.Typer) -> None:
+    app.add_typer(stereo_app, name="stereo")

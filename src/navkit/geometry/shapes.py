@@ -1,0 +1,717 @@
+"""Bounding shapes of a 2D point set (paper 1, stage 8: shapes A1-A7) plus the exact optima.
+
+The paper maps each obstacle by a small shape computed on its boundary points, and asks that more
+shape methods can be "easily added". This module is that registry:
+
+========  ==========================================================================
+``A1``    axis-aligned rectangle ``(MnX, MxX, MnY, MxY)``
+``A2``    circle circumscribed about the A1 rectangle
+``A3``    reduced circle: the paper's linear-time iterative enlargement
+``A4``    ellipse through three points (rectangle diagonal enlarged by ``gamma``)
+``A5``    reduced ellipse: the A2 circle compressed across a diagonal by ``k``
+``A6``    minimised ellipse: the area ``pi a^2 k`` minimised over ``(x, y, phi, k)`` from A5
+``MEC``   exact minimum enclosing circle (Welzl's algorithm) - beyond the paper
+``MVEE``  minimum-area enclosing ellipse (Khachiyan's algorithm) - beyond the paper
+========  ==========================================================================
+
+A7 ("guaranteed" bounds) is not a separate construction: it is any of these shapes computed over
+the obstacle *together with its shadows* (see :mod:`navkit.obstacles`).
+
+Add a method with :func:`register_shape`; :func:`compute_shapes` evaluates any set of registered
+names. Every shape has ``area``, ``contains(points, tol)``, ``outline(n)`` and ``params()``.
+
+Shapes depend only on the convex hull of the points, so every method first reduces the input to
+its hull vertices (:func:`hull_points`); the Python loops in A3 and Welzl run over hull vertices
+(tens), never over the raw points. Degenerate inputs (one point, collinear points) are handled by
+a 1 mm dilation (documented in :func:`hull_points`), so every method returns a shape.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import ConvexHull, QhullError
+
+from navkit.errors import InputError
+from navkit.geometry._validate import as_points
+
+__all__ = [
+    "SHAPES",
+    "Circle",
+    "Ellipse",
+    "Rectangle",
+    "Shape",
+    "circle_a2",
+    "circle_a3",
+    "compute_shapes",
+    "ellipse_a4",
+    "ellipse_a5",
+    "ellipse_a6",
+    "hull_points",
+    "min_circle_welzl",
+    "mvee_khachiyan",
+    "rect_a1",
+    "register_shape",
+]
+
+DEGENERATE_DILATION_M = 1e-3
+"""Half-size (m) of the cross of points added around degenerate inputs (see :func:`hull_points`)."""
+
+
+class Shape(Protocol):
+    """What every bounding shape offers."""
+
+    @property
+    def area(self) -> float: ...
+
+    def contains(self, points: ArrayLike, tol: float = 1e-9) -> NDArray[np.bool_]: ...
+
+    def outline(self, n: int = 64) -> NDArray[np.float64]: ...
+
+    def params(self) -> dict[str, Any]: ...
+
+
+@dataclass(frozen=True)
+class Rectangle:
+    """Axis-aligned rectangle ``[xmin, xmax] x [ymin, ymax]`` (m); the paper's A1."""
+
+    xmin: float
+    xmax: float
+    ymin: float
+    ymax: float
+    kind: str = "rectangle"
+
+    @property
+    def area(self) -> float:
+        """``D_x * D_y`` (m^2)."""
+        return (self.xmax - self.xmin) * (self.ymax - self.ymin)
+
+    def contains(self, points: ArrayLike, tol: float = 1e-9) -> NDArray[np.bool_]:
+        """``(N,)`` mask of points ``(N, 2)`` inside (within ``tol`` m)."""
+        P = as_points(points, 2)
+        return (
+            (P[:, 0] >= self.xmin - tol)
+            & (P[:, 0] <= self.xmax + tol)
+            & (P[:, 1] >= self.ymin - tol)
+            & (P[:, 1] <= self.ymax + tol)
+        )
+
+    def outline(self, n: int = 4) -> NDArray[np.float64]:
+        """The four corners ``(4, 2)``, counter-clockwise."""
+        return np.array(
+            [
+                [self.xmin, self.ymin],
+                [self.xmax, self.ymin],
+                [self.xmax, self.ymax],
+                [self.xmin, self.ymax],
+            ]
+        )
+
+    def params(self) -> dict[str, Any]:
+        """``MnX, MxX, MnY, MxY, D_x, D_y`` (m) and the area (m^2)."""
+        return {
+            "kind": self.kind,
+            "MnX": self.xmin,
+            "MxX": self.xmax,
+            "MnY": self.ymin,
+            "MxY": self.ymax,
+            "D_x": self.xmax - self.xmin,
+            "D_y": self.ymax - self.ymin,
+            "area": self.area,
+        }
+
+
+@dataclass(frozen=True)
+class Circle:
+    """Circle of centre ``(x, y)`` and ``radius`` (m)."""
+
+    x: float
+    y: float
+    radius: float
+    kind: str = "circle"
+
+    @property
+    def area(self) -> float:
+        """``pi r^2`` (m^2)."""
+        return math.pi * self.radius**2
+
+    def contains(self, points: ArrayLike, tol: float = 1e-9) -> NDArray[np.bool_]:
+        """``(N,)`` mask of points ``(N, 2)`` inside (within ``tol`` m)."""
+        P = as_points(points, 2)
+        return np.hypot(P[:, 0] - self.x, P[:, 1] - self.y) <= self.radius + tol
+
+    def outline(self, n: int = 64) -> NDArray[np.float64]:
+        """``(n, 2)`` points on the circle, counter-clockwise."""
+        t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+        return np.column_stack([self.x + self.radius * np.cos(t), self.y + self.radius * np.sin(t)])
+
+    def params(self) -> dict[str, Any]:
+        """Centre, radius (m) and area (m^2)."""
+        return {
+            "kind": self.kind,
+            "x": self.x,
+            "y": self.y,
+            "radius": self.radius,
+            "area": self.area,
+        }
+
+
+@dataclass(frozen=True)
+class Ellipse:
+    """Ellipse of centre ``(x, y)``, semi-axes ``a >= b >= 0`` (m), major axis at ``angle`` (rad).
+
+    The paper's five numbers are ``x_O, y_O, a, e, angle`` with eccentricity
+    ``e = sqrt(1 - b^2 / a^2)``.
+    """
+
+    x: float
+    y: float
+    a: float
+    b: float
+    angle: float
+    kind: str = "ellipse"
+
+    @property
+    def area(self) -> float:
+        """``pi a b`` (m^2)."""
+        return math.pi * self.a * self.b
+
+    @property
+    def eccentricity(self) -> float:
+        """``e = sqrt(1 - b^2/a^2)``."""
+        return math.sqrt(max(0.0, 1.0 - (self.b / self.a) ** 2)) if self.a > 0 else 0.0
+
+    def contains(self, points: ArrayLike, tol: float = 1e-9) -> NDArray[np.bool_]:
+        """``(N,)`` mask of points ``(N, 2)`` inside the ellipse grown by ``tol`` m on both axes."""
+        P = as_points(points, 2)
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        dx, dy = P[:, 0] - self.x, P[:, 1] - self.y
+        u = c * dx + s * dy
+        v = -s * dx + c * dy
+        a, b = self.a + tol, self.b + tol
+        return (u / a) ** 2 + (v / b) ** 2 <= 1.0 + 1e-12
+
+    def outline(self, n: int = 64) -> NDArray[np.float64]:
+        """``(n, 2)`` points on the ellipse, counter-clockwise."""
+        t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+        u, v = self.a * np.cos(t), self.b * np.sin(t)
+        c, s = math.cos(self.angle), math.sin(self.angle)
+        return np.column_stack([self.x + c * u - s * v, self.y + s * u + c * v])
+
+    def params(self) -> dict[str, Any]:
+        """Centre, semi-axes (m), eccentricity, major-axis angle (rad) and area (m^2)."""
+        return {
+            "kind": self.kind,
+            "x": self.x,
+            "y": self.y,
+            "a": self.a,
+            "b": self.b,
+            "e": self.eccentricity,
+            "angle": self.angle,
+            "area": self.area,
+        }
+
+
+def _ellipse(x: float, y: float, a: float, b: float, angle: float) -> Ellipse:
+    """Normalise so that ``a >= b`` and the angle is in ``(-pi/2, pi/2]``."""
+    a, b = abs(a), abs(b)
+    if b > a:
+        a, b, angle = b, a, angle + math.pi / 2
+    angle = (angle + math.pi / 2) % math.pi - math.pi / 2
+    return Ellipse(float(x), float(y), float(a), float(b), float(angle))
+
+
+# ----------------------------------------------------------------------------------------------
+# input reduction
+
+
+def hull_points(points: ArrayLike) -> NDArray[np.float64]:
+    """Convex-hull vertices ``(M, 2)`` (counter-clockwise) of finite points ``(N, 2)``.
+
+    Every enclosing shape of a point set encloses its hull and vice versa, so the shapes are
+    computed on the hull only. A degenerate set (one point, or all collinear) is dilated by a
+    cross of four points at ``DEGENERATE_DILATION_M`` (1 mm) around each hull end point, so that
+    every method returns a proper shape (a 1 mm-thin ellipse around a segment, for example).
+
+    Raises
+    ------
+    InputError
+        If there is no finite point.
+    """
+    P = as_points(points, 2)
+    P = P[np.all(np.isfinite(P), axis=1)]
+    if len(P) == 0:
+        raise InputError("no finite point", field="points", expected="at least one finite (x, y)")
+    if len(P) >= 3:
+        try:
+            hull = ConvexHull(P)
+            return P[hull.vertices]
+        except QhullError:
+            pass
+    # degenerate: keep the two extreme points along the main direction, dilate them
+    centred = P - P.mean(axis=0)
+    _, _, vt = (
+        np.linalg.svd(centred, full_matrices=False) if len(P) > 1 else (None, None, np.eye(2))
+    )
+    t = centred @ vt[0]
+    ends = P[[int(np.argmin(t)), int(np.argmax(t))]]
+    e = DEGENERATE_DILATION_M
+    cross = np.array([[e, 0.0], [-e, 0.0], [0.0, e], [0.0, -e]])
+    Q = (ends[:, None, :] + cross[None]).reshape(-1, 2)
+    return Q[ConvexHull(Q).vertices]
+
+
+# ----------------------------------------------------------------------------------------------
+# the paper's shapes A1-A6
+
+
+def rect_a1(points: ArrayLike) -> Rectangle:
+    """A1: the axis-aligned bounding rectangle ``(MnX, MxX, MnY, MxY)`` (paper 1, stage 8)."""
+    return _rect_a1(hull_points(points))
+
+
+def _rect_a1(H: NDArray[np.float64]) -> Rectangle:
+    lo, hi = H.min(axis=0), H.max(axis=0)
+    return Rectangle(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
+
+
+def circle_a2(points: ArrayLike) -> Circle:
+    """A2: the circle circumscribed about the A1 rectangle (centre at the diagonals' crossing)."""
+    return _circle_a2(hull_points(points))
+
+
+def _circle_a2(H: NDArray[np.float64]) -> Circle:
+    r = _rect_a1(H)
+    return Circle(
+        0.5 * (r.xmin + r.xmax),
+        0.5 * (r.ymin + r.ymax),
+        0.5 * math.hypot(r.xmax - r.xmin, r.ymax - r.ymin),
+        kind="circle",
+    )
+
+
+def circle_a3(points: ArrayLike) -> Circle:
+    """A3: the paper's reduced circle, one pass over the points (linear time).
+
+    Start with the circle having as diameter the two extreme points along the longer side of the
+    A1 rectangle **[reading: the paper says "two points"; these two make the start deterministic
+    and already wide]**. For each next point outside the current circle, the segment from that
+    point through the centre to the far side of the circle becomes the new diameter; that circle
+    is internally tangent to the old one and larger, so it still encloses every point seen so far.
+    At the end every point is inside and the circle passes through an input point.
+    """
+    return _circle_a3(hull_points(points))
+
+
+def _circle_a3(H: NDArray[np.float64]) -> Circle:
+    span = H.max(axis=0) - H.min(axis=0)
+    axis = 0 if span[0] >= span[1] else 1
+    i0, i1 = int(np.argmin(H[:, axis])), int(np.argmax(H[:, axis]))
+    (x0, y0), (x1, y1) = H[i0], H[i1]
+    cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
+    r = 0.5 * math.hypot(x1 - x0, y1 - y0)
+    for px, py in H.tolist():  # hull vertices only (tens), sequential by construction
+        d = math.hypot(px - cx, py - cy)
+        if d <= r * (1 + 1e-12) + 1e-12:
+            continue
+        new_r = 0.5 * (d + r)
+        # the new centre is on the segment from p through the old centre, at new_r from p
+        cx, cy = px + (cx - px) * new_r / d, py + (cy - py) * new_r / d
+        r = new_r
+    return Circle(cx, cy, r, kind="circle")
+
+
+def _a4_gamma_optimal(cos_phi: float) -> float:
+    # area^2 ∝ g^2 / (g - c) with g = gamma^2, c = cos^2(phi): minimum at g = 2c (see ellipse_a4)
+    return max(1.0, math.sqrt(2.0) * abs(cos_phi))
+
+
+def ellipse_a4(points: ArrayLike, gamma: float | None = None) -> Ellipse:
+    """A4: the ellipse through three points, built on the A1 rectangle (paper 1, stage 8).
+
+    The rectangle's diagonal from ``(MnX, MnY)`` to ``(MxX, MxY)``, enlarged by ``gamma >= 1``
+    about the centre, is the major axis ``2a``; the ellipse passes through the other two corners
+    (radius ``rho`` = half diagonal, angle ``phi`` from the major axis), which gives
+    ``b^2 = rho^2 sin^2(phi) / (1 - rho^2 cos^2(phi) / a^2)`` and ``e^2 = 1 - b^2 / a^2``. It
+    encloses the rectangle, hence every point.
+
+    Parameters
+    ----------
+    gamma : float, optional
+        Enlargement ``>= 1``. **[reading: the paper leaves gamma free]** By default the
+        area-minimising value ``gamma = max(1, sqrt(2) |cos phi|)`` (from
+        ``d/dg [g^2 / (g - cos^2 phi)] = 0`` with ``g = gamma^2``); ``gamma = 1`` gives the A2 circle.
+    """
+    return _ellipse_a4(hull_points(points), gamma)
+
+
+def _ellipse_a4(H: NDArray[np.float64], gamma: float | None = None) -> Ellipse:
+    r = _rect_a1(H)
+    dx, dy = r.xmax - r.xmin, r.ymax - r.ymin
+    rho = 0.5 * math.hypot(dx, dy)
+    cx, cy = 0.5 * (r.xmin + r.xmax), 0.5 * (r.ymin + r.ymax)
+    angle = math.atan2(dy, dx)
+    # the other diagonal is at angle atan2(dy, -dx); phi is the angle between the diagonals
+    cos_phi = (dx * -dx + dy * dy) / max(dx * dx + dy * dy, 1e-300)
+    if gamma is None:
+        gamma = _a4_gamma_optimal(cos_phi)
+    if not gamma >= 1.0:
+        raise InputError(f"gamma = {gamma}", field="gamma", expected="a number >= 1")
+    a = gamma * rho
+    sin2 = 1.0 - cos_phi**2
+    denom = 1.0 - cos_phi**2 / gamma**2
+    b = rho * math.sqrt(sin2 / denom) if denom > 0 else rho
+    return _ellipse(cx, cy, a, b, angle)
+
+
+def ellipse_a5(points: ArrayLike) -> Ellipse:
+    """A5: the reduced ellipse, the A2 circle compressed across a diagonal (paper 1, stage 8).
+
+    In the frame whose x axis is a diagonal of the A1 rectangle (origin at its centre, ``r`` the
+    A2 radius), each point ``(u_i, v_i)`` has distance ``d_i = |v_i|`` from the diameter and the
+    circle's half-chord ``h_i = sqrt(r^2 - u_i^2)`` at its abscissa; the circle is compressed by
+    ``k = max_i d_i / h_i`` **[reading: the printed "min" cannot enclose every point]**, giving
+    ``a = r, b = k r, e = sqrt(1 - k^2)``; ``|v_i| <= k h_i`` puts each point inside. Both
+    diagonals are tried and the smaller ellipse kept **[reading: the paper does not say which]**.
+    """
+    return _ellipse_a5(hull_points(points))
+
+
+def _ellipse_a5(H: NDArray[np.float64]) -> Ellipse:
+    c2 = _circle_a2(H)
+    rect = _rect_a1(H)
+    r = c2.radius
+    best: Ellipse | None = None
+    for sign in (1.0, -1.0):
+        ang = math.atan2(sign * (rect.ymax - rect.ymin), rect.xmax - rect.xmin)
+        c, s = math.cos(ang), math.sin(ang)
+        dx, dy = H[:, 0] - c2.x, H[:, 1] - c2.y
+        u = c * dx + s * dy
+        v = -s * dx + c * dy
+        h2 = np.maximum(r * r - u * u, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.where(
+                h2 > 0, np.abs(v) / np.sqrt(h2), np.where(np.abs(v) > 1e-12 * r, np.inf, 0.0)
+            )
+        k = float(min(1.0, np.max(ratio)))
+        cand = _ellipse(c2.x, c2.y, r, k * r, ang)
+        if best is None or cand.area < best.area:
+            best = cand
+    assert best is not None
+    return best
+
+
+def _a6_area(
+    params: NDArray[np.float64], P: NDArray[np.float64], mask: NDArray[np.bool_]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Batched A6 objective: ``params (n, q, 4) = (x, y, phi, log k)`` over padded points ``P (n, m, 2)``.
+
+    Returns the area ``pi a^2 k`` and ``a`` (both ``(n, q)``), with
+    ``a = max_i sqrt(u_i^2 + v_i^2 / k^2)``.
+    """
+    x, y, phi, logk = (params[..., i] for i in range(4))
+    k = np.exp(logk)
+    c, s = np.cos(phi)[..., None], np.sin(phi)[..., None]
+    dx = P[:, None, :, 0] - x[..., None]
+    dy = P[:, None, :, 1] - y[..., None]
+    u = c * dx + s * dy
+    v = -s * dx + c * dy
+    a2 = u * u + (v * v) / (k[..., None] ** 2)
+    a2 = np.where(mask[:, None, :], a2, 0.0).max(axis=-1)
+    return np.pi * a2 * k, np.sqrt(a2)
+
+
+def ellipses_a6_batch(
+    hulls: Sequence[NDArray[np.float64]],
+    starts: Sequence[Ellipse],
+    *,
+    max_iter: int = 120,
+    rel_tol: float = 3e-3,
+) -> list[Ellipse]:
+    """A6 for many point sets at once: a compass (pattern) search vectorised over the sets.
+
+    The objective of paper 1's A6, area ``pi a^2 k`` with the smallest enclosing
+    ``a = max_i sqrt(u_i^2 + v_i^2/k^2)`` for fixed ``(x, y, phi, k)``, is minimised over
+    ``(x, y, phi, log k)``. **[reading: the paper names Newton's method; the objective is a
+    maximum of smooth functions (not differentiable where the maximising point changes), so a
+    derivative-free pattern search is used]**: each iteration tries the 80 moves of -1, 0 or +1
+    step on each parameter (axis moves alone stall at the kinks) for all sets at once, moves to the best improving trial, and halves the steps of a
+    set with no improvement, until its steps fall below ``rel_tol`` of its size. The result is
+    never larger than the start (A5).
+    """
+    n = len(hulls)
+    if n == 0:
+        return []
+    m = max(len(h) for h in hulls)
+    P = np.zeros((n, m, 2))
+    mask = np.zeros((n, m), dtype=bool)
+    for i, h in enumerate(hulls):
+        P[i, : len(h)] = h
+        mask[i, : len(h)] = True
+    x0 = np.array(
+        [[e.x, e.y, e.angle, math.log(max(e.b / e.a, 1e-6)) if e.a > 0 else 0.0] for e in starts]
+    )
+    size = np.array([max(e.a, 1e-6) for e in starts])
+    step = np.column_stack([0.25 * size, 0.25 * size, np.full(n, 0.2), np.full(n, 0.2)])
+    min_step = np.column_stack(
+        [rel_tol * size, rel_tol * size, np.full(n, rel_tol), np.full(n, rel_tol)]
+    )
+    cur = x0.copy()
+    f_cur, _ = _a6_area(cur[:, None, :], P, mask)
+    f_cur = f_cur[:, 0]
+    # all 80 combinations of {-1, 0, +1} on the four parameters: the objective is a max of
+    # smooth functions, whose descent directions at a kink are often not along an axis
+    grid = np.stack(np.meshgrid(*([np.array([-1.0, 0.0, 1.0])] * 4), indexing="ij"), -1).reshape(
+        -1, 4
+    )
+    moves = grid[np.any(grid != 0, axis=1)]  # (80, 4)
+    active = np.ones(n, dtype=bool)
+    for _ in range(max_iter):
+        if not active.any():
+            break
+        idx = np.flatnonzero(active)
+        trial = cur[idx, None, :] + moves[None] * step[idx, None, :]
+        f_trial, _ = _a6_area(trial, P[idx], mask[idx])
+        best = np.argmin(f_trial, axis=1)
+        f_best = f_trial[np.arange(len(idx)), best]
+        improved = f_best < f_cur[idx] * (1 - 1e-12)
+        upd = idx[improved]
+        cur[upd] = trial[improved, best[improved]]
+        f_cur[upd] = f_best[improved]
+        shrink = idx[~improved]
+        step[shrink] *= 0.5
+        active[shrink] = np.any(step[shrink] > min_step[shrink], axis=1)
+    _, a = _a6_area(cur[:, None, :], P, mask)
+    a = a[:, 0] * (1 + 1e-12)
+    out = []
+    for i in range(n):
+        cand = _ellipse(cur[i, 0], cur[i, 1], a[i], a[i] * math.exp(cur[i, 3]), cur[i, 2])
+        out.append(cand if cand.area <= starts[i].area else starts[i])
+    return out
+
+
+def ellipse_a6(points: ArrayLike, start: Ellipse | None = None) -> Ellipse:
+    """A6: the minimised ellipse, from the A5 ellipse (or ``start``); see :func:`ellipses_a6_batch`."""
+    H = hull_points(points)
+    return ellipses_a6_batch([H], [start if start is not None else _ellipse_a5(H)])[0]
+
+
+# ----------------------------------------------------------------------------------------------
+# the exact optima (beyond the paper)
+
+
+def _circle2(ax: float, ay: float, bx: float, by: float) -> tuple[float, float, float]:
+    cx, cy = 0.5 * (ax + bx), 0.5 * (ay + by)
+    return cx, cy, math.hypot(ax - cx, ay - cy)
+
+
+def _circle3(
+    ax: float, ay: float, bx: float, by: float, cx: float, cy: float
+) -> tuple[float, float, float] | None:
+    d = 2.0 * (ax * (by - cy) + bx * (cy - ay) + cx * (ay - by))
+    if abs(d) < 1e-18:
+        return None
+    a2, b2, c2 = ax * ax + ay * ay, bx * bx + by * by, cx * cx + cy * cy
+    ux = (a2 * (by - cy) + b2 * (cy - ay) + c2 * (ay - by)) / d
+    uy = (a2 * (cx - bx) + b2 * (ax - cx) + c2 * (bx - ax)) / d
+    return ux, uy, math.hypot(ax - ux, ay - uy)
+
+
+def min_circle_welzl(points: ArrayLike, seed: int = 0) -> Circle:
+    """The exact minimum enclosing circle (Welzl 1991, randomised incremental form).
+
+    Expected linear time in the number of hull vertices; the order is shuffled with a fixed
+    ``seed`` so results are reproducible. Coordinates are centred first for numerical stability.
+    """
+    return _min_circle_welzl(hull_points(points), seed)
+
+
+def _min_circle_welzl(H: NDArray[np.float64], seed: int = 0) -> Circle:
+    origin = H.mean(axis=0)
+    pts = [tuple(p) for p in (H - origin).tolist()]
+    random.Random(seed).shuffle(pts)
+
+    def inside(c: tuple[float, float, float], p: tuple[float, float]) -> bool:
+        return math.hypot(p[0] - c[0], p[1] - c[1]) <= c[2] * (1 + 1e-12) + 1e-12
+
+    c = (pts[0][0], pts[0][1], 0.0)
+    for i in range(1, len(pts)):
+        p = pts[i]
+        if inside(c, p):
+            continue
+        c = (p[0], p[1], 0.0)
+        for j in range(i):
+            q = pts[j]
+            if inside(c, q):
+                continue
+            c = _circle2(*p, *q)
+            for k in range(j):
+                s = pts[k]
+                if inside(c, s):
+                    continue
+                c3 = _circle3(*p, *q, *s)
+                if c3 is not None:
+                    c = c3
+    return Circle(
+        c[0] + float(origin[0]), c[1] + float(origin[1]), c[2] * (1 + 1e-12), kind="circle"
+    )
+
+
+def mvee_batch(
+    hulls: Sequence[NDArray[np.float64]], *, tol: float = 1e-3, max_iter: int = 2000
+) -> list[Ellipse]:
+    """Minimum-volume enclosing ellipses of many 2D sets (Khachiyan 1996; Todd & Yildirim 2007).
+
+    The barycentric weights ``u`` of the lifted points ``q_i = (x_i, y_i, 1)`` are updated by
+    Khachiyan's step ``beta = (M_j - d - 1) / ((d + 1)(M_j - 1))`` on the point ``j`` with the
+    largest ``M_j = q_j^T X(u)^{-1} q_j``, alternated with Todd & Yildirim's away steps from the
+    support point with the smallest ``M_j``, until ``M_j / (d + 1)`` is within ``tol`` of 1 for all
+    points (and support points), vectorised over all sets. The ellipse ``(x - c)^T A (x - c) <= 1`` with ``c = P u``,
+    ``A = (P diag(u) P^T - c c^T)^{-1} / d`` is then scaled to contain every point exactly, so it
+    encloses the set and its area is within ``(1 + tol)`` (about) of the optimum.
+    """
+    n = len(hulls)
+    if n == 0:
+        return []
+    d = 2
+    m = max(len(h) for h in hulls)
+    origin = np.array([h.mean(axis=0) for h in hulls])
+    P = np.zeros((n, m, 2))
+    mask = np.zeros((n, m), dtype=bool)
+    for i, h in enumerate(hulls):
+        P[i, : len(h)] = h - origin[i]
+        mask[i, : len(h)] = True
+    scale = np.maximum(np.abs(P).max(axis=(1, 2)), 1e-9)
+    P = P / scale[:, None, None]
+    Q = np.concatenate([P, np.ones((n, m, 1))], axis=2)  # (n, m, 3)
+    counts = mask.sum(axis=1)
+    u = mask / counts[:, None]
+    active = np.ones(n, dtype=bool)
+    rows = np.arange(n)
+    for _ in range(max_iter):
+        idx = np.flatnonzero(active)
+        if len(idx) == 0:
+            break
+        r = rows[: len(idx)]
+        Qa, ua, ma = Q[idx], u[idx], mask[idx]
+        X = np.einsum("nmi,nm,nmj->nij", Qa, ua, Qa)
+        M = np.einsum("nmi,nij,nmj->nm", Qa, np.linalg.inv(X), Qa)
+        j_up = np.argmax(np.where(ma, M, -np.inf), axis=1)
+        j_dn = np.argmin(np.where(ma & (ua > 0), M, np.inf), axis=1)
+        M_up, M_dn = M[r, j_up], M[r, j_dn]
+        eps_up = M_up / (d + 1) - 1
+        eps_dn = 1 - M_dn / (d + 1)
+        done = np.maximum(eps_up, eps_dn) <= tol
+        toward = eps_up >= eps_dn
+        # Khachiyan's step towards the farthest point, or Todd-Yildirim's away step from the
+        # nearest support point (faster convergence, same fixed point)
+        beta_up = (M_up - d - 1) / ((d + 1) * (M_up - 1))
+        u_dn = ua[r, j_dn]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            beta_dn = np.minimum((d + 1 - M_dn) / ((d + 1) * (M_dn - 1)), u_dn / (1 - u_dn))
+        beta_dn = np.where(np.isfinite(beta_dn), beta_dn, 0.0)
+        up = toward & ~done
+        dn = ~toward & ~done
+        ua[up] *= (1 - beta_up[up])[:, None]
+        ua[r[up], j_up[up]] += beta_up[up]
+        ua[dn] *= (1 + beta_dn[dn])[:, None]
+        ua[r[dn], j_dn[dn]] -= beta_dn[dn]
+        ua = np.maximum(ua, 0.0)
+        u[idx] = ua
+        active[idx[done]] = False
+    c = np.einsum("nm,nmi->ni", u, P)
+    S = np.einsum("nmi,nm,nmj->nij", P, u, P) - np.einsum("ni,nj->nij", c, c)
+    A = np.linalg.inv(S) / d
+    diff = P - c[:, None, :]
+    val = np.einsum("nmi,nij,nmj->nm", diff, A, diff)
+    worst = np.where(mask, val, 0.0).max(axis=1)
+    A = A / np.maximum(worst, 1e-300)[:, None, None] / (1 + 1e-12)
+    out = []
+    for i in range(n):
+        w, V = np.linalg.eigh(A[i])  # ascending: w[0] smallest -> major axis
+        a, b = 1 / math.sqrt(w[0]), 1 / math.sqrt(w[1])
+        angle = math.atan2(V[1, 0], V[0, 0])
+        cx, cy = c[i] * scale[i] + origin[i]
+        out.append(_ellipse(cx, cy, a * scale[i], b * scale[i], angle))
+    return out
+
+
+def mvee_khachiyan(points: ArrayLike, tol: float = 1e-3) -> Ellipse:
+    """The minimum-area enclosing ellipse of points ``(N, 2)``; see :func:`mvee_batch`."""
+    return mvee_batch([hull_points(points)], tol=tol)[0]
+
+
+# ----------------------------------------------------------------------------------------------
+# registry
+
+ShapeFn = Callable[[NDArray[np.float64]], Any]
+SHAPES: dict[str, ShapeFn] = {}
+"""Registered methods: name -> function of hull points ``(M, 2)`` returning a shape."""
+
+_BATCHED = {"A6", "MVEE"}
+
+
+def register_shape(name: str, fn: ShapeFn, *, replace: bool = False) -> None:
+    """Add a bounding-shape method ``fn(points (M, 2)) -> shape`` under ``name``.
+
+    The shape object must offer ``area``, ``contains(points, tol)``, ``outline(n)`` and
+    ``params()`` (see :class:`Shape`).
+    """
+    if name in SHAPES and not replace:
+        raise InputError(
+            f"shape {name!r} is already registered",
+            field="name",
+            expected="a new name or replace=True",
+        )
+    SHAPES[name] = fn
+
+
+register_shape("A1", _rect_a1)
+register_shape("A2", _circle_a2)
+register_shape("A3", _circle_a3)
+register_shape("A4", _ellipse_a4)
+register_shape("A5", _ellipse_a5)
+register_shape("A6", ellipse_a6)
+register_shape("MEC", _min_circle_welzl)
+register_shape("MVEE", mvee_khachiyan)
+
+
+def compute_shapes(
+    point_sets: Iterable[ArrayLike],
+    names: Sequence[str] = ("A1", "A2", "A3", "A4", "A5", "A6", "MEC", "MVEE"),
+    *,
+    are_hulls: bool = False,
+) -> list[dict[str, Any]]:
+    """Every requested shape for every point set: a list of ``{name: shape}`` dicts.
+
+    A6 and MVEE are computed for all sets at once (vectorised); A6 starts from the set's A5.
+    ``are_hulls=True`` says the sets already are :func:`hull_points` outputs (not recomputed).
+    """
+    unknown = [n for n in names if n not in SHAPES]
+    if unknown:
+        raise InputError(
+            f"unknown shapes {unknown}", field="shapes", expected=f"names among {sorted(SHAPES)}"
+        )
+    hulls = [np.asarray(p, dtype=np.float64) if are_hulls else hull_points(p) for p in point_sets]
+    out: list[dict[str, Any]] = [{} for _ in hulls]
+    for name in names:
+        if name in _BATCHED and SHAPES[name] is {"A6": ellipse_a6, "MVEE": mvee_khachiyan}[name]:
+            continue
+        for res, H in zip(out, hulls, strict=False):
+            res[name] = SHAPES[name](H)
+    if "A6" in names and SHAPES["A6"] is ellipse_a6:
+        starts = [
+            res["A5"] if "A5" in res else _ellipse_a5(H) for res, H in zip(out, hulls, strict=False)
+        ]
+        for res, e in zip(out, ellipses_a6_batch(hulls, starts), strict=False):
+            res["A6"] = e
+    if "MVEE" in names and SHAPES["MVEE"] is mvee_khachiyan:
+        for res, e in zip(out, mvee_batch(hulls), strict=False):
+            res["MVEE"] = e
+    return [{n: res[n] for n in names} for res in out]

@@ -1,0 +1,81 @@
+"""Wall maps and where-am-I by correlation (paper 3, with the parts the paper leaves implicit).
+
+Stages, usable apart from NumPy arrays:
+
+- :mod:`~navkit.localization.walls` - 2D points -> straight wall segments (split-and-merge for
+  ordered scans, RANSAC for clouds), TLS lines with extents and uncertainty;
+- :mod:`~navkit.localization.mapping` - views with known poses -> :class:`WallMap` (the same
+  wall seen twice merged, corners, room outline, occupancy grid, JSON);
+- :mod:`~navkit.localization.correlation` - the paper's method: known heading, the fragment
+  slid over the map, the maximum of the correlation, the robot position by the paper's formula;
+- :mod:`~navkit.localization.matcher` - unknown heading: multi-resolution correlative scan
+  matching over ``(x, y, theta)`` (Olson 2009) with sub-cell refinement and an ambiguity report.
+"""
+
+from navkit.localization.correlation import (
+    KnownHeadingFix,
+    correlate_profiles,
+    locate_known_heading,
+    robot_position,
+)
+from navkit.localization.field import LikelihoodField
+from navkit.localization.mapping import (
+    Corner,
+    MapSettings,
+    WallMap,
+    build_map,
+    build_map_from_scans,
+    evaluate_map,
+    find_corners,
+    find_outline,
+    merge_segments,
+    rasterize,
+    sample_segments,
+)
+from navkit.localization.matcher import (
+    Ambiguity,
+    Fix,
+    MatcherSettings,
+    analyse_peak,
+    match_scan,
+    score_poses,
+)
+from navkit.localization.walls import (
+    SegmentationSettings,
+    WallSegment,
+    merge_two,
+    ransac_walls,
+    segment_from_points,
+    split_and_merge,
+)
+
+__all__ = [
+    "Ambiguity",
+    "Corner",
+    "Fix",
+    "KnownHeadingFix",
+    "LikelihoodField",
+    "MapSettings",
+    "MatcherSettings",
+    "SegmentationSettings",
+    "WallMap",
+    "WallSegment",
+    "analyse_peak",
+    "build_map",
+    "build_map_from_scans",
+    "correlate_profiles",
+    "evaluate_map",
+    "find_corners",
+    "find_outline",
+    "locate_known_heading",
+    "match_scan",
+    "merge_segments",
+    "merge_two",
+    "ransac_walls",
+    "rasterize",
+    "robot_position",
+    "sample_segments",
+    "score_poses",
+    "segment_from_points",
+    "split_and_merge",
+]

@@ -1,0 +1,218 @@
+"""The likelihood field of a map and its max-pooled resolution pyramid (Olson 2009, sec. III-IV).
+
+The map is a grid of "how likely is a scan point here": ``L = exp(-d^2 / (2 sigma^2))`` with ``d``
+the distance to the nearest wall (Thrun's likelihood field, the cost Olson's correlative matcher
+sums). The pyramid level ``h`` holds, in every cell ``(i, j)``, the maximum of ``L`` over the
+``2^h x 2^h`` block of cells starting there, so the sum over scan points of level-``h`` values is
+an upper bound of the score of every translation inside that block - the bound that makes
+branch-and-bound exact.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from navkit.errors import ConfigError, InputError
+from navkit.geometry._validate import as_points
+
+__all__ = ["LikelihoodField"]
+
+
+@dataclass(frozen=True)
+class LikelihoodField:
+    """A likelihood field on a regular grid with its max-pooled pyramid.
+
+    Attributes
+    ----------
+    values : (H, W) float32 array
+        ``exp(-d^2 / (2 sigma^2))`` in ``[0, 1]``; row = y index, column = x index.
+    resolution : float
+        Cell size, metres.
+    origin : (2,) array
+        World ``(x, y)`` of the lower-left corner of cell ``[0, 0]``.
+    sigma : float
+        Metres, the width of the field around the walls.
+    pyramid : list of (H, W) float32 arrays
+        ``pyramid[h][i, j] = max(values[i:i+2^h, j:j+2^h])`` (zero outside the grid).
+    points : (N, 2) array or None
+        The occupied points the field was built from (for :meth:`exact`).
+    """
+
+    values: NDArray[np.float32]
+    resolution: float
+    origin: NDArray[np.float64]
+    sigma: float
+    pyramid: list[NDArray[np.float32]]
+    points: NDArray[np.float64] | None = None
+
+    def exact(self, points: ArrayLike) -> NDArray[np.float64]:
+        """``exp(-d^2 / (2 sigma^2))`` at points ``(M, 2)`` with ``d`` the exact distance to the
+        nearest occupied point (a KD-tree; no grid quantisation) - for sub-cell refinement."""
+        if self.points is None:
+            return self.interpolate(points)[0]
+        tree = self.__dict__.get("_tree")
+        if tree is None:
+            tree = cKDTree(self.points)
+            object.__setattr__(self, "_tree", tree)
+        d, _ = tree.query(
+            np.asarray(points, dtype=np.float64), distance_upper_bound=4.0 * self.sigma
+        )
+        return np.exp(-0.5 * (np.minimum(d, 1e9) / self.sigma) ** 2)
+
+    @classmethod
+    def from_points(
+        cls,
+        points: ArrayLike,
+        resolution: float = 0.05,
+        sigma: float = 0.1,
+        *,
+        margin: float = 2.0,
+        levels: int = 7,
+        bounds: ArrayLike | None = None,
+    ) -> LikelihoodField:
+        """Build the field of occupied points ``(N, 2)`` (wall samples, laser end points).
+
+        Parameters
+        ----------
+        points : (N, 2) array
+            Occupied places, metres.
+        resolution : float
+            Cell size, metres.
+        sigma : float
+            Metres; about the noise of the scan points plus the map's own error.
+        margin : float
+            Metres of border around the points (scans may reach a little beyond the map).
+        levels : int
+            Pyramid levels ``0 .. levels - 1`` (top block ``2^(levels-1)`` cells).
+        bounds : (2, 2) array, optional
+            Force the covered area ``[[xmin, ymin], [xmax, ymax]]`` (metres).
+        """
+        if not (np.isfinite(resolution) and resolution > 0):
+            raise ConfigError(f"is {resolution}", field="resolution", expected="positive metres")
+        if not (np.isfinite(sigma) and sigma > 0):
+            raise ConfigError(f"is {sigma}", field="sigma", expected="positive metres")
+        if levels < 1:
+            raise ConfigError(f"is {levels}", field="levels", expected=">= 1")
+        P = as_points(points, 2)
+        P = P[np.all(np.isfinite(P), axis=1)]
+        if len(P) == 0:
+            raise InputError(
+                "no finite points", field="points", expected="at least one occupied point"
+            )
+        if bounds is None:
+            lo, hi = P.min(axis=0) - margin, P.max(axis=0) + margin
+        else:
+            B = np.asarray(bounds, dtype=np.float64).reshape(2, 2)
+            lo, hi = B[0], B[1]
+        lo = np.floor(lo / resolution) * resolution
+        W, H = (np.ceil((hi - lo) / resolution).astype(int) + 1).tolist()
+        if W * H > 60_000_000:
+            raise ConfigError(
+                f"needs a {H} x {W} grid",
+                field="resolution",
+                expected="a coarser resolution for a map this large",
+            )
+        # Exact distances from cell centres to the nearest point (a KD-tree, limited to 4 sigma:
+        # beyond it the field is < 3e-4 and set to 0), so the field has no half-cell bias.
+        occ = np.zeros((H, W), dtype=bool)
+        ij = np.floor((P - lo) / resolution).astype(np.intp)
+        inside = (ij[:, 0] >= 0) & (ij[:, 0] < W) & (ij[:, 1] >= 0) & (ij[:, 1] < H)
+        occ[ij[inside, 1], ij[inside, 0]] = True
+        reach = 4.0 * sigma
+        near = ndimage.distance_transform_edt(~occ) * resolution <= reach + resolution
+        rows, cols = np.nonzero(near)
+        centres = np.stack([cols + 0.5, rows + 0.5], axis=1) * resolution + lo
+        d, _ = cKDTree(P).query(centres, distance_upper_bound=reach)
+        values = np.zeros((H, W), dtype=np.float32)
+        values[rows, cols] = np.exp(-0.5 * (np.minimum(d, 1e9) / sigma) ** 2)
+        return cls(
+            values=values,
+            resolution=float(resolution),
+            origin=lo.astype(np.float64),
+            sigma=float(sigma),
+            pyramid=_pyramid(values, levels),
+            points=P,
+        )
+
+    def coarsen(self, factor: int) -> LikelihoodField:
+        """A field ``factor`` times coarser: each cell the maximum of the ``factor x factor`` block."""
+        if factor <= 1:
+            return self
+        H, W = self.shape
+        Hc, Wc = -(-H // factor), -(-W // factor)
+        pad = np.zeros((Hc * factor, Wc * factor), dtype=np.float32)
+        pad[:H, :W] = self.values
+        values = pad.reshape(Hc, factor, Wc, factor).max(axis=(1, 3))
+        return LikelihoodField(
+            values=values,
+            resolution=self.resolution * factor,
+            origin=self.origin.copy(),
+            sigma=self.sigma,
+            pyramid=_pyramid(values, len(self.pyramid)),
+        )
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.values.shape  # type: ignore[return-value]
+
+    def cell(self, points: ArrayLike) -> NDArray[np.intp]:
+        """Integer cells ``(N, 2)`` (column x, row y) containing the world points ``(N, 2)``."""
+        return np.floor(
+            (np.asarray(points, dtype=np.float64) - self.origin) / self.resolution
+        ).astype(np.intp)
+
+    def lookup(self, points: ArrayLike, level: int = 0) -> NDArray[np.float32]:
+        """Field values at world points ``(..., 2)`` (nearest cell, 0 outside the grid)."""
+        P = np.asarray(points, dtype=np.float64)
+        ij = np.floor((P - self.origin) / self.resolution).astype(np.intp)
+        return _gather(self.pyramid[level], ij[..., 0], ij[..., 1])
+
+    def interpolate(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Bilinear field values ``(N,)`` and gradients ``(N, 2)`` (per metre) at points ``(N, 2)``."""
+        P = np.asarray(points, dtype=np.float64)
+        # cell centres sit at origin + (i + 0.5) * resolution
+        u = (P - self.origin) / self.resolution - 0.5
+        x0 = np.floor(u[:, 0]).astype(np.intp)
+        y0 = np.floor(u[:, 1]).astype(np.intp)
+        fx, fy = u[:, 0] - x0, u[:, 1] - y0
+        v00 = _gather(self.values, x0, y0)
+        v10 = _gather(self.values, x0 + 1, y0)
+        v01 = _gather(self.values, x0, y0 + 1)
+        v11 = _gather(self.values, x0 + 1, y0 + 1)
+        val = v00 * (1 - fx) * (1 - fy) + v10 * fx * (1 - fy) + v01 * (1 - fx) * fy + v11 * fx * fy
+        gx = ((v10 - v00) * (1 - fy) + (v11 - v01) * fy) / self.resolution
+        gy = ((v01 - v00) * (1 - fx) + (v11 - v10) * fx) / self.resolution
+        return val.astype(np.float64), np.stack([gx, gy], axis=1).astype(np.float64)
+
+
+def _gather(
+    grid: NDArray[np.float32], ix: NDArray[np.intp], iy: NDArray[np.intp]
+) -> NDArray[np.float32]:
+    """``grid[iy, ix]`` with 0 outside."""
+    H, W = grid.shape
+    ok = (ix >= 0) & (ix < W) & (iy >= 0) & (iy < H)
+    out = np.zeros(np.shape(ix), dtype=np.float32)
+    out[ok] = grid[iy[ok], ix[ok]]
+    return out
+
+
+def _pyramid(values: NDArray[np.float32], levels: int) -> list[NDArray[np.float32]]:
+    """Max-pooled levels: ``P_h[i, j] = max(values[i:i+2^h, j:j+2^h])`` (zero beyond the grid)."""
+    out = [values]
+    for h in range(1, levels):
+        prev = out[-1]
+        s = 2 ** (h - 1)
+        pad = np.zeros((prev.shape[0] + s, prev.shape[1] + s), dtype=np.float32)
+        pad[: prev.shape[0], : prev.shape[1]] = prev
+        H, W = prev.shape
+        cur = np.maximum(
+            np.maximum(pad[:H, :W], pad[s : s + H, :W]),
+            np.maximum(pad[:H, s : s + W], pad[s : s + H, s : s + W]),
+        )
+        out.append(cur)
+    return out

@@ -1,0 +1,822 @@
+"""A 2D wall map: segments, corners, the room outline, an occupancy grid.
+
+Paper 3 builds the map of the room from wall points seen with known poses: least-squares lines,
+corners at their intersections (``x = (b2 - b1)/(k1 - k2)``, ``y = (k1 b2 - k2 b1)/(k1 - k2)``),
+then "simple heuristics" for the room outline. navkit's version:
+
+1. wall segments of each view in its own frame (:mod:`navkit.localization.walls`), moved to the
+   world by the view's pose (paper eq. 2, an SE(2) motion here);
+2. the same wall seen twice merged: segments with directions within ``merge_angle``, lying
+   within ``merge_distance`` of each other's line and overlapping (or a gap below ``merge_gap``)
+   are joined transitively and refitted exactly (TLS of the union of their points);
+3. corners where two walls at more than ``corner_min_angle`` meet within ``corner_reach`` of an
+   end of both (the line intersection, the TLS equivalent of the paper's formulas);
+4. the outline: cycles of walls linked by corners (and collinear walls linked across doorways),
+   the largest by area is the room, smaller ones are islands (columns);
+5. an occupancy grid: walls occupied, free space from the views' rays (or inside the outline).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from navkit.errors import ConfigError, FormatError, InputError
+from navkit.geometry import polygon_area, se2_apply, se2_from_xytheta, signed_area
+from navkit.geometry._validate import as_points
+from navkit.localization.field import LikelihoodField
+from navkit.localization.walls import (
+    SegmentationSettings,
+    WallSegment,
+    merge_two,
+    ransac_walls,
+    segment_from_stats,
+    split_and_merge,
+)
+
+__all__ = [
+    "Corner",
+    "MapSettings",
+    "WallMap",
+    "build_map",
+    "build_map_from_scans",
+    "drop_corner_stubs",
+    "evaluate_map",
+    "find_corners",
+    "find_outline",
+    "merge_segments",
+    "rasterize",
+    "sample_segments",
+]
+
+log = logging.getLogger(__name__)
+
+MAP_FORMAT = "navkit-wall-map"
+MAP_VERSION = 1
+
+
+@dataclass(frozen=True)
+class MapSettings:
+    """How wall maps are built.
+
+    Attributes
+    ----------
+    segmentation : SegmentationSettings
+        Cutting points into walls.
+    merge_angle_deg : float
+        Two segments are the same wall only if their directions differ by less than this.
+    merge_distance : float
+        Metres; ... and the shorter one's end points lie within this of the longer one's line.
+    merge_gap : float
+        Metres; ... and their extents overlap or leave a gap shorter than this.
+    corner_min_angle_deg : float
+        Walls meeting at less than this angle do not make a corner.
+    corner_reach : float
+        Metres; a corner must lie within this of an end of both walls.
+    doorway_max : float
+        Metres; collinear walls whose facing ends are closer than this are linked across a
+        doorway when tracing the outline.
+    resolution : float
+        Occupancy grid cell size, metres.
+    min_wall_length : float
+        Metres; merged walls shorter than this are dropped from the map.
+    min_relative_support : float
+        Walls with fewer points than this fraction of the 75th-percentile wall's are dropped
+        (stray pieces of stereo outliers; a no-op for laser maps, whose walls have few points).
+    """
+
+    segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
+    merge_angle_deg: float = 5.0
+    merge_distance: float = 0.1
+    merge_gap: float = 0.3
+    corner_min_angle_deg: float = 30.0
+    corner_reach: float = 0.4
+    doorway_max: float = 1.5
+    resolution: float = 0.05
+    min_wall_length: float = 0.3
+    min_relative_support: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in (
+            "merge_distance",
+            "merge_gap",
+            "corner_reach",
+            "resolution",
+            "min_wall_length",
+        ):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ConfigError(f"is {v}", field=name, expected="a positive number of metres")
+        if not 0 < self.merge_angle_deg < 90:
+            raise ConfigError(
+                f"is {self.merge_angle_deg}", field="merge_angle_deg", expected="in (0, 90)"
+            )
+
+
+@dataclass(frozen=True)
+class Corner:
+    """Two walls meeting.
+
+    Attributes
+    ----------
+    point : (2,) array
+        Intersection of the two wall lines, metres.
+    walls : tuple of int
+        Indices of the two walls in the map.
+    angle_deg : float
+        Angle between the walls, degrees in ``(0, 90]``.
+    sigma : float
+        First-order standard error of the corner position, metres, from the walls' offset and
+        direction errors (``sigma_offset + sigma_angle * distance from centroid``, combined in
+        quadrature, divided by ``sin(angle)``).
+    """
+
+    point: NDArray[np.float64]
+    walls: tuple[int, int]
+    angle_deg: float
+    sigma: float
+
+
+@dataclass(frozen=True)
+class WallMap:
+    """A 2D map of straight walls.
+
+    Attributes
+    ----------
+    walls : list of WallSegment
+        World frame, metres.
+    corners : list of Corner
+    outline : (K, 2) array or None
+        Room outline polygon (counter-clockwise), or None when no closed cycle of walls exists.
+    islands : list of (K, 2) arrays
+        Smaller closed cycles (columns, furniture blocks).
+    occupancy : (H, W) int8 array or None
+        -1 unknown, 0 free, 100 occupied; row 0 = min y (use ``np.flipud`` for an image).
+    resolution : float
+        Cell size of ``occupancy``, metres.
+    origin : (2,) array
+        World ``(x, y)`` of the lower-left corner of cell ``[0, 0]``.
+    """
+
+    walls: list[WallSegment]
+    corners: list[Corner] = field(default_factory=list)
+    outline: NDArray[np.float64] | None = None
+    islands: list[NDArray[np.float64]] = field(default_factory=list)
+    occupancy: NDArray[np.int8] | None = None
+    resolution: float = 0.05
+    origin: NDArray[np.float64] = field(default_factory=lambda: np.zeros(2))
+
+    @property
+    def bounds(self) -> NDArray[np.float64]:
+        """``(2, 2)`` rows min ``(x, y)`` and max ``(x, y)`` of the wall end points."""
+        if not self.walls:
+            return np.zeros((2, 2))
+        E = np.concatenate([[w.start, w.end] for w in self.walls])
+        return np.stack([E.min(axis=0), E.max(axis=0)])
+
+    def occupied_points(self) -> NDArray[np.float64]:
+        """Centres ``(K, 2)`` of the occupied grid cells, or wall samples when there is no grid."""
+        if self.occupancy is None:
+            return sample_segments(self.walls, self.resolution / 2)
+        rows, cols = np.nonzero(self.occupancy == 100)
+        return (np.stack([cols, rows], axis=1) + 0.5) * self.resolution + self.origin
+
+    def likelihood_field(
+        self, sigma: float = 0.1, resolution: float | None = None
+    ) -> LikelihoodField:
+        """The map as a likelihood field for :func:`navkit.localization.matcher.match_scan`.
+
+        Built from points every 2 cm along the walls (exact, sub-cell positions) plus the
+        occupied cells farther than one cell from every wall (clutter that is not a straight
+        wall; cell centres would blur the walls by up to half a cell).
+        """
+        from scipy.spatial import cKDTree
+
+        wall_pts = sample_segments(self.walls, 0.02)
+        cells = self.occupied_points()
+        if len(wall_pts) and len(cells):
+            d, _ = cKDTree(wall_pts).query(cells, distance_upper_bound=2 * self.resolution)
+            cells = cells[d > self.resolution]
+        pts = np.concatenate([wall_pts, cells])
+        return LikelihoodField.from_points(pts, resolution or self.resolution, sigma)
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-able description (without the grid, which goes to PGM + YAML)."""
+        return {
+            "format": MAP_FORMAT,
+            "version": MAP_VERSION,
+            "units": "metres, radians unless *_deg",
+            "walls": [w.to_dict() for w in self.walls],
+            "corners": [
+                {
+                    "point": c.point.tolist(),
+                    "walls": list(c.walls),
+                    "angle_deg": c.angle_deg,
+                    "sigma": c.sigma,
+                }
+                for c in self.corners
+            ],
+            "outline": None if self.outline is None else self.outline.tolist(),
+            "islands": [i.tolist() for i in self.islands],
+            "resolution": self.resolution,
+            "origin": self.origin.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, data: object, source: str = "map") -> WallMap:
+        """Inverse of :meth:`to_dict` (the occupancy grid is not restored).
+
+        Raises
+        ------
+        FormatError
+            If the dictionary is not a navkit wall map (names the missing / bad field).
+        """
+        if not isinstance(data, dict) or data.get("format") != MAP_FORMAT:
+            raise FormatError(
+                "not a navkit wall map", source=source, field="format", expected=f"'{MAP_FORMAT}'"
+            )
+        try:
+            walls = []
+            for k, w in enumerate(data["walls"]):
+                walls.append(
+                    segment_from_stats(
+                        int(w["count"]),
+                        np.asarray(w["centroid"], dtype=np.float64).reshape(2),
+                        np.asarray(w["scatter"], dtype=np.float64).reshape(2, 2),
+                        np.asarray([w["start"], w["end"]], dtype=np.float64).reshape(2, 2),
+                    )
+                )
+                if walls[-1].count < 2:
+                    raise ValueError(f"walls[{k}].count < 2")
+            corners = [
+                Corner(
+                    np.asarray(c["point"], float).reshape(2),
+                    (int(c["walls"][0]), int(c["walls"][1])),
+                    float(c["angle_deg"]),
+                    float(c["sigma"]),
+                )
+                for c in data.get("corners", [])
+            ]
+            outline = data.get("outline")
+            return cls(
+                walls=walls,
+                corners=corners,
+                outline=None if outline is None else np.asarray(outline, float).reshape(-1, 2),
+                islands=[np.asarray(i, float).reshape(-1, 2) for i in data.get("islands", [])],
+                resolution=float(data.get("resolution", 0.05)),
+                origin=np.asarray(data.get("origin", [0.0, 0.0]), float).reshape(2),
+            )
+        except (KeyError, TypeError, ValueError, IndexError) as exc:
+            raise FormatError(
+                f"bad wall entry: {exc}",
+                source=source,
+                field="walls",
+                expected="walls with start, end, count, centroid, scatter",
+            ) from exc
+
+
+# --------------------------------------------------------------------------- merging
+def merge_segments(
+    segments: Sequence[WallSegment], settings: MapSettings | None = None
+) -> list[WallSegment]:
+    """Merge segments of the same wall (seen from several views), transitively.
+
+    Pairs are compared vectorised (in blocks, so thousands of segments fit in memory); linked
+    pairs form connected components, each refitted exactly from the pooled statistics.
+
+    Returns
+    -------
+    list of WallSegment
+        Longest first; walls shorter than ``min_wall_length`` dropped.
+    """
+    s = settings or MapSettings()
+    segs = list(segments)
+    if not segs:
+        return []
+    M = len(segs)
+    S = np.array([w.start for w in segs])
+    E = np.array([w.end for w in segs])
+    N = np.array([w.normal for w in segs])
+    rho = np.array([w.rho for w in segs])
+    D = np.array([w.direction for w in segs])
+    C = 0.5 * (S + E)
+    half = 0.5 * np.linalg.norm(E - S, axis=1)
+    cos_max = np.cos(np.radians(s.merge_angle_deg))
+    rows, cols = [], []
+    block = max(1, 2_000_000 // M)
+    for i0 in range(0, M, block):
+        i = slice(i0, min(M, i0 + block))
+        parallel = np.abs(D[i] @ D.T) > cos_max
+        # end points of j against the line of i, and of i against the line of j
+        dSj = np.abs(S @ N[i].T - rho[i]).T
+        dEj = np.abs(E @ N[i].T - rho[i]).T
+        dSi = np.abs(np.einsum("ik,jk->ij", S[i], N) - rho[None, :])
+        dEi = np.abs(np.einsum("ik,jk->ij", E[i], N) - rho[None, :])
+        # the shorter segment's end points must lie near the longer one's line
+        j_shorter = half[None, :] <= half[i][:, None]
+        near = np.where(j_shorter, np.maximum(dSj, dEj), np.maximum(dSi, dEi)) < s.merge_distance
+        # gap between extents along the direction of i
+        centre_gap = np.abs(np.einsum("ijk,ik->ij", C[None, :, :] - C[i][:, None, :], D[i]))
+        overlap = centre_gap - half[i][:, None] - half[None, :] < s.merge_gap
+        # a short piece lying on a longer wall (both ends near its line, inside its extent) is
+        # part of it whatever its direction (stereo smear at corners makes slanted stubs)
+        t_s = np.einsum("ijk,ik->ij", S[None, :, :] - C[i][:, None, :], D[i])
+        t_e = np.einsum("ijk,ik->ij", E[None, :, :] - C[i][:, None, :], D[i])
+        inside = (np.abs(t_s) <= half[i][:, None]) & (np.abs(t_e) <= half[i][:, None])
+        subsumed = j_shorter & (np.maximum(dSj, dEj) < s.merge_distance) & inside
+        link = (parallel & near & overlap) | subsumed
+        r, c = np.nonzero(link)
+        rows.append(r + i0)
+        cols.append(c)
+    r = np.concatenate(rows)
+    c = np.concatenate(cols)
+    graph = coo_matrix((np.ones(len(r), dtype=np.int8), (r, c)), shape=(M, M))
+    n_comp, labels = connected_components(graph, directed=False)
+    merged = []
+    for k in range(n_comp):
+        members = np.flatnonzero(labels == k)
+        wall = segs[members[0]]
+        for m in members[1:]:
+            wall = merge_two(wall, segs[m])
+        if wall.length >= s.min_wall_length:
+            merged.append(wall)
+    merged.sort(key=lambda w: -w.length)
+    log.debug("merged %d segments into %d walls", M, len(merged))
+    return merged
+
+
+# --------------------------------------------------------------------------- corners, outline
+def find_corners(walls: Sequence[WallSegment], settings: MapSettings | None = None) -> list[Corner]:
+    """Corners where two walls meet (line intersection near an end of both walls).
+
+    The intersection of the TLS lines ``n1 . p = rho1`` and ``n2 . p = rho2`` is the paper's
+    ``x = (b2 - b1)/(k1 - k2), y = (k1 b2 - k2 b1)/(k1 - k2)`` in a form valid for vertical walls.
+    """
+    s = settings or MapSettings()
+    if len(walls) < 2:
+        return []
+    N = np.array([w.normal for w in walls])
+    rho = np.array([w.rho for w in walls])
+    S = np.array([w.start for w in walls])
+    E = np.array([w.end for w in walls])
+    i, j = np.triu_indices(len(walls), k=1)
+    det = N[i, 0] * N[j, 1] - N[i, 1] * N[j, 0]
+    sin_min = np.sin(np.radians(s.corner_min_angle_deg))
+    ok = np.abs(det) >= sin_min
+    i, j, det = i[ok], j[ok], det[ok]
+    # Cramer's rule for [n_i; n_j] p = [rho_i; rho_j]
+    px = (rho[i] * N[j, 1] - rho[j] * N[i, 1]) / det
+    py = (N[i, 0] * rho[j] - N[j, 0] * rho[i]) / det
+    P = np.stack([px, py], axis=1)
+
+    def near_end(k: NDArray[np.intp]) -> NDArray[np.bool_]:
+        return (
+            np.minimum(np.linalg.norm(P - S[k], axis=1), np.linalg.norm(P - E[k], axis=1))
+            <= s.corner_reach
+        )
+
+    keep = near_end(i) & near_end(j)
+    corners = []
+    for a, b, p, dt in zip(i[keep], j[keep], P[keep], det[keep], strict=True):
+        wa, wb = walls[a], walls[b]
+        ea = np.hypot(wa.sigma_offset, wa.sigma_angle * np.linalg.norm(p - wa.centroid))
+        eb = np.hypot(wb.sigma_offset, wb.sigma_angle * np.linalg.norm(p - wb.centroid))
+        corners.append(
+            Corner(
+                p,
+                (int(a), int(b)),
+                float(np.degrees(np.arcsin(min(1.0, abs(dt))))),
+                float(np.hypot(ea, eb) / abs(dt)),
+            )
+        )
+    return corners
+
+
+def find_outline(
+    walls: Sequence[WallSegment], corners: Sequence[Corner], settings: MapSettings | None = None
+) -> tuple[NDArray[np.float64] | None, list[NDArray[np.float64]]]:
+    """Closed cycles of walls: the largest (by area) is the outline, the rest are islands.
+
+    Walls are nodes; corners link them, and so do collinear walls whose facing ends are less
+    than ``doorway_max`` apart (a doorway: the outline runs across it). Every connected group in
+    which each wall has exactly two links is a cycle; its polygon visits the corners in order
+    (a doorway link contributes the two door jambs).
+
+    Returns
+    -------
+    outline : (K, 2) array or None
+        Counter-clockwise polygon, metres.
+    islands : list of (K, 2) arrays
+    """
+    s = settings or MapSettings()
+    M = len(walls)
+    links: dict[int, list[tuple[int, list[NDArray[np.float64]]]]] = {k: [] for k in range(M)}
+    for c in corners:
+        a, b = c.walls
+        links[a].append((b, [c.point]))
+        links[b].append((a, [c.point]))
+    cos_max = np.cos(np.radians(s.merge_angle_deg))
+    for a in range(M):
+        for b in range(a + 1, M):
+            wa, wb = walls[a], walls[b]
+            if (
+                abs(wa.direction @ wb.direction) < cos_max
+                or abs(wa.distance(wb.centroid)[0]) > s.merge_distance * 2
+            ):
+                continue
+            ends_a, ends_b = np.stack([wa.start, wa.end]), np.stack([wb.start, wb.end])
+            dist = np.linalg.norm(ends_a[:, None] - ends_b[None], axis=2)
+            ia, ib = np.unravel_index(np.argmin(dist), dist.shape)
+            if dist[ia, ib] <= s.doorway_max:
+                links[a].append((b, [ends_a[ia], ends_b[ib]]))
+                links[b].append((a, [ends_b[ib], ends_a[ia]]))
+    polygons = []
+    seen = np.zeros(M, dtype=bool)
+    for start in range(M):
+        if seen[start] or len(links[start]) != 2:
+            continue
+        # walk the cycle
+        poly: list[NDArray[np.float64]] = []
+        prev, cur = -1, start
+        ok = True
+        visited = []
+        while True:
+            if len(links[cur]) != 2:
+                ok = False
+                break
+            visited.append(cur)
+            nxt = [(n, pts) for n, pts in links[cur] if n != prev] if prev >= 0 else [links[cur][0]]
+            if not nxt:
+                ok = False
+                break
+            n, pts = nxt[0]
+            poly.extend(pts)
+            prev, cur = cur, n
+            if cur == start:
+                break
+            if cur in visited:
+                ok = False
+                break
+        seen[visited] = True
+        if ok and len(poly) >= 3:
+            P = np.array(poly)
+            if signed_area(P) < 0:
+                P = P[::-1]
+            polygons.append(P)
+    if not polygons:
+        return None, []
+    polygons.sort(key=lambda p: -abs(polygon_area(p)))
+    return polygons[0], polygons[1:]
+
+
+# --------------------------------------------------------------------------- grid
+def sample_segments(walls: Sequence[WallSegment], spacing: float) -> NDArray[np.float64]:
+    """Points ``(K, 2)`` every ``spacing`` metres along the walls (both ends included)."""
+    if not walls:
+        return np.zeros((0, 2))
+    S = np.array([w.start for w in walls])
+    E = np.array([w.end for w in walls])
+    n = np.maximum(2, np.ceil(np.linalg.norm(E - S, axis=1) / spacing).astype(int) + 1)
+    owner = np.repeat(np.arange(len(walls)), n)
+    first = np.cumsum(n) - n
+    t = (np.arange(n.sum()) - first[owner]) / (n[owner] - 1)
+    return S[owner] + t[:, None] * (E - S)[owner]
+
+
+def rasterize(
+    walls: Sequence[WallSegment],
+    resolution: float,
+    *,
+    free_polygon: ArrayLike | None = None,
+    rays: tuple[ArrayLike, ArrayLike] | None = None,
+    occupied_points: ArrayLike | None = None,
+    margin: float = 1.0,
+) -> tuple[NDArray[np.int8], NDArray[np.float64]]:
+    """Occupancy grid of a wall map.
+
+    Parameters
+    ----------
+    walls : list of WallSegment
+        Occupied cells (sampled at half a cell).
+    resolution : float
+        Cell size, metres.
+    free_polygon : (K, 2) array, optional
+        Cells whose centres are inside are free (the room outline).
+    rays : ((R, 2) origins, (R, 2) ends), optional
+        Cells crossed by these rays (sensor beams) are free.
+    occupied_points : (P, 2) array, optional
+        Further occupied places (laser end points: clutter that is not a straight wall).
+    margin : float
+        Metres of border around the walls.
+
+    Returns
+    -------
+    grid : (H, W) int8
+        -1 unknown, 0 free, 100 occupied; row 0 at ``origin[1]`` (min y).
+    origin : (2,) array
+        World ``(x, y)`` of the lower-left corner of cell ``[0, 0]``.
+    """
+    if not (np.isfinite(resolution) and resolution > 0):
+        raise InputError(f"is {resolution}", field="resolution", expected="positive metres")
+    occ = sample_segments(walls, resolution / 2)
+    if occupied_points is not None:
+        extra = as_points(occupied_points, 2, "occupied_points")
+        occ = np.concatenate([occ, extra[np.all(np.isfinite(extra), axis=1)]])
+    extent = [occ] if len(occ) else []
+    if rays is not None:
+        o, e = as_points(rays[0], 2, "ray origins"), as_points(rays[1], 2, "ray ends")
+        extent += [o, e]
+    if free_polygon is not None:
+        extent.append(as_points(free_polygon, 2, "free_polygon"))
+    if not extent:
+        return np.full((1, 1), -1, dtype=np.int8), np.zeros(2)
+    allp = np.concatenate(extent)
+    lo = np.floor((allp.min(axis=0) - margin) / resolution) * resolution
+    hi = allp.max(axis=0) + margin
+    W, H = (np.ceil((hi - lo) / resolution).astype(int) + 1).tolist()
+    grid = np.full((H, W), -1, dtype=np.int8)
+
+    def cells(p: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        ij = np.floor((p - lo) / resolution).astype(np.intp)
+        ij[:, 0] = np.clip(ij[:, 0], 0, W - 1)
+        ij[:, 1] = np.clip(ij[:, 1], 0, H - 1)
+        return ij[:, 1], ij[:, 0]
+
+    if free_polygon is not None:
+        from navkit.geometry import points_in_polygon
+
+        yy, xx = np.mgrid[0:H, 0:W]
+        centres = np.stack([xx.ravel() + 0.5, yy.ravel() + 0.5], axis=1) * resolution + lo
+        inside = points_in_polygon(centres, as_points(free_polygon, 2)).reshape(H, W)
+        grid[inside] = 0
+    if rays is not None:
+        o, e = as_points(rays[0], 2), as_points(rays[1], 2)
+        length = np.linalg.norm(e - o, axis=1)
+        n = np.maximum(1, np.ceil(length / (resolution / 2)).astype(int))
+        chunk = 2_000_000
+        start = 0
+        cum = np.cumsum(n)
+        while start < len(n):
+            stop = int(np.searchsorted(cum, (cum[start - 1] if start else 0) + chunk, side="right"))
+            stop = max(stop, start + 1)
+            nn = n[start:stop]
+            owner = np.repeat(np.arange(start, stop), nn)
+            first = np.cumsum(nn) - nn
+            t = (np.arange(nn.sum()) - first[owner - start]) / nn[owner - start]  # [0, 1)
+            r, c = cells(o[owner] + t[:, None] * (e - o)[owner])
+            grid[r, c] = 0
+            start = stop
+    if len(occ):
+        r, c = cells(occ)
+        grid[r, c] = 100
+    return grid, lo
+
+
+# --------------------------------------------------------------------------- building
+def drop_corner_stubs(
+    walls: Sequence[WallSegment], settings: MapSettings | None = None
+) -> list[WallSegment]:
+    """Remove short pieces lying across a corner of two longer walls (stereo smear at corners).
+
+    A wall shorter than ``2 * corner_reach`` whose both end points lie within ``corner_reach``
+    of a corner formed by two other, longer walls is an artefact, not a wall.
+    """
+    s = settings or MapSettings()
+    walls = list(walls)
+    corners = find_corners(walls, s)
+    drop = set()
+    for k, w in enumerate(walls):
+        if w.length >= 2 * s.corner_reach:
+            continue
+        for c in corners:
+            if k in c.walls or min(walls[c.walls[0]].length, walls[c.walls[1]].length) <= w.length:
+                continue
+            if (
+                max(np.linalg.norm(w.start - c.point), np.linalg.norm(w.end - c.point))
+                <= s.corner_reach * 1.5
+            ):
+                drop.add(k)
+                break
+    return [w for k, w in enumerate(walls) if k not in drop]
+
+
+def _finish(
+    walls: list[WallSegment],
+    s: MapSettings,
+    rays: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+) -> WallMap:
+    if walls:
+        # support filter: a wall needs min_relative_support of the points of a well-supported
+        # wall (the 75th percentile: robust to many stubs and to a few huge walls)
+        ref = float(np.percentile([w.count for w in walls], 75))
+        walls = [w for w in walls if w.count >= s.min_relative_support * ref]
+    walls = drop_corner_stubs(walls, s)
+    corners = find_corners(walls, s)
+    outline, islands = find_outline(walls, corners, s)
+    grid, origin = rasterize(
+        walls,
+        s.resolution,
+        free_polygon=outline if rays is None else None,
+        rays=rays,
+        occupied_points=None if rays is None else rays[1],
+    )
+    return WallMap(
+        walls=walls,
+        corners=corners,
+        outline=outline,
+        islands=islands,
+        occupancy=grid,
+        resolution=s.resolution,
+        origin=origin,
+    )
+
+
+def build_map(
+    views: Sequence[ArrayLike],
+    poses: ArrayLike | None = None,
+    settings: MapSettings | None = None,
+    *,
+    ordered: bool = False,
+) -> WallMap:
+    """Build a wall map from 2D wall points of one or more views.
+
+    Parameters
+    ----------
+    views : list of (N_k, 2) arrays
+        Wall points of each view (e.g. stereo points of wall pixels projected on the floor),
+        metres, in the view's frame (x forward, y left) - or in the world if ``poses`` is None.
+    poses : (K, 3) array, optional
+        ``(x, y, theta)`` of each view in the world (paper eq. 2: a rotation about z and a shift).
+    settings : MapSettings, optional
+    ordered : bool
+        Points of each view are in scan order: use split-and-merge; else RANSAC.
+
+    Returns
+    -------
+    WallMap
+    """
+    s = settings or MapSettings()
+    views = list(views)
+    if poses is not None:
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        if len(poses) != len(views):
+            raise InputError(
+                f"has {len(poses)} rows for {len(views)} views",
+                field="poses",
+                expected="one (x, y, theta) per view",
+            )
+    segs: list[WallSegment] = []
+    seg_fn = split_and_merge if ordered else ransac_walls
+    for k, pts in enumerate(views):
+        P = as_points(pts, 2, f"views[{k}]")
+        local = seg_fn(P, s.segmentation)
+        if poses is not None:
+            T = se2_from_xytheta(*poses[k])
+            local = [_transform(w, T) for w in local]
+        segs.extend(local)
+    walls = merge_segments(segs, s)
+    return _finish(walls, s, None)
+
+
+def build_map_from_scans(
+    ranges: ArrayLike,
+    bearings: ArrayLike,
+    poses: ArrayLike,
+    settings: MapSettings | None = None,
+    *,
+    max_range: float = 30.0,
+) -> WallMap:
+    """Build a wall map from 2D laser scans with known (corrected) poses.
+
+    Parameters
+    ----------
+    ranges : (K, B) array
+        Ranges, metres; NaN, non-positive or ``>= max_range`` = no return.
+    bearings : (B,) array
+        Beam angles in the sensor frame, radians (0 = forward, positive to the left).
+    poses : (K, 3) array
+        Sensor poses ``(x, y, theta)`` in the world.
+    settings : MapSettings, optional
+    max_range : float
+        Metres; readings at or above it are no return (they clear no free space either).
+
+    Returns
+    -------
+    WallMap
+        With the occupancy grid's free space traced along the beams.
+    """
+    s = settings or MapSettings()
+    R = np.asarray(ranges, dtype=np.float64)
+    b = np.asarray(bearings, dtype=np.float64).reshape(-1)
+    X = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if R.ndim != 2 or R.shape[1] != len(b) or len(R) != len(X):
+        raise InputError(
+            f"ranges {R.shape}, bearings {b.shape}, poses {X.shape}",
+            field="ranges",
+            expected="(K, B) ranges, (B,) bearings, (K, 3) poses",
+        )
+    valid = np.isfinite(R) & (R > 0) & (R < max_range)  # no-return beams clear nothing
+    local = np.stack([R * np.cos(b), R * np.sin(b)], axis=-1)  # (K, B, 2)
+    segs: list[WallSegment] = []
+    ends_world = []
+    origins = []
+    for k in range(len(R)):
+        pts = local[k][valid[k]]
+        T = se2_from_xytheta(*X[k])
+        segs.extend(_transform(w, T) for w in split_and_merge(pts, s.segmentation))
+        ok = valid[k]
+        e = np.stack([R[k, ok] * np.cos(b[ok]), R[k, ok] * np.sin(b[ok])], axis=1)
+        ends_world.append(se2_apply(T, e) if len(e) else np.zeros((0, 2)))
+        origins.append(np.repeat(X[k, None, :2], len(e), axis=0))
+    walls = merge_segments(segs, s)
+    rays = (np.concatenate(origins), np.concatenate(ends_world))
+    return _finish(walls, s, rays)
+
+
+def _transform(w: WallSegment, T: NDArray[np.float64]) -> WallSegment:
+    """The segment moved by the planar transform ``T`` (3, 3)."""
+    R = T[:2, :2]
+    c = R @ w.centroid + T[:2, 2]
+    ends = se2_apply(T, np.stack([w.start, w.end]))
+    return segment_from_stats(w.count, c, R @ w.scatter @ R.T, ends)
+
+
+# --------------------------------------------------------------------------- evaluation
+def evaluate_map(
+    wall_map: WallMap,
+    true_walls: ArrayLike,
+    true_corners: ArrayLike,
+    *,
+    max_distance: float = 0.5,
+    max_angle_deg: float = 10.0,
+) -> dict[str, object]:
+    """Map accuracy against a known floor plan.
+
+    Each true wall is matched to the map wall of nearly the same direction (within
+    ``max_angle_deg``) whose line passes nearest the true wall's midpoint (within
+    ``max_distance``), preferring the longest overlap; each true corner to the nearest map corner
+    within ``max_distance``.
+
+    Returns
+    -------
+    dict
+        ``walls_found`` / ``walls_true``, ``wall_angle_error_deg`` (list; NaN = not found),
+        ``wall_offset_error`` (metres, mean distance of the true end points' projections... the
+        true midpoint to the map line), ``corners_found`` / ``corners_true``,
+        ``corner_error`` (metres, list; NaN = not found), and their medians / maxima.
+    """
+    TW = np.asarray(true_walls, dtype=np.float64).reshape(-1, 2, 2)
+    TC = np.asarray(true_corners, dtype=np.float64).reshape(-1, 2)
+    ang_err, off_err = [], []
+    for a, b in TW:
+        d = (b - a) / np.linalg.norm(b - a)
+        mid = 0.5 * (a + b)
+        best, best_key = None, None
+        for w in wall_map.walls:
+            ang = np.degrees(np.arccos(min(1.0, abs(float(d @ w.direction)))))
+            off = abs(float(w.distance(mid)[0]))
+            if ang > max_angle_deg or off > max_distance:
+                continue
+            ts = sorted(float((p - a) @ d) for p in (w.start, w.end))
+            overlap = min(ts[1], float(np.linalg.norm(b - a))) - max(ts[0], 0.0)
+            if overlap <= 0:
+                continue
+            key = -overlap
+            if best_key is None or key < best_key:
+                best, best_key = (ang, off), key
+        ang_err.append(np.nan if best is None else best[0])
+        off_err.append(np.nan if best is None else best[1])
+    C = np.array([c.point for c in wall_map.corners]).reshape(-1, 2)
+    corner_err = []
+    for c in TC:
+        dist = np.linalg.norm(C - c, axis=1) if len(C) else np.array([np.inf])
+        corner_err.append(float(dist.min()) if dist.min() <= max_distance else np.nan)
+    ae, oe, ce = np.array(ang_err), np.array(off_err), np.array(corner_err)
+
+    def stat(x: NDArray[np.float64], f) -> float:  # type: ignore[no-untyped-def]
+        x = x[np.isfinite(x)]
+        return float(f(x)) if len(x) else float("nan")
+
+    return {
+        "walls_true": len(TW),
+        "walls_found": int(np.isfinite(ae).sum()),
+        "walls_in_map": len(wall_map.walls),
+        "wall_angle_error_deg": ae.tolist(),
+        "wall_offset_error_m": oe.tolist(),
+        "wall_angle_error_deg_median": stat(ae, np.median),
+        "wall_angle_error_deg_max": stat(ae, np.max),
+        "wall_offset_error_m_median": stat(oe, np.median),
+        "corners_true": len(TC),
+        "corners_found": int(np.isfinite(ce).sum()),
+        "corners_in_map": len(wall_map.corners),
+        "corner_error_m": ce.tolist(),
+        "corner_error_m_median": stat(ce, np.median),
+        "corner_error_m_max": stat(ce, np.max),
+        "outline_found": wall_map.outline is not None,
+    }

@@ -1,0 +1,653 @@
+"""Where am I: correlative scan matching over ``(x, y, theta)`` against a wall map.
+
+Paper 3 slides the observed wall fragment along the map with a *known* heading
+(:mod:`navkit.localization.correlation`). When the heading is unknown the same correlation is
+searched over rotations too; done naively that costs ``n_x n_y n_theta N`` look-ups. Olson's
+real-time correlative scan matching (Olson, ICRA 2009) makes it fast and exact:
+
+1. the map as a likelihood field (:class:`~navkit.localization.field.LikelihoodField`);
+2. for each rotation of the search window, the scan's points rotated once and rounded to cells
+   (rotation step such that the farthest point moves at most one cell);
+3. a max-pooled resolution pyramid: a node covering ``2^h x 2^h`` translations gets an upper
+   bound of their scores with one look-up per point;
+4. branch-and-bound: nodes are expanded level by level (vectorised over all surviving nodes),
+   pruned when their bound cannot beat the best exact score found (greedy descents seed it);
+5. sub-cell refinement of the winner on the bilinear field (L-BFGS-B, analytic gradient);
+6. an ambiguity report: the shape of the score around the peak (a straight featureless wall is
+   flat along itself: its direction and extent are reported) and the best *distinct* second
+   peak (a second branch-and-bound with the winner's neighbourhood excluded).
+
+The score of a pose is the mean field value at the scan's points, in ``[0, 1]``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from navkit.errors import ConfigError, InputError
+from navkit.geometry import wrap_angle
+from navkit.geometry._validate import as_points
+from navkit.localization.field import LikelihoodField, _pyramid
+
+__all__ = ["Ambiguity", "Fix", "MatcherSettings", "analyse_peak", "match_scan", "score_poses"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class MatcherSettings:
+    """Correlative matcher settings.
+
+    Attributes
+    ----------
+    linear_window : float
+        Metres; half-width of the translation search around the prior (ignored without a prior:
+        the whole field is searched).
+    angular_window_deg : float
+        Degrees; half-width of the heading search around the prior (360 without a prior).
+    angular_step_deg : float or None
+        Heading step; None = Olson's rule, the farthest (95th percentile) point moves one cell.
+    point_spacing : float
+        Metres; the scan is thinned to one point per cell of this size before matching.
+    max_candidates : int
+        Budget of node evaluations per branch-and-bound; when it runs out the best leaf so far
+        is returned and the fix is flagged ``exact=False``.
+    refine : bool
+        Sub-cell refinement of the winner on the bilinear field.
+    peak_tolerance : float
+        Poses whose score is within this fraction of the best belong to the peak (ambiguity).
+    ambiguity_extent : float
+        Metres; a peak longer than this along its major axis is reported ambiguous.
+    ambiguity_window : float
+        Metres; half-width of the neighbourhood examined for the peak's shape.
+    second_peak_ratio : float
+        A distinct second peak scoring at least this fraction of the best is reported ambiguous.
+    exclusion_radius : float
+        Metres; poses nearer than this to the best (and within ``exclusion_angle_deg``) are the
+        same peak, not a second one.
+    exclusion_angle_deg : float
+        Degrees, see ``exclusion_radius``.
+    min_score : float
+        A fix scoring below this is reported as failed (``ok=False``).
+    global_resolution : float
+        Metres; a global search (no prior) runs on the field max-pooled to about this cell size
+        (and its rotation step), then a fine search of +-2 coarse cells / steps around the
+        winner at full resolution. Exact on the coarse field; the fine stage recovers the full
+        resolution (the coarse field over-rates poses by at most one coarse cell of offset).
+    """
+
+    linear_window: float = 1.0
+    angular_window_deg: float = 20.0
+    angular_step_deg: float | None = None
+    point_spacing: float = 0.1
+    max_candidates: int = 20_000_000
+    refine: bool = True
+    peak_tolerance: float = 0.05
+    ambiguity_extent: float = 0.5
+    ambiguity_window: float = 1.5
+    second_peak_ratio: float = 0.9
+    exclusion_radius: float = 1.0
+    exclusion_angle_deg: float = 15.0
+    min_score: float = 0.3
+    global_resolution: float = 0.2
+
+    def __post_init__(self) -> None:
+        for name in (
+            "linear_window",
+            "angular_window_deg",
+            "point_spacing",
+            "ambiguity_window",
+            "exclusion_radius",
+        ):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ConfigError(f"is {v}", field=name, expected="a positive number")
+        if not 0 < self.peak_tolerance < 1:
+            raise ConfigError(
+                f"is {self.peak_tolerance}", field="peak_tolerance", expected="in (0, 1)"
+            )
+        if not 0 < self.second_peak_ratio <= 1:
+            raise ConfigError(
+                f"is {self.second_peak_ratio}", field="second_peak_ratio", expected="in (0, 1]"
+            )
+
+
+@dataclass(frozen=True)
+class Ambiguity:
+    """How well a fix is determined.
+
+    Attributes
+    ----------
+    ambiguous : bool
+        True when the peak is elongated beyond ``ambiguity_extent`` or a distinct second peak
+        scores at least ``second_peak_ratio`` of the best.
+    reason : str
+        ``""``, ``"elongated peak"`` (e.g. a single straight wall), ``"second peak"`` or both.
+    direction : (2,) array
+        World unit vector of the peak's major axis (along the wall for a straight wall).
+    extent : float
+        Metres; length of the near-optimal set along ``direction`` (``>= 2 * window`` means
+        "at least": the peak runs out of the examined window).
+    extent_minor : float
+        Metres; its width across.
+    covariance : (2, 2) array
+        m^2; score-weighted covariance of the near-optimal translations.
+    second_score : float
+        Score of the best distinct second peak (NaN if none reached ``second_peak_ratio`` of
+        the best). After a global search it is the coarse-field score scaled by the ratio of
+        the fine to the coarse best score (so it compares with ``Fix.score``).
+    second_pose : (3,) array
+        Its ``(x, y, theta)``, NaN if none.
+    """
+
+    ambiguous: bool
+    reason: str
+    direction: NDArray[np.float64]
+    extent: float
+    extent_minor: float
+    covariance: NDArray[np.float64]
+    second_score: float = float("nan")
+    second_pose: NDArray[np.float64] = field(default_factory=lambda: np.full(3, np.nan))
+
+
+@dataclass(frozen=True)
+class Fix:
+    """A localization result.
+
+    Attributes
+    ----------
+    pose : (3,) array
+        ``(x, y, theta)`` of the scan's frame in the map, metres and radians.
+    score : float
+        Mean likelihood-field value at the scan points, ``[0, 1]``.
+    ok : bool
+        ``score >= min_score`` and not ambiguous.
+    ambiguity : Ambiguity
+    exact : bool
+        False if the candidate cap cut the branch-and-bound (the optimum is then likely, not
+        guaranteed).
+    n_points : int
+        Scan points used (after thinning).
+    n_evaluated : int
+        Bound / score evaluations (pyramid nodes) spent.
+    seconds : float
+        Wall time of the fix.
+    """
+
+    pose: NDArray[np.float64]
+    score: float
+    ok: bool
+    ambiguity: Ambiguity
+    exact: bool
+    n_points: int
+    n_evaluated: int
+    seconds: float
+
+
+# --------------------------------------------------------------------------- helpers
+def _thin(points: NDArray[np.float64], spacing: float) -> NDArray[np.float64]:
+    """One point (the first) per ``spacing``-sized cell."""
+    keys = np.floor(points / spacing).astype(np.int64)
+    _, first = np.unique(keys, axis=0, return_index=True)
+    return points[np.sort(first)]
+
+
+def _rot(theta: NDArray[np.float64]) -> NDArray[np.float64]:
+    c, s = np.cos(theta), np.sin(theta)
+    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+
+
+@dataclass
+class _BnBState:
+    """Mutable state of one branch-and-bound: best exact score so far, its node, the budget."""
+
+    lower: float
+    best: tuple[float, int, int, int] | None
+    budget: int
+
+
+class _Search:
+    """One branch-and-bound search over a rotation list and a square translation window.
+
+    Translations are ``base + (ix, iy) * resolution`` with ``0 <= ix, iy < n_cells``. The
+    pyramid is copied into zero-padded flat arrays large enough that every look-up of the search
+    is in range, so a score is one gather: ``grid[F[k] + iy * W + ix]``.
+    """
+
+    def __init__(
+        self,
+        fld: LikelihoodField,
+        pts: NDArray[np.float64],
+        thetas: NDArray[np.float64],
+        base: NDArray[np.float64],
+        n_cells: int,
+    ) -> None:
+        self.f = fld
+        self.thetas = thetas
+        self.base = base
+        self.n = n_cells
+        Q = np.einsum("kij,nj->kni", _rot(thetas), pts)  # (K, N, 2)
+        off = np.floor((Q + base - fld.origin) / fld.resolution).astype(np.int64)  # (K, N, 2)
+        H, W = fld.shape
+        # The region of cells any look-up of this search can touch: [lo, hi) per axis. The
+        # pyramid is pooled on this region (zeros outside the map), so a block that starts
+        # outside the map but reaches into it keeps its true maximum; the look-up is then one
+        # gather, grid[F[k] + iy * Wr + ix].
+        lo = off.min(axis=(0, 1))
+        hi = off.max(axis=(0, 1)) + n_cells
+        Wr, Hr = int(hi[0] - lo[0]), int(hi[1] - lo[1])
+        if Wr * Hr > 60_000_000:
+            raise ConfigError(
+                f"the search spans {Hr} x {Wr} cells",
+                field="linear_window",
+                expected="a smaller search window, a coarser map or shorter ranges",
+            )
+        region = np.zeros((Hr, Wr), dtype=np.float32)
+        x0, y0 = max(0, int(lo[0])), max(0, int(lo[1]))
+        x1, y1 = min(W, int(hi[0])), min(H, int(hi[1]))
+        if x1 > x0 and y1 > y0:
+            region[y0 - lo[1] : y1 - lo[1], x0 - lo[0] : x1 - lo[0]] = fld.values[y0:y1, x0:x1]
+        self.Wp = Wr
+        self.F = ((off[..., 1] - lo[1]) * Wr + off[..., 0] - lo[0]).astype(np.int64)  # (K, N)
+        # uint8 copies of the pooled levels (rounded up, so level bounds stay upper bounds).
+        self.flat = [
+            np.ceil(g * 255.0).astype(np.uint8).ravel() for g in _pyramid(region, len(fld.pyramid))
+        ]
+        self.evaluated = 0
+        self.batch = 512
+
+    def scores(
+        self, level: int, k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp]
+    ) -> NDArray[np.float64]:
+        """Mean level-``level`` values of the scan at rotations ``k`` and translations ``(ix, iy)``."""
+        out = np.empty(len(k), dtype=np.float64)
+        N = self.F.shape[1]
+        step = max(1, 4_000_000 // max(N, 1))
+        grid = self.flat[level]
+        shift = iy.astype(np.int64) * self.Wp + ix
+        for a in range(0, len(k), step):
+            b = min(len(k), a + step)
+            out[a:b] = grid[self.F[k[a:b]] + shift[a:b, None]].sum(axis=1, dtype=np.int64) / (
+                255.0 * N
+            )
+        self.evaluated += len(k)
+        return out
+
+    def pose(self, k: int, ix: int, iy: int) -> NDArray[np.float64]:
+        r = self.f.resolution
+        return np.array([self.base[0] + ix * r, self.base[1] + iy * r, float(self.thetas[k])])
+
+    def _children(self, h: int, k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp]):  # type: ignore[no-untyped-def]
+        s = 2 ** (h - 1)
+        k4 = np.repeat(k, 4)
+        ix4 = np.repeat(ix, 4) + np.tile([0, s, 0, s], len(ix))
+        iy4 = np.repeat(iy, 4) + np.tile([0, 0, s, s], len(iy))
+        ok = (ix4 < self.n) & (iy4 < self.n)
+        return k4[ok], ix4[ok], iy4[ok], np.repeat(np.arange(len(k)), 4)[ok]
+
+    def run(self, levels: int, lower: float, cap: int, exclude=None, seeds: int = 8):  # type: ignore[no-untyped-def]
+        """Best leaf ``(score, k, ix, iy)`` with score > ``lower`` (or None) and an exactness flag.
+
+        ``exclude(k, ix, iy) -> bool mask`` removes leaves (second-peak search).
+        """
+        L = levels - 1
+        step = 2**L
+        g = np.arange(0, self.n, step)
+        K, IX, IY = np.meshgrid(np.arange(len(self.thetas)), g, g, indexing="ij")
+        k, ix, iy = K.ravel(), IX.ravel(), IY.ravel()
+        bound = self.scores(L, k, ix, iy)
+        best: tuple[float, int, int, int] | None = None
+        # Seed the lower bound: greedy descents from the best top-level nodes.
+        top = np.argsort(-bound)[:seeds]
+        sk, sx, sy = k[top], ix[top], iy[top]
+        for h in range(L, 0, -1):
+            ck, cx, cy, parent = self._children(h, sk, sx, sy)
+            cb = self.scores(h - 1, ck, cx, cy)
+            if exclude is not None and h == 1:
+                cb[exclude(ck, cx, cy)] = -1.0
+            pick = np.full(len(sk), -1)
+            bestval = np.full(len(sk), -np.inf)
+            np.maximum.at(bestval, parent, cb)
+            for j in range(len(cb)):  # tiny: <= 4 * seeds
+                if cb[j] == bestval[parent[j]] and pick[parent[j]] < 0:
+                    pick[parent[j]] = j
+            sk, sx, sy = ck[pick], cx[pick], cy[pick]
+            if h == 1:
+                j = int(np.argmax(bestval))
+                if bestval[j] > lower:
+                    lower = float(bestval[j])
+                    best = (lower, int(sk[j]), int(sx[j]), int(sy[j]))
+        if L == 0:
+            if exclude is not None:
+                bound[exclude(k, ix, iy)] = -1.0
+            j = int(np.argmax(bound))
+            return (
+                (float(bound[j]), int(k[j]), int(ix[j]), int(iy[j])) if bound[j] > lower else best
+            ), True
+        # Depth-first branch-and-bound in batches (Cartographer's order, vectorised): nodes of a
+        # level sorted by bound, expanded a batch at a time down to the leaves, so good leaves
+        # raise the lower bound early and prune the rest.
+        state = _BnBState(lower, best, cap)
+
+        def descend(
+            h: int,
+            k: NDArray[np.intp],
+            ix: NDArray[np.intp],
+            iy: NDArray[np.intp],
+            bound: NDArray[np.float64],
+        ) -> None:
+            order = np.argsort(-bound, kind="stable")
+            k, ix, iy, bound = k[order], ix[order], iy[order], bound[order]
+            for a in range(0, len(k), self.batch):
+                if bound[a] <= state.lower or state.budget <= 0:
+                    return
+                sl = slice(a, a + self.batch)
+                keep = bound[sl] > state.lower
+                ck, cx, cy, _ = self._children(h, k[sl][keep], ix[sl][keep], iy[sl][keep])
+                state.budget -= len(ck)
+                cb = self.scores(h - 1, ck, cx, cy)
+                if h == 1:
+                    if exclude is not None:
+                        cb[exclude(ck, cx, cy)] = -1.0
+                    if len(cb):
+                        j = int(np.argmax(cb))
+                        if cb[j] > state.lower:
+                            state.lower = float(cb[j])
+                            state.best = (float(cb[j]), int(ck[j]), int(cx[j]), int(cy[j]))
+                else:
+                    m = cb > state.lower
+                    if m.any():
+                        descend(h - 1, ck[m], cx[m], cy[m], cb[m])
+
+        keep = bound > lower
+        descend(L, k[keep], ix[keep], iy[keep], bound[keep])
+        return state.best, bool(state.budget > 0)
+
+
+def score_poses(fld: LikelihoodField, points: ArrayLike, poses: ArrayLike) -> NDArray[np.float64]:
+    """Scores ``(M,)`` (mean nearest-cell field value) of scan points ``(N, 2)`` at poses ``(M, 3)``."""
+    P = as_points(points, 2)
+    X = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    W = np.einsum("mij,nj->mni", _rot(X[:, 2]), P) + X[:, None, :2]
+    return fld.lookup(W).mean(axis=1).astype(np.float64)
+
+
+def _exact_scores(
+    fld: LikelihoodField, pts: NDArray[np.float64], poses: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Mean exact field values (KD-tree distances) of the scan at poses ``(M, 3)``."""
+    W = np.einsum("mij,nj->mni", _rot(poses[:, 2]), pts) + poses[:, None, :2]
+    v = fld.exact(W.reshape(-1, 2))
+    return v.reshape(len(poses), -1).mean(axis=1)
+
+
+_STENCIL = np.stack(
+    np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], indexing="ij"), -1
+).reshape(-1, 3)
+
+
+def _refine(
+    fld: LikelihoodField, pts: NDArray[np.float64], x0: NDArray[np.float64], dxy: float, dth: float
+) -> NDArray[np.float64]:
+    """Sub-cell maximum of the exact score near ``x0`` (within one cell / one rotation step).
+
+    The score here uses exact distances to the map's points (:meth:`LikelihoodField.exact`),
+    not the grid: a piecewise-bilinear field would pin the optimum to cell centres.
+
+    Then three rounds: score a 3 x 3 x 3 stencil (half a cell, half a step), fit a quadratic in
+    ``(x, y, theta)`` by least squares, jump to its maximum when it is one (negative-definite
+    Hessian) and inside the box, otherwise to the best stencil point; halve the stencil.
+    """
+    x = np.asarray(x0, dtype=np.float64).copy()
+    # Phase 1: exact scores on the grid around the discrete optimum (+-2 cells, +-1 step): the
+    # nearest-cell scores of the search are noisy by up to half a cell per point, so on a
+    # shallow peak the discrete winner can sit a cell or two from the true optimum.
+    g = np.arange(-2, 3) * dxy
+    a = np.arange(-1, 2) * dth
+    GX, GY, GA = np.meshgrid(g, g, a, indexing="ij")
+    cand = x + np.stack([GX.ravel(), GY.ravel(), GA.ravel()], axis=1)
+    x = cand[int(np.argmax(_exact_scores(fld, pts, cand)))].copy()
+    # Phase 2: quadratic model rounds.
+    h = np.array([dxy / 2, dxy / 2, dth / 2])
+    lo, hi = x - np.array([dxy, dxy, dth]), x + np.array([dxy, dxy, dth])
+    for _ in range(3):
+        U = _STENCIL  # offsets in units of h
+        v = _exact_scores(fld, pts, x + U * h)
+        # quadratic model v = c + g.u + 0.5 u^T A u
+        cols = [
+            np.ones(len(U)),
+            U[:, 0],
+            U[:, 1],
+            U[:, 2],
+            U[:, 0] ** 2,
+            U[:, 1] ** 2,
+            U[:, 2] ** 2,
+            U[:, 0] * U[:, 1],
+            U[:, 0] * U[:, 2],
+            U[:, 1] * U[:, 2],
+        ]
+        c = np.linalg.lstsq(np.stack(cols, 1), v, rcond=None)[0]
+        g = c[1:4]
+        A = np.array([[2 * c[4], c[7], c[8]], [c[7], 2 * c[5], c[9]], [c[8], c[9], 2 * c[6]]])
+        step = None
+        if np.all(np.linalg.eigvalsh(A) < 0):
+            u = -np.linalg.solve(A, g)
+            if np.all(np.abs(u) <= 1.5):
+                step = u
+        if step is None:
+            step = U[int(np.argmax(v))]
+        x = np.clip(x + step * h, lo, hi)
+        h = h / 2
+    return x
+
+
+def analyse_peak(
+    fld: LikelihoodField,
+    points: ArrayLike,
+    pose: ArrayLike,
+    settings: MatcherSettings | None = None,
+    *,
+    angular_step: float | None = None,
+) -> tuple[NDArray[np.float64], float, float, NDArray[np.float64], float]:
+    """Shape of the score peak around ``pose``.
+
+    Scores all translations within ``ambiguity_window`` (one cell apart; the best of three
+    headings ``theta - step, theta, theta + step`` each); the near-optimal set is those within
+    ``peak_tolerance`` of the best. Its score-weighted covariance's major axis is the peak's
+    direction; the extents are the spread of the set's projections on the two axes.
+
+    Returns
+    -------
+    direction : (2,) array
+    extent, extent_minor : float
+        Metres.
+    covariance : (2, 2) array
+    best : float
+        The best score in the neighbourhood.
+    """
+    s = settings or MatcherSettings()
+    P = as_points(points, 2)
+    x0 = np.asarray(pose, dtype=np.float64).reshape(3)
+    r = fld.resolution
+    n = int(np.ceil(s.ambiguity_window / r))
+    step = (
+        angular_step
+        if angular_step is not None
+        else r / max(np.percentile(np.linalg.norm(P, axis=1), 95), r)
+    )
+    search = _Search(
+        fld,
+        P,
+        np.asarray(x0[2] + np.array([-step, 0.0, step]), dtype=np.float64),
+        x0[:2] - n * r,
+        2 * n + 1,
+    )
+    IX, IY = np.meshgrid(np.arange(2 * n + 1), np.arange(2 * n + 1), indexing="ij")
+    ix, iy = IX.ravel(), IY.ravel()
+    best = np.max([search.scores(0, np.full(len(ix), k), ix, iy) for k in range(3)], axis=0)
+    DX, DY = (IX - n) * r, (IY - n) * r
+    top = float(best.max())
+    near = best >= (1.0 - s.peak_tolerance) * top
+    T = np.stack([DX.ravel()[near], DY.ravel()[near]], axis=1)
+    w = best[near]
+    mu = (w[:, None] * T).sum(0) / w.sum()
+    C = ((w[:, None] * (T - mu)).T @ (T - mu)) / w.sum()
+    _, evecs = np.linalg.eigh(C)
+    major, minor = evecs[:, 1], evecs[:, 0]
+    pm, pn = T @ major, T @ minor
+    return major, float(pm.max() - pm.min()) + r, float(pn.max() - pn.min()) + r, C, top
+
+
+def match_scan(
+    fld: LikelihoodField,
+    points: ArrayLike,
+    prior: ArrayLike | None = None,
+    settings: MatcherSettings | None = None,
+) -> Fix:
+    """Locate a scan in the map by multi-resolution correlative matching.
+
+    Parameters
+    ----------
+    fld : LikelihoodField
+        The map (see :meth:`LikelihoodField.from_points`; from a wall map use
+        :func:`navkit.localization.mapping.sample_segments`).
+    points : (N, 2) array
+        The scan's points in its own frame (x forward, y left), metres; NaN rows dropped.
+    prior : (3,) array, optional
+        ``(x, y, theta)`` guess; the search covers ``linear_window`` / ``angular_window_deg``
+        around it. None = global search: the whole field, all headings.
+    settings : MatcherSettings, optional
+
+    Returns
+    -------
+    Fix
+    """
+    t0 = time.perf_counter()
+    s = settings or MatcherSettings()
+    P = as_points(points, 2)
+    P = P[np.all(np.isfinite(P), axis=1)]
+    if len(P) < 3:
+        raise InputError(
+            f"has {len(P)} finite points", field="points", expected="at least 3 scan points"
+        )
+    P = _thin(P, s.point_spacing)
+    r = fld.resolution
+    reach = max(float(np.percentile(np.linalg.norm(P, axis=1), 95)), r)
+    step = (
+        np.radians(s.angular_step_deg)
+        if s.angular_step_deg
+        else float(np.arccos(1 - r**2 / (2 * reach**2)))
+    )
+    levels = len(fld.pyramid)
+    if prior is None:
+        # Global: exact branch-and-bound on a coarser field, all headings, the whole map.
+        factor = max(1, round(s.global_resolution / r))
+        coarse = fld.coarsen(factor)
+        rc = coarse.resolution
+        H, W = coarse.shape
+        n_cells = max(H, W)
+        centre = coarse.origin + 0.5 * np.array([W, H]) * rc
+        base = centre - (n_cells // 2) * rc
+        step_c = (
+            float(np.arccos(1 - rc**2 / (2 * reach**2)))
+            if not s.angular_step_deg
+            else step * factor
+        )
+        n_th = int(np.ceil(2 * np.pi / step_c))
+        thetas = np.asarray(-np.pi + np.arange(n_th) * (2 * np.pi / n_th), dtype=np.float64)
+        step_c = 2 * np.pi / n_th
+        search = _Search(coarse, P, thetas, base, n_cells)
+        best, exact = search.run(levels, -1.0, s.max_candidates)
+        assert best is not None
+        coarse_best = best
+        x0 = search.pose(best[1], best[2], best[3])
+        lin, ang = 2 * rc, 2 * step_c
+    else:
+        x0 = np.asarray(prior, dtype=np.float64).reshape(3)
+        lin, ang = s.linear_window, np.radians(s.angular_window_deg)
+        search, coarse_best, exact = None, None, True
+    m = int(np.ceil(lin / r))
+    n_th = int(np.ceil(ang / step))
+    fine = _Search(fld, P, x0[2] + np.arange(-n_th, n_th + 1) * step, x0[:2] - m * r, 2 * m + 1)
+    best, exact_f = fine.run(levels, -1.0, s.max_candidates)
+    assert best is not None  # lower = -1 < any score
+    exact = exact and exact_f
+    score, kb, ixb, iyb = best
+    pose = fine.pose(kb, ixb, iyb)
+    if s.refine:
+        pose = _refine(fld, P, pose, r, step)
+    pose[2] = float(wrap_angle(pose[2]))
+    evaluated = fine.evaluated
+    # Ambiguity: the peak's shape, then a distinct second peak (on the field that was searched
+    # globally, or in the tracking window).
+    direction, extent, extent_minor, cov, _ = analyse_peak(fld, P, pose, s, angular_step=step)
+    sec_search = search if search is not None else fine
+    sb = coarse_best if coarse_best is not None else best
+    res_s = sec_search.f.resolution
+    excl_cells = s.exclusion_radius / res_s
+    excl_ang = np.radians(s.exclusion_angle_deg)
+    th_best = sec_search.thetas[sb[1]]
+    ixb, iyb = sb[2], sb[3]
+
+    def exclude(
+        k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp]
+    ) -> NDArray[np.bool_]:
+        near_t = np.hypot(ix - ixb, iy - iyb) < excl_cells
+        near_a = np.abs(wrap_angle(sec_search.thetas[k] - th_best)) < excl_ang
+        return near_t & near_a
+
+    before = sec_search.evaluated
+    second, exact2 = sec_search.run(
+        levels, s.second_peak_ratio * sb[0], s.max_candidates, exclude=exclude
+    )
+    evaluated += (
+        sec_search.evaluated
+        - before
+        + (search.evaluated if search is not None and search is not sec_search else 0)
+    )
+    if search is not None:
+        evaluated += before
+    second_score, second_pose = float("nan"), np.full(3, np.nan)
+    if second is not None:
+        second_score = second[0] * score / max(sb[0], 1e-12) if search is not None else second[0]
+        second_pose = sec_search.pose(second[1], second[2], second[3])
+        second_pose[2] = float(wrap_angle(second_pose[2]))
+    reasons = []
+    if extent > s.ambiguity_extent:
+        reasons.append("elongated peak")
+    if second is not None:
+        reasons.append("second peak")
+    amb = Ambiguity(
+        ambiguous=bool(reasons),
+        reason=" and ".join(reasons),
+        direction=direction,
+        extent=extent,
+        extent_minor=extent_minor,
+        covariance=cov,
+        second_score=second_score,
+        second_pose=second_pose,
+    )
+    final_score = float(_exact_scores(fld, P, pose[None])[0])
+    fix = Fix(
+        pose=pose,
+        score=final_score,
+        ok=bool(final_score >= s.min_score and not amb.ambiguous),
+        ambiguity=amb,
+        exact=bool(exact and exact2),
+        n_points=len(P),
+        n_evaluated=int(evaluated),
+        seconds=time.perf_counter() - t0,
+    )
+    log.debug(
+        "fix %s score %.3f (%d evaluations, %.1f ms)",
+        pose,
+        final_score,
+        fix.n_evaluated,
+        1e3 * fix.seconds,
+    )
+    return fix

@@ -1,0 +1,163 @@
+"""Run a mission into an output folder: the report, the metrics and the maps in standard formats.
+
+Outputs of :func:`run_to_dir` (every file written atomically):
+
+- ``report.html`` - one self-contained page (figures embedded);
+- ``metrics.json`` - the mission's figures (:func:`navkit.mission.metrics.mission_metrics`);
+- ``settings.toml`` - the resolved settings and the route; ``summary.json`` - the key figures;
+- ``truth.tum``, ``vo.tum``, ``estimate.tum`` - trajectories (TUM format, z = 0);
+- ``path.json`` - the stored spline (paper 4);
+- ``obstacle_map.pgm`` + ``obstacle_map.yaml`` - the fused obstacle map (ROS map_server).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from navkit.mission.settings import MissionSettings, Route, builtin_route_path, load_route
+
+__all__ = ["run_demo", "run_scene_file", "run_to_dir", "summary_of", "write_outputs"]
+
+log = logging.getLogger(__name__)
+
+ProgressFn = Callable[[Iterator[int], str, int], Iterator[int]]
+
+
+def summary_of(metrics: dict[str, Any]) -> dict[str, Any]:
+    """The headline figures of a run (``summary.json``)."""
+    pe, ob, ret = metrics["pose_error"], metrics["obstacles"], metrics["return"]
+    return {
+        "scene": metrics["scene"],
+        "outcome": ret["outcome"],
+        "final_distance_to_operator_m": ret["final_distance_to_operator_m"],
+        "position_error_mean_m": {
+            "raw_vo": pe["raw_vo_m"]["mean"],
+            "corrected": pe["corrected_m"]["mean"],
+        },
+        "obstacle_recall": ob["recall"],
+        "obstacle_recall_larger_than_robot": ob["recall_larger_than_robot"],
+        "obstacle_precision": ob["precision"],
+        "phantoms": ob["phantoms"],
+        "wall_seconds": metrics.get("wall_seconds"),
+    }
+
+
+def write_outputs(lg: Any, metrics: dict[str, Any], out: Path) -> list[str]:
+    """Write the report, the metrics and the maps of a run into ``out``; returns the file names."""
+    from navkit.io.atomic import write_json
+    from navkit.io.maps import write_occupancy_grid
+    from navkit.io.trajectory import Trajectory, write_tum
+    from navkit.path.storage import write_path_json
+    from navkit.viz.mission import write_report
+
+    files = []
+    write_json(out / "metrics.json", metrics)
+    files.append("metrics.json")
+    for name, arr in (("truth", lg.truth), ("vo", lg.vo), ("estimate", lg.estimate)):
+        c, s = np.cos(arr[:, 2]), np.sin(arr[:, 2])
+        T = np.tile(np.eye(4), (len(arr), 1, 1))
+        T[:, 0, 0], T[:, 0, 1], T[:, 1, 0], T[:, 1, 1] = c, -s, s, c
+        T[:, 0, 3], T[:, 1, 3] = arr[:, 0], arr[:, 1]
+        write_tum(out / f"{name}.tum", Trajectory(lg.time.astype(np.float64), T))
+        files.append(f"{name}.tum")
+    if lg.path is not None and lg.path.n_segments:
+        write_path_json(out / "path.json", lg.path)
+        files.append("path.json")
+    g = lg.obstacle_grid
+    occ = np.full(g.shape, -1, dtype=np.int8)
+    occ[g.seen > 0] = 0
+    occ[g.occupied] = 100
+    write_occupancy_grid(out / "obstacle_map", occ, g.resolution, g.origin)
+    files += ["obstacle_map.pgm", "obstacle_map.yaml"]
+    write_report(lg, metrics, out / "report.html")
+    files.append("report.html")
+    return files
+
+
+def run_to_dir(
+    scene: Any,
+    route: Route,
+    settings: MissionSettings,
+    out: str | Path,
+    progress: ProgressFn | None = None,
+) -> dict[str, Any]:
+    """Run the mission and write every output into ``out``; returns the metrics."""
+    from navkit.cli.common import write_run_files
+    from navkit.mission.metrics import mission_metrics
+    from navkit.mission.run import run_mission
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    lg = run_mission(scene, route, settings, progress)
+    metrics = mission_metrics(lg)
+    metrics["wall_seconds_mission"] = time.perf_counter() - t0
+    files = write_outputs(lg, metrics, out)
+    metrics["wall_seconds"] = time.perf_counter() - t0
+    # the metrics file holds the total time too (rewritten atomically with it)
+    from navkit.io.atomic import write_json
+
+    write_json(out / "metrics.json", metrics)
+    summary = summary_of(metrics)
+    summary["outputs"] = [*files, "settings.toml", "summary.json"]
+    write_run_files(
+        out,
+        {
+            "mission": dataclasses.asdict(settings),
+            "route": dataclasses.asdict(route),
+            "scene": scene.name,
+        },
+        summary,
+    )
+    return metrics
+
+
+def run_scene_file(
+    scene_path: str | Path,
+    out: str | Path,
+    *,
+    mission: str | Path | None = None,
+    seed: int | None = None,
+    small: bool = False,
+    progress: ProgressFn | None = None,
+) -> dict[str, Any]:
+    """``navkit mission run``: a scene TOML (or built-in name) and its mission file.
+
+    The mission file is ``mission`` if given, else ``<scene stem>.mission.toml`` beside the
+    scene, else the built-in ``mission_<name>.toml`` for a built-in scene.
+    """
+    from navkit.errors import DataNotFoundError
+    from navkit.sim import load_scene
+
+    scene = load_scene(scene_path)
+    if mission is None:
+        p = Path(scene_path)
+        beside = p.with_name(f"{p.stem}.mission.toml")
+        builtin = builtin_route_path(p.stem if p.suffix else p.name)
+        if beside.is_file():
+            mission = beside
+        elif builtin.is_file():
+            mission = builtin
+        else:
+            raise DataNotFoundError(
+                f"{scene_path}: no mission file; pass --mission FILE or put {beside.name} beside the scene "
+                "([route] waypoints = [[x, y], ...], optional room = [xmin, ymin, xmax, ymax])"
+            )
+    route, overrides = load_route(mission)
+    base = MissionSettings.small() if small else MissionSettings()
+    settings = base.with_overrides(overrides, source=str(mission))
+    if seed is not None:
+        settings = dataclasses.replace(settings, seed=int(seed))
+    return run_to_dir(scene, route, settings, out, progress)
+
+
+def run_demo(out: str | Path, seed: int = 0, progress: ProgressFn | None = None) -> dict[str, Any]:
+    """The built-in mission (``navkit demo``): the yard world and its route, into ``out``."""
+    return run_scene_file("yard", out, seed=seed, progress=progress)

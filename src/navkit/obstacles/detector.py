@@ -1,0 +1,528 @@
+"""Paper 1's eight stages composed: scan grid in, classes, obstacles and their 2D map out."""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from navkit.errors import InputError
+from navkit.geometry.shapes import compute_shapes, hull_points
+from navkit.obstacles.grids import ScanGrid
+from navkit.obstacles.ground import refine_by_ground_height
+from navkit.obstacles.mesh import build_mesh, robust_cell_normals
+from navkit.obstacles.mounting import Mounting
+from navkit.obstacles.rules import GROUND, OBSTACLE, classify
+from navkit.obstacles.segment import (
+    assign_shadows,
+    boundary_vertices,
+    label_components,
+    main_ground_vertices,
+    merge_close_components,
+    vertex_labels,
+)
+from navkit.obstacles.settings import ObstacleSettings
+from navkit.sensors import RangeScan
+
+__all__ = [
+    "Obstacle",
+    "ObstacleDetection",
+    "detect_obstacles",
+    "detect_obstacles_grid",
+    "detect_obstacles_in_grid",
+    "unsort_vertex_array",
+]
+
+log = logging.getLogger(__name__)
+
+STAGES = ("points", "mesh", "classes", "split", "boundaries", "map")
+"""Stage names used as keys of :attr:`ObstacleDetection.timings` (stages 3-4 are in "mesh")."""
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """One obstacle and its 2D map entry (paper 1, stages 6-8).
+
+    Attributes
+    ----------
+    id : int
+        1-based id (the value in :attr:`ObstacleDetection.triangle_obstacle`).
+    n_triangles, n_points : int
+        Obstacle triangles and the grid vertices they use.
+    z_min, z_max : float
+        Lowest and highest obstacle vertex (body frame, m); ``height = z_max - z_min``.
+    boundary_xy : (M, 2) float
+        Boundary vertices (stage 7) in the body frame's x, y, metres.
+    polygon_xy : (K, 2) float
+        Counter-clockwise convex hull of the boundary vertices (the outline written to files).
+    shadow_xy : (S, 2) float
+        Vertices of the obstacle together with its shadows (input of A7).
+    shadow_area : float
+        Horizontal area of the obstacle's shadow triangles, m^2.
+    shapes : dict
+        Bounding shapes on the boundary vertices (A1-A6, MEC, MVEE, ...; stage 8).
+    guaranteed : dict
+        A7: the same kinds of shape over obstacle plus shadows.
+    """
+
+    id: int
+    n_triangles: int
+    n_points: int
+    z_min: float
+    z_max: float
+    boundary_xy: NDArray[np.float64]
+    polygon_xy: NDArray[np.float64]
+    shadow_xy: NDArray[np.float64]
+    shadow_area: float
+    shapes: dict[str, Any] = field(default_factory=dict)
+    guaranteed: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def height(self) -> float:
+        """Vertical extent of the obstacle, metres."""
+        return self.z_max - self.z_min
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain-JSON description (what ``obstacles.json`` holds for each obstacle)."""
+        return {
+            "id": self.id,
+            "n_points": self.n_points,
+            "n_triangles": self.n_triangles,
+            "height": self.height,
+            "z_min": self.z_min,
+            "z_max": self.z_max,
+            "boundary_polygon": self.polygon_xy.tolist(),
+            "n_boundary_points": len(self.boundary_xy),
+            "shadow_area": self.shadow_area,
+            "shapes": {k: v.params() for k, v in self.shapes.items()},
+            "A7": {k: v.params() for k, v in self.guaranteed.items()},
+        }
+
+
+@dataclass(frozen=True)
+class ObstacleDetection:
+    """Everything the eight stages produce for one scan grid.
+
+    Attributes
+    ----------
+    points : (n_az, n_el, 3) float
+        Stage 1 points in the level body frame (NaN where no return).
+    valid : (n_az, n_el) bool
+        Validity codes C_d.
+    sensor_origin : (3,) float
+        Sensor position in the body frame.
+    wrap : bool
+        Whether the mesh closes across the azimuth seam.
+    triangles : (R, 2C, 3) int
+        Vertex indices of the mesh (see :mod:`navkit.obstacles.mesh`).
+    normals : (R, 2C, 3) float
+        Unit normals (NaN for unreliable triangles).
+    jump : (R, 2C) bool
+        Height-jump code of H_s.
+    triangle_labels : (R, 2C) int8
+        Classes m_t: 0 ground, -1 unreliable, -2 obstacle, -3 side shadow, -4 shadow behind.
+    triangle_obstacle : (R, 2C) int32
+        Obstacle id of obstacle triangles and of the shadow triangles they own (0 = none).
+    vertex_labels : (n_az, n_el) int8
+        One class per grid vertex (see :func:`navkit.obstacles.segment.vertex_labels`).
+    vertex_obstacle : (n_az, n_el) int32
+        Obstacle id per vertex (0 = none).
+    boundary : (n_az, n_el) bool
+        Boundary vertices (stage 7).
+    obstacles : tuple of Obstacle
+    timings : dict
+        Seconds per stage (keys of :data:`STAGES`).
+    """
+
+    points: NDArray[np.float64]
+    valid: NDArray[np.bool_]
+    sensor_origin: NDArray[np.float64]
+    wrap: bool
+    triangles: NDArray[np.int64]
+    normals: NDArray[np.floating[Any]]
+    jump: NDArray[np.bool_]
+    triangle_labels: NDArray[np.int8]
+    triangle_obstacle: NDArray[np.int32]
+    vertex_labels: NDArray[np.int8]
+    vertex_obstacle: NDArray[np.int32]
+    boundary: NDArray[np.bool_]
+    obstacles: tuple[Obstacle, ...]
+    timings: dict[str, float]
+
+    @property
+    def counts(self) -> dict[str, int]:
+        """Number of triangles per class name."""
+        names = {
+            0: "ground",
+            -1: "unreliable",
+            -2: "obstacle",
+            -3: "side_shadow",
+            -4: "shadow_behind",
+        }
+        return {name: int(np.count_nonzero(self.triangle_labels == k)) for k, name in names.items()}
+
+
+def _check_grid(points: ArrayLike, source: str) -> NDArray[np.float64]:
+    try:
+        P = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(
+            f"is not numeric: {exc}",
+            source=source,
+            field="points",
+            expected="(n_az, n_el, 3) floats",
+        ) from exc
+    if P.ndim != 3 or P.shape[2] != 3:
+        raise InputError(
+            f"has shape {P.shape}", source=source, field="points", expected="(n_az, n_el, 3) array"
+        )
+    if P.shape[0] < 2 or P.shape[1] < 2:
+        raise InputError(
+            f"has shape {P.shape}",
+            source=source,
+            field="points",
+            expected="a grid of at least 2 x 2 cells",
+        )
+    return P
+
+
+def _auto_wrap(azimuth: NDArray[np.float64] | None) -> bool:
+    if azimuth is None or len(azimuth) < 3:
+        return False
+    step = np.median(np.abs(np.diff(azimuth)))
+    return bool(np.ptp(azimuth) + 1.5 * step >= 2 * math.pi)
+
+
+def detect_obstacles_grid(
+    points: ArrayLike,
+    sensor_origin: ArrayLike = (0.0, 0.0, 0.0),
+    settings: ObstacleSettings | None = None,
+    *,
+    azimuth: ArrayLike | None = None,
+    source: str = "points",
+) -> ObstacleDetection:
+    """Run stages 2-8 on an organised grid of body-frame points.
+
+    Parameters
+    ----------
+    points : (n_az, n_el, 3) float
+        Level body-frame points (z up, origin on the ground under the sensor), azimuth rising
+        (counter-clockwise) along axis 0 and elevation rising along axis 1; NaN = no return.
+    sensor_origin : (3,) float
+        The sensor's position in that frame, normally ``(0, 0, z_D)``.
+    settings : ObstacleSettings
+    azimuth : (n_az,) float, optional
+        Azimuth of each row (rad), only used to decide ``wrap_azimuth=None``.
+    source : str
+        Name used in error messages.
+
+    Raises
+    ------
+    InputError
+        If the grid has the wrong shape or no valid point at all.
+    """
+    settings = settings or ObstacleSettings()
+    t = {s: 0.0 for s in STAGES}
+    t0 = time.perf_counter()
+    P = _check_grid(points, source)
+    origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
+    valid = np.all(np.isfinite(P), axis=-1)
+    if not valid.any():
+        raise InputError(
+            "has no valid point (all NaN / no return)",
+            source=source,
+            field="points",
+            expected="at least one measured point",
+        )
+    P = np.where(valid[..., None], P, np.nan)
+    wrap = (
+        settings.wrap_azimuth
+        if settings.wrap_azimuth is not None
+        else _auto_wrap(None if azimuth is None else np.asarray(azimuth, dtype=np.float64))
+    )
+    wrap = bool(wrap and P.shape[0] > 2)
+    n_az, n_el = valid.shape
+    t1 = time.perf_counter()
+    t["points"] += t1 - t0
+
+    # stages 2-4: mesh, normals, characteristic parameters H_s and validity codes C_d
+    mesh = build_mesh(
+        P,
+        valid,
+        origin,
+        wrap=wrap,
+        jump_height_m=settings.jump_height_m,
+        jump_range_fraction=settings.jump_range_fraction,
+        jump_range_ratio=settings.jump_range_ratio,
+        steep_cos=math.cos(settings.c1_rad),
+    )
+    t2 = time.perf_counter()
+    t["mesh"] = t2 - t1
+
+    # stage 5: production rules P1-P5 -> classes
+    robust = None
+    if settings.normal_support_m > 0:
+        robust = robust_cell_normals(
+            P,
+            valid,
+            origin,
+            support_m=settings.normal_support_m,
+            wrap=wrap,
+            jump_height_m=settings.jump_height_m,
+            jump_range_fraction=settings.jump_range_fraction,
+            jump_range_ratio=settings.jump_range_ratio,
+        )
+    labels, _rules = classify(mesh, settings, wrap=wrap, robust_cells=robust)
+    t3 = time.perf_counter()
+    t["classes"] = t3 - t2
+
+    # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
+    obs_lab, n = label_components(labels == OBSTACLE, wrap)
+    if n:
+        size = np.bincount(obs_lab.ravel(), minlength=n + 1)[1:]
+        zmax, zmin = _per_label_extrema(obs_lab, mesh.z_max, mesh.z_min, n)
+        spread = _per_label_spread(obs_lab, 0.5 * (mesh.z_max + mesh.z_min), n)
+        keep = (
+            (size >= settings.min_obstacle_triangles)
+            & (zmax - zmin >= settings.min_obstacle_height_m)
+            & (spread >= 0.5 * settings.min_obstacle_height_m)
+        )
+        lut = np.zeros(n + 1, dtype=np.int32)
+        lut[1:][keep] = np.arange(1, int(keep.sum()) + 1)
+        dropped = (obs_lab > 0) & (lut[obs_lab] == 0)
+        labels[dropped] = 0  # back to ground: too small or too flat to be an obstacle
+        obs_lab = lut[obs_lab]
+        n = int(keep.sum())
+        # zones that passed the filters and nearly touch are one obstacle (after the filters, so
+        # that low debris such as curbs cannot bridge separate objects)
+        obs_lab, n = merge_close_components(
+            obs_lab, n, P, wrap, settings.merge_distance_m, settings.merge_gap_cells
+        )
+    owner = assign_shadows(labels, obs_lab, wrap)
+    tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
+    t4 = time.perf_counter()
+    t["split"] = t4 - t3
+
+    # stage 7: boundary vertices, per-vertex classes
+    vid, boundary = boundary_vertices(obs_lab, n_az, n_el, wrap)
+    vlab = vertex_labels(labels, valid, wrap)
+    if settings.ground_refine:  # beyond the paper: per-point height above the local ground
+        main = main_ground_vertices(labels, n_az, n_el, wrap)
+        vlab = refine_by_ground_height(
+            P,
+            vlab,
+            valid,
+            band_m=settings.ground_band_m,
+            above_m=settings.ground_above_m,
+            cell_m=settings.ground_cell_m,
+            reference=main & (vlab == GROUND),
+        )
+    t5 = time.perf_counter()
+    t["boundaries"] = t5 - t4
+
+    # stage 8: the 2D map - bounding shapes of every obstacle
+    obstacles = _build_obstacles(
+        P, mesh.triangles, labels, obs_lab, owner, vid, boundary, n, settings
+    )
+    t["map"] = time.perf_counter() - t5
+    log.debug("obstacle detection: %d obstacles, timings %s", len(obstacles), t)
+    return ObstacleDetection(
+        points=P,
+        valid=valid,
+        sensor_origin=origin,
+        wrap=wrap,
+        triangles=mesh.triangles,
+        normals=mesh.normal,
+        jump=mesh.jump,
+        triangle_labels=labels,
+        triangle_obstacle=tri_obstacle,
+        vertex_labels=vlab,
+        vertex_obstacle=vid,
+        boundary=boundary,
+        obstacles=tuple(obstacles),
+        timings=t,
+    )
+
+
+def _per_label_extrema(
+    lab: NDArray[np.int32], hi: NDArray[Any], lo: NDArray[Any], n: int
+) -> tuple[NDArray[Any], NDArray[Any]]:
+    """Max of ``hi`` and min of ``lo`` over each label 1..n (sort + reduceat over labelled cells)."""
+    sel = np.flatnonzero(lab.ravel() > 0)
+    ids = lab.ravel()[sel]
+    order = np.argsort(ids, kind="stable")
+    counts = np.bincount(ids, minlength=n + 1)[1:]
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    return (
+        np.maximum.reduceat(hi.ravel()[sel][order], starts),
+        np.minimum.reduceat(lo.ravel()[sel][order], starts),
+    )
+
+
+def _per_label_spread(lab: NDArray[np.int32], z: NDArray[Any], n: int) -> NDArray[np.float64]:
+    """Robust vertical extent per label 1..n: 90th minus 10th percentile of the triangles' mid
+    heights (a patch of range noise on flat ground has a large max - min but a small spread)."""
+    sel = np.flatnonzero(lab.ravel() > 0)
+    ids = lab.ravel()[sel].astype(np.int64)
+    zz = z.ravel()[sel].astype(np.float64)
+    lo, hi = float(zz.min()), float(zz.max())
+    order = np.argsort(ids + (zz - lo) / (1.01 * (hi - lo) + 1e-9))  # by label, then by height
+    counts = np.bincount(ids, minlength=n + 1)[1:]
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    zs = zz[order]
+    q10 = zs[starts + np.floor(0.1 * (counts - 1)).astype(np.int64)]
+    q90 = zs[starts + np.floor(0.9 * (counts - 1)).astype(np.int64)]
+    return q90 - q10
+
+
+def _group(
+    ids: NDArray[np.int64], values: NDArray[np.float64], n: int
+) -> list[NDArray[np.float64]]:
+    """Split ``values`` rows by ``ids`` (1..n) into a list of n arrays (vectorised sort + split)."""
+    order = np.argsort(ids, kind="stable")
+    counts = np.bincount(ids, minlength=n + 1)[1:]
+    return np.split(values[order], np.cumsum(counts)[:-1])
+
+
+def _build_obstacles(
+    P: NDArray[np.float64],
+    tri: NDArray[np.int64],
+    labels: NDArray[np.int8],
+    obs_lab: NDArray[np.int32],
+    owner: NDArray[np.int32],
+    vid: NDArray[np.int32],
+    boundary: NDArray[np.bool_],
+    n: int,
+    settings: ObstacleSettings,
+) -> list[Obstacle]:
+    if n == 0:
+        return []
+    flat = P.reshape(-1, 3)
+    # boundary vertices per obstacle
+    bmask = boundary.ravel()
+    bxy = _group(vid.ravel()[bmask].astype(np.int64), flat[bmask, :2], n)
+    # vertices of each obstacle (stage 7 gives every vertex its obstacle id)
+    vflat = vid.ravel()
+    vsel = np.flatnonzero(vflat > 0)
+    pid = vflat[vsel].astype(np.int64)
+    vz = _group(pid, flat[vsel, 2], n)
+    vxy = _group(pid, flat[vsel, :2], n)
+    nv = len(flat)
+    # obstacle + its shadows (A7), and shadow areas
+    is_sh = owner > 0
+    sh_ids = owner[is_sh]
+    skey = np.unique(np.repeat(sh_ids.astype(np.int64), 3) * nv + tri[is_sh].ravel())
+    sxy = _group(skey // nv, flat[skey % nv, :2], n) if len(skey) else [np.empty((0, 2))] * n
+    V = flat[tri[is_sh]][..., :2]
+    area = 0.5 * np.abs(
+        (V[:, 1, 0] - V[:, 0, 0]) * (V[:, 2, 1] - V[:, 0, 1])
+        - (V[:, 2, 0] - V[:, 0, 0]) * (V[:, 1, 1] - V[:, 0, 1])
+    )
+    shadow_area = np.bincount(sh_ids, weights=area, minlength=n + 1)[1:]
+    ntri = np.bincount(obs_lab.ravel(), minlength=n + 1)[1:]
+    guaranteed_sets = [np.concatenate([o, s]) for o, s in zip(vxy, sxy, strict=True)]
+    hulls = [hull_points(b) for b in bxy]  # the outline written to files, and the shapes' input
+    shapes = (
+        compute_shapes(hulls, settings.shapes, are_hulls=True)
+        if settings.shapes
+        else [{} for _ in range(n)]
+    )
+    guaranteed = (
+        compute_shapes(guaranteed_sets, settings.guaranteed_shapes)
+        if settings.guaranteed_shapes
+        else [{} for _ in range(n)]
+    )
+    out = []
+    for k in range(n):
+        out.append(
+            Obstacle(
+                id=k + 1,
+                n_triangles=int(ntri[k]),
+                n_points=len(vz[k]),
+                z_min=float(vz[k].min()),
+                z_max=float(vz[k].max()),
+                boundary_xy=bxy[k],
+                polygon_xy=hulls[k],
+                shadow_xy=guaranteed_sets[k],
+                shadow_area=float(shadow_area[k]),
+                shapes=shapes[k],
+                guaranteed=guaranteed[k],
+            )
+        )
+    return out
+
+
+def detect_obstacles(
+    scan: RangeScan, settings: ObstacleSettings | None = None
+) -> ObstacleDetection:
+    """The eight stages of paper 1 on a :class:`~navkit.sensors.RangeScan`.
+
+    Stage 1 computes ``x = d cos b cos a, y = d cos b sin a, z = z_D + d sin b`` in the level body
+    frame (the scan's ``R_body_sensor`` and ``sensor_height`` give the mounting). The grid must
+    have azimuth and elevation rising along its axes; scans with falling angles are flipped.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from navkit.sensors import RangeScan
+    >>> az, el = np.radians(np.arange(-90, 91)), np.radians(np.arange(-30, 1))
+    >>> d = 1.5 / np.sin(-np.minimum(el, -1e-3))           # level ground, sensor at 1.5 m
+    >>> scan = RangeScan(np.tile(d, (az.size, 1)), az, el, sensor_height=1.5, max_range=50)
+    >>> result = detect_obstacles(scan)
+    >>> len(result.obstacles), result.counts["obstacle"]
+    (0, 0)
+    """
+    if not isinstance(scan, RangeScan):
+        raise InputError(
+            f"got {type(scan).__name__}", field="scan", expected="a navkit.sensors.RangeScan"
+        )
+    t0 = time.perf_counter()
+    az, el = scan.azimuth, scan.elevation
+    P = scan.points("body")
+    ia = np.argsort(az, kind="stable")
+    ie = np.argsort(el, kind="stable")
+    P = P[ia][:, ie]
+    origin = scan.T_body_sensor[:3, 3]
+    t_points = time.perf_counter() - t0
+    res = detect_obstacles_grid(P, origin, settings, azimuth=az[ia], source="scan")
+    res.timings["points"] += t_points
+    return res
+
+
+def unsort_vertex_array(scan: RangeScan, values: NDArray[Any]) -> NDArray[Any]:
+    """Put a per-vertex array of :func:`detect_obstacles` back into the scan's own grid order."""
+    ia = np.argsort(scan.azimuth, kind="stable")
+    ie = np.argsort(scan.elevation, kind="stable")
+    out = np.empty_like(values)
+    out[np.ix_(ia, ie)] = values
+    return out
+
+
+def detect_obstacles_in_grid(
+    grid: ScanGrid,
+    mounting: Mounting | None = None,
+    settings: ObstacleSettings | None = None,
+    *,
+    source: str = "grid",
+) -> ObstacleDetection:
+    """Stages 1-8 on a :class:`~navkit.obstacles.grids.ScanGrid` (a recovered lidar grid, an
+    organised cloud or a depth image), mounted on the robot as ``mounting`` says.
+
+    With ``settings.wrap_azimuth = None`` the mesh closes across the seam when the grid covers
+    360 deg. Per-point labels: ``grid.per_point(result.vertex_labels)``.
+    """
+    mounting = mounting or Mounting()
+    settings = settings or ObstacleSettings()
+    t0 = time.perf_counter()
+    P = mounting.to_body(grid.points)
+    if settings.wrap_azimuth is None:
+        settings = replace(settings, wrap_azimuth=grid.wraps)
+    t_points = time.perf_counter() - t0
+    res = detect_obstacles_grid(P, mounting.T_body_sensor[:3, 3], settings, source=source)
+    res.timings["points"] += t_points
+    return res

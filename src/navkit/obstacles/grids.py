@@ -1,0 +1,380 @@
+"""Stage 1 inputs: organising lidar clouds, organised clouds and depth images as scan grids.
+
+Paper 1 works on a grid ``d(alpha_i, beta_j)``. Real data come as
+
+- a spinning-lidar cloud stored point by point (KITTI ``.bin``), whose rings (beams) and
+  azimuth columns must be recovered from the points: :func:`cloud_to_grid`;
+- an organised cloud (``H x W`` points, e.g. an organised PCD): :func:`organized_to_grid`;
+- a depth image and its pinhole camera: :func:`depth_to_grid`.
+
+Every function returns a :class:`ScanGrid`: sensor-frame points ``(n_az, n_el, 3)`` with azimuth
+rising along axis 0 and elevation rising along axis 1 (what :func:`detect_obstacles_grid` needs),
+and the map between grid cells and the input's points.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from navkit.errors import InputError
+from navkit.geometry import R_BODY_FROM_OPTICAL
+from navkit.sensors import PinholeCamera
+
+__all__ = ["ScanGrid", "cloud_to_grid", "depth_to_grid", "organized_to_grid"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ScanGrid:
+    """Points organised on an azimuth x elevation grid, with the way back to the input.
+
+    Attributes
+    ----------
+    points : (n_az, n_el, 3) float64
+        Sensor-frame points (NaN = empty cell), azimuth rising along axis 0 (counter-clockwise
+        seen from +z), elevation rising along axis 1.
+    cell_of_point : (N,) int64
+        Flat cell index ``i * n_el + j`` of every input point, -1 for points outside the grid
+        (no-returns, NaN, unassigned rings). Several input points may share a cell (the grid
+        keeps the nearest); they all get that cell's label.
+    azimuth : (n_az,) float64 or None
+        Azimuth of the grid rows (rad), when known.
+    wraps : bool
+        The grid covers 360 deg of azimuth (the mesh closes across the seam).
+    method : str
+        How the grid was recovered (``"order"``, ``"elevation"``, ``"organized"``, ``"depth"``).
+    """
+
+    points: NDArray[np.float64]
+    cell_of_point: NDArray[np.int64]
+    azimuth: NDArray[np.float64] | None
+    wraps: bool
+    method: str
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(n_az, n_el)``."""
+        return self.points.shape[:2]  # type: ignore[return-value]
+
+    def per_point(self, values: NDArray[Any], fill: int | float = -1) -> NDArray[Any]:
+        """Spread a per-cell array ``(n_az, n_el)`` back to the input points ``(N,)``."""
+        flat = values.reshape(-1)
+        out = np.full(self.cell_of_point.shape, fill, dtype=values.dtype)
+        ok = self.cell_of_point >= 0
+        out[ok] = flat[self.cell_of_point[ok]]
+        return out
+
+
+def _as_cloud(points: ArrayLike, source: str) -> NDArray[np.float64]:
+    try:
+        P = np.asarray(points)
+    except (TypeError, ValueError) as exc:  # pragma: no cover - numpy rarely refuses
+        raise InputError(
+            f"is not numeric: {exc}", source=source, field="points", expected="(N, 3) floats"
+        ) from exc
+    if P.dtype.kind not in "fiu":
+        raise InputError(
+            f"has dtype {P.dtype}",
+            source=source,
+            field="points",
+            expected="a float array (N, 3) or (N, 4)",
+        )
+    if P.ndim != 2 or P.shape[1] < 3:
+        raise InputError(
+            f"has shape {P.shape}",
+            source=source,
+            field="points",
+            expected="(N, 3) or (N, >=3) array",
+        )
+    if P.shape[0] == 0:
+        raise InputError("is empty", source=source, field="points", expected="at least one point")
+    return np.asarray(P[:, :3], dtype=np.float64)
+
+
+def _rings_by_order(az: NDArray[np.float64]) -> tuple[NDArray[np.int64], float] | None:
+    """Rings from the storage order: the unwrapped azimuth advances by 2 pi per ring.
+
+    Returns ``(ring id per point, azimuth step)`` or ``None`` when the order is not a sweep.
+    """
+    if len(az) < 100:
+        return None
+    d = np.diff(az)
+    d = (d + np.pi) % (2 * np.pi) - np.pi
+    step = float(np.median(np.abs(d)))
+    if step <= 0:
+        return None
+    direction = 1.0 if np.median(d) > 0 else -1.0
+    # a sweep: small steps (at least 64 points per turn), nearly all in one direction
+    forward = np.mean(direction * d > -0.5 * step)
+    if step > 2 * np.pi / 64 or forward < 0.9:
+        return None
+    unwrapped = direction * np.concatenate([[0.0], np.cumsum(d)])
+    # a ring starts where the sweep starts; tolerate small backward jitter with a half-step margin
+    ring = np.floor((unwrapped + 0.5 * step) / (2 * np.pi)).astype(np.int64)
+    ring -= ring.min()
+    n = int(ring.max()) + 1
+    if n < 2 or n > 512:
+        return None
+    return ring, step
+
+
+def _rings_by_elevation(el: NDArray[np.float64], n_rings: int | None) -> NDArray[np.int64]:
+    """Rings by 1-D clustering of the elevation angles (beams at fixed elevations).
+
+    With ``n_rings`` the ``n_rings - 1`` widest gaps in the sorted elevations split the rings;
+    otherwise every gap wider than 20 times the median gap does, and clusters holding less than
+    1 % of the median cluster size are dropped (ring -1).
+    """
+    order = np.argsort(el, kind="stable")
+    s = el[order]
+    gaps = np.diff(s)
+    if n_rings is not None:
+        if n_rings < 1 or n_rings > len(s):
+            raise InputError(f"= {n_rings}", field="n_rings", expected=f"1 .. {len(s)}")
+        cut = (
+            np.sort(np.argpartition(gaps, -(n_rings - 1))[-(n_rings - 1) :])
+            if n_rings > 1
+            else np.array([], dtype=np.int64)
+        )
+    else:
+        pos = gaps[gaps > 0]
+        thr = 20 * float(np.median(pos)) if pos.size else np.inf
+        thr = max(thr, 1e-4)
+        cut = np.flatnonzero(gaps > thr)
+    ring_sorted = np.zeros(len(s), dtype=np.int64)
+    ring_sorted[cut + 1] = 1
+    ring_sorted = np.cumsum(ring_sorted)
+    ring = np.empty_like(ring_sorted)
+    ring[order] = ring_sorted
+    if n_rings is None:
+        counts = np.bincount(ring)
+        small = counts < 0.01 * np.median(counts)
+        if small.any():
+            lut = np.cumsum(~small) - 1
+            lut[small] = -1
+            ring = lut[ring]
+    return ring
+
+
+def cloud_to_grid(
+    points: ArrayLike,
+    *,
+    n_rings: int | None = None,
+    n_columns: int | None = None,
+    ring_method: str = "auto",
+    source: str = "points",
+) -> ScanGrid:
+    """Recover the scan grid of a spinning-lidar cloud (any beam count, any storage order).
+
+    Parameters
+    ----------
+    points : (N, 3) or (N, >=3) float
+        Sensor-frame points (extra columns such as intensity are ignored). Points at exactly
+        ``(0, 0, 0)`` or with a NaN are no-returns (several datasets store them so).
+    n_rings : int, optional
+        Number of beams; needed only by ``ring_method="elevation"`` when the elevations are not
+        cleanly separated.
+    n_columns : int, optional
+        Azimuth columns; by default ``round(2 pi / step)`` with ``step`` the median azimuth step
+        between consecutive points of a ring (robust to dropped returns).
+    ring_method : {"auto", "order", "elevation"}
+        ``"order"``: rings from the storage order (the azimuth sweeps 2 pi per ring, as in KITTI,
+        whose beams are not at a fixed elevation: the HDL-64E lasers have offset origins);
+        ``"elevation"``: rings by clustering the elevation angles (any order);
+        ``"auto"``: ``"order"`` when the storage order is a coherent sweep, else ``"elevation"``.
+
+    Returns
+    -------
+    ScanGrid
+        Rings sorted by rising mean elevation; azimuth columns rising counter-clockwise from
+        -pi, centred on the sensor's firing azimuths (their phase is estimated); each cell keeps
+        its nearest point.
+    """
+    P = _as_cloud(points, source)
+    N = len(P)
+    ok = np.all(np.isfinite(P), axis=1) & np.any(P != 0.0, axis=1)
+    idx = np.flatnonzero(ok)
+    if idx.size < 4:
+        raise InputError(
+            f"has {idx.size} valid points",
+            source=source,
+            field="points",
+            expected="at least 4 points that are not NaN or (0, 0, 0)",
+        )
+    Q = P[idx]
+    rh = np.hypot(Q[:, 0], Q[:, 1])
+    az = np.arctan2(Q[:, 1], Q[:, 0])
+    if ring_method not in ("auto", "order", "elevation"):
+        raise InputError(
+            f"= {ring_method!r}", field="ring_method", expected="'auto', 'order' or 'elevation'"
+        )
+    by_order = _rings_by_order(az) if ring_method in ("auto", "order") else None
+    if ring_method == "order" and by_order is None:
+        raise InputError(
+            "the storage order is not a lidar sweep",
+            source=source,
+            field="points",
+            expected="points stored ring by ring (or use ring_method='elevation')",
+        )
+    if by_order is not None:
+        ring, step = by_order
+        method = "order"
+    else:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ring = _rings_by_elevation(np.arctan2(Q[:, 2], rh), n_rings)
+        method = "elevation"
+        step = 0.0
+    keep = ring >= 0
+    if not keep.all():
+        idx, Q, az, ring, rh = idx[keep], Q[keep], az[keep], ring[keep], rh[keep]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        tan_el = Q[:, 2] / np.maximum(rh, 1e-9)  # monotone in the elevation: enough to order rings
+    n_r = int(ring.max()) + 1
+    # order rings by rising mean elevation
+    counts = np.bincount(ring, minlength=n_r)
+    present = counts > 0
+    mean_el = np.bincount(ring, weights=tan_el, minlength=n_r) / np.maximum(counts, 1)
+    rank = np.argsort(np.where(present, mean_el, np.inf), kind="stable")
+    lut = np.empty(n_r, dtype=np.int64)
+    lut[rank] = np.arange(n_r)
+    j = lut[ring]
+    n_el = int(present.sum())
+    if n_columns is None:
+        if step <= 0:
+            # per ring, the azimuth step between neighbours in azimuth order
+            o = np.lexsort((az, ring))
+            da = np.diff(az[o])
+            same = ring[o][1:] == ring[o][:-1]
+            da = da[same & (da > 0)]
+            step = float(np.median(da)) if da.size else 2 * np.pi / 360
+        n_columns = max(3, round(2 * np.pi / step))
+    if n_columns < 2:
+        raise InputError(f"= {n_columns}", field="n_columns", expected="an integer >= 2")
+    # columns centred on the sensor's firing azimuths: their phase is the circular mean of the
+    # fractional column positions (a sensor fires at a fixed lattice of azimuths)
+    x = (az + np.pi) / (2 * np.pi) * n_columns
+    frac = 2 * np.pi * (x[:: max(1, len(x) // 20000)] % 1.0)  # a subsample is plenty
+    phase = float(
+        np.arctan2(np.sin(frac).mean(), np.cos(frac).mean()) / (2 * np.pi)
+    )  # in (-1/2, 1/2]
+    i = np.floor(x - phase + 0.5).astype(np.int64) % n_columns
+    cell = i * n_el + j
+    # the nearest point of each cell represents it (sorting only the cells hit more than once)
+    grid = np.full((n_columns * n_el, 3), np.nan)
+    hits = np.bincount(cell, minlength=n_columns * n_el)
+    multi = hits[cell] > 1
+    single = ~multi
+    grid[cell[single]] = Q[single]
+    if multi.any():
+        cm, qm = cell[multi], Q[multi]
+        rm = np.sqrt(qm[:, 0] ** 2 + qm[:, 1] ** 2 + qm[:, 2] ** 2)
+        o = np.lexsort((rm, cm))
+        first = np.r_[True, cm[o][1:] != cm[o][:-1]]
+        grid[cm[o][first]] = qm[o][first]
+    cell_of_point = np.full(N, -1, dtype=np.int64)
+    cell_of_point[idx] = cell
+    azimuth = -np.pi + (np.arange(n_columns) + phase) * 2 * np.pi / n_columns
+    log.debug("cloud_to_grid: %d points -> %d x %d grid by %s", N, n_columns, n_el, method)
+    return ScanGrid(grid.reshape(n_columns, n_el, 3), cell_of_point, azimuth, True, method)
+
+
+def organized_to_grid(points: ArrayLike, *, source: str = "points") -> ScanGrid:
+    """An organised cloud ``(H, W, 3)`` (sensor frame) as a scan grid, whatever its layout.
+
+    The axis along which the azimuth changes most becomes the azimuth axis, and both axes are
+    flipped as needed so that azimuth and elevation rise (an image-like layout - rows top to
+    bottom, columns left to right - is transposed and flipped). NaN or ``(0, 0, 0)`` = no return.
+    """
+    try:
+        G = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(
+            f"is not numeric: {exc}", source=source, field="points", expected="(H, W, 3) floats"
+        ) from exc
+    if G.ndim != 3 or G.shape[2] < 3 or G.shape[0] < 2 or G.shape[1] < 2:
+        raise InputError(
+            f"has shape {G.shape}",
+            source=source,
+            field="points",
+            expected="an organised (H, W, 3) cloud, H, W >= 2",
+        )
+    G = G[..., :3].copy()
+    bad = ~np.all(np.isfinite(G), axis=-1) | np.all(G == 0.0, axis=-1)
+    G[bad] = np.nan
+    if bad.all():
+        raise InputError(
+            "has no valid point", source=source, field="points", expected="at least one return"
+        )
+    az = np.arctan2(G[..., 1], G[..., 0])
+    el = np.arctan2(G[..., 2], np.hypot(G[..., 0], G[..., 1]))
+
+    def trend(a: NDArray[np.float64], axis: int) -> float:
+        d = np.diff(a, axis=axis)
+        d = (d + np.pi) % (2 * np.pi) - np.pi
+        return float(np.nanmedian(d)) if np.isfinite(d).any() else 0.0
+
+    cell = np.arange(G.shape[0] * G.shape[1]).reshape(G.shape[:2])
+    if abs(trend(az, 0)) < abs(trend(az, 1)):  # azimuth changes along columns: transpose
+        G, az, el, cell = G.transpose(1, 0, 2), az.T, el.T, cell.T
+    if trend(az, 0) < 0:
+        G, az, el, cell = G[::-1], az[::-1], el[::-1], cell[::-1]
+    if trend(el, 1) < 0:
+        G, az, el, cell = G[:, ::-1], az[:, ::-1], el[:, ::-1], cell[:, ::-1]
+    G = np.ascontiguousarray(G)
+    n_el = G.shape[1]
+    # input point k sits in grid cell (i, j) where cell[i, j] == k
+    cell_of_point = np.empty(cell.size, dtype=np.int64)
+    ii, jj = np.indices(cell.shape)
+    cell_of_point[cell.ravel()] = (ii * n_el + jj).ravel()
+    cell_of_point[bad.ravel()] = -1
+    row_az = (
+        np.nanmedian(np.where(np.isfinite(az), az, np.nan), axis=1)
+        if np.isfinite(az).any(axis=1).all()
+        else None
+    )
+    span = np.ptp(row_az) if row_az is not None else 0.0
+    wraps = bool(row_az is not None and span > 2 * math.pi * (1 - 2.0 / len(row_az)))
+    return ScanGrid(G, cell_of_point, row_az, wraps, "organized")
+
+
+def depth_to_grid(depth: ArrayLike, camera: PinholeCamera, *, source: str = "depth") -> ScanGrid:
+    """A depth image (metres, NaN / 0 invalid) as a scan grid in the sensor frame (x fwd, y left, z up).
+
+    Pixels are back-projected with the pinhole model and turned from the OpenCV optical frame to
+    the sensor's body-like axes (:data:`navkit.geometry.R_BODY_FROM_OPTICAL`); image columns right
+    to left become rising azimuth, rows bottom to top rising elevation.
+    """
+    try:
+        D = np.asarray(depth, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(
+            f"is not numeric: {exc}", source=source, field="depth", expected="(H, W) metres"
+        ) from exc
+    if D.ndim != 2 or D.shape != (camera.height, camera.width):
+        raise InputError(
+            f"has shape {D.shape}",
+            source=source,
+            field="depth",
+            expected=f"(H, W) = ({camera.height}, {camera.width}) as the camera",
+        )
+    D = np.where(np.isfinite(D) & (D > 0), D, np.nan)
+    if not np.isfinite(D).any():
+        raise InputError(
+            "has no valid depth", source=source, field="depth", expected="some depth > 0"
+        )
+    P = camera.backproject(D) @ R_BODY_FROM_OPTICAL.T  # (H, W, 3) x forward, y left, z up
+    H, W = D.shape
+    G = np.ascontiguousarray(P[::-1, ::-1].transpose(1, 0, 2))  # grid[i, j] = P[H-1-j, W-1-i]
+    jj, ii = np.meshgrid(np.arange(H), np.arange(W))
+    pix = (H - 1 - jj) * W + (W - 1 - ii)  # input pixel of grid cell (i, j)
+    cell_of_point = np.empty(H * W, dtype=np.int64)
+    cell_of_point[pix.ravel()] = (ii * H + jj).ravel()
+    cell_of_point[~np.isfinite(D).ravel()] = -1
+    return ScanGrid(G, cell_of_point, None, False, "depth")

@@ -1,0 +1,123 @@
+"""Stage 5 of paper 1: production rules P1-P5 and the five triangle classes."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from navkit.obstacles.mesh import MeshCharacteristics, smooth_normals
+from navkit.obstacles.settings import ObstacleSettings
+
+__all__ = [
+    "GROUND",
+    "OBSTACLE",
+    "SHADOW_BEHIND",
+    "SIDE_SHADOW",
+    "UNRELIABLE",
+    "classify",
+    "zone_cosine",
+]
+
+GROUND = 0
+"""m_t = 0: the underlying (traversable) surface."""
+UNRELIABLE = -1
+"""m_t = -1: a vertex without a valid measurement (C_d)."""
+OBSTACLE = -2
+"""m_t = -2: obstacle."""
+SIDE_SHADOW = -3
+"""m_t = -3: side shadow (zone III across a height jump)."""
+SHADOW_BEHIND = -4
+"""m_t = -4: shadow behind the obstacle (zone II across a height jump)."""
+
+_HUGE = 1.0e6
+_SEG = 1.0e7
+
+
+def zone_cosine(normal: NDArray[Any], ray: NDArray[Any]) -> NDArray[np.float64]:
+    """Cosine between the horizontal projections of normal and line of sight (in D'x'y').
+
+    Positive: co-directed (zone II, behind); negative: opposed (zone I, front); near 0 or a
+    vertical normal: zone III (sides).
+    """
+    nh, rh = normal[..., :2], ray[..., :2]
+    num = np.einsum("...i,...i->...", nh, rh)
+    den = np.linalg.norm(nh, axis=-1) * np.linalg.norm(rh, axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(den > 1e-9, num / np.where(den > 0, den, 1.0), 0.0)
+
+
+def classify(
+    mesh: MeshCharacteristics,
+    settings: ObstacleSettings,
+    *,
+    wrap: bool,
+    robust_cells: NDArray[np.float64] | None = None,
+) -> tuple[NDArray[np.int8], dict[str, NDArray[np.bool_]]]:
+    """Labels ``m_t (R, 2C) int8`` from the production rules (paper 1, stage 5).
+
+    Rules, per reliable triangle:
+
+    - P1: the (robust, see :func:`smooth_normals`) normal is tilted from the vertical by more than
+      ``c1``; a triangle with a height jump uses its own normal.
+    - P2 / P3: the horizontal projection of the normal is co-directed (``cos > c2``, zone II) /
+      opposed (``cos < -c2``, zone I) to the line of sight's.
+    - P4: no height jump (see :class:`MeshCharacteristics`).
+    - P5: the previous triangle along the rising ray (axis 1) is an obstacle - evaluated as "an
+      earlier P1 triangle in the same run of non-shadow, reliable triangles", and only while the
+      triangle is ``chain_min_height_m`` above the lowest P1 triangle of that run.
+
+    Productions in this order **[reading: the printed formula is damaged; the order follows the
+    paper's explanation]**: ``P2 & ~P4 -> -4``; ``~(P2 | P3) & ~P4 -> -3`` (a side shadow lies
+    across a jump); ``P1 | P5 -> -2``; otherwise ``0``; unreliable triangles ``-1``.
+
+    Returns
+    -------
+    labels : (R, 2C) int8
+    rules : dict of (R, 2C) bool
+        ``P1 .. P5`` as evaluated (for inspection and tests).
+    """
+    ok = mesh.valid
+    jump = mesh.jump
+    # zones matter only across a jump: evaluate them there only
+    cosz = np.zeros(ok.shape)
+    cosz[jump] = zone_cosine(mesh.normal[jump], mesh.ray_of(jump))
+    p2 = jump & (cosz > settings.c2)
+    p3 = jump & (cosz < -settings.c2)
+    p4 = ok & ~jump
+    shadow_behind = ok & p2 & ~p4
+    side_shadow = ok & ~p2 & ~p3 & ~p4
+    shadow = shadow_behind | side_shadow
+
+    nrm = mesh.normal
+    if robust_cells is not None:
+        # the cell's robust normal for both of its triangles; the own normal where it has none
+        rc = np.repeat(robust_cells, 2, axis=1)
+        nrm = np.where(np.isfinite(rc[..., 2:3]), rc, nrm)
+    if settings.normal_support > 0:
+        nrm = smooth_normals(nrm, ok & ~jump, settings.normal_support, wrap)
+    nz = nrm[..., 2]
+    nz = np.where(jump, mesh.normal[..., 2], nz)
+    with np.errstate(invalid="ignore"):
+        p1 = ok & ~shadow & (nz < math.cos(settings.c1_rad))
+
+    # P5 as a run-length chain along axis 1, vectorised with a segmented running minimum:
+    # runs are broken by shadows and unreliable triangles; the key subtracts a per-run offset so
+    # that np.minimum.accumulate restarts at each break.
+    breaker = ~ok | shadow
+    seg = np.cumsum(breaker, axis=1, dtype=np.float64)
+    val = np.where(p1, mesh.z_min, _HUGE)
+    val = np.where(breaker, _HUGE, val)
+    base = np.minimum.accumulate(val - seg * _SEG, axis=1) + seg * _SEG
+    with np.errstate(invalid="ignore"):
+        p5 = ~breaker & (base < _HUGE / 2) & (mesh.z_min - base >= settings.chain_min_height_m)
+    obstacle = ok & ~shadow & (p1 | p5)
+
+    labels = np.full(ok.shape, UNRELIABLE, dtype=np.int8)
+    labels[ok] = GROUND
+    labels[obstacle] = OBSTACLE
+    labels[side_shadow] = SIDE_SHADOW
+    labels[shadow_behind] = SHADOW_BEHIND
+    return labels, {"P1": p1, "P2": p2, "P3": p3, "P4": p4, "P5": p5}

@@ -1,0 +1,164 @@
+"""Settings of the obstacle detector (paper 1), with their defaults in one place."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+from navkit.errors import ConfigError
+
+__all__ = ["DEFAULT_SHAPES", "ObstacleSettings"]
+
+DEFAULT_SHAPES = ("A1", "A2", "A3", "A4", "A5", "A6", "MEC", "MVEE")
+
+
+@dataclass(frozen=True)
+class ObstacleSettings:
+    """Thresholds and options of the eight stages.
+
+    Attributes
+    ----------
+    c0_deg : float
+        Largest slope the robot can climb and descend (deg); a face steeper than this is an
+        obstacle even without a height jump (paper 1, "Setting" and the prism example).
+    c1_deg : float or None
+        Tilt of the normal from the vertical above which rule P1 holds (deg). ``None`` = ``c0_deg``
+        **[reading: the paper keeps c0 and c1 apart but gives no values; P1 is the rule that makes
+        a face steeper than c0 an obstacle, so c1 = c0 unless set]**.
+    c2 : float
+        Co-directionality threshold on the cosine between the horizontal projections of the normal
+        and of the ray: P2 (zone II, behind) when ``cos > c2``, P3 (zone I, front) when
+        ``cos < -c2``, zone III (sides) otherwise. 0.5 = within 60 deg.
+    jump_height_m, jump_range_fraction : float
+        Rule P4 (no height jump): a triangle *has* a height jump when the vertical extent of its
+        three vertices exceeds ``jump_height_m + jump_range_fraction * d`` with ``d`` its mean
+        range (m). **[reading: the paper does not define the jump; the vertical extent is used
+        because on level ground the height noise is about ``relative_noise * sensor_height``
+        whatever the range, while the range term absorbs gentle hills seen at grazing angles]**.
+    jump_range_ratio : float
+        Rule P4, second test: a triangle also has a jump when the ranges at the two ends of its
+        azimuth edge differ by more than this fraction of the smaller one **[reading: the spec
+        allows "the range discontinuity between neighbouring beams"; along azimuth, smooth
+        ground gives about equal ranges, so this catches the occlusion edges beside an obstacle
+        where the height difference is small - they become side shadows, not obstacles]**.
+        ``inf`` disables the test.
+    chain_min_height_m : float
+        Rule P5 (previous triangle along the ray is an obstacle) carries the obstacle label only
+        over triangles at least this much above the lowest point of the face that started the
+        chain **[reading: P5 is meant to carry the label "over the flat top of a box"; a top is
+        above the obstacle's foot, and this keeps one noisy triangle on flat ground from
+        labelling the rest of its column]**.
+    normal_support_m : float
+        Metric support (m) of the robust normals used by the tilt test P1
+        (:func:`navkit.obstacles.mesh.robust_cell_normals`); 0 = the paper's per-triangle normals.
+        Larger values suppress phantom obstacles under range noise at the cost of about
+        ``normal_support_m / 2`` of boundary growth.
+    normal_support : int
+        Half-size (cells) of an extra window over which the normals are averaged before P1
+        (0 = none). Jump and unreliable triangles are left out of the average.
+    merge_distance_m, merge_gap_cells : float, int
+        Obstacle zones whose vertices come within ``merge_distance_m`` (3D) across at most
+        ``merge_gap_cells`` grid cells are one obstacle (a missing return or a small jump inside
+        one object splits its mesh zone; see
+        :func:`navkit.obstacles.segment.merge_close_components`). ``0`` disables.
+    min_obstacle_triangles : int
+        Connected obstacle zones with fewer triangles are returned to ground.
+    min_obstacle_height_m : float
+        Obstacle zones whose vertical extent (max z - min z of their vertices) is below this, or
+        whose robust extent (90th - 10th percentile of their triangles' mid heights) is below
+        half of it, are returned to ground (noise and curbs, not obstacles).
+    ground_refine : bool
+        Re-label points by their height above the local ground after stage 7 (beyond the paper;
+        :mod:`navkit.obstacles.ground`): within ``ground_band_m`` -> ground, labelled ground but
+        more than ``ground_above_m`` above -> obstacle; the ground height is a low quantile per
+        ``ground_cell_m`` cell of the points of the main ground zones (ground components on the
+        mesh with >= 10 % of the largest one's triangles: the ground around the robot, not a
+        terrace cut off by its steep sides). Only the per-point classes change (triangles,
+        obstacles and shapes do not).
+    ground_band_m, ground_above_m, ground_cell_m : float
+        See ``ground_refine``.
+    wrap_azimuth : bool or None
+        Close the mesh across the azimuth seam (a 360 deg spinning lidar). ``None`` = when the
+        azimuth span plus one step reaches 2 pi.
+    shapes : tuple of str
+        Bounding-shape methods of :mod:`navkit.geometry.shapes` computed on each obstacle's
+        boundary vertices (stage 8).
+    guaranteed_shapes : tuple of str
+        Shapes recomputed over the obstacle together with its shadows: the paper's A7.
+    """
+
+    c0_deg: float = 20.0
+    c1_deg: float | None = None
+    c2: float = 0.5
+    jump_height_m: float = 0.3
+    jump_range_fraction: float = 0.01
+    jump_range_ratio: float = 0.2
+    chain_min_height_m: float = 0.2
+    normal_support_m: float = 1.0
+    normal_support: int = 0
+    merge_distance_m: float = 0.5
+    merge_gap_cells: int = 2
+    min_obstacle_triangles: int = 4
+    min_obstacle_height_m: float = 0.2
+    ground_refine: bool = True
+    ground_band_m: float = 0.1
+    ground_above_m: float = 0.3
+    ground_cell_m: float = 2.0
+    wrap_azimuth: bool | None = None
+    shapes: tuple[str, ...] = DEFAULT_SHAPES
+    guaranteed_shapes: tuple[str, ...] = ("A1", "MEC")
+
+    def __post_init__(self) -> None:
+        def check(name: str, ok: bool, expected: str) -> None:
+            if not ok:
+                raise ConfigError(f"= {getattr(self, name)!r}", field=name, expected=expected)
+
+        check("c0_deg", 0.0 < self.c0_deg < 90.0, "degrees in (0, 90)")
+        check(
+            "c1_deg", self.c1_deg is None or 0.0 < self.c1_deg < 90.0, "None or degrees in (0, 90)"
+        )
+        check("c2", 0.0 <= self.c2 < 1.0, "a cosine in [0, 1)")
+        check("jump_height_m", self.jump_height_m > 0, "metres > 0")
+        check("jump_range_fraction", self.jump_range_fraction >= 0, "a fraction >= 0")
+        check("jump_range_ratio", self.jump_range_ratio > 0, "a fraction > 0 (inf disables)")
+        check("chain_min_height_m", self.chain_min_height_m >= 0, "metres >= 0")
+        check("normal_support_m", self.normal_support_m >= 0, "metres >= 0")
+        check(
+            "normal_support",
+            int(self.normal_support) == self.normal_support and self.normal_support >= 0,
+            "an integer >= 0",
+        )
+        check("merge_distance_m", self.merge_distance_m >= 0, "metres >= 0")
+        check(
+            "merge_gap_cells",
+            int(self.merge_gap_cells) == self.merge_gap_cells and self.merge_gap_cells >= 0,
+            "an integer >= 0",
+        )
+        check("min_obstacle_triangles", self.min_obstacle_triangles >= 1, "an integer >= 1")
+        check("ground_band_m", self.ground_band_m >= 0, "metres >= 0")
+        check("ground_above_m", self.ground_above_m > 0, "metres > 0")
+        check("ground_cell_m", self.ground_cell_m > 0, "metres > 0")
+        check("min_obstacle_height_m", self.min_obstacle_height_m >= 0, "metres >= 0")
+        object.__setattr__(self, "shapes", tuple(self.shapes))
+        object.__setattr__(self, "guaranteed_shapes", tuple(self.guaranteed_shapes))
+        from navkit.geometry.shapes import SHAPES
+
+        for name in ("shapes", "guaranteed_shapes"):
+            bad = [s for s in getattr(self, name) if s not in SHAPES]
+            check(name, not bad, f"names among {sorted(SHAPES)}")
+
+    @property
+    def c1_rad(self) -> float:
+        """The P1 tilt threshold in radians."""
+        return math.radians(self.c0_deg if self.c1_deg is None else self.c1_deg)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, object], source: str = "settings") -> ObstacleSettings:
+        """Build from a mapping (e.g. a TOML table), rejecting unknown keys."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ConfigError(
+                f"unknown keys {unknown}", source=source, expected=f"keys among {sorted(known)}"
+            )
+        return cls(**data)  # type: ignore[arg-type]

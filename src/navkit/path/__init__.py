@@ -1,0 +1,32 @@
+"""Paper 4: online cubic-spline memory of a trajectory, loop removal, arc length, return home.
+
+Mode 1 (recording): :class:`OnlineApproximator` / :func:`approximate` turn positions arriving one
+at a time into a :class:`PathSpline` (cubic segments over arc length) within a tolerance, cutting
+loops out as they close. Mode 2 (return): :class:`ReturnController` steers a robot back along the
+stored path to its start. Everything works on NumPy arrays; file formats live at the edge
+(``path.json`` in :mod:`navkit.path.storage`, trajectories in ``navkit.io.trajectory``).
+"""
+
+from navkit.path.approximator import (
+    ApproximationResult,
+    ApproximatorSettings,
+    OnlineApproximator,
+    approximate,
+)
+from navkit.path.fitting import VARIANTS
+from navkit.path.loops import Crossing, LoopCut, LoopFreeChain, find_crossings, remove_loops
+from navkit.path.spline import PathSpline
+
+__all__ = [
+    "VARIANTS",
+    "ApproximationResult",
+    "ApproximatorSettings",
+    "Crossing",
+    "LoopCut",
+    "LoopFreeChain",
+    "OnlineApproximator",
+    "PathSpline",
+    "approximate",
+    "find_crossings",
+    "remove_loops",
+]

@@ -1,0 +1,507 @@
+"""Mode 1 of paper 4: the online spline memory of the odometry trajectory.
+
+Points arrive one at a time (step 1.2). The current segment is a parametric cubic fitted by
+least squares over the polyline length ``t`` (1.3, :mod:`navkit.path.fitting`); when the largest
+deviation exceeds ``eps`` (1.4-1.5) the segment is frozen on all points but the last, refitted
+over arc length (1.6, section 4), searched for loops that are then cut out (1.7, section 3,
+:mod:`navkit.path.loops`), and a new segment starts where it ended.
+
+Guarantee: every accepted point ``P_i`` satisfies ``|P_i - C(s_i)| <= eps`` for the stored
+(arc-length) segment that covers it, hence lies within ``eps`` of the stored spline. The
+deviation is measured at the point's own parameter - an upper bound of the point-to-curve
+distance, so the guarantee is conservative. It is checked on the *stored* curve: if the refit of
+step 1.6 pushes a point beyond ``eps`` the segment is frozen one point earlier instead.
+
+Cost per point: the normal equations come from running power sums (O(1) per point); the cheap
+test ``SSR <= eps^2`` (which bounds every residual) accepts most points of smooth data without
+touching them; otherwise the residuals of the segment's points are computed in one vectorised
+pass. Freezing costs O(points in the segment) once.
+
+Decisions where the paper is silent: the tangent variants use the plain start / endpoints fit for
+the first segment (there is no previous tangent); points within ``min_step`` of the previous
+accepted point (repeats) and non-finite points are skipped and counted, with one warning.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from navkit.errors import ConfigError, InputError
+from navkit.path.fitting import (
+    CubicFit,
+    check_variant,
+    fit_from_sums,
+    fit_points,
+    needs_tangent,
+    project,
+    residuals,
+)
+from navkit.path.loops import LoopCut, LoopFreeChain
+from navkit.path.spline import PathSpline, cubic_eval, gauss_legendre_length
+
+__all__ = ["ApproximationResult", "ApproximatorSettings", "OnlineApproximator", "approximate"]
+
+log = logging.getLogger(__name__)
+
+_POW7 = np.arange(7.0)
+
+
+@dataclass(frozen=True)
+class ApproximatorSettings:
+    """Settings of the online approximator.
+
+    Attributes
+    ----------
+    tolerance : float
+        ``eps``: largest allowed distance of an input point from the stored spline, metres.
+    variant : str
+        Constraints of each segment (paper fig. 1): ``"start"``, ``"start_tangent"``,
+        ``"endpoints"`` (the paper's recommendation for low-noise data, the default) or
+        ``"endpoints_tangent"``.
+    remove_loops : bool
+        Cut loops out as segments are frozen (step 1.7).
+    loop_precision : float
+        Box size the crossing search refines to, metres (paper: 0.1 mm).
+    min_loop_length : float
+        Crossings closer than this along the path are not loops, metres.
+    min_step : float
+        A point closer than this to the previous accepted point is a repeat and is skipped, metres.
+    geometric_test : bool
+        When a point's residual at its own parameter exceeds the limit, measure its distance to
+        the curve (Newton projection) before freezing: segments get longer, the guarantee is the
+        same (it is on the distance). False: the paper's residual test only.
+    max_segment_points : int
+        A segment is frozen when it holds this many points even if it still fits: bounds the
+        per-point cost on dense, slow data (e.g. 100 Hz wheel odometry of a robot standing still
+        half the time).
+    fit_margin : float
+        The running fit over the polyline length must stay within ``fit_margin * tolerance``, so
+        the arc-length refit of step 1.6 (which moves the curve slightly) rarely breaks
+        ``tolerance``; when it does, the segment is frozen earlier. In ``(0, 1]``.
+    """
+
+    tolerance: float = 0.05
+    variant: str = "endpoints"
+    remove_loops: bool = True
+    loop_precision: float = 1e-4
+    min_loop_length: float = 1e-3
+    min_step: float = 1e-9
+    fit_margin: float = 0.9
+    geometric_test: bool = True
+    max_segment_points: int = 2000
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.tolerance) and self.tolerance > 0):
+            raise ConfigError(
+                f"is {self.tolerance}", field="tolerance", expected="a positive distance in metres"
+            )
+        check_variant(self.variant)
+        if not 0 < self.fit_margin <= 1:
+            raise ConfigError(
+                f"is {self.fit_margin}", field="fit_margin", expected="a fraction in (0, 1]"
+            )
+        if not self.max_segment_points >= 3:
+            raise ConfigError(
+                f"is {self.max_segment_points}",
+                field="max_segment_points",
+                expected="an integer >= 3",
+            )
+        if not self.min_step >= 0:
+            raise ConfigError(f"is {self.min_step}", field="min_step", expected=">= 0 metres")
+
+
+@dataclass(frozen=True)
+class ApproximationResult:
+    """What the recorder produced.
+
+    Attributes
+    ----------
+    spline : PathSpline
+        The stored path (loop-free unless ``remove_loops`` was off).
+    raw_spline : PathSpline
+        All frozen segments before loop removal (the one the eps guarantee is stated on).
+    loops : tuple of LoopCut
+        The loops cut out (arc lengths refer to the path as it was at the cut).
+    points : (N, 2) array
+        The accepted input points.
+    point_s : (N,) array
+        Arc length of each accepted point's parameter on ``raw_spline``.
+    deviation : (N,) array
+        ``|P_i - C(s_i)|`` on ``raw_spline``, metres (all ``<= tolerance``).
+    n_input, n_repeated, n_nonfinite : int
+        Points offered, skipped as repeats, skipped as NaN / inf.
+    n_cheap : int
+        Points accepted by the O(1) test without computing residuals.
+    seconds_per_point : (n_input,) array
+        Wall time of each ``add`` call (including freezing and loop search), seconds.
+    cpu_seconds_per_point : (n_input,) array
+        The same as thread CPU time (immune to other processes taking the CPU), seconds.
+    """
+
+    spline: PathSpline
+    raw_spline: PathSpline
+    loops: tuple[LoopCut, ...]
+    points: NDArray[np.float64]
+    point_s: NDArray[np.float64]
+    deviation: NDArray[np.float64]
+    n_input: int
+    n_repeated: int
+    n_nonfinite: int
+    n_cheap: int
+    seconds_per_point: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    cpu_seconds_per_point: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def max_deviation(self) -> float:
+        """Largest deviation of an accepted point, metres (NaN without points)."""
+        return float(self.deviation.max()) if len(self.deviation) else float("nan")
+
+    def summary(self) -> dict[str, Any]:
+        """Key figures (the CLI's ``summary.json``)."""
+        us = self.seconds_per_point * 1e6
+        cpu = self.cpu_seconds_per_point * 1e6
+        return {
+            "points": self.n_input,
+            "points_used": len(self.points),
+            "points_repeated": self.n_repeated,
+            "points_nonfinite": self.n_nonfinite,
+            "segments": self.spline.n_segments,
+            "segments_before_loop_removal": self.raw_spline.n_segments,
+            "loops_removed": len(self.loops),
+            "loop_length_removed_m": float(sum(c.length for c in self.loops)),
+            "length_m": self.spline.total_length,
+            "raw_length_m": self.raw_spline.total_length,
+            "tolerance_m": self.raw_spline.tolerance,
+            "max_deviation_m": self.max_deviation,
+            "stored_numbers": self.spline.n_numbers,
+            "cheap_test_fraction": self.n_cheap / max(len(self.points), 1),
+            "mean_us_per_point": float(us.mean()) if len(us) else None,
+            "p99_us_per_point": float(np.percentile(us, 99)) if len(us) else None,
+            "max_us_per_point": float(us.max()) if len(us) else None,
+            "mean_cpu_us_per_point": float(cpu.mean()) if len(cpu) else None,
+            "max_cpu_us_per_point": float(cpu.max()) if len(cpu) else None,
+        }
+
+
+class OnlineApproximator:
+    """The path recorder: feed points with :meth:`add`, get the path with :meth:`finish`.
+
+    Examples
+    --------
+    >>> rec = OnlineApproximator(ApproximatorSettings(tolerance=0.05))
+    >>> for p in np.c_[np.linspace(0, 3, 31), np.zeros(31)]:
+    ...     _ = rec.add(p)
+    >>> result = rec.finish()
+    >>> result.spline.n_segments, round(result.spline.total_length, 6)
+    (1, 3.0)
+    """
+
+    def __init__(
+        self, settings: ApproximatorSettings | None = None, frame: dict[str, Any] | None = None
+    ) -> None:
+        self.settings = settings or ApproximatorSettings()
+        self.frame = dict(frame or {})
+        s = self.settings
+        self._eps = float(s.tolerance)
+        self._eps_fit = self._eps * float(s.fit_margin)
+        self._max_points = int(s.max_segment_points)
+        self._min_step = float(s.min_step)
+        self._eps2 = self._eps_fit**2
+        self._chain = LoopFreeChain(precision=s.loop_precision, min_loop_length=s.min_loop_length)
+        self._raw: list[tuple[NDArray[np.float64], NDArray[np.float64], float]] = []
+        self._raw_length = 0.0
+        self._loops: list[LoopCut] = []
+        # accepted points and their bookkeeping
+        self._pts: list[NDArray[np.float64]] = []
+        self._pt_s: list[NDArray[np.float64]] = []
+        self._pt_dev: list[NDArray[np.float64]] = []
+        self.n_input = self.n_repeated = self.n_nonfinite = self.n_cheap = 0
+        self.n_refit_fallbacks = 0
+        # current segment: buffer row 0 is the anchor
+        self._buf = np.zeros((64, 2))
+        self._tau = np.zeros(64)
+        self._n = 0
+        self._anchor_is_point = True  # the very first anchor is a data point
+        self._tangent: NDArray[np.float64] | None = None
+        self._last: NDArray[np.float64] | None = None
+
+    # ------------------------------------------------------------------ state
+    @property
+    def spline(self) -> PathSpline:
+        """The frozen (and loop-free) part of the path recorded so far."""
+        return self._chain.spline(tolerance=self._eps, frame=self.frame)
+
+    @property
+    def _variant(self) -> str:
+        v = self.settings.variant
+        if needs_tangent(v) and self._tangent is None:
+            return "start" if v == "start_tangent" else "endpoints"
+        return v
+
+    def _start_segment(self, anchor: NDArray[np.float64]) -> None:
+        self._buf[0] = anchor
+        self._tau[0] = 0.0
+        self._n = 1
+        self._S = [1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]  # the anchor: u = 0 adds only to S_0
+        self._D = ([0.0] * 4, [0.0] * 4)
+        self._Q = 0.0
+        self._anchor = (float(anchor[0]), float(anchor[1]))
+        self._lastxy = self._anchor
+        self._tangent_t = (
+            None if self._tangent is None else (float(self._tangent[0]), float(self._tangent[1]))
+        )
+        self._fit: CubicFit | None = None
+
+    # ------------------------------------------------------------------ adding points (steps 1.2 - 1.5)
+    def add(self, point: ArrayLike) -> bool:
+        """Offer the next point ``(2,)``; returns False if it was skipped (NaN or a repeat)."""
+        self.n_input += 1
+        p = np.asarray(point, dtype=np.float64).reshape(-1)
+        if p.shape != (2,):
+            raise InputError(
+                f"has shape {np.shape(point)}", field="point", expected="(2,) x, y in metres"
+            )
+        x, y = float(p[0]), float(p[1])
+        if not (math.isfinite(x) and math.isfinite(y)):
+            self.n_nonfinite += 1
+            return False
+        last = self._last
+        if last is not None and math.hypot(x - last[0], y - last[1]) <= self._min_step:
+            self.n_repeated += 1
+            return False
+        self._last = p
+        if self._n == 0:
+            self._start_segment(p)
+            return True
+        self._push(p)
+        return True
+
+    def _grow(self) -> None:
+        if self._n + 1 >= len(self._tau):
+            self._buf = np.resize(self._buf, (2 * len(self._tau), 2))
+            self._tau = np.resize(self._tau, 2 * len(self._tau))
+
+    def _push(self, p: NDArray[np.float64]) -> None:
+        n = self._n
+        px, py = float(p[0]), float(p[1])
+        ax_, ay_ = self._anchor
+        lx, ly = self._lastxy
+        dx, dy = px - ax_, py - ay_
+        step = math.hypot(px - lx, py - ly)
+        if step <= 0.0:  # coincides with the anchor of a fresh segment: it is on the spline
+            self._record(p[None, :], np.array([self._raw_length]), np.zeros(1))
+            return
+        tau = self._tau[n - 1] + step
+        # running power sums (plain floats: 7 + 8 multiply-adds per point)
+        t2 = tau * tau
+        t3 = t2 * tau
+        tp = (1.0, tau, t2, t3, t2 * t2, t3 * t2, t3 * t3)
+        S = [a + b for a, b in zip(self._S, tp, strict=True)]
+        Dx = [a + dx * b for a, b in zip(self._D[0], tp[:4], strict=True)]
+        Dy = [a + dy * b for a, b in zip(self._D[1], tp[:4], strict=True)]
+        Q = self._Q + dx * dx + dy * dy
+        inv = 1.0 / tau
+        sc = [1.0, inv]
+        for _ in range(5):
+            sc.append(sc[-1] * inv)
+        Su = [a * b for a, b in zip(S, sc, strict=True)]
+        D = (
+            [a * b for a, b in zip(Dx, sc[:4], strict=True)],
+            [a * b for a, b in zip(Dy, sc[:4], strict=True)],
+        )
+        fit = fit_from_sums(self._variant, Su, D, Q, n, tau, end=(dx, dy), tangent=self._tangent_t)
+        ok = fit.ssr <= self._eps2 * (1.0 - 1e-9) - 1e-15 * Q  # rounding margin of the sums
+        if n >= self._max_points:
+            ok = False  # bound the O(n) work of the exact test and of freezing
+        if ok:
+            self.n_cheap += 1
+        elif n < self._max_points:
+            self._grow()
+            self._buf[n] = p
+            self._tau[n] = tau
+            u = self._tau[: n + 1] / tau
+            d = self._buf[: n + 1] - self._buf[0]
+            r = residuals(fit, u, d)
+            ok = bool(r.max() <= self._eps_fit)
+            if not ok and self.settings.geometric_test:
+                # the residual at a point's own parameter includes along-track misfit; the
+                # distance to the curve (Newton projection) is what the guarantee is about
+                far = r > self._eps_fit
+                _, dist = project(fit, u[far], d[far])
+                ok = bool(dist.max() <= self._eps_fit)
+        if ok:
+            self._grow()
+            self._buf[n], self._tau[n] = p, tau
+            self._n, self._S, self._D, self._Q, self._fit = n + 1, S, (Dx, Dy), Q, fit
+            self._lastxy = (px, py)
+            return
+        # step 1.5: freeze on all points but the last, start the next segment where it ends
+        leftover = self._freeze(self._n)
+        for q in [*leftover, p]:
+            self._push(q)
+
+    # ------------------------------------------------------------------ freezing (steps 1.5 - 1.7)
+    def _freeze(self, n_use: int) -> list[NDArray[np.float64]]:
+        """Freeze the segment on buffer rows ``[0, n_use)``; returns points to re-add (rarely any)."""
+        variant = self._variant
+        anchor = self._buf[0].copy()
+        fit_s, s, dev = self._natural_fit(variant, anchor, n_use)
+        if dev.max() > self._eps:
+            # The refit over arc length moved a point beyond eps (it can, on long wiggly
+            # segments). Store the fit over t instead - its shape passed the test - with the
+            # parameter scaled so it runs over the curve's arc length [0, S]: the same curve, the
+            # total length exact, the speed |C'| = S'(t) T / S only approximately 1.
+            self.n_refit_fallbacks += 1
+            fit_s, s, dev = self._scaled_t_fit(variant, anchor, n_use)
+        pts = self._buf[:n_use]
+        leftover = [self._buf[i].copy() for i in range(n_use, self._n)]
+        ax, ay = fit_s.metric_coefficients(anchor)
+        length = float(fit_s.T)
+        first = 0 if self._anchor_is_point else 1
+        self._record(pts[first:], self._raw_length + s[first:], dev[first:])
+        self._raw.append((ax, ay, length))
+        self._raw_length += length
+        self._loops.extend(
+            self._chain.append(ax, ay, length, remove_loops=self.settings.remove_loops)
+        )
+        # the next segment starts where this one ends, with its tangent
+        end = np.array([cubic_eval(ax, float(length)), cubic_eval(ay, float(length))])
+        tan = np.array([cubic_eval(ax, float(length), 1), cubic_eval(ay, float(length), 1)])
+        norm = float(np.hypot(*tan))
+        self._tangent = tan / norm if norm > 0 else None
+        self._anchor_is_point = False
+        self._start_segment(end)
+        return leftover
+
+    def _natural_fit(
+        self, variant: str, anchor: NDArray[np.float64], n_use: int
+    ) -> tuple[CubicFit, NDArray[np.float64], NDArray[np.float64]]:
+        """Section 4's three steps on buffer rows ``[0, n_use)``: (fit, arc lengths, deviations)."""
+        d = self._buf[:n_use] - anchor
+        # 1) fit over the polyline length t
+        fit_t = fit_points(variant, self._tau[:n_use], d, tangent=self._tangent)
+        # 2) arc length of that curve at each point (Gauss-Legendre)
+        s = gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], self._tau[:n_use] / fit_t.T)
+        # 3) refit over (s_i, P_i): the stored curve is x(s), y(s)
+        fit_s = fit_points(variant, s, d, tangent=self._tangent)
+        # the guarantee is on the distance to the stored curve (the point's own parameter moved)
+        u, dist = project(fit_s, s / fit_s.T, d)
+        return fit_s, u * fit_s.T, dist
+
+    def _scaled_t_fit(
+        self, variant: str, anchor: NDArray[np.float64], n_use: int
+    ) -> tuple[CubicFit, NDArray[np.float64], NDArray[np.float64]]:
+        """The fit over t with its parameter rescaled to the arc length (fallback of step 1.6)."""
+        d = self._buf[:n_use] - anchor
+        fit_t = fit_points(variant, self._tau[:n_use], d, tangent=self._tangent)
+        u = self._tau[:n_use] / fit_t.T
+        s = gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u)
+        fit = CubicFit(coef=fit_t.coef, T=float(s[-1]), ssr=fit_t.ssr)  # same u in [0, 1], T = S
+        u2, dist = project(fit, u, d)
+        return fit, u2 * fit.T, dist
+
+    def _record(
+        self, pts: NDArray[np.float64], s: NDArray[np.float64], dev: NDArray[np.float64]
+    ) -> None:
+        self._pts.append(np.array(pts, dtype=np.float64).reshape(-1, 2))
+        self._pt_s.append(np.asarray(s, dtype=np.float64))
+        self._pt_dev.append(np.asarray(dev, dtype=np.float64))
+
+    # ------------------------------------------------------------------ the end
+    def finish(self, seconds_per_point: ArrayLike | None = None) -> ApproximationResult:
+        """Freeze the open segment and return the result (the recorder can keep going after)."""
+        if self._n >= 2:
+            while self._n >= 2:
+                for q in self._freeze(self._n):
+                    self._push(q)
+        elif self._n == 1 and self._anchor_is_point:
+            self._record(self._buf[:1], np.zeros(1), np.zeros(1))
+            self._n = 0
+            self._anchor_is_point = True
+        skipped = self.n_repeated + self.n_nonfinite
+        if skipped:
+            log.warning(
+                "skipped %d of %d points (%d repeats, %d NaN/inf)",
+                skipped,
+                self.n_input,
+                self.n_repeated,
+                self.n_nonfinite,
+            )
+        raw = PathSpline.from_segments(
+            [r[2] for r in self._raw],
+            np.reshape([r[0] for r in self._raw], (-1, 4)),
+            np.reshape([r[1] for r in self._raw], (-1, 4)),
+            tolerance=self._eps,
+            frame=self.frame,
+        )
+
+        def cat(xs: list[NDArray[np.float64]], shape: tuple[int, ...]) -> NDArray[np.float64]:
+            return np.concatenate(xs) if xs else np.zeros(shape)
+
+        return ApproximationResult(
+            spline=self.spline,
+            raw_spline=raw,
+            loops=tuple(self._loops),
+            points=cat(self._pts, (0, 2)),
+            point_s=cat(self._pt_s, (0,)),
+            deviation=cat(self._pt_dev, (0,)),
+            n_input=self.n_input,
+            n_repeated=self.n_repeated,
+            n_nonfinite=self.n_nonfinite,
+            n_cheap=self.n_cheap,
+            seconds_per_point=np.asarray(
+                seconds_per_point if seconds_per_point is not None else np.zeros(0),
+                dtype=np.float64,
+            ),
+        )
+
+
+def approximate(
+    points: ArrayLike,
+    settings: ApproximatorSettings | None = None,
+    *,
+    frame: dict[str, Any] | None = None,
+    timed: bool = True,
+    iterate: Callable[[Iterable[Any]], Iterable[Any]] | None = None,
+) -> ApproximationResult:
+    """Record a whole trajectory point by point (mode 1) and return the stored path.
+
+    Parameters
+    ----------
+    points : (N, 2) array
+        Positions in arrival order, metres (NaN rows are skipped).
+    settings : ApproximatorSettings, optional
+    frame : dict, optional
+        Description of the frame (stored in ``path.json``).
+    timed : bool
+        Measure the wall time of every ``add`` call (``seconds_per_point``).
+    iterate : callable, optional
+        Wraps the iteration over the points (the CLI passes a progress bar).
+    """
+    P = np.asarray(points, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 2:
+        raise InputError(f"has shape {P.shape}", field="points", expected="(N, 2) x, y in metres")
+    rec = OnlineApproximator(settings, frame=frame)
+    times = np.zeros(len(P))
+    cpu = np.zeros(len(P))
+    clock, cpu_clock = time.perf_counter, time.thread_time
+    wrap = iterate or (lambda items: items)
+    if timed:
+        for i, p in wrap(enumerate(P)):
+            t0, c0 = clock(), cpu_clock()
+            rec.add(p)
+            times[i], cpu[i] = clock() - t0, cpu_clock() - c0
+    else:
+        for p in wrap(P):
+            rec.add(p)
+    result = rec.finish(seconds_per_point=times if timed else None)
+    return dataclasses.replace(result, cpu_seconds_per_point=cpu) if timed else result

@@ -1,0 +1,453 @@
+"""Plane extraction: organised grids (CAPE-like cell region growing) and unorganised clouds.
+
+Organised input (depth image back-projected, organised PCD, a range-scan grid), in the spirit of
+CAPE (Proenca & Gao, 2018):
+
+1. cut the grid into ``cell x cell`` patches and accumulate their moments (count, sum, scatter);
+2. a patch is *planar* when it is nearly complete and its PCA thickness (smallest eigenvalue)
+   is below a depth-dependent noise bound ``rms_base + rms_quadratic * z^2``;
+3. neighbouring planar patches are joined when their normals agree and each centroid lies on the
+   other's plane (region growing = connected components of that cell graph);
+4. each region is refit from its summed moments; patches that disagree with the region's plane are
+   dropped and the regions recomputed; coplanar regions are merged;
+5. pixels of the region and of the cells bordering it are re-assigned by their distance to the
+   plane (boundary refinement) and the plane is refit by total least squares.
+
+Unorganised clouds: sequential RANSAC with vectorised hypotheses, a TLS refit, and the largest
+connected part of the inliers (rasterised in the plane) kept per plane.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from navkit.errors import InputError
+from navkit.geometry import Plane, canonical_plane
+from navkit.geometry.linalg import rows_dot, rows_matmul
+from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points, plane_frame
+
+__all__ = [
+    "CloudExtractionSettings",
+    "ExtractionSettings",
+    "extract_planes_cloud",
+    "extract_planes_organized",
+]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class ExtractionSettings:
+    """Settings of :func:`extract_planes_organized`.
+
+    Attributes
+    ----------
+    cell : int
+        Patch size, pixels (CAPE uses 20 for 640 x 480).
+    min_fill : float
+        Fraction of valid points a patch needs to be tested.
+    rms_base, rms_quadratic : float
+        Patch thickness bound ``rms_base + rms_quadratic * z^2`` (metres, z in metres): the
+        structured-light noise model (Khoshelham & Elberink 2012: sigma_z ~ 1.4e-3 z^2 ... 2.9e-3 z^2)
+        plus a margin for quantisation.
+    angle_deg : float
+        Largest normal angle between joined patches / merged regions, degrees.
+    distance_factor : float
+        Joined patches: centroid-to-plane distance below ``distance_factor`` x the thickness bound.
+    min_cells : int
+        Smallest region kept, patches.
+    inlier_factor : float
+        Boundary refinement: a pixel is an inlier when its distance to the plane is below
+        ``inlier_factor`` x the thickness bound at its depth.
+    outline_cell : float
+        Raster size for outlines and areas, metres.
+    """
+
+    cell: int = 20
+    min_fill: float = 0.6
+    rms_base: float = 0.002
+    rms_quadratic: float = 0.0025
+    angle_deg: float = 12.0
+    distance_factor: float = 3.0
+    min_cells: int = 4
+    inlier_factor: float = 3.0
+    outline_cell: float = 0.02
+
+    def __post_init__(self) -> None:
+        if int(self.cell) < 3:
+            raise InputError(f"is {self.cell}", field="cell", expected="an integer >= 3")
+        if not 0 < self.angle_deg < 90:
+            raise InputError(f"is {self.angle_deg}", field="angle_deg", expected="0 < angle < 90")
+
+    def noise(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Thickness bound (metres) at range ``z`` (metres)."""
+        return self.rms_base + self.rms_quadratic * z * z
+
+
+def _planes_from_moments(cnt, S, SS):
+    """Normals ``(G, 3)`` (pointing away from the origin), rho ``(G,)``, rms ``(G,)``, means."""
+    n = np.maximum(cnt, 1.0)
+    m = S / n[:, None]
+    C = SS / n[:, None, None] - m[:, :, None] * m[:, None, :]
+    w, V = np.linalg.eigh(C)
+    normal = V[:, :, 0]
+    d = np.einsum("gi,gi->g", normal, m)
+    flip = d < 0
+    normal[flip] *= -1
+    d = np.abs(d)
+    rms = np.sqrt(np.maximum(w[:, 0], 0.0))
+    return normal, d, rms, m, w
+
+
+def _segment(
+    idx: NDArray[np.int64], P_flat: NDArray[np.float64], outline_cell: float
+) -> PlaneSegment:
+    """Package inliers as a segment: TLS refit (from the 3 x 3 scatter), outline and area."""
+    X = P_flat[idx]
+    c = X.mean(axis=0)
+    Xc = X - c
+    w, V = np.linalg.eigh(np.einsum("ni,nj->ij", Xc, Xc))
+    n, rho = canonical_plane(V[:, 0], float(V[:, 0] @ c))
+    plane = Plane(
+        normal=n, rho=rho, centroid=c, rms=float(np.sqrt(max(w[0], 0.0) / len(X))), count=len(X)
+    )
+    origin, axes = plane_frame(plane)
+    step = max(1, len(X) // 40_000)  # outlines from at most ~40k points (dense grids)
+    uv = rows_matmul(X[::step] - origin, axes.T)
+    outline, area = outline_from_points(uv, outline_cell)
+    return PlaneSegment(plane=plane, inliers=idx.astype(np.int64), outline=outline, area=area)
+
+
+def extract_planes_organized(
+    points: ArrayLike, settings: ExtractionSettings | None = None
+) -> ExtractionResult:
+    """Planes of an organised point grid (depth image back-projected, organised PCD, scan grid).
+
+    Parameters
+    ----------
+    points : (H, W, 3) array
+        Points in the sensor frame, metres; NaN (or all-zero rows) = no measurement. Depth-like
+        range for the noise model is the distance from the origin.
+    settings : ExtractionSettings, optional
+
+    Returns
+    -------
+    ExtractionResult
+        ``labels`` is ``(H, W)``; inlier indices are ``row * W + col``.
+    """
+    s = settings or ExtractionSettings()
+    P = np.asarray(points, dtype=np.float64)
+    if P.ndim != 3 or P.shape[2] != 3:
+        raise InputError(
+            f"has shape {P.shape}", field="points", expected="(H, W, 3) organised grid"
+        )
+    H, W = P.shape[:2]
+    c = int(s.cell)
+    hc, wc = H // c, W // c
+    labels = -np.ones((H, W), np.int64)
+    if hc == 0 or wc == 0:
+        return ExtractionResult((), labels)
+    valid = np.all(np.isfinite(P), axis=2) & np.any(P != 0, axis=2)
+    Pc = P[: hc * c, : wc * c]
+    vc = valid[: hc * c, : wc * c]
+    # 1. patch moments
+    # block sums of (1, x, y, z, xx, xy, xz, yy, yz, zz): rows of a patch first (contiguous
+    # reductions), then columns - exact in float64
+    X = np.where(vc[..., None], Pc, 0.0)
+    iu = np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2])
+    stack = np.concatenate(
+        [vc[..., None].astype(np.float64), X, X[..., iu[0]] * X[..., iu[1]]], axis=2
+    )
+    rows = stack.reshape(hc, c, wc * c * 10).sum(axis=1)
+    sums = rows.reshape(hc, wc, c, 10).sum(axis=2).reshape(-1, 10)
+    cnt = np.rint(sums[:, 0])
+    S = sums[:, 1:4]
+    SS = np.empty((hc * wc, 3, 3))
+    SS[:, iu[0], iu[1]] = sums[:, 4:]
+    SS[:, iu[1], iu[0]] = sums[:, 4:]
+    # 2. planar patches
+    normal, d, rms, mean, _ = _planes_from_moments(cnt, S, SS)
+    z = np.linalg.norm(mean, axis=1)
+    bound = s.noise(z)
+    planar = (cnt >= s.min_fill * c * c) & (rms < bound)
+    # 3. region growing on the patch graph
+    cos_t = np.cos(np.radians(s.angle_deg))
+    ids = np.arange(hc * wc).reshape(hc, wc)
+    pairs = np.concatenate(
+        [
+            np.stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()], axis=1),
+            np.stack([ids[:-1, :].ravel(), ids[1:, :].ravel()], axis=1),
+        ]
+    )
+
+    def edges_ok(keep: NDArray[np.bool_]) -> NDArray[np.int64]:
+        a, b = pairs[:, 0], pairs[:, 1]
+        ok = keep[a] & keep[b]
+        ok &= np.einsum("ei,ei->e", normal[a], normal[b]) > cos_t
+        tol = s.distance_factor * np.maximum(bound[a], bound[b])
+        ok &= np.abs(np.einsum("ei,ei->e", normal[a], mean[b]) - d[a]) < tol
+        ok &= np.abs(np.einsum("ei,ei->e", normal[b], mean[a]) - d[b]) < tol
+        return pairs[ok]
+
+    def regions(keep: NDArray[np.bool_]) -> tuple[int, NDArray[np.int64]]:
+        e = edges_ok(keep)
+        g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(hc * wc, hc * wc))
+        n_comp, comp = connected_components(g, directed=False)
+        comp = np.where(keep, comp, -1)
+        sizes = np.bincount(comp[comp >= 0], minlength=n_comp)
+        big = sizes >= s.min_cells
+        remap = -np.ones(n_comp, np.int64)
+        remap[big] = np.arange(big.sum())
+        comp = np.where(comp >= 0, remap[np.maximum(comp, 0)], -1)
+        return int(big.sum()), comp
+
+    def region_planes(n_reg, comp):
+        sel = comp >= 0
+        g = comp[sel]
+        rc = np.bincount(g, cnt[sel], minlength=n_reg)
+        rS = np.stack([np.bincount(g, S[sel, k], minlength=n_reg) for k in range(3)], axis=1)
+        rSS = np.zeros((n_reg, 3, 3))
+        np.add.at(rSS, g, SS[sel])
+        return _planes_from_moments(rc, rS, rSS)
+
+    n_reg, comp = regions(planar)
+    if n_reg == 0:
+        return ExtractionResult((), labels)
+    # 4. prune patches that disagree with their region's refit plane, then regroup
+    rn, rd, _, _, _ = region_planes(n_reg, comp)
+    r = np.maximum(comp, 0)
+    agree = (np.einsum("gi,gi->g", normal, rn[r]) > cos_t) & (
+        np.abs(np.einsum("gi,gi->g", rn[r], mean) - rd[r]) < s.distance_factor * bound
+    )
+    n_reg, comp = regions(planar & (comp >= 0) & agree)
+    if n_reg == 0:
+        return ExtractionResult((), labels)
+    rn, rd, _, rmean, _ = region_planes(n_reg, comp)
+    # merge coplanar regions (e.g. a wall cut in two by an object in front of it)
+    rz = np.linalg.norm(rmean, axis=1)
+    rtol = s.distance_factor * s.noise(rz)
+    same = (rn @ rn.T > cos_t) & (
+        np.abs(np.einsum("ai,bi->ab", rn, rmean) - rd[:, None])
+        < np.maximum(rtol[:, None], rtol[None, :])
+    )
+    same &= same.T
+    n_m, merged = connected_components(same.astype(np.int8), directed=False)
+    comp = np.where(comp >= 0, merged[np.maximum(comp, 0)], -1)
+    n_reg = n_m
+    rn, rd, _, _, _ = region_planes(n_reg, comp)
+    # 5. boundary refinement at pixel level: pixels of the region's patches and of the patches
+    #    bordering them join the plane when close enough to it
+    #    (every pixel of a region's patches is tested against its plane in one pass; the pixels
+    #    of the patches bordering a region are also tested against it, the closest plane wins)
+    P_flat = P.reshape(-1, 3)
+    cellmap = comp.reshape(hc, wc)
+    lab_c = labels[: hc * c, : wc * c].reshape(hc, c, wc, c)
+    vcb = vc.reshape(hc, c, wc, c)
+    blocks = Pc.reshape(hc, c, wc, c, 3).transpose(0, 2, 1, 3, 4)  # views: (hc, wc, c, c, 3)
+    vblocks = vcb.transpose(0, 2, 1, 3)
+    # interior: every pixel against its own region's plane, in one pass
+    k_cell = np.maximum(cellmap, 0)
+    with np.errstate(invalid="ignore"):
+        d_in = np.abs(
+            np.einsum("ijabk,ijk->ijab", blocks, rn[k_cell]) - rd[k_cell][:, :, None, None]
+        )
+        z_in = np.linalg.norm(blocks, axis=4)
+        ok_in = (
+            vblocks & (cellmap >= 0)[:, :, None, None] & (d_in < s.inlier_factor * s.noise(z_in))
+        )
+    lab_c[...] = np.where(ok_in, cellmap[:, :, None, None], -1).transpose(0, 2, 1, 3)
+    best: dict[int, NDArray[np.float64]] = {}
+    ring_lab: dict[int, NDArray[np.int64]] = {}
+    for k in range(n_reg):
+        ring = ndimage.binary_dilation(cellmap == k, structure=np.ones((3, 3), bool)) & (
+            cellmap != k
+        )
+        cells = np.flatnonzero(ring.ravel())
+        if len(cells) == 0:
+            continue
+        ci, cj = np.divmod(cells, wc)
+        pts = blocks[ci, cj]  # gathers only the ring's patches
+        with np.errstate(invalid="ignore"):
+            dist = np.abs(rows_matmul(pts, rn[k][:, None])[..., 0] - rd[k])
+            z = np.linalg.norm(pts, axis=3)
+            ok = vblocks[ci, cj] & (dist < s.inlier_factor * s.noise(z))
+        for cell, okc, dc in zip(cells, ok, dist, strict=True):
+            i, j = divmod(int(cell), wc)
+            b = best.setdefault(int(cell), np.where(ok_in[i, j], d_in[i, j], np.inf))
+            lab = ring_lab.setdefault(int(cell), np.where(ok_in[i, j], cellmap[i, j], -1))
+            take = okc & (dc < b)
+            b[take] = dc[take]
+            lab[take] = k
+    for key, lab in ring_lab.items():
+        ci0, cj0 = divmod(key, wc)
+        lab_c[ci0, :, cj0, :] = lab
+    labels[: hc * c, : wc * c] = lab_c.reshape(hc * c, wc * c)
+    flat = labels.ravel()
+    order = np.argsort(flat, kind="stable")
+    bounds = np.searchsorted(flat[order], np.arange(n_reg + 1))
+    segs = []
+    for k in range(n_reg):
+        idx = order[bounds[k] : bounds[k + 1]]
+        if len(idx) < s.min_cells * c * c * s.min_fill:
+            continue
+        segs.append(_segment(idx, P_flat, s.outline_cell))
+    segs.sort(key=lambda sg: -sg.plane.count)
+    labels = -np.ones(H * W, np.int64)
+    for k, sg in enumerate(segs):
+        labels[sg.inliers] = k
+    log.debug(
+        "organised extraction: %d planar patches of %d, %d planes",
+        int(planar.sum()),
+        hc * wc,
+        len(segs),
+    )
+    return ExtractionResult(tuple(segs), labels.reshape(H, W))
+
+
+@dataclass(frozen=True)
+class CloudExtractionSettings:
+    """Settings of :func:`extract_planes_cloud`.
+
+    Attributes
+    ----------
+    distance : float
+        RANSAC inlier distance, metres.
+    min_points : int
+        Smallest plane kept, points.
+    max_planes : int
+        Most planes extracted.
+    hypotheses : int
+        Plane hypotheses drawn per round (scored together on a subsample).
+    score_sample : int
+        Points of the subsample that scores hypotheses.
+    connect_cell : float
+        Raster cell (metres) in the plane for keeping the largest connected part of the inliers;
+        0 disables the connectivity step.
+    outline_cell : float
+        Raster size for outlines and areas, metres.
+    seed : int
+        Seed of the hypothesis sampling (the result is deterministic).
+    """
+
+    distance: float = 0.02
+    min_points: int = 500
+    max_planes: int = 20
+    hypotheses: int = 256
+    score_sample: int = 4000
+    connect_cell: float = 0.3
+    outline_cell: float = 0.05
+    seed: int = 0
+
+
+def extract_planes_cloud(
+    points: ArrayLike, settings: CloudExtractionSettings | None = None
+) -> ExtractionResult:
+    """Planes of an unorganised cloud by sequential, vectorised RANSAC.
+
+    Each round draws ``hypotheses`` random triples of the remaining points, scores all of them at
+    once on a subsample, refits the best by TLS over its inliers (twice), keeps the largest
+    connected part of the inliers, and removes them.
+
+    Parameters
+    ----------
+    points : (N, 3) array
+        Metres; NaN rows ignored.
+    settings : CloudExtractionSettings, optional
+
+    Returns
+    -------
+    ExtractionResult
+        ``labels`` is ``(N,)``.
+    """
+    s = settings or CloudExtractionSettings()
+    P = np.asarray(points, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise InputError(f"has shape {P.shape}", field="points", expected="(N, 3) array")
+    rng = np.random.default_rng(s.seed)
+    labels = -np.ones(len(P), np.int64)
+    remaining = np.flatnonzero(np.all(np.isfinite(P), axis=1))
+    segs: list[PlaneSegment] = []
+    failures = 0
+    while len(segs) < s.max_planes and len(remaining) >= s.min_points and failures < 3:
+        R = P[remaining]
+        tri = R[rng.integers(0, len(R), size=(s.hypotheses, 3))]
+        nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        ln = np.linalg.norm(nrm, axis=1)
+        good = ln > 1e-9
+        nrm = nrm[good] / ln[good, None]
+        dd = np.einsum("hi,hi->h", nrm, tri[good, 0])
+        sample = R[rng.integers(0, len(R), size=min(s.score_sample, len(R)))]
+        score = (np.abs(rows_matmul(sample, nrm.T) - dd) < s.distance).sum(axis=0)
+        best = int(np.argmax(score))
+        n, d = nrm[best], dd[best]
+        for _ in range(2):  # TLS refit on the inliers
+            inl = np.abs(rows_dot(R, n) - d) < s.distance
+            if inl.sum() < 3:
+                break
+            X = R[inl]
+            cm = X.mean(axis=0)
+            n = np.linalg.svd(X - cm, full_matrices=False)[2][2]
+            d = float(n @ cm)
+        inl = np.abs(rows_dot(R, n) - d) < s.distance
+        idx = remaining[inl]
+        if s.connect_cell > 0 and len(idx) >= s.min_points:
+            idx = _largest_connected(P[idx], n, d, s.connect_cell, idx)
+        if len(idx) < s.min_points:
+            failures += 1
+            continue
+        seg = _segment(idx, P, s.outline_cell)
+        labels[idx] = len(segs)
+        segs.append(seg)
+        remaining = np.setdiff1d(remaining, idx, assume_unique=True)
+    segs = _merge_coplanar(segs, P, s)
+    labels = -np.ones(len(P), np.int64)
+    for k, sg in enumerate(segs):
+        labels[sg.inliers] = k
+    return ExtractionResult(tuple(segs), labels)
+
+
+def _merge_coplanar(segs: list[PlaneSegment], P, s: CloudExtractionSettings) -> list[PlaneSegment]:
+    """Join segments of one plane that RANSAC returned in pieces (normals within 3 deg, each
+    centroid within the inlier band of the other plane)."""
+    if len(segs) < 2:
+        return segs
+    n = np.array([g.normal for g in segs])
+    rho = np.array([g.rho for g in segs])
+    c = np.array([g.plane.centroid for g in segs])
+    same = (n @ n.T > np.cos(np.radians(3.0))) & (np.abs(c @ n.T - rho[None, :]) < s.distance)
+    same &= same.T
+    n_grp, grp = connected_components(same.astype(np.int8), directed=False)
+    if n_grp == len(segs):
+        return segs
+    out = [
+        _segment(
+            np.concatenate([segs[k].inliers for k in np.flatnonzero(grp == g)]), P, s.outline_cell
+        )
+        for g in range(n_grp)
+    ]
+    out.sort(key=lambda sg: -sg.plane.count)
+    return out
+
+
+def _largest_connected(X, n, d, cell, idx):
+    """Indices of the largest 8-connected part of planar points rasterised at ``cell`` metres."""
+    nn, rho = canonical_plane(n, d)
+    axes = Plane(normal=nn, rho=rho, centroid=X.mean(0)).basis()
+    uv = rows_matmul(X, axes.T)
+    ij = np.floor((uv - uv.min(axis=0)) / cell).astype(np.int64)
+    shape = tuple(ij.max(axis=0) + 1)
+    grid = np.zeros(shape, bool)
+    grid[ij[:, 0], ij[:, 1]] = True
+    lab, n_lab = ndimage.label(grid, structure=np.ones((3, 3), bool))
+    if n_lab <= 1:
+        return idx
+    pl = lab[ij[:, 0], ij[:, 1]]
+    big = np.argmax(np.bincount(pl)[1:]) + 1
+    return idx[pl == big]

@@ -1,0 +1,428 @@
+"""6-DoF motion between two sensor positions from matched planes (paper 2).
+
+Convention: the motion ``T_1_2`` maps points of the second frame (oxyz) into the first (OXYZ):
+``X = A x + dT`` (the paper's ``A(dphi, dpsi, dtheta)`` maps oxyz to OXYZ). A plane seen as
+``N1 . X = rho1`` and ``N2 . x = rho2`` then satisfies ``N1 = A N2`` (eq. 1) and
+``N1 . dT = rho1 - rho2`` (eq. 2).
+
+Cases (by how many independent normal directions the matched planes span):
+
+- **>= 3**: closed form. Rotation: weighted orthogonal Procrustes (Kabsch) on the normal pairs;
+  translation: least squares of ``N1i . dT = rho1i - rho2i`` (all from geometry).
+- **2**: rotation from the two normal directions (Procrustes on the normals and their cross
+  product, the least-squares solution of eqs. 1 and 5); translation on the line of eqs. 2 and 6,
+  the position along it ``mu`` from the 1D texture functional (eq. 7).
+- **1**: the quaternion route: ``q1`` (eq. 8), the shift along ``N11`` (eq. 2), ``q2`` (eq. 9)
+  fixing the in-plane axes, then ``(mu, eta, lambda)`` from the texture functional (eq. 4) with a
+  global coarse stage, ``dT`` by eq. 10 and ``Q = q3 q1``.
+
+When neither geometry nor texture can fix a degree of freedom the result is a
+:class:`MotionFailure` naming the free degrees of freedom, never a guess.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from navkit.geometry import Plane, matrix_to_quat, quat_to_matrix, se3_from_rt
+from navkit.planes.align import Search1D, Search2D, search_1d, search_2d
+from navkit.planes.quaternion import (
+    compose_q3_q1,
+    euler_zxy_from_quat,
+    in_plane_axes,
+    q1_normal_alignment,
+    q2_to_optical_axis,
+    q3_about_normal,
+    translation_eq10,
+)
+from navkit.planes.texture import PlaneTexture
+
+__all__ = [
+    "MotionEstimate",
+    "MotionFailure",
+    "SolverSettings",
+    "TextureFn",
+    "normal_rank",
+    "solve_one_plane",
+    "solve_three_planes",
+    "solve_two_planes",
+]
+
+log = logging.getLogger(__name__)
+
+TextureFn = Callable[[int, NDArray[np.float64], NDArray[np.float64], float], PlaneTexture]
+"""``texture(k, axes (2, 3), ref (3,), nu) -> PlaneTexture`` of a frame's plane ``k``."""
+
+
+@dataclass(frozen=True)
+class SolverSettings:
+    """Settings of the motion solvers.
+
+    Attributes
+    ----------
+    parallel_deg : float
+        Normals closer than this (degrees) count as one direction (degeneracy check).
+    nu : float
+        Texture pixel size, metres (the paper's nu).
+    max_shift : float
+        Largest texture shift searched (|mu|, |eta|), metres.
+    max_turn_deg : float
+        Largest turn lambda searched about the normal, degrees (1-plane case).
+    min_overlap : int
+        Fewest texture pixels compared for a match to count.
+    min_contrast : float
+        Smallest brightness std (0..1) for a texture to be usable.
+    min_distinctness : float
+        2-plane case: ``(median D - min D) / median D`` below this = flat functional = free DoF.
+    min_peak : float
+        1-plane case: best coarse normalised cross-correlation below this = no texture match.
+    """
+
+    parallel_deg: float = 15.0
+    nu: float = 0.01
+    max_shift: float = 0.6
+    max_turn_deg: float = 30.0
+    min_overlap: int = 400
+    min_contrast: float = 0.01
+    min_distinctness: float = 0.1
+    min_peak: float = 0.3
+
+
+@dataclass(frozen=True)
+class MotionEstimate:
+    """A recovered motion ``T_1_2`` (frame 2 -> frame 1).
+
+    Attributes
+    ----------
+    T : (4, 4) array
+        ``X1 = R X2 + t``.
+    quaternion : (4,) array
+        ``(x, y, z, w)`` of ``R`` (the paper's ``Q``).
+    euler_zxy : (3,) array
+        ``(dphi, dpsi, dtheta)``, radians, ``R = A_Z(dphi) A_X(dpsi) A_Y(dtheta)`` (eq. 11).
+    case : int
+        1, 2 or 3 (= ">= 3") independent plane normals used.
+    geometry_dof, texture_dof : tuple of str
+        Which degrees of freedom geometry fixed and which the texture fixed.
+    residuals : dict
+        ``normal_deg`` (RMS angle between ``N1`` and ``R N2``), ``rho_m`` (RMS of eq. 2),
+        and for texture cases ``texture_D`` (eq. 4 / 7), ``texture_overlap`` (pixels), ...
+    pairs : tuple of (int, int)
+        The plane matches used (frame-1 index, frame-2 index).
+    """
+
+    T: NDArray[np.float64]
+    case: int
+    geometry_dof: tuple[str, ...]
+    texture_dof: tuple[str, ...]
+    residuals: dict[str, float] = field(default_factory=dict)
+    pairs: tuple[tuple[int, int], ...] = ()
+
+    ok = True
+
+    @property
+    def rotation(self) -> NDArray[np.float64]:
+        return self.T[:3, :3]
+
+    @property
+    def translation(self) -> NDArray[np.float64]:
+        return self.T[:3, 3]
+
+    @property
+    def quaternion(self) -> NDArray[np.float64]:
+        return matrix_to_quat(self.T[:3, :3])
+
+    @property
+    def euler_zxy(self) -> NDArray[np.float64]:
+        return euler_zxy_from_quat(self.quaternion)
+
+
+@dataclass(frozen=True)
+class MotionFailure:
+    """No motion: the input leaves degrees of freedom free.
+
+    Attributes
+    ----------
+    case : int
+        Independent normal directions available (0 = no matched plane).
+    free_dof : tuple of str
+        The degrees of freedom neither geometry nor texture fixed.
+    reason : str
+        Why (no overlap, uniform texture, flat functional, ...).
+    """
+
+    case: int
+    free_dof: tuple[str, ...]
+    reason: str
+
+    ok = False
+
+
+def _kabsch(
+    a: NDArray[np.float64], b: NDArray[np.float64], w: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Rotation ``R`` minimising ``sum w |a_i - R b_i|^2`` (rows are vectors)."""
+    H = (b * w[:, None]).T @ a
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+
+
+def normal_rank(normals: NDArray[np.float64], parallel_deg: float) -> tuple[int, list[int]]:
+    """How many independent directions the unit normals ``(K, 3)`` span, and the indices chosen.
+
+    Normals within ``parallel_deg`` of each other (or of the plane of two chosen ones, for the
+    third) do not add a direction. Input order = priority (put the largest planes first).
+    """
+    if len(normals) == 0:
+        return 0, []
+    s = np.sin(np.radians(parallel_deg))
+    chosen = [0]
+    cr = np.linalg.norm(np.cross(normals[0], normals), axis=1)
+    if cr.max() < s:
+        return 1, chosen
+    b = int(np.argmax(cr > s))  # first (largest) non-parallel one
+    chosen.append(b)
+    axis = np.cross(normals[0], normals[b])
+    axis /= np.linalg.norm(axis)
+    off = np.abs(normals @ axis)
+    if off.max() < s:
+        return 2, chosen
+    chosen.append(int(np.argmax(off > s)))
+    return 3, chosen
+
+
+def _residuals(R, t, p1: Sequence[Plane], p2: Sequence[Plane]) -> dict[str, float]:
+    N1 = np.array([p.normal for p in p1])
+    N2 = np.array([p.normal for p in p2])
+    cosang = np.clip(np.einsum("ij,ij->i", N1, N2 @ R.T), -1, 1)
+    drho = np.array([a.rho - b.rho for a, b in zip(p1, p2, strict=True)])
+    return {
+        "normal_deg": float(np.degrees(np.sqrt(np.mean(np.arccos(cosang) ** 2)))),
+        "rho_m": float(np.sqrt(np.mean((N1 @ t - drho) ** 2))),
+    }
+
+
+def solve_three_planes(
+    p1: Sequence[Plane],
+    p2: Sequence[Plane],
+    settings: SolverSettings | None = None,
+    weights: NDArray[np.float64] | None = None,
+) -> MotionEstimate | MotionFailure:
+    """Closed form from >= 3 matched planes spanning three directions.
+
+    Parameters
+    ----------
+    p1, p2 : sequences of Plane
+        Matched planes, frame 1 and frame 2 (same order).
+    weights : (K,) array, optional
+        Per-pair weights (default: ``sqrt`` of the smaller inlier count).
+
+    Returns
+    -------
+    MotionEstimate (case 3), or MotionFailure when the normals do not span three directions
+    (``case`` = the directions found, ``free_dof`` the translation directions left free).
+    """
+    s = settings or SolverSettings()
+    N1 = np.array([p.normal for p in p1], dtype=np.float64).reshape(-1, 3)
+    N2 = np.array([p.normal for p in p2], dtype=np.float64).reshape(-1, 3)
+    rank, _ = normal_rank(N1, s.parallel_deg)
+    if rank < 3:
+        free = {0: ("rotation", "translation"), 1: ("lambda", "mu", "eta"), 2: ("mu",)}[rank]
+        return MotionFailure(rank, free, f"the normals span {rank} direction(s), 3 needed")
+    w = (
+        np.asarray(weights, float)
+        if weights is not None
+        else np.sqrt(
+            np.minimum([max(p.count, 1) for p in p1], [max(p.count, 1) for p in p2]).astype(float)
+        )
+    )
+    R = _kabsch(N1, N2, w)
+    drho = np.array([a.rho - b.rho for a, b in zip(p1, p2, strict=True)])
+    t = np.linalg.lstsq(N1 * w[:, None], drho * w, rcond=None)[0]
+    return MotionEstimate(
+        se3_from_rt(R, t), 3, ("rotation", "translation"), (), _residuals(R, t, p1, p2)
+    )
+
+
+def solve_two_planes(
+    p1: Sequence[Plane],
+    p2: Sequence[Plane],
+    tex1: TextureFn,
+    tex2: TextureFn,
+    settings: SolverSettings | None = None,
+    prior_translation: NDArray[np.float64] | None = None,
+) -> MotionEstimate | MotionFailure:
+    """Two normal directions: rotation from geometry, the position on the line from texture (eq. 7).
+
+    Parameters
+    ----------
+    p1, p2 : sequences of Plane
+        Matched planes (first two must be non-parallel; further ones parallel to either also
+        contribute their texture).
+    tex1, tex2 : TextureFn
+        Texture samplers of frame 1 and frame 2.
+    prior_translation : (3,) array, optional
+        Predicted translation; its component along the line centres the search.
+
+    Returns
+    -------
+    MotionEstimate (case 2) or MotionFailure naming ``mu`` (the position along the planes'
+    intersection line) when the textures do not overlap or do not vary along it.
+    """
+    s = settings or SolverSettings()
+    N1 = np.array([p.normal for p in p1])
+    N2 = np.array([p.normal for p in p2])
+    rank, chosen = normal_rank(N1, s.parallel_deg)
+    if rank != 2:
+        return MotionFailure(rank, ("mu",), f"the normals span {rank} direction(s), 2 expected")
+    a, b = chosen
+    # rotation: least squares of eqs. 1 and 5 (normals and their cross product)
+    c1 = np.cross(N1[a], N1[b])
+    c2 = np.cross(N2[a], N2[b])
+    R = _kabsch(
+        np.stack([N1[a], N1[b], c1 / np.linalg.norm(c1)]),
+        np.stack([N2[a], N2[b], c2 / np.linalg.norm(c2)]),
+        np.ones(3),
+    )
+    # translation: minimum-norm solution of eqs. 2 and 6 (all planes), plus mu along the line
+    d = c1 / np.linalg.norm(c1)
+    drho = np.array([x.rho - y.rho for x, y in zip(p1, p2, strict=True)])
+    t0 = np.linalg.lstsq(N1, drho, rcond=None)[0]
+    t0 -= (t0 @ d) * d
+    prior_shift = (
+        0.0 if prior_translation is None else float(np.asarray(prior_translation, float) @ d)
+    )
+    # textures on a common lattice per plane: columns along d, frame 2 seen through (R, t0)
+    pairs = []
+    low_contrast = 0
+    for k in range(len(p1)):
+        n = N1[k]
+        if abs(n @ d) > np.sin(np.radians(s.parallel_deg)):
+            continue  # not containing the line direction
+        u = d - (d @ n) * n
+        u /= np.linalg.norm(u)
+        axes1 = np.stack([u, np.cross(n, u)])
+        ref1 = p1[k].rho * n
+        axes2 = axes1 @ R  # R^T applied to each row
+        ref2 = R.T @ (ref1 - t0)
+        # centre the search on the prior shift: shift ref2 so the prior is at zero shift
+        ref2 = ref2 - prior_shift * (R.T @ u)
+        try:
+            e1 = tex1(k, axes1, ref1, s.nu)
+            e2 = tex2(k, axes2, ref2, s.nu)
+        except Exception as exc:  # a plane without texture is skipped, the others decide
+            log.debug("plane %d: no texture (%s)", k, exc)
+            continue
+        if e1.contrast() < s.min_contrast or e2.contrast() < s.min_contrast:
+            low_contrast += 1
+            continue
+        pairs.append((e1, e2))
+    if not pairs:
+        why = "uniform texture" if low_contrast else "no textured plane"
+        return MotionFailure(
+            2, ("mu",), f"{why}: the position along the planes' intersection line is free"
+        )
+    res: Search1D = search_1d(pairs, int(np.ceil(s.max_shift / s.nu)), s.min_overlap)
+    if not np.isfinite(res.shift):
+        return MotionFailure(
+            2,
+            ("mu",),
+            "the textures do not overlap: the position along the intersection line is free",
+        )
+    if res.distinctness < s.min_distinctness:
+        return MotionFailure(
+            2,
+            ("mu",),
+            f"the texture functional D(mu) is flat (distinctness {res.distinctness:.3f}): "
+            "the position along the intersection line is free",
+        )
+    mu = prior_shift + res.shift * s.nu
+    t = t0 + mu * d
+    resid = _residuals(R, t, p1, p2)
+    resid.update(
+        texture_D=float(np.nanmin(res.D)),
+        texture_overlap=float(res.overlap),
+        texture_distinctness=float(res.distinctness),
+        mu_m=float(mu),
+    )
+    return MotionEstimate(
+        se3_from_rt(R, t), 2, ("rotation", "translation across the line"), ("mu",), resid
+    )
+
+
+def solve_one_plane(
+    p1: Plane,
+    p2: Plane,
+    tex1: TextureFn,
+    tex2: TextureFn,
+    k1: int,
+    k2: int,
+    settings: SolverSettings | None = None,
+) -> MotionEstimate | MotionFailure:
+    """One plane: the paper's quaternion route with the 3-parameter texture search (eqs. 3, 4, 8-10).
+
+    Steps: ``q1`` turns ``N21`` onto ``N11`` (eq. 8); the shift ``(rho11 - rho21) N11`` puts the
+    second texture into plane P1 (eq. 2); ``q2`` (eq. 9) fixes the in-plane axes ``mu``, ``eta``;
+    :func:`~navkit.planes.align.search_2d` finds ``(mu0, eta0, lambda0)`` (eq. 4); then eq. 10 and
+    ``Q = q3 q1``.
+
+    Returns
+    -------
+    MotionEstimate (case 1) or MotionFailure naming ``lambda``, ``mu``, ``eta``.
+    """
+    s = settings or SolverSettings()
+    n1, n2 = p1.normal, p2.normal
+    q1 = q1_normal_alignment(n2, n1)
+    q2 = q2_to_optical_axis(n1)
+    axes1 = in_plane_axes(q2)  # (mu, eta) axes, u x v = N11
+    R1 = quat_to_matrix(q1)
+    axes2 = axes1 @ R1  # q1^-1 applied: frame-2 axes that q1 maps onto axes1
+    free = ("lambda", "mu", "eta")
+    try:
+        e1 = tex1(k1, axes1, p1.rho * n1, s.nu)
+        e2 = tex2(k2, axes2, p2.rho * n2, s.nu)
+    except Exception as exc:
+        return MotionFailure(1, free, f"no texture: {exc}")
+    if min(e1.contrast(), e2.contrast()) < s.min_contrast:
+        return MotionFailure(
+            1, free, "uniform texture: the turn about the normal and the in-plane shift are free"
+        )
+    res: Search2D = search_2d(
+        e1,
+        e2,
+        max_angle=np.radians(s.max_turn_deg),
+        max_shift=s.max_shift,
+        min_overlap=s.min_overlap,
+    )
+    if not np.isfinite(res.lam) or not np.isfinite(res.D):
+        return MotionFailure(1, free, "the textures do not overlap")
+    if res.peak < s.min_peak:
+        return MotionFailure(
+            1, free, f"the textures do not match (best correlation {res.peak:.2f})"
+        )
+    q3 = q3_about_normal(n1, res.lam)
+    Q = compose_q3_q1(q3, q1)
+    t = translation_eq10(n1, p1.rho, p2.rho, q2, float(res.t[0]), float(res.t[1]))
+    R = quat_to_matrix(Q)
+    resid = _residuals(R, t, [p1], [p2])
+    resid.update(
+        texture_D=res.D,
+        texture_overlap=float(res.overlap),
+        texture_peak=res.peak,
+        lambda_rad=res.lam,
+        mu_m=float(res.t[0]),
+        eta_m=float(res.t[1]),
+    )
+    return MotionEstimate(
+        se3_from_rt(R, t),
+        1,
+        ("rotation aligning the normal", "translation along the normal"),
+        free,
+        resid,
+    )

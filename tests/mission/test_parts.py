@@ -1,0 +1,165 @@
+"""The mission's own parts: the operator's driver, the obstacle map, pose algebra, settings."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from navkit.errors import ConfigError, FormatError
+from navkit.mission import (
+    CameraSettings,
+    MissionSettings,
+    ObstacleGrid,
+    PurePursuit,
+    load_route,
+    score_obstacles,
+    true_footprints,
+)
+from navkit.mission.driver import polyline_point
+from navkit.mission.obstacle_map import _distance_to_polygon
+from navkit.mission.run import blend, compose, relative
+from navkit.sim import unicycle_step
+
+from .conftest import small_scene
+
+
+def test_pure_pursuit_follows_an_l_shaped_route_to_its_end():
+    W = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 5.0]])
+    drv = PurePursuit(W, v_max=0.6, omega_max=0.8, lookahead=1.0, goal_tolerance=0.3)
+    pose = np.zeros(3)
+    track = [pose]
+    for _ in range(600):
+        if drv.done(pose):
+            break
+        v, om = drv.command(pose)
+        pose = unicycle_step(pose, v, om, 0.1)
+        track.append(pose)
+    assert drv.done(pose)
+    P = np.array(track)[:, :2]
+    # pure pursuit cuts corners by at most about the look-ahead distance
+    s = np.linspace(0, 11, 2201)
+    ref = polyline_point(W, s)
+    d = np.min(np.hypot(*(P[:, None, :] - ref[None]).transpose(2, 0, 1)), axis=1)
+    assert d.max() <= 1.0
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    st.floats(-20, 20),
+    st.floats(-20, 20),
+    st.floats(-3.1, 3.1),
+    st.floats(-2, 2),
+    st.floats(-2, 2),
+    st.floats(-1, 1),
+)
+def test_relative_inverts_compose(x, y, th, dx, dy, dth):
+    a = np.array([x, y, th])
+    inc = np.array([dx, dy, dth])
+    np.testing.assert_allclose(relative(a, compose(a, inc)), inc, atol=1e-9)
+
+
+def test_blend_wraps_the_heading():
+    a, b = np.array([0.0, 0.0, np.pi - 0.1]), np.array([2.0, 0.0, -np.pi + 0.1])
+    out = blend(a, b, 0.5)
+    np.testing.assert_allclose(out, [1.0, 0.0, np.pi], atol=1e-12)
+
+
+def _box_cells(c, half, step=0.05):
+    g = np.arange(-half, half + 1e-9, step)
+    X, Y = np.meshgrid(g, g)
+    return np.c_[X.ravel(), Y.ravel()] + c
+
+
+def test_obstacle_grid_confirms_repeated_obstacles_and_scores_them():
+    scene = small_scene()
+    fps = true_footprints(scene)
+    crate = next(f for f in fps if f.name == "crate")
+    grid = ObstacleGrid((-2, -5), (15, 5), 0.1, min_hits=2, min_ratio=0.3)
+    ground = np.random.default_rng(0).uniform([-2, -5], [8, 5], (4000, 2))
+    crate_pts = _box_cells(np.array([3.0, 1.6]), 0.45)
+    for k in range(3):
+        extra = np.array([[0.0, -3.0]]) if k == 0 else np.zeros((0, 2))  # one-scan noise
+        phantom = np.array([[1.0, 3.5]]) if k >= 1 else np.zeros((0, 2))  # seen twice: a phantom
+        grid.add_scan(np.vstack([crate_pts, extra, phantom]), ground)
+    seen = {crate.index}
+    sc = score_obstacles(grid, fps, seen, min_height=0.2, robot_width=0.5, tolerance=0.3)
+    assert sc["seen_obstacles"] == 1 and sc["recall"] == 1.0
+    assert sc["phantoms"] == 1 and sc["components"] == 2
+    assert sc["precision"] == 0.5
+    # cells of the crate lie inside its true footprint (error 0)
+    assert sc["cell_error_p95_m"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_blocked_corridor_matches_brute_force(np_rng):
+    grid = ObstacleGrid((0, 0), (10, 10), 0.1, min_hits=1, min_ratio=0.0, recent_scans=1)
+    pts = np_rng.uniform(0, 10, (40, 2))
+    grid.add_scan(pts, pts)
+    path = np.c_[np.linspace(0.5, 9.5, 50), np.linspace(5, 6, 50)]
+    got = grid.blocked(path, 0.4)
+    rows, cols = np.nonzero(grid.recent_occupied)
+    C = grid.centres(rows, cols)
+    # brute force: the nearest point of each occupied cell (a 0.1 m square) to each path point
+    lo, hi = C - 0.05, C + 0.05
+    nearest = np.clip(path[:, None, :], lo[None], hi[None])
+    d = np.hypot(*(nearest - path[:, None, :]).transpose(2, 0, 1)).min(axis=1)
+    # the grid test uses centre distance minus half a diagonal: never misses a cell within the
+    # corridor, and over-reports only within the half-diagonal (0.0707 m) band
+    assert np.all(got[d <= 0.4])
+    assert not np.any(got[d > 0.4 + 0.0708])
+
+
+def test_known_obstacles_do_not_block_the_way_back_new_ones_do():
+    grid = ObstacleGrid((0, 0), (10, 10), 0.1, min_hits=1, min_ratio=0.0, recent_scans=1)
+    jamb = np.c_[np.full(20, 5.0), np.linspace(5.6, 7.5, 20)]  # a door jamb 0.6 m from the path
+    grid.add_scan(jamb, jamb)
+    grid.freeze_known(0.6)
+    path = np.c_[np.linspace(4.0, 6.0, 21), np.full(21, 5.0)]
+    # seen again on the way back with the estimate 0.35 m off: the jamb now touches the corridor
+    grid.add_scan(jamb - [0.0, 0.35], jamb)
+    assert not grid.blocked(path, 0.3).any()
+    # without the memory of the way out, the same cells would stop the robot
+    known, grid.known = grid.known, None
+    assert grid.blocked(path, 0.3).any()
+    grid.known = known
+    # a new box on the path blocks
+    box = np.c_[np.full(5, 6.0), np.linspace(4.6, 5.0, 5)]  # 1 m from the jamb
+    grid.add_scan(np.vstack([jamb - [0.0, 0.35], box]), jamb)
+    hit = grid.blocked(path, 0.3)
+    assert hit.any() and np.all(np.abs(path[hit, 0] - 6.0) <= 0.3 + 0.08)
+
+
+def test_true_footprints_of_the_primitives():
+    fps = {f.name: f for f in true_footprints(small_scene())}
+    from navkit.geometry import polygon_area
+
+    assert polygon_area(fps["crate"].polygon) == pytest.approx(1.0)
+    assert fps["crate"].height == pytest.approx(1.0)
+    assert polygon_area(fps["rock"].polygon) == pytest.approx(np.pi * 0.55**2, rel=0.01)
+    assert fps["post"].extent == pytest.approx(0.2, rel=0.01)
+    assert polygon_area(fps["room_south"].polygon) == pytest.approx(5.0 * 0.1)
+    assert _distance_to_polygon(
+        np.array([[3.0, 1.6], [3.0, 3.1]]), fps["crate"].polygon
+    ) == pytest.approx([0.0, 1.0])
+
+
+def test_settings_reject_bad_rates_and_keys(tmp_path):
+    with pytest.raises(ConfigError, match=r"camera\.rate_hz"):
+        MissionSettings(camera=CameraSettings(rate_hz=3.0))
+    with pytest.raises(ConfigError, match="lidarr"):
+        MissionSettings().with_overrides({"lidarr": {}})
+    s = MissionSettings().with_overrides({"lidar": {"n_beams": 16}, "seed": 9})
+    assert s.lidar.n_beams == 16 and s.seed == 9
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[route\n")
+    with pytest.raises(FormatError, match=r"bad\.toml"):
+        load_route(bad)
+    nowp = tmp_path / "nowp.toml"
+    nowp.write_text("[route]\nroom = [0, 0, 1, 1]\n")
+    with pytest.raises(ConfigError, match="waypoints"):
+        load_route(nowp)
+    badroom = tmp_path / "badroom.toml"
+    badroom.write_text("[route]\nwaypoints = [[0, 0], [3, 0]]\nroom = [5, 0, 1, 1]\n")
+    with pytest.raises(ConfigError, match=r"route\.room"):
+        load_route(badroom)

@@ -1,0 +1,131 @@
+"""RGB-D readers on real and broken folders."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from navkit.errors import DataNotFoundError, FormatError, InputError
+from navkit.io.rgbd import (
+    open_rgbd_sequence,
+    read_camera_yaml,
+    read_cape_calibration,
+    read_cape_frame,
+    read_simple_rgbd,
+    read_tum_rgbd,
+)
+
+SLAMBOOK_CAMERA = {"fx": 518.0, "fy": 519.0, "cx": 325.5, "cy": 253.5, "depth_scale": 1000.0}
+
+
+def write_simple(root, n=3, stems=None, yaml=True, scale=1000.0):
+    (root / "color").mkdir(parents=True)
+    (root / "depth").mkdir()
+    stems = stems or [str(i) for i in range(n)]
+    for k, s in enumerate(stems):
+        cv2.imwrite(str(root / "color" / f"{s}.png"), np.full((8, 10, 3), 10 * k, np.uint8))
+        d = np.full((8, 10), int(1.5 * scale), np.uint16)
+        d[0, 0] = 0
+        cv2.imwrite(str(root / "depth" / f"{s}.png"), d)
+    if yaml:
+        (root / "camera.yaml").write_text(
+            f"fx: 5\nfy: 5\ncx: 4.5\ncy: 3.5  # centre\ndepth_scale: {scale}\n"
+        )
+
+
+def test_simple_layout_round_trip(tmp_path):
+    write_simple(tmp_path, stems=["1.5", "2.5", "10"])
+    seq = read_simple_rgbd(tmp_path)
+    assert len(seq) == 3
+    assert np.allclose(seq.timestamps, [1.5, 2.5, 10.0])  # numeric stems, numeric order
+    f = seq.frame(2)
+    assert f.color.shape == (8, 10, 3) and f.color[0, 0, 0] == 20
+    assert np.isnan(f.depth[0, 0]) and np.allclose(f.depth[1:, 1:], 1.5)
+    assert seq.camera.width == 10 and seq.camera.fx == 5
+
+
+def test_simple_layout_stems_not_numbers_give_indices(tmp_path):
+    write_simple(tmp_path, stems=["a", "b"])
+    assert np.allclose(read_simple_rgbd(tmp_path).timestamps, [0, 1])
+
+
+def test_simple_layout_errors(tmp_path):
+    write_simple(tmp_path / "a", yaml=False)
+    with pytest.raises(FormatError, match="fx"):
+        read_simple_rgbd(tmp_path / "a")
+    write_simple(tmp_path / "b")
+    (tmp_path / "b" / "depth" / "2.png").unlink()
+    with pytest.raises(FormatError, match="3 colour images but 2 depth"):
+        read_simple_rgbd(tmp_path / "b")
+    with pytest.raises(DataNotFoundError):
+        read_simple_rgbd(tmp_path / "nothing")
+
+
+def test_broken_camera_yaml(tmp_path):
+    p = tmp_path / "camera.yaml"
+    p.write_text("fx: five\n")
+    with pytest.raises(FormatError, match="fx"):
+        read_camera_yaml(p)
+    p.write_text("fx 5\n")
+    with pytest.raises(FormatError, match="line 1"):
+        read_camera_yaml(p)
+
+
+def test_tum_folder(tmp_path):
+    (tmp_path / "rgb").mkdir()
+    (tmp_path / "depth").mkdir()
+    rgb, dep = ["# color"], ["# depth"]
+    for k, t in enumerate([1.0, 1.033, 1.066]):
+        cv2.imwrite(str(tmp_path / "rgb" / f"{t:.3f}.png"), np.zeros((480, 640, 3), np.uint8))
+        cv2.imwrite(
+            str(tmp_path / "depth" / f"{t + 0.004:.3f}.png"),
+            np.full((480, 640), 5000 * (k + 1), np.uint16),
+        )
+        rgb.append(f"{t:.6f} rgb/{t:.3f}.png")
+        dep.append(f"{t + 0.004:.6f} depth/{t + 0.004:.3f}.png")
+    (tmp_path / "rgb.txt").write_text("\n".join(rgb))
+    (tmp_path / "depth.txt").write_text("\n".join(dep))
+    seq = open_rgbd_sequence(tmp_path)
+    assert len(seq) == 3 and seq.depth_scale == 5000 and seq.camera.fx == 525
+    assert np.allclose(seq.frame(1).depth, 2.0)  # raw 10000 / 5000
+    (tmp_path / "depth.txt").write_text("1.5 depth/x.png\n")
+    with pytest.raises(FormatError, match="no colour / depth pair"):
+        read_tum_rgbd(tmp_path)
+
+
+def test_unknown_folder(tmp_path):
+    with pytest.raises(InputError, match=r"rgb\.txt nor color"):
+        open_rgbd_sequence(tmp_path)
+
+
+def test_slambook_reads(data_path):
+    seq = read_simple_rgbd(data_path("rgbd/slambook-ch5"), SLAMBOOK_CAMERA)
+    assert len(seq) == 3
+    f = seq.frame(0)
+    # a dining room seen by a Kinect: depths between ~0.5 and ~10 m, mostly valid
+    d = f.depth[np.isfinite(f.depth)]
+    assert 0.4 < d.min() and d.max() < 12 and len(d) > 0.5 * f.depth.size
+
+
+def test_cape_calibration_and_frame(data_path, tmp_path):
+    root = data_path("rgbd/cape-tunnel")
+    cal = read_cape_calibration(root / "calib_params.xml")
+    assert np.isclose(cal.K_rgb[0, 0], 548.867, atol=1e-3)
+    assert np.isclose(cal.T_rgb_ir[0, 3], 0.0114975, atol=1e-6)  # 11.50 mm -> metres
+    f = read_cape_frame(root)
+    assert f.points.shape == (480, 640, 3) and f.color_registered.shape == (480, 640, 3)
+    z = f.points[..., 2]
+    assert np.nanmedian(z) == pytest.approx(1.829, abs=0.01)  # the raw depth median, in metres
+    bad = tmp_path / "calib.xml"
+    bad.write_text(
+        (root / "calib_params.xml")
+        .read_text()
+        .replace("<Rotation", "<Rot")
+        .replace("</Rotation>", "</Rot>")
+    )
+    with pytest.raises(FormatError, match="Rotation"):
+        read_cape_calibration(bad)
+    bad.write_text("not xml at all")
+    with pytest.raises(FormatError):
+        read_cape_calibration(bad)

@@ -1,0 +1,166 @@
+"""Known motions recovered in the 1-, 2- and >= 3-plane cases; failure objects on degenerate input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.spatial.transform import Rotation
+
+from navkit.geometry import Plane, canonical_plane, rotation_angle, se3_from_rt, se3_inverse
+from navkit.planes import (
+    ExtractionSettings,
+    MotionEstimate,
+    MotionFailure,
+    estimate_motion,
+    euler_zxy_from_quat,
+    observe_rgbd,
+    solve_three_planes,
+)
+from navkit.planes.align import search_1d
+from navkit.planes.texture import PlaneTexture
+
+from .conftest import SOLID, render_pair
+
+ES = ExtractionSettings(cell=10)
+NU = 0.01  # texture pixel, metres (SolverSettings default)
+
+
+def errors(est: MotionEstimate, truth: np.ndarray) -> tuple[float, float]:
+    """Rotation error (deg) and translation error (m) of an estimate."""
+    E = se3_inverse(truth) @ est.T
+    return float(np.degrees(rotation_angle(E[:3, :3]))), float(np.linalg.norm(E[:3, 3]))
+
+
+def solve(pair):
+    return estimate_motion(observe_rgbd(pair.f1.frame, ES), observe_rgbd(pair.f2.frame, ES))
+
+
+def test_three_planes_closed_form(pairs):
+    est = solve(pairs[3])
+    assert isinstance(est, MotionEstimate) and est.case == 3
+    assert est.texture_dof == ()
+    rot, tr = errors(est, pairs[3].T_1_2)
+    # normals from >= 10^4 points with 0.2 % depth noise are good to ~1e-3 rad and rho to
+    # < 1 mm (see test_extract); the closed form inherits them: 0.1 deg and 5 mm
+    assert rot < 0.1 and tr < 0.005
+    assert est.residuals["normal_deg"] < 0.2
+    # the Euler angles reported are the paper's ZXY of the estimate
+    assert np.allclose(
+        Rotation.from_euler("ZXY", est.euler_zxy).as_matrix(), est.rotation, atol=1e-9
+    )
+
+
+def test_two_planes_texture_fixes_mu(pairs):
+    est = solve(pairs[2])
+    assert isinstance(est, MotionEstimate) and est.case == 2
+    assert est.texture_dof == ("mu",)
+    rot, tr = errors(est, pairs[2].T_1_2)
+    # rotation from two normals (as in the 3-plane case); mu from the exhaustive search at
+    # nu = 1 cm is within nu / 2 = 5 mm before the sub-pixel step
+    assert rot < 0.1 and tr < NU / 2
+    # the motion along the line really was found by texture: it is not zero
+    assert abs(est.residuals["mu_m"]) > 0.1
+
+
+def test_one_plane_texture_fixes_lambda_mu_eta(pairs):
+    est = solve(pairs[1])
+    assert isinstance(est, MotionEstimate) and est.case == 1
+    assert set(est.texture_dof) == {"lambda", "mu", "eta"}
+    rot, tr = errors(est, pairs[1].T_1_2)
+    # (mu, eta) to within half a texture pixel (5 mm); lambda to within half a pixel at the
+    # texture's radius (~1 m): 0.005 rad = 0.3 deg
+    assert tr < NU / 2 and rot < 0.3
+    # the turn about the normal is not small: it was recovered, not assumed
+    assert abs(est.residuals["lambda_rad"]) > 0.02
+
+
+def test_one_plane_large_shift_uses_the_global_stage():
+    """A 0.45 m slide along the wall (15 bricks' worth of texture) with a 12 deg turn."""
+    motion = se3_from_rt(Rotation.from_rotvec([0, 0, 0.2]).as_matrix(), [0.45, -0.2, 0.05])
+    pair = render_pair(1, motion=motion, seed=5)
+    est = solve(pair)
+    assert isinstance(est, MotionEstimate) and est.case == 1
+    rot, tr = errors(est, motion)
+    assert tr < NU / 2 and rot < 0.3
+
+
+@pytest.mark.parametrize("n_dirs, free", [(1, {"lambda", "mu", "eta"}), (2, {"mu"})])
+def test_uniform_texture_is_a_failure_naming_the_free_dof(n_dirs, free):
+    pair = render_pair(n_dirs, texture=SOLID)
+    res = solve(pair)
+    assert isinstance(res, MotionFailure) and not res.ok
+    assert set(res.free_dof) == free
+    assert res.case == n_dirs
+    assert "uniform" in res.reason or "flat" in res.reason
+
+
+def test_no_overlap_is_a_failure():
+    rng = np.random.default_rng(0)
+    plane = Plane(np.array([0.0, 0, 1]), 1.0, np.zeros(3))
+
+    def tex(i0):
+        img = rng.random((20, 30)).astype(np.float32)
+        return PlaneTexture(
+            img, np.ones(img.shape, bool), np.zeros(3), np.eye(3)[:2], np.array([i0, 0]), NU, plane
+        )
+
+    res = search_1d([(tex(0), tex(1000))], max_shift=50)
+    assert np.isnan(res.shift)
+
+
+def test_parallel_planes_are_degenerate_for_the_closed_form():
+    p = [Plane(np.array([0.0, 0, 1]), r, np.zeros(3), count=100) for r in (1.0, 2.0, 3.0)]
+    res = solve_three_planes(p, p)
+    assert isinstance(res, MotionFailure) and res.case == 1
+    assert set(res.free_dof) == {"lambda", "mu", "eta"}
+
+
+def test_two_directions_without_camera_are_a_failure(pairs):
+    from dataclasses import replace
+
+    o1 = observe_rgbd(pairs[2].f1.frame, ES)
+    o2 = observe_rgbd(pairs[2].f2.frame, ES)
+    res = estimate_motion(replace(o1, gray=None), replace(o2, gray=None))
+    assert isinstance(res, MotionFailure) and res.free_dof == ("mu",)
+
+
+unit = (
+    st.lists(st.floats(-1, 1), min_size=3, max_size=3)
+    .map(np.array)
+    .filter(lambda v: np.linalg.norm(v) > 0.2)
+)
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    st.lists(unit, min_size=3, max_size=6),
+    st.lists(st.floats(0.5, 5), min_size=6, max_size=6),
+    unit,
+    st.floats(0, np.pi),
+    st.lists(st.floats(-2, 2), min_size=3, max_size=3),
+)
+def test_closed_form_recovers_any_motion_exactly(normals, rhos, axis, angle, t):
+    """Noise-free planes: the closed form is exact whenever the normals span 3 directions."""
+    N = np.array([n / np.linalg.norm(n) for n in normals])
+    if np.linalg.svd(N, compute_uv=False)[2] < 0.3:
+        return  # not three well-separated directions: covered by the degeneracy test
+    R = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix()
+    t = np.array(t)
+    p1, p2 = [], []
+    for n, rho in zip(N, rhos, strict=False):
+        n1, r1 = canonical_plane(n, rho)
+        # frame 2 sees N2 = R^T N1, rho2 = rho1 - N1 . t (eqs. 1, 2)
+        n2, r2 = R.T @ n1, r1 - n1 @ t
+        p1.append(Plane(n1, r1, n1 * r1, count=1000))
+        p2.append(Plane(n2, r2, n2 * r2, count=1000))
+    res = solve_three_planes(p1, p2)
+    assert isinstance(res, MotionEstimate)
+    assert np.allclose(res.rotation, R, atol=1e-8)
+    assert np.allclose(res.translation, t, atol=1e-8)
+    # the paper's Euler angles (eq. 11) equal SciPy's ZXY modulo 2 pi (away from gimbal lock)
+    ref = Rotation.from_matrix(R).as_euler("ZXY")
+    if abs(ref[1]) < np.radians(89):
+        diff = np.angle(np.exp(1j * (euler_zxy_from_quat(res.quaternion) - ref)))
+        assert np.allclose(diff, 0, atol=1e-6)
