@@ -45,7 +45,7 @@ def test_labels_of_the_wrong_length(tmp_path):
 
     path = tmp_path / "000000.label"
     np.arange(10, dtype=np.uint32).tofile(path)
-    with pytest.raises(FormatError, match="000000.label"):
+    with pytest.raises(FormatError, match=r"000000\.label"):
         read_kitti_labels(path, n_points=12)
     with pytest.raises(InputError, match="semantic"):
         ground_scores(np.ones(12, bool), np.zeros(10, np.uint16))

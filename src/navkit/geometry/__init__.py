@@ -1,4 +1,5 @@
-"""Shared maths on arrays: rigid transforms, rotations, plane and line fits, polygons.
+"""Shared maths on arrays: rigid transforms, rotations, plane and line fits, polygons, and the
+bounding shapes of obstacles on a 2D map (:mod:`navkit.geometry.shapes`).
 
 Frame conventions (fixed once, for all of navkit): world z up; ``T_a_b`` maps points from frame
 *b* to frame *a*; quaternions are scalar-last ``(x, y, z, w)``; angles are radians; the papers'
@@ -42,6 +43,17 @@ from navkit.geometry.rotations import (
     rotation_angle,
     rotation_between,
 )
+from navkit.geometry.shapes import (
+    SHAPES,
+    Circle,
+    Ellipse,
+    Rectangle,
+    Shape,
+    compute_shapes,
+    min_circle_welzl,
+    mvee_khachiyan,
+    register_shape,
+)
 from navkit.geometry.transforms import (
     se2_apply,
     se2_compose,
@@ -68,10 +80,16 @@ T_BODY_FROM_OPTICAL = se3_from_rt(R_BODY_FROM_OPTICAL, np.zeros(3))
 __all__ = [
     "EULER_ORDER_PAPER",
     "R_BODY_FROM_OPTICAL",
+    "SHAPES",
     "T_BODY_FROM_OPTICAL",
+    "Circle",
+    "Ellipse",
     "Line2D",
     "Plane",
+    "Rectangle",
+    "Shape",
     "canonical_plane",
+    "compute_shapes",
     "convex_hull_2d",
     "ensure_ccw",
     "euler_zxy_to_matrix",
@@ -82,6 +100,8 @@ __all__ = [
     "line_from_points_2d",
     "matrix_to_euler_zxy",
     "matrix_to_quat",
+    "min_circle_welzl",
+    "mvee_khachiyan",
     "plane_from_points",
     "points_in_polygon",
     "polygon_area",
@@ -92,6 +112,7 @@ __all__ = [
     "quat_multiply",
     "quat_rotate",
     "quat_to_matrix",
+    "register_shape",
     "rotation_angle",
     "rotation_between",
     "se2_apply",

@@ -286,11 +286,17 @@ def detect_obstacles_grid(
     if n:
         size = np.bincount(obs_lab.ravel(), minlength=n + 1)[1:]
         zmax, zmin = _per_label_extrema(obs_lab, mesh.z_max, mesh.z_min, n)
-        spread = _per_label_spread(obs_lab, 0.5 * (mesh.z_max + mesh.z_min), n)
+        zmid = 0.5 * (mesh.z_max + mesh.z_min)
+        spread = _per_label_spread(obs_lab, zmid, n)
+        lift = _lift_over_adjacent_ground(obs_lab, labels, zmid, n, wrap)
+        half = 0.5 * settings.min_obstacle_height_m
+        # a patch of noise on the ground: little spread and no lift over the ground around it
+        # (an elevated flat fragment - a car's roof cut off by missing returns - is kept)
+        noise_patch = (spread < half) & (lift < half)
         keep = (
             (size >= settings.min_obstacle_triangles)
             & (zmax - zmin >= settings.min_obstacle_height_m)
-            & (spread >= 0.5 * settings.min_obstacle_height_m)
+            & ~noise_patch
         )
         lut = np.zeros(n + 1, dtype=np.int32)
         lut[1:][keep] = np.arange(1, int(keep.sum()) + 1)
@@ -378,6 +384,27 @@ def _per_label_spread(lab: NDArray[np.int32], z: NDArray[Any], n: int) -> NDArra
     q10 = zs[starts + np.floor(0.1 * (counts - 1)).astype(np.int64)]
     q90 = zs[starts + np.floor(0.9 * (counts - 1)).astype(np.int64)]
     return q90 - q10
+
+
+def _lift_over_adjacent_ground(
+    lab: NDArray[np.int32], labels: NDArray[np.int8], z: NDArray[Any], n: int, wrap: bool
+) -> NDArray[np.float64]:
+    """Mean height of each label's triangles minus the mean height of the ground triangles next
+    to them (+inf for a label with no ground neighbour)."""
+    from navkit.obstacles.segment import _pairs
+
+    tri_index = np.arange(lab.size, dtype=np.int64).reshape(lab.shape)
+    a, b = _pairs(lab, tri_index, wrap)
+    zf = z.ravel().astype(np.float64)
+    keep = (a > 0) & (labels.ravel()[b] == GROUND) & np.isfinite(zf[b])
+    cnt_g = np.bincount(a[keep], minlength=n + 1)[1:]
+    sum_g = np.bincount(a[keep], weights=zf[b[keep]], minlength=n + 1)[1:]
+    sel = lab.ravel() > 0
+    cnt = np.bincount(lab.ravel()[sel], minlength=n + 1)[1:]
+    sm = np.bincount(lab.ravel()[sel], weights=zf[sel], minlength=n + 1)[1:]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        lift = sm / np.maximum(cnt, 1) - sum_g / cnt_g
+    return np.where(cnt_g > 0, lift, np.inf)
 
 
 def _group(

@@ -64,9 +64,10 @@ class ObstacleSettings:
     min_obstacle_triangles : int
         Connected obstacle zones with fewer triangles are returned to ground.
     min_obstacle_height_m : float
-        Obstacle zones whose vertical extent (max z - min z of their vertices) is below this, or
-        whose robust extent (90th - 10th percentile of their triangles' mid heights) is below
-        half of it, are returned to ground (noise and curbs, not obstacles).
+        Obstacle zones whose vertical extent (max z - min z of their vertices) is below this are
+        returned to ground (noise and curbs, not obstacles); so are zones whose robust extent
+        (90th - 10th percentile of their triangles' mid heights) and mean height over the ground
+        triangles around them are both below half of it (a patch of range noise on the ground).
     ground_refine : bool
         Re-label points by their height above the local ground after stage 7 (beyond the paper;
         :mod:`navkit.obstacles.ground`): within ``ground_band_m`` -> ground, labelled ground but
