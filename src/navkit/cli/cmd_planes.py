@@ -74,12 +74,13 @@ def _load_observation(path: Path, frame: int, cam: CameraOverride, cell: int):
             T_camera_sensor=f.T_camera_sensor,
             organized_settings=es,
         )
-        import numpy as np
-
-        from navkit.planes.texture import to_gray
-
-        gray = (to_gray(f.color) * 255).astype(np.uint8)
-        return obs, None, "CAPE frame (depth camera + separately calibrated RGB camera)", gray
+        # the overlay is drawn in the depth camera's pixels: the colour registered to them
+        return (
+            obs,
+            f.color_registered,
+            "CAPE frame (depth camera + separately calibrated RGB camera)",
+            None,
+        )
     if path.is_dir():
         from navkit.io.rgbd import open_rgbd_sequence
 

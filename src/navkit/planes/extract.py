@@ -106,10 +106,8 @@ def _planes_from_moments(cnt, S, SS):
     return normal, d, rms, m, w
 
 
-def _segment(
-    idx: NDArray[np.int64], P_flat: NDArray[np.float64], outline_cell: float
-) -> PlaneSegment:
-    """Package inliers as a segment: TLS refit (from the 3 x 3 scatter), outline and area."""
+def _fit(idx: NDArray[np.int64], P_flat: NDArray[np.float64]) -> tuple[Plane, NDArray[np.float64]]:
+    """TLS plane of the inliers (from the 3 x 3 scatter) and the inlier points."""
     X = P_flat[idx]
     c = X.mean(axis=0)
     Xc = X - c
@@ -118,6 +116,14 @@ def _segment(
     plane = Plane(
         normal=n, rho=rho, centroid=c, rms=float(np.sqrt(max(w[0], 0.0) / len(X))), count=len(X)
     )
+    return plane, X
+
+
+def _segment(
+    idx: NDArray[np.int64], P_flat: NDArray[np.float64], outline_cell: float
+) -> PlaneSegment:
+    """Package inliers as a segment: TLS refit, outline and area from the rasterised points."""
+    plane, X = _fit(idx, P_flat)
     origin, axes = plane_frame(plane)
     step = max(1, len(X) // 40_000)  # outlines from at most ~40k points (dense grids)
     uv = rows_matmul(X[::step] - origin, axes.T)
@@ -154,24 +160,27 @@ def extract_planes_organized(
     labels = -np.ones((H, W), np.int64)
     if hc == 0 or wc == 0:
         return ExtractionResult((), labels)
-    valid = np.all(np.isfinite(P), axis=2) & np.any(P != 0, axis=2)
+    px, py, pz = P[..., 0], P[..., 1], P[..., 2]
+    valid = (
+        np.isfinite(px) & np.isfinite(py) & np.isfinite(pz) & ((px != 0) | (py != 0) | (pz != 0))
+    )
     Pc = P[: hc * c, : wc * c]
     vc = valid[: hc * c, : wc * c]
-    # 1. patch moments
-    # block sums of (1, x, y, z, xx, xy, xz, yy, yz, zz): rows of a patch first (contiguous
-    # reductions), then columns - exact in float64
-    X = np.where(vc[..., None], Pc, 0.0)
+    # 1. patch moments: block sums of 1, x, y, z, xx, xy, xz, yy, yz, zz - one contiguous 2D
+    #    image per quantity, rows of a patch summed first, then columns (exact in float64)
+    gx, gy, gz = (np.where(vc, Pc[..., k], 0.0) for k in range(3))
+
+    def block_sum(a: NDArray[np.float64]) -> NDArray[np.float64]:
+        return a.reshape(hc, c, wc * c).sum(axis=1).reshape(hc, wc, c).sum(axis=2).ravel()
+
+    cnt = block_sum(vc.astype(np.float64))
+    S = np.stack([block_sum(gx), block_sum(gy), block_sum(gz)], axis=1)
     iu = np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2])
-    stack = np.concatenate(
-        [vc[..., None].astype(np.float64), X, X[..., iu[0]] * X[..., iu[1]]], axis=2
-    )
-    rows = stack.reshape(hc, c, wc * c * 10).sum(axis=1)
-    sums = rows.reshape(hc, wc, c, 10).sum(axis=2).reshape(-1, 10)
-    cnt = np.rint(sums[:, 0])
-    S = sums[:, 1:4]
+    xyz = (gx, gy, gz)
+    Q = np.stack([block_sum(xyz[a] * xyz[b]) for a, b in zip(*iu, strict=True)], axis=1)
     SS = np.empty((hc * wc, 3, 3))
-    SS[:, iu[0], iu[1]] = sums[:, 4:]
-    SS[:, iu[1], iu[0]] = sums[:, 4:]
+    SS[:, iu[0], iu[1]] = Q
+    SS[:, iu[1], iu[0]] = Q
     # 2. planar patches
     normal, d, rms, mean, _ = _planes_from_moments(cnt, S, SS)
     z = np.linalg.norm(mean, axis=1)
@@ -254,15 +263,14 @@ def extract_planes_organized(
     vblocks = vcb.transpose(0, 2, 1, 3)
     # interior: every pixel against its own region's plane, in one pass
     k_cell = np.maximum(cellmap, 0)
-    with np.errstate(invalid="ignore"):
-        d_in = np.abs(
-            np.einsum("ijabk,ijk->ijab", blocks, rn[k_cell]) - rd[k_cell][:, :, None, None]
-        )
-        z_in = np.linalg.norm(blocks, axis=4)
-        ok_in = (
-            vblocks & (cellmap >= 0)[:, :, None, None] & (d_in < s.inlier_factor * s.noise(z_in))
-        )
-    lab_c[...] = np.where(ok_in, cellmap[:, :, None, None], -1).transpose(0, 2, 1, 3)
+    nx, ny, nz = (rn[k_cell][:, None, :, None, k] for k in range(3))  # (hc, 1, wc, 1) each
+    xb, yb, zb = (a.reshape(hc, c, wc, c) for a in (gx, gy, gz))  # contiguous, zeros where invalid
+    d4 = np.abs(xb * nx + yb * ny + zb * nz - rd[k_cell][:, None, :, None])
+    r4 = np.sqrt(xb * xb + yb * yb + zb * zb)
+    ok4 = vcb & (cellmap >= 0)[:, None, :, None] & (d4 < s.inlier_factor * s.noise(r4))
+    lab_c[...] = np.where(ok4, cellmap[:, None, :, None], -1)
+    d_in = d4.transpose(0, 2, 1, 3)  # (hc, wc, c, c) views for the ring step
+    ok_in = ok4.transpose(0, 2, 1, 3)
     best: dict[int, NDArray[np.float64]] = {}
     ring_lab: dict[int, NDArray[np.int64]] = {}
     for k in range(n_reg):
