@@ -58,8 +58,10 @@ def test_record_odometry_log(cli, tmp_path):
     s = json.loads((tmp_path / "m" / "summary.json").read_text())
     assert s["format"] == "odometry" and s["loops_removed"] == 0
     spline = read_path_json(tmp_path / "m" / "path.json")
-    # the last sample's command is not integrated (zero-order hold): 19.99 s of motion
-    assert spline.total_length == pytest.approx(0.2 * 19.99, abs=1e-3)
+    # the last sample's command is not integrated (zero-order hold): 19.99 s of motion. A curve
+    # within eps of an arc differs in length by at most ~eps x the turned angle (an offset
+    # curve at distance d has length L + d dtheta): 0.01 m x 2 rad = 2 cm
+    assert spline.total_length == pytest.approx(0.2 * 19.99, abs=0.02)
     end = spline.position(spline.total_length)
     th = 0.1 * 19.99
     np.testing.assert_allclose(end, [2.0 * np.sin(th), 2.0 * (1 - np.cos(th))], atol=0.01)
@@ -110,3 +112,26 @@ def test_bad_options(cli, tmp_path):
     )  # x and z: a line along x
     assert r.exit_code == 0, r.output
     assert np.isclose(read_path_json(tmp_path / "o" / "path.json").total_length, 0.9)
+
+
+def test_record_euroc_csv_on_a_tilted_plane(cli, tmp_path):
+    """A EuRoC ground-truth CSV whose positions lie on a plane tilted 30 deg about x: the auto
+    ground plane recovers in-plane distances, so a 1 m-radius half circle is 3.14 m long."""
+    n = 400
+    th = np.linspace(0.0, np.pi, n)
+    u, v = np.sin(th), 1.0 - np.cos(th)  # in-plane circle of radius 1
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    xyz = np.c_[u, c * v, s * v] + [2.0, -1.0, 0.5]
+    ns = 1_403_636_579_758_555_392 + np.arange(n) * 5_000_000
+    header = "#timestamp [ns],p_RS_R_x [m],p_RS_R_y [m],p_RS_R_z [m],q_RS_w [],q_RS_x [],q_RS_y [],q_RS_z []\n"
+    rows = "".join(
+        f"{t},{x:.9f},{y:.9f},{z:.9f},1,0,0,0\n" for t, (x, y, z) in zip(ns, xyz, strict=True)
+    )
+    f = tmp_path / "data.csv"
+    f.write_text(header + rows)
+    r = cli("path", "record", f, "--tolerance", "0.005", "--out", tmp_path / "e")
+    assert r.exit_code == 0, r.output
+    spline = read_path_json(tmp_path / "e" / "path.json")
+    # within eps = 5 mm of a half circle: length within eps x turned angle (pi) of pi
+    assert spline.total_length == pytest.approx(np.pi, abs=0.005 * np.pi)
+    assert spline.frame["method"] == "fit" and spline.frame["rms_m"] < 1e-6

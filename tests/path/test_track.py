@@ -68,6 +68,7 @@ def test_kitti_ground_plane_is_the_camera_xz_plane(data_path):
     # KITTI camera frames: y points down, the road is (nearly) the x-z plane; the 3.7 km drive
     # climbs a few metres, so the fitted normal is within a few degrees of y
     assert abs(normal[1]) > np.cos(np.radians(3))
+    assert normal[1] < 0  # seen from above (camera y points down): turns keep their sense
     # in-plane path length equals the 3D length to 0.1 % (height changes are small)
     q = to_plane(traj.positions, gp)
     L2 = np.hypot(*np.diff(q, axis=0).T).sum()

@@ -9,8 +9,9 @@ over arc length (1.6, section 4), searched for loops that are then cut out (1.7,
 Guarantee: every accepted point ``P_i`` satisfies ``|P_i - C(s_i)| <= eps`` for the stored
 (arc-length) segment that covers it, hence lies within ``eps`` of the stored spline. The
 deviation is measured at the point's own parameter - an upper bound of the point-to-curve
-distance, so the guarantee is conservative. It is checked on the *stored* curve: if the refit of
-step 1.6 pushes a point beyond ``eps`` the segment is frozen one point earlier instead.
+distance, so the guarantee is conservative. It is checked on the *stored* curve (distance by
+Newton projection): if the refit of step 1.6 would push a point beyond ``eps``, the fit over t
+(which passed the test) is stored with its parameter scaled to arc length instead.
 
 Cost per point: the normal equations come from running power sums (O(1) per point); the cheap
 test ``SSR <= eps^2`` (which bounds every residual) accepts most points of smooth data without
@@ -141,6 +142,9 @@ class ApproximationResult:
         Points offered, skipped as repeats, skipped as NaN / inf.
     n_cheap : int
         Points accepted by the O(1) test without computing residuals.
+    n_refit_fallbacks : int
+        Segments stored as the fit over t scaled to arc length, because the refit over arc
+        length would have broken eps.
     seconds_per_point : (n_input,) array
         Wall time of each ``add`` call (including freezing and loop search), seconds.
     cpu_seconds_per_point : (n_input,) array
@@ -157,6 +161,7 @@ class ApproximationResult:
     n_repeated: int
     n_nonfinite: int
     n_cheap: int
+    n_refit_fallbacks: int = 0
     seconds_per_point: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     cpu_seconds_per_point: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 
@@ -184,6 +189,7 @@ class ApproximationResult:
             "max_deviation_m": self.max_deviation,
             "stored_numbers": self.spline.n_numbers,
             "cheap_test_fraction": self.n_cheap / max(len(self.points), 1),
+            "refit_fallbacks": self.n_refit_fallbacks,
             "mean_us_per_point": float(us.mean()) if len(us) else None,
             "p99_us_per_point": float(np.percentile(us, 99)) if len(us) else None,
             "max_us_per_point": float(us.max()) if len(us) else None,
@@ -345,13 +351,12 @@ class OnlineApproximator:
             self._lastxy = (px, py)
             return
         # step 1.5: freeze on all points but the last, start the next segment where it ends
-        leftover = self._freeze(self._n)
-        for q in [*leftover, p]:
-            self._push(q)
+        self._freeze(self._n)
+        self._push(p)
 
     # ------------------------------------------------------------------ freezing (steps 1.5 - 1.7)
-    def _freeze(self, n_use: int) -> list[NDArray[np.float64]]:
-        """Freeze the segment on buffer rows ``[0, n_use)``; returns points to re-add (rarely any)."""
+    def _freeze(self, n_use: int) -> None:
+        """Freeze the segment on buffer rows ``[0, n_use)`` (steps 1.5 - 1.7)."""
         variant = self._variant
         anchor = self._buf[0].copy()
         fit_s, s, dev = self._natural_fit(variant, anchor, n_use)
@@ -362,8 +367,14 @@ class OnlineApproximator:
             # total length exact, the speed |C'| = S'(t) T / S only approximately 1.
             self.n_refit_fallbacks += 1
             fit_s, s, dev = self._scaled_t_fit(variant, anchor, n_use)
+            if dev.max() > self._eps * (1.0 + 1e-9):
+                log.warning(
+                    "segment %d: a point is %.6g m from the curve (eps %.6g m)",
+                    len(self._raw),
+                    dev.max(),
+                    self._eps,
+                )
         pts = self._buf[:n_use]
-        leftover = [self._buf[i].copy() for i in range(n_use, self._n)]
         ax, ay = fit_s.metric_coefficients(anchor)
         length = float(fit_s.T)
         first = 0 if self._anchor_is_point else 1
@@ -380,7 +391,6 @@ class OnlineApproximator:
         self._tangent = tan / norm if norm > 0 else None
         self._anchor_is_point = False
         self._start_segment(end)
-        return leftover
 
     def _natural_fit(
         self, variant: str, anchor: NDArray[np.float64], n_use: int
@@ -420,9 +430,7 @@ class OnlineApproximator:
     def finish(self, seconds_per_point: ArrayLike | None = None) -> ApproximationResult:
         """Freeze the open segment and return the result (the recorder can keep going after)."""
         if self._n >= 2:
-            while self._n >= 2:
-                for q in self._freeze(self._n):
-                    self._push(q)
+            self._freeze(self._n)
         elif self._n == 1 and self._anchor_is_point:
             self._record(self._buf[:1], np.zeros(1), np.zeros(1))
             self._n = 0
@@ -458,6 +466,7 @@ class OnlineApproximator:
             n_repeated=self.n_repeated,
             n_nonfinite=self.n_nonfinite,
             n_cheap=self.n_cheap,
+            n_refit_fallbacks=self.n_refit_fallbacks,
             seconds_per_point=np.asarray(
                 seconds_per_point if seconds_per_point is not None else np.zeros(0),
                 dtype=np.float64,

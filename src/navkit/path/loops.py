@@ -10,8 +10,10 @@ and update only their ancestors, so the tree is built once and extended as data 
 
 A new segment's pieces descend the tree, level by level and vectorised over (piece, node) pairs,
 keeping the nodes whose boxes overlap. Each overlapping pair of pieces is then refined by binary
-search: both pieces are halved in parameter and the overlapping sub-pairs kept, until both boxes
-are smaller than ``precision`` (0.1 mm, as in the paper). A crossing at parameters ``s1 < s2``
+search: both pieces are split in parameter and the overlapping sub-pairs kept, until both boxes
+are smaller than ``precision`` (0.1 mm, as in the paper). Sub-pairs whose boxes overlap must also
+pass a chord test (a sub-piece stays within ``du^2 / 8 max|C''|`` of its chord), which keeps
+near-parallel curves from multiplying the pairs. A crossing at parameters ``s1 < s2``
 makes the loop ``[s1, s2]``; loops shorter than ``min_loop_length`` are the shared end points of
 neighbouring pieces, not loops, and are pruned as soon as the arc-length bound proves it.
 
@@ -93,6 +95,41 @@ def _quadratic_roots(a: float, b: float, c: float) -> list[float]:
     if abs(q) > 1e-300:
         roots.append(c / q)
     return roots
+
+
+def _segment_distance(
+    p1: NDArray[np.float64],
+    q1: NDArray[np.float64],
+    p2: NDArray[np.float64],
+    q2: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Distances between segments ``p1 q1`` and ``p2 q2`` (rows ``(N, 2)``), vectorised
+    (closest points of two segments, Ericson, Real-Time Collision Detection, 5.1.9)."""
+    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
+    a = (d1 * d1).sum(-1)
+    e = (d2 * d2).sum(-1)
+    f = (d2 * r).sum(-1)
+    c = (d1 * r).sum(-1)
+    b = (d1 * d2).sum(-1)
+    tiny = 1e-300
+    a_ok, e_ok = a > tiny, e > tiny
+    safe_a = np.where(a_ok, a, 1.0)
+    safe_e = np.where(e_ok, e, 1.0)
+    denom = a * e - b * b
+    s = np.where(
+        denom > tiny, np.clip((b * f - c * e) / np.where(denom > tiny, denom, 1.0), 0.0, 1.0), 0.0
+    )
+    s = np.where(a_ok, s, 0.0)
+    t = np.where(e_ok, (b * s + f) / safe_e, 0.0)
+    s = np.where(
+        t < 0.0,
+        np.clip(-c / safe_a, 0.0, 1.0),
+        np.where(t > 1.0, np.clip((b - c) / safe_a, 0.0, 1.0), s),
+    )
+    s = np.where(e_ok, s, np.clip(-c / safe_a, 0.0, 1.0))  # B is a point: project it on A
+    s = np.where(a_ok, s, 0.0)
+    t = np.where(e_ok, np.clip(t, 0.0, 1.0), 0.0)
+    return np.linalg.norm(p1 + d1 * s[:, None] - p2 - d2 * t[:, None], axis=-1)
 
 
 def monotone_breaks(
@@ -350,27 +387,42 @@ class LoopFreeChain:
                 )
                 sa, sb = sa[order], sb[order]
                 ua0, ua1, ub0, ub1 = ua0[order], ua1[order], ub0[order], ub1[order]
-            ua = ua0[:, None] + (ua1 - ua0)[:, None] * f[None, :]  # (P, K + 1)
-            ub = ub0[:, None] + (ub1 - ub0)[:, None] * f[None, :]
-            axa, aya, axb, ayb = (
-                c[:, None, :] for c in (self._ax[sa], self._ay[sa], self._ax[sb], self._ay[sb])
-            )
-            pa = np.stack([cubic_eval(axa, ua), cubic_eval(aya, ua)], -1)  # (P, K + 1, 2)
-            pb = np.stack([cubic_eval(axb, ub), cubic_eval(ayb, ub)], -1)
-            alo, ahi = (
-                np.minimum(pa[:, :-1], pa[:, 1:]),
-                np.maximum(pa[:, :-1], pa[:, 1:]),
-            )  # (P, K, 2)
-            blo, bhi = np.minimum(pb[:, :-1], pb[:, 1:]), np.maximum(pb[:, :-1], pb[:, 1:])
+            # both pieces of every pair in one array: index 0 = A (older), 1 = B (newer)
+            U = (
+                np.stack([ua0, ub0])[:, :, None] + np.stack([ua1 - ua0, ub1 - ub0])[:, :, None] * f
+            )  # (2, P, K+1)
+            seg = np.stack([sa, sb])
+            coef = np.stack([self._ax[seg], self._ay[seg]], axis=-2)  # (2, P, 2, 4)
+            pts = cubic_eval(coef[:, :, None], U[..., None])  # (2, P, K + 1, 2)
+            lo = np.minimum(pts[:, :, :-1], pts[:, :, 1:])  # sub-piece boxes (2, P, K, 2)
+            hi = np.maximum(pts[:, :, :-1], pts[:, :, 1:])
+            ext = (hi - lo).max(-1)  # (2, P, K)
             overlap = np.all(
-                (alo[:, :, None] <= bhi[:, None, :]) & (blo[:, None, :] <= ahi[:, :, None]), axis=-1
+                (lo[0][:, :, None] <= hi[1][:, None, :]) & (lo[1][:, None, :] <= hi[0][:, :, None]),
+                axis=-1,
             )
+            ua, ub = U[0], U[1]
+            pa, pb = pts[0], pts[1]
             ga, gb = self._s0[sa], self._s0[sb]
             long_enough = (
                 (gb[:, None, None] + ub[:, None, 1:]) - (ga[:, None, None] + ua[:, :-1, None])
             ) >= self.min_loop_length
             p, i, j = np.nonzero(overlap & long_enough)
-            size = np.maximum((ahi - alo).max(-1)[p, i], (bhi - blo).max(-1)[p, j])
+            # Tighter than the boxes: a sub-piece lies within delta = du^2 / 8 max|C''| of its
+            # chord (interpolation error bound; C'' is linear in u, so its max norm is at an end),
+            # so two sub-pieces can only meet if their chords are within delta_a + delta_b.
+            # Near-parallel curves (a road driven twice) then stop spawning box pairs early.
+            acc = np.linalg.norm(
+                cubic_eval(coef[:, :, None], U[..., None], 2), axis=-1
+            )  # (2, P, K+1)
+            du = U[:, :, 1] - U[:, :, 0]  # (2, P), equal steps
+            delta = (du**2 / 8.0)[:, :, None] * np.maximum(
+                acc[:, :, :-1], acc[:, :, 1:]
+            )  # (2, P, K)
+            gap = _segment_distance(pa[p, i], pa[p, i + 1], pb[p, j], pb[p, j + 1])
+            near = gap <= delta[0][p, i] + delta[1][p, j] + 1e-12
+            p, i, j = p[near], i[near], j[near]
+            size = np.maximum(ext[0][p, i], ext[1][p, j])
             done = size <= self.precision
             if done.any():
                 pd, idn, jd = p[done], i[done], j[done]

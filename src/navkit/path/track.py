@@ -115,7 +115,9 @@ def ground_plane(positions: ArrayLike, plane: str = "auto") -> GroundPlane:
     ``"xy" | "xz" | "yz"`` take the two coordinates as they are (origin 0). ``"auto"`` fits a
     plane to the positions (total least squares, :func:`navkit.geometry.fit_plane`) and uses its
     in-plane basis, origin at the first position, so e.g. KITTI camera poses (y down, ground =
-    x-z) and TUM poses in any frame give a planar path. If the positions are collinear (no plane)
+    x-z) and TUM poses in any frame give a planar path. The in-plane axes are oriented so the
+    path is seen from above: up is taken as -y when the plane's normal is closest to y (camera
+    frames, y down) and +z otherwise (z-up world frames). If the positions are collinear (no plane)
     the line's own direction and a perpendicular are used.
     """
     from navkit.errors import DegenerateGeometryError
@@ -147,6 +149,15 @@ def ground_plane(positions: ArrayLike, plane: str = "auto") -> GroundPlane:
         c = P - P.mean(0)
         _, _, Vt = np.linalg.svd(c, full_matrices=True)
         axes, rms = Vt[:2], 0.0
+    # Orientation: seen from "up" the path must not be mirrored (a left turn stays a left turn).
+    # Up is not in the data; guess it from the frame convention: a plane normal along y is a
+    # camera frame (OpenCV / KITTI / TUM cameras: y down, so up = -y), along z a z-up world
+    # frame (up = +z).
+    normal = np.cross(axes[0], axes[1])
+    k = int(np.argmax(np.abs(normal)))
+    up = {1: -1.0, 2: 1.0}.get(k, 1.0)
+    if normal[k] * up < 0:
+        axes = np.stack([axes[0], -axes[1]])
     return GroundPlane(origin=P[0].copy(), axes=axes, method="fit", rms=float(rms))
 
 
