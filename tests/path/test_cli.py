@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from navkit.path.storage import read_path_json
+from navkit.io.pathjson import read_path_json
 
 
 def test_simulate_record_return(cli, tmp_path):

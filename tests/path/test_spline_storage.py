@@ -9,7 +9,7 @@ import pytest
 
 from navkit.errors import DataNotFoundError, FormatError
 from navkit.path import ApproximatorSettings, PathSpline, approximate
-from navkit.path.storage import read_path_json, write_path_json
+from navkit.io.pathjson import read_path_json, write_path_json
 
 
 @pytest.fixture

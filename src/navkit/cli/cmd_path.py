@@ -142,7 +142,7 @@ def record(
     with cli_errors():
         from navkit.errors import InputError
         from navkit.path import ApproximatorSettings, approximate
-        from navkit.path.storage import write_path_json
+        from navkit.io.pathjson import write_path_json
         from navkit.viz.path import plot_record
 
         _check_out(out)
@@ -220,7 +220,7 @@ def return_(
         from navkit.errors import ConfigError
         from navkit.io.atomic import write_json
         from navkit.path.control import ReturnSettings
-        from navkit.path.storage import read_path_json
+        from navkit.io.pathjson import read_path_json
         from navkit.sensors import VisualOdometryNoise
         from navkit.sim.return_sim import simulate_returns
         from navkit.viz.path import plot_returns

@@ -4,7 +4,7 @@ Mode 1 (recording): :class:`OnlineApproximator` / :func:`approximate` turn posit
 at a time into a :class:`PathSpline` (cubic segments over arc length) within a tolerance, cutting
 loops out as they close. Mode 2 (return): :class:`ReturnController` steers a robot back along the
 stored path to its start. Everything works on NumPy arrays; file formats live at the edge
-(``path.json`` in :mod:`navkit.path.storage`, trajectories in ``navkit.io.trajectory``).
+(``path.json`` in :mod:`navkit.io.pathjson`, trajectories in ``navkit.io.trajectory``).
 """
 
 from navkit.path.approximator import (
