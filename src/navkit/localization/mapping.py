@@ -47,6 +47,7 @@ __all__ = [
     "build_map",
     "build_map_from_scans",
     "drop_corner_stubs",
+    "drop_wall_shadows",
     "evaluate_map",
     "find_corners",
     "find_outline",
@@ -89,6 +90,13 @@ class MapSettings:
     min_relative_support : float
         Walls with fewer points than this fraction of the 75th-percentile wall's are dropped
         (stray pieces of stereo outliers; a no-op for laser maps, whose walls have few points).
+    min_strongest_support : float
+        Unordered clouds (stereo): walls with fewer points than this fraction of the strongest
+        wall's are dropped too.
+    shadow_distance : float
+        Metres; see :func:`drop_wall_shadows`.
+    shadow_support : float
+        Fraction; see :func:`drop_wall_shadows`.
     """
 
     segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
@@ -101,6 +109,9 @@ class MapSettings:
     resolution: float = 0.05
     min_wall_length: float = 0.3
     min_relative_support: float = 0.05
+    shadow_distance: float = 0.25
+    min_strongest_support: float = 0.03
+    shadow_support: float = 0.1
 
     def __post_init__(self) -> None:
         for name in (
@@ -422,20 +433,26 @@ def find_outline(
         links[a].append((b, [c.point]))
         links[b].append((a, [c.point]))
     cos_max = np.cos(np.radians(s.merge_angle_deg))
-    for a in range(M):
-        for b in range(a + 1, M):
-            wa, wb = walls[a], walls[b]
-            if (
-                abs(wa.direction @ wb.direction) < cos_max
-                or abs(wa.distance(wb.centroid)[0]) > s.merge_distance * 2
-            ):
-                continue
-            ends_a, ends_b = np.stack([wa.start, wa.end]), np.stack([wb.start, wb.end])
-            dist = np.linalg.norm(ends_a[:, None] - ends_b[None], axis=2)
-            ia, ib = np.unravel_index(np.argmin(dist), dist.shape)
-            if dist[ia, ib] <= s.doorway_max:
-                links[a].append((b, [ends_a[ia], ends_b[ib]]))
-                links[b].append((a, [ends_b[ib], ends_a[ia]]))
+    if M > 1:
+        # candidate doorway pairs, vectorised: parallel, on one line, facing ends close
+        D = np.array([w.direction for w in walls])
+        N = np.array([w.normal for w in walls])
+        rho = np.array([w.rho for w in walls])
+        C = np.array([w.centroid for w in walls])
+        ends = np.stack([[w.start, w.end] for w in walls])  # (M, 2, 2)
+        ia, ib = np.triu_indices(M, k=1)
+        par = np.abs(np.einsum("ij,ij->i", D[ia], D[ib])) >= cos_max
+        line = np.abs(np.einsum("ij,ij->i", C[ib], N[ia]) - rho[ia]) <= 2 * s.merge_distance
+        gaps = np.linalg.norm(ends[ia][:, :, None, :] - ends[ib][:, None, :, :], axis=3).reshape(
+            -1, 4
+        )
+        near = gaps.min(axis=1) <= s.doorway_max
+        for a, b, g in zip(
+            ia[par & line & near], ib[par & line & near], gaps[par & line & near], strict=True
+        ):
+            ea, eb = divmod(int(np.argmin(g)), 2)
+            links[int(a)].append((int(b), [ends[a, ea], ends[b, eb]]))
+            links[int(b)].append((int(a), [ends[b, eb], ends[a, ea]]))
     polygons = []
     seen = np.zeros(M, dtype=bool)
     for start in range(M):
@@ -606,16 +623,58 @@ def drop_corner_stubs(
     return [w for k, w in enumerate(walls) if k not in drop]
 
 
+def drop_wall_shadows(
+    walls: Sequence[WallSegment], settings: MapSettings | None = None
+) -> list[WallSegment]:
+    """Remove weak pieces running alongside a strong wall (stereo smear beside occluders).
+
+    A wall is a shadow of a longer one when their directions differ by less than
+    ``2 * merge_angle_deg``, both its ends lie within ``shadow_distance`` of the longer wall's
+    line and inside its extent, and it has less than ``shadow_support`` of its points.
+    """
+    s = settings or MapSettings()
+    walls = list(walls)
+    if len(walls) < 2:
+        return walls
+    D = np.array([w.direction for w in walls])
+    N = np.array([w.normal for w in walls])
+    rho = np.array([w.rho for w in walls])
+    S = np.array([w.start for w in walls])
+    E = np.array([w.end for w in walls])
+    n = np.array([w.count for w in walls], dtype=np.float64)
+    half = 0.5 * np.linalg.norm(E - S, axis=1)
+    mid = 0.5 * (S + E)
+    # rows: candidate shadow i, columns: strong wall j
+    par = np.abs(D @ D.T) >= np.cos(np.radians(2 * s.merge_angle_deg))
+    dS = np.abs(S @ N.T - rho[None, :])
+    dE = np.abs(E @ N.T - rho[None, :])
+    near = np.maximum(dS, dE) <= s.shadow_distance
+    tS = np.abs(np.einsum("ijk,jk->ij", S[:, None, :] - mid[None, :, :], D))
+    tE = np.abs(np.einsum("ijk,jk->ij", E[:, None, :] - mid[None, :, :], D))
+    inside = np.maximum(tS, tE) <= half[None, :] + s.merge_gap
+    weak = n[:, None] < s.shadow_support * n[None, :]
+    shadow = par & near & inside & weak
+    np.fill_diagonal(shadow, False)
+    keep = ~shadow.any(axis=1)
+    return [w for w, k in zip(walls, keep, strict=True) if k]
+
+
 def _finish(
     walls: list[WallSegment],
     s: MapSettings,
     rays: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+    strongest_fraction: float = 0.0,
 ) -> WallMap:
     if walls:
         # support filter: a wall needs min_relative_support of the points of a well-supported
         # wall (the 75th percentile: robust to many stubs and to a few huge walls)
-        ref = float(np.percentile([w.count for w in walls], 75))
-        walls = [w for w in walls if w.count >= s.min_relative_support * ref]
+        counts = np.array([w.count for w in walls], dtype=np.float64)
+        floor = max(
+            s.min_relative_support * float(np.percentile(counts, 75)),
+            strongest_fraction * counts.max(),
+        )
+        walls = [w for w in walls if w.count >= floor]
+    walls = drop_wall_shadows(walls, s)
     walls = drop_corner_stubs(walls, s)
     corners = find_corners(walls, s)
     outline, islands = find_outline(walls, corners, s)
@@ -681,7 +740,9 @@ def build_map(
             local = [_transform(w, T) for w in local]
         segs.extend(local)
     walls = merge_segments(segs, s)
-    return _finish(walls, s, None)
+    # stereo clouds: stray pieces are also judged against the strongest wall (many stubs would
+    # otherwise pull the percentile down)
+    return _finish(walls, s, None, 0.0 if ordered else s.min_strongest_support)
 
 
 def build_map_from_scans(
