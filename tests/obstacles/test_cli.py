@@ -6,7 +6,8 @@ import json
 
 import numpy as np
 import pytest
-from benchmarks.bench_obstacles import run_experiment
+
+from navkit.experiments.obstacles import run_experiment
 
 
 @pytest.fixture(scope="module")

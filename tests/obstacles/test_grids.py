@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 import pytest
-from benchmarks.bench_obstacles import paper_scenes
 
 from navkit.errors import ConfigError, InputError
+from navkit.experiments.obstacles import paper_scenes
 from navkit.geometry import R_BODY_FROM_OPTICAL, se3_from_rt
 from navkit.obstacles import (
     OBSTACLE,

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import pytest
-from benchmarks.bench_obstacles import car_recall
 
 from navkit.errors import InputError
+from navkit.experiments.obstacles import car_recall
 from navkit.io.pointcloud import read_kitti_bin, read_kitti_labels
 from navkit.obstacles import (
     GROUND,

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from benchmarks.bench_obstacles import footprint, footprint_distance, paper_scenes, run_experiment
 
+from navkit.experiments.obstacles import footprint, footprint_distance, paper_scenes, run_experiment
 from navkit.obstacles import OBSTACLE, SHADOW_BEHIND, SIDE_SHADOW, unsort_vertex_array
 
 

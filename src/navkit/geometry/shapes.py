@@ -449,6 +449,27 @@ def ellipses_a6_batch(
     n = len(hulls)
     if n == 0:
         return []
+    # sets of similar size together (sizes within a factor 2): the trials are evaluated on
+    # arrays padded to the largest set of a batch, so mixing 4- and 24-vertex hulls wastes most
+    # of the work; each set's search is independent of the others, so the result is the same
+    sizes = np.array([len(h) for h in hulls])
+    bucket = np.floor(np.log2(np.maximum(sizes, 1))).astype(np.int64)
+    out: list[Ellipse] = [starts[0]] * n
+    for b in np.unique(bucket):
+        members = np.flatnonzero(bucket == b).tolist()
+        res = _a6_batch(
+            [hulls[i] for i in members], [starts[i] for i in members], max_iter, rel_tol
+        )
+        for i, e in zip(members, res, strict=True):
+            out[i] = e
+    return out
+
+
+def _a6_batch(
+    hulls: Sequence[NDArray[np.float64]], starts: Sequence[Ellipse], max_iter: int, rel_tol: float
+) -> list[Ellipse]:
+    """The pattern search of :func:`ellipses_a6_batch` on one batch of sets."""
+    n = len(hulls)
     m = max(len(h) for h in hulls)
     P = np.zeros((n, m, 2))
     mask = np.zeros((n, m), dtype=bool)
@@ -472,18 +493,38 @@ def ellipses_a6_batch(
         -1, 4
     )
     moves = grid[np.any(grid != 0, axis=1)]  # (80, 4)
+    centre = 40  # index of the zero move in the 3^4 grid (ij order over x, y, phi, log k)
+    keep_moves = np.arange(81) != centre
+    # padded points repeat each set's first point: a duplicate cannot change a maximum
+    for i, h in enumerate(hulls):
+        P[i, len(h) :] = h[0]
+    three = np.array([-1.0, 0.0, 1.0])
     active = np.ones(n, dtype=bool)
     for _ in range(max_iter):
         if not active.any():
             break
         idx = np.flatnonzero(active)
-        trial = cur[idx, None, :] + moves[None] * step[idx, None, :]
-        f_trial, _ = _a6_area(trial, P[idx], mask[idx])
+        # the 80 trials factorised: x, y, phi and k take three values each, so u and v are
+        # computed on 27 (phi, x, y) combinations and a^2 on 81, instead of 80 full passes
+        vals = cur[idx, None, :] + three[None, :, None] * step[idx, None, :]  # (k, 3, 4)
+        Pa = P[idx]
+        dx = Pa[:, None, :, 0] - vals[:, :, 0, None]  # (k, 3x, m)
+        dy = Pa[:, None, :, 1] - vals[:, :, 1, None]  # (k, 3y, m)
+        c = np.cos(vals[:, :, 2])[:, :, None, None, None]  # (k, 3phi, 1, 1, 1)
+        sn = np.sin(vals[:, :, 2])[:, :, None, None, None]
+        dxb, dyb = dx[:, None, :, None, :], dy[:, None, None, :, :]
+        u = c * dxb + sn * dyb  # (k, 3phi, 3x, 3y, m)
+        v = -sn * dxb + c * dyb
+        kk = np.exp(vals[:, :, 3])  # (k, 3k)
+        a2 = (u * u)[..., None, :] + (v * v)[..., None, :] / (kk[:, None, None, None, :, None] ** 2)
+        a2 = a2.max(axis=-1)  # (k, 3phi, 3x, 3y, 3k)
+        f_all = (np.pi * a2 * kk[:, None, None, None, :]).transpose(0, 2, 3, 1, 4)
+        f_trial = f_all.reshape(len(idx), 81)[:, keep_moves]  # same order as ``moves``
         best = np.argmin(f_trial, axis=1)
         f_best = f_trial[np.arange(len(idx)), best]
         improved = f_best < f_cur[idx] * (1 - 1e-12)
         upd = idx[improved]
-        cur[upd] = trial[improved, best[improved]]
+        cur[upd] = cur[upd] + moves[best[improved]] * step[upd]
         f_cur[upd] = f_best[improved]
         shrink = idx[~improved]
         step[shrink] *= 0.5
@@ -583,49 +624,61 @@ def mvee_batch(
     d = 2
     m = max(len(h) for h in hulls)
     origin = np.array([h.mean(axis=0) for h in hulls])
-    P = np.zeros((n, m, 2))
+    # pad each set to m points by repeating its first point with weight 0: a padded copy never
+    # wins argmax (ties go to the first index) and, weightless, never argmin over the support
+    P = np.empty((n, m, 2))
     mask = np.zeros((n, m), dtype=bool)
     for i, h in enumerate(hulls):
         P[i, : len(h)] = h - origin[i]
+        P[i, len(h) :] = h[0] - origin[i]
         mask[i, : len(h)] = True
     scale = np.maximum(np.abs(P).max(axis=(1, 2)), 1e-9)
     P = P / scale[:, None, None]
-    Q = np.concatenate([P, np.ones((n, m, 1))], axis=2)  # (n, m, 3)
     counts = mask.sum(axis=1)
     u = mask / counts[:, None]
-    active = np.ones(n, dtype=bool)
-    rows = np.arange(n)
-    for _ in range(max_iter):
-        idx = np.flatnonzero(active)
-        if len(idx) == 0:
-            break
-        r = rows[: len(idx)]
-        Qa, ua, ma = Q[idx], u[idx], mask[idx]
-        X = np.einsum("nmi,nm,nmj->nij", Qa, ua, Qa)
-        M = np.einsum("nmi,nij,nmj->nm", Qa, np.linalg.inv(X), Qa)
-        j_up = np.argmax(np.where(ma, M, -np.inf), axis=1)
-        j_dn = np.argmin(np.where(ma & (ua > 0), M, np.inf), axis=1)
-        M_up, M_dn = M[r, j_up], M[r, j_dn]
-        eps_up = M_up / (d + 1) - 1
-        eps_dn = 1 - M_dn / (d + 1)
-        done = np.maximum(eps_up, eps_dn) <= tol
-        toward = eps_up >= eps_dn
-        # Khachiyan's step towards the farthest point, or Todd-Yildirim's away step from the
-        # nearest support point (faster convergence, same fixed point)
-        beta_up = (M_up - d - 1) / ((d + 1) * (M_up - 1))
-        u_dn = ua[r, j_dn]
-        with np.errstate(divide="ignore", invalid="ignore"):
+    # X(u)^{-1} of the lifted points from the weighted moments: with c = sum u p and
+    # S = sum u p p^T - c c^T, q^T X^{-1} q = 1 + (p - c)^T S^{-1} (p - c) (block inverse), so
+    # each iteration needs five weighted sums and a 2 x 2 inverse instead of 3 x 3 products
+    F = np.stack([P[..., 0], P[..., 1], P[..., 0] ** 2, P[..., 0] * P[..., 1], P[..., 1] ** 2], 1)
+    idx = np.arange(n)
+    Fa, ua = F, u.copy()
+    r = np.arange(n)
+    with np.errstate(divide="ignore", invalid="ignore"):  # once: the loop is overhead-bound
+        for _ in range(max_iter):
+            if len(idx) == 0:
+                break
+            mom = np.einsum("kfm,km->kf", Fa, ua)
+            cx, cy = mom[:, 0:1], mom[:, 1:2]
+            sxx, sxy, syy = mom[:, 2:3] - cx * cx, mom[:, 3:4] - cx * cy, mom[:, 4:5] - cy * cy
+            det = np.maximum(sxx * syy - sxy * sxy, 1e-300)
+            dx, dy = Fa[:, 0] - cx, Fa[:, 1] - cy
+            M = 1.0 + (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det
+            j_up = np.argmax(M, axis=1)
+            j_dn = np.argmin(np.where(ua > 0, M, np.inf), axis=1)
+            M_up, M_dn = M[r, j_up], M[r, j_dn]
+            eps_up = M_up / (d + 1) - 1
+            eps_dn = 1 - M_dn / (d + 1)
+            done = np.maximum(eps_up, eps_dn) <= tol
+            toward = eps_up >= eps_dn
+            # Khachiyan's step towards the farthest point, or Todd-Yildirim's away step from
+            # the nearest support point (faster convergence, same fixed point)
+            beta_up = (M_up - d - 1) / ((d + 1) * (M_up - 1))
+            u_dn = ua[r, j_dn]
             beta_dn = np.minimum((d + 1 - M_dn) / ((d + 1) * (M_dn - 1)), u_dn / (1 - u_dn))
-        beta_dn = np.where(np.isfinite(beta_dn), beta_dn, 0.0)
-        up = toward & ~done
-        dn = ~toward & ~done
-        ua[up] *= (1 - beta_up[up])[:, None]
-        ua[r[up], j_up[up]] += beta_up[up]
-        ua[dn] *= (1 + beta_dn[dn])[:, None]
-        ua[r[dn], j_dn[dn]] -= beta_dn[dn]
-        ua = np.maximum(ua, 0.0)
-        u[idx] = ua
-        active[idx[done]] = False
+            beta_dn = np.where(np.isfinite(beta_dn), beta_dn, 0.0)
+            up = toward & ~done
+            dn = ~toward & ~done
+            # one multiplicative factor per set, then the chosen point's additive term
+            ua *= np.where(up, 1 - beta_up, np.where(dn, 1 + beta_dn, 1.0))[:, None]
+            ua[r[up], j_up[up]] += beta_up[up]
+            ua[r[dn], j_dn[dn]] -= beta_dn[dn]
+            np.maximum(ua, 0.0, out=ua)
+            if done.any():  # store the finished sets, keep iterating on the others only
+                u[idx[done]] = ua[done]
+                keep = ~done
+                idx, Fa, ua = idx[keep], Fa[keep], ua[keep]
+                r = np.arange(len(idx))
+    u[idx] = ua
     c = np.einsum("nm,nmi->ni", u, P)
     S = np.einsum("nmi,nm,nmj->nij", P, u, P) - np.einsum("ni,nj->nij", c, c)
     A = np.linalg.inv(S) / d

@@ -136,7 +136,9 @@ class ObstacleDetection:
         Boundary vertices (stage 7).
     obstacles : tuple of Obstacle
     timings : dict
-        Seconds per stage (keys of :data:`STAGES`).
+        Wall-clock seconds per stage (keys of :data:`STAGES`).
+    cpu_timings : dict
+        CPU seconds per stage (``time.process_time``: all threads of the process), same keys.
     """
 
     points: NDArray[np.float64]
@@ -153,6 +155,7 @@ class ObstacleDetection:
     boundary: NDArray[np.bool_]
     obstacles: tuple[Obstacle, ...]
     timings: dict[str, float]
+    cpu_timings: dict[str, float] = field(default_factory=dict)
 
     @property
     def counts(self) -> dict[str, int]:
@@ -165,6 +168,21 @@ class ObstacleDetection:
             -4: "shadow_behind",
         }
         return {name: int(np.count_nonzero(self.triangle_labels == k)) for k, name in names.items()}
+
+
+class _Clock:
+    """Wall and CPU time per stage: ``lap(name)`` charges the time since the last lap."""
+
+    def __init__(self) -> None:
+        self.wall = {s: 0.0 for s in STAGES}
+        self.cpu = {s: 0.0 for s in STAGES}
+        self._w, self._c = time.perf_counter(), time.process_time()
+
+    def lap(self, stage: str) -> None:
+        w, c = time.perf_counter(), time.process_time()
+        self.wall[stage] += w - self._w
+        self.cpu[stage] += c - self._c
+        self._w, self._c = w, c
 
 
 def _check_grid(points: ArrayLike, source: str) -> NDArray[np.float64]:
@@ -227,11 +245,10 @@ def detect_obstacles_grid(
         If the grid has the wrong shape or no valid point at all.
     """
     settings = settings or ObstacleSettings()
-    t = {s: 0.0 for s in STAGES}
-    t0 = time.perf_counter()
+    clock = _Clock()
     P = _check_grid(points, source)
     origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
-    valid = np.all(np.isfinite(P), axis=-1)
+    valid = np.isfinite(P[..., 0]) & np.isfinite(P[..., 1]) & np.isfinite(P[..., 2])
     if not valid.any():
         raise InputError(
             "has no valid point (all NaN / no return)",
@@ -247,8 +264,7 @@ def detect_obstacles_grid(
     )
     wrap = bool(wrap and P.shape[0] > 2)
     n_az, n_el = valid.shape
-    t1 = time.perf_counter()
-    t["points"] += t1 - t0
+    clock.lap("points")
 
     # stages 2-4: mesh, normals, characteristic parameters H_s and validity codes C_d
     mesh = build_mesh(
@@ -261,8 +277,7 @@ def detect_obstacles_grid(
         jump_range_ratio=settings.jump_range_ratio,
         steep_cos=math.cos(settings.c1_rad),
     )
-    t2 = time.perf_counter()
-    t["mesh"] = t2 - t1
+    clock.lap("mesh")
 
     # stage 5: production rules P1-P5 -> classes
     robust = None
@@ -278,8 +293,7 @@ def detect_obstacles_grid(
             jump_range_ratio=settings.jump_range_ratio,
         )
     labels, _rules = classify(mesh, settings, wrap=wrap, robust_cells=robust)
-    t3 = time.perf_counter()
-    t["classes"] = t3 - t2
+    clock.lap("classes")
 
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
     obs_lab, n = label_components(labels == OBSTACLE, wrap)
@@ -311,8 +325,7 @@ def detect_obstacles_grid(
         )
     owner = assign_shadows(labels, obs_lab, wrap)
     tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
-    t4 = time.perf_counter()
-    t["split"] = t4 - t3
+    clock.lap("split")
 
     # stage 7: boundary vertices, per-vertex classes
     vid, boundary = boundary_vertices(obs_lab, n_az, n_el, wrap)
@@ -328,15 +341,14 @@ def detect_obstacles_grid(
             cell_m=settings.ground_cell_m,
             reference=main & (vlab == GROUND),
         )
-    t5 = time.perf_counter()
-    t["boundaries"] = t5 - t4
+    clock.lap("boundaries")
 
     # stage 8: the 2D map - bounding shapes of every obstacle
     obstacles = _build_obstacles(
         P, mesh.triangles, labels, obs_lab, owner, vid, boundary, n, settings
     )
-    t["map"] = time.perf_counter() - t5
-    log.debug("obstacle detection: %d obstacles, timings %s", len(obstacles), t)
+    clock.lap("map")
+    log.debug("obstacle detection: %d obstacles, timings %s", len(obstacles), clock.wall)
     return ObstacleDetection(
         points=P,
         valid=valid,
@@ -351,7 +363,8 @@ def detect_obstacles_grid(
         vertex_obstacle=vid,
         boundary=boundary,
         obstacles=tuple(obstacles),
-        timings=t,
+        timings=clock.wall,
+        cpu_timings=clock.cpu,
     )
 
 
@@ -393,15 +406,16 @@ def _lift_over_adjacent_ground(
     to them (+inf for a label with no ground neighbour)."""
     from navkit.obstacles.segment import _pairs
 
-    tri_index = np.arange(lab.size, dtype=np.int64).reshape(lab.shape)
-    a, b = _pairs(lab, tri_index, wrap)
-    zf = z.ravel().astype(np.float64)
-    keep = (a > 0) & (labels.ravel()[b] == GROUND) & np.isfinite(zf[b])
+    z_ground = np.where(labels == GROUND, z, np.nan)  # NaN: not a ground neighbour
+    # only the pairs that start on a labelled triangle
+    a, zb = _pairs(lab, z_ground, wrap, lab > 0)
+    keep = np.isfinite(zb)
     cnt_g = np.bincount(a[keep], minlength=n + 1)[1:]
-    sum_g = np.bincount(a[keep], weights=zf[b[keep]], minlength=n + 1)[1:]
-    sel = lab.ravel() > 0
-    cnt = np.bincount(lab.ravel()[sel], minlength=n + 1)[1:]
-    sm = np.bincount(lab.ravel()[sel], weights=zf[sel], minlength=n + 1)[1:]
+    sum_g = np.bincount(a[keep], weights=zb[keep].astype(np.float64), minlength=n + 1)[1:]
+    sel = np.flatnonzero(lab.ravel())
+    ids = lab.ravel()[sel]
+    cnt = np.bincount(ids, minlength=n + 1)[1:]
+    sm = np.bincount(ids, weights=z.ravel()[sel].astype(np.float64), minlength=n + 1)[1:]
     with np.errstate(invalid="ignore", divide="ignore"):
         lift = sm / np.maximum(cnt, 1) - sum_g / cnt_g
     return np.where(cnt_g > 0, lift, np.inf)
@@ -508,16 +522,17 @@ def detect_obstacles(
         raise InputError(
             f"got {type(scan).__name__}", field="scan", expected="a navkit.sensors.RangeScan"
         )
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     az, el = scan.azimuth, scan.elevation
     P = scan.points("body")
     ia = np.argsort(az, kind="stable")
     ie = np.argsort(el, kind="stable")
     P = P[ia][:, ie]
     origin = scan.T_body_sensor[:3, 3]
-    t_points = time.perf_counter() - t0
+    t_points, c_points = time.perf_counter() - t0, time.process_time() - c0
     res = detect_obstacles_grid(P, origin, settings, azimuth=az[ia], source="scan")
     res.timings["points"] += t_points
+    res.cpu_timings["points"] += c_points
     return res
 
 
@@ -545,11 +560,12 @@ def detect_obstacles_in_grid(
     """
     mounting = mounting or Mounting()
     settings = settings or ObstacleSettings()
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     P = mounting.to_body(grid.points)
     if settings.wrap_azimuth is None:
         settings = replace(settings, wrap_azimuth=grid.wraps)
-    t_points = time.perf_counter() - t0
+    t_points, c_points = time.perf_counter() - t0, time.process_time() - c0
     res = detect_obstacles_grid(P, mounting.T_body_sensor[:3, 3], settings, source=source)
     res.timings["points"] += t_points
+    res.cpu_timings["points"] += c_points
     return res

@@ -106,11 +106,15 @@ def _rings_by_order(az: NDArray[np.float64]) -> tuple[NDArray[np.int64], float] 
     if len(az) < 100:
         return None
     d = np.diff(az)
-    d = (d + np.pi) % (2 * np.pi) - np.pi
+    # wrap into [-pi, pi) (|d| < 2 pi since the angles are in (-pi, pi]): two masked updates,
+    # cheaper than a float modulo over every point
+    d[d >= np.pi] -= 2 * np.pi
+    d[d < -np.pi] += 2 * np.pi
     step = float(np.median(np.abs(d)))
     if step <= 0:
         return None
-    direction = 1.0 if np.median(d) > 0 else -1.0
+    # the sweep's direction: the sign of the median step = whether most steps are positive
+    direction = 1.0 if 2 * np.count_nonzero(d > 0) > len(d) else -1.0
     # a sweep: small steps (at least 64 points per turn), nearly all in one direction
     forward = np.mean(direction * d > -0.5 * step)
     if step > 2 * np.pi / 64 or forward < 0.9:
@@ -199,8 +203,11 @@ def cloud_to_grid(
     """
     P = _as_cloud(points, source)
     N = len(P)
-    ok = np.all(np.isfinite(P), axis=1) & np.any(P != 0.0, axis=1)
-    idx = np.flatnonzero(ok)
+    x0, y0, z0 = P[:, 0], P[:, 1], P[:, 2]
+    # column by column: reductions along a length-3 axis are slow in NumPy
+    ok = np.isfinite(x0) & np.isfinite(y0) & np.isfinite(z0) & ((x0 != 0) | (y0 != 0) | (z0 != 0))
+    all_ok = bool(ok.all())
+    idx = np.arange(N) if all_ok else np.flatnonzero(ok)
     if idx.size < 4:
         raise InputError(
             f"has {idx.size} valid points",
@@ -208,7 +215,7 @@ def cloud_to_grid(
             field="points",
             expected="at least 4 points that are not NaN or (0, 0, 0)",
         )
-    Q = P[idx]
+    Q = P if all_ok else P[idx]
     rh = np.hypot(Q[:, 0], Q[:, 1])
     az = np.arctan2(Q[:, 1], Q[:, 0])
     if ring_method not in ("auto", "order", "elevation"):
@@ -266,18 +273,20 @@ def cloud_to_grid(
     )  # in (-1/2, 1/2]
     i = np.floor(x - phase + 0.5).astype(np.int64) % n_columns
     cell = i * n_el + j
-    # the nearest point of each cell represents it (sorting only the cells hit more than once)
+    # the nearest point of each cell represents it: scatter every point's index, then let points
+    # nearer than their cell's current winner overwrite it until none is (a few rounds: as many
+    # as the largest number of points in one cell) - no sort
+    r = np.sqrt(rh * rh + Q[:, 2] * Q[:, 2])
+    win = np.full(n_columns * n_el, -1, dtype=np.intp)
+    win[cell] = np.arange(len(cell))
+    while True:
+        better = np.flatnonzero(r < r[win[cell]])
+        if better.size == 0:
+            break
+        win[cell[better]] = better
     grid = np.full((n_columns * n_el, 3), np.nan)
-    hits = np.bincount(cell, minlength=n_columns * n_el)
-    multi = hits[cell] > 1
-    single = ~multi
-    grid[cell[single]] = Q[single]
-    if multi.any():
-        cm, qm = cell[multi], Q[multi]
-        rm = np.sqrt(qm[:, 0] ** 2 + qm[:, 1] ** 2 + qm[:, 2] ** 2)
-        o = np.lexsort((rm, cm))
-        first = np.r_[True, cm[o][1:] != cm[o][:-1]]
-        grid[cm[o][first]] = qm[o][first]
+    filled = np.flatnonzero(win >= 0)
+    grid[filled] = Q[win[filled]]
     cell_of_point = np.full(N, -1, dtype=np.int64)
     cell_of_point[idx] = cell
     azimuth = -np.pi + (np.arange(n_columns) + phase) * 2 * np.pi / n_columns

@@ -230,6 +230,19 @@ def smooth_normals(
     return out
 
 
+def _nanmedian_rows(a: NDArray[Any]) -> NDArray[Any]:
+    """``np.nanmedian(a, axis=0)`` for a 2-D array by one sort along axis 0 (NaNs sort last);
+    NumPy's version goes through masked arrays for short axes. All-NaN columns give NaN."""
+    s = np.sort(a, axis=0)
+    cnt = np.count_nonzero(~np.isnan(a), axis=0)
+    cols = np.arange(a.shape[1])
+    lo = s[np.maximum((cnt - 1) // 2, 0), cols]
+    hi = s[np.maximum(cnt // 2, 0) - (cnt == 0), cols]
+    with np.errstate(invalid="ignore"):
+        out = (lo + hi) / 2
+    return np.where(cnt > 0, out, np.nan)
+
+
 def robust_cell_normals(
     points: NDArray[np.float64],
     valid: NDArray[np.bool_],
@@ -273,7 +286,7 @@ def robust_cell_normals(
         # elevation spacing per column from the medians of the horizontal range over the rows
         # (robust to range noise, which inflates the spacing measured between single points)
         cols = valid[::4].any(axis=0)
-        rh_col = np.nanmedian(np.where(valid, rh, np.nan)[::4][:, cols], axis=0)
+        rh_col = _nanmedian_rows(np.where(valid[::4], rh[::4], np.nan)[:, cols])
         rh_col = (
             np.interp(np.arange(n_el), np.flatnonzero(cols), rh_col)
             if rh_col.size

@@ -91,14 +91,19 @@ def classify(
     side_shadow = ok & ~p2 & ~p3 & ~p4
     shadow = shadow_behind | side_shadow
 
-    nrm = mesh.normal
-    if robust_cells is not None:
-        # the cell's robust normal for both of its triangles; the own normal where it has none
-        rc = np.repeat(robust_cells, 2, axis=1)
-        nrm = np.where(np.isfinite(rc[..., 2:3]), rc, nrm)
     if settings.normal_support > 0:
-        nrm = smooth_normals(nrm, ok & ~jump, settings.normal_support, wrap)
-    nz = nrm[..., 2]
+        nrm = mesh.normal
+        if robust_cells is not None:
+            # the cell's robust normal for both of its triangles; the own normal where it has none
+            rc = np.repeat(robust_cells, 2, axis=1)
+            nrm = np.where(np.isfinite(rc[..., 2:3]), rc, nrm)
+        nz = smooth_normals(nrm, ok & ~jump, settings.normal_support, wrap)[..., 2]
+    elif robust_cells is not None:
+        # only the vertical component matters for P1: the same choice on z alone
+        rcz = np.repeat(robust_cells[..., 2], 2, axis=1)
+        nz = np.where(np.isfinite(rcz), rcz, mesh.normal[..., 2])
+    else:
+        nz = mesh.normal[..., 2]
     nz = np.where(jump, mesh.normal[..., 2], nz)
     with np.errstate(invalid="ignore"):
         p1 = ok & ~shadow & (nz < math.cos(settings.c1_rad))
@@ -107,7 +112,7 @@ def classify(
     # runs are broken by shadows and unreliable triangles; the key subtracts a per-run offset so
     # that np.minimum.accumulate restarts at each break.
     breaker = ~ok | shadow
-    seg = np.cumsum(breaker, axis=1, dtype=np.float64)
+    seg = np.cumsum(breaker, axis=1, dtype=np.int32).astype(np.float64)  # exact small integers
     val = np.where(p1, mesh.z_min, _HUGE)
     val = np.where(breaker, _HUGE, val)
     base = np.minimum.accumulate(val - seg * _SEG, axis=1) + seg * _SEG

@@ -28,20 +28,45 @@ MESH_STRUCTURE = np.array([[0, 0, 1], [1, 1, 1], [1, 0, 0]], dtype=bool)
 _OFFSETS = ((0, 1), (0, -1), (1, -1), (-1, 1))
 
 
-def _pairs(a: NDArray[Any], b: NDArray[Any], wrap: bool) -> tuple[NDArray[Any], NDArray[Any]]:
-    """Values of ``a`` and ``b`` at every pair of mesh-adjacent triangles (``a`` first)."""
+def _pairs(
+    a: NDArray[Any],
+    b: NDArray[Any],
+    wrap: bool,
+    where: NDArray[np.bool_] | None = None,
+    *,
+    seam_only: bool = False,
+) -> tuple[NDArray[Any], NDArray[Any]]:
+    """Values of ``a`` and ``b`` at every pair of mesh-adjacent triangles (``a`` first).
+
+    ``where`` (same shape as ``a``) keeps only the pairs whose first triangle is selected (done per
+    offset, so the full pair list is never built); ``seam_only`` returns only the pairs across
+    the azimuth seam (those that ``ndimage.label`` on the array cannot see).
+    """
     out_a, out_b = [], []
     for di, dj in _OFFSETS:
         rs_a = slice(max(0, -di), a.shape[0] - max(0, di))
         rs_b = slice(max(0, di), a.shape[0] - max(0, -di))
         cs_a = slice(max(0, -dj), a.shape[1] - max(0, dj))
         cs_b = slice(max(0, dj), a.shape[1] - max(0, -dj))
-        out_a.append(a[rs_a, cs_a].ravel())
-        out_b.append(b[rs_b, cs_b].ravel())
+        if not seam_only:
+            if where is None:
+                out_a.append(a[rs_a, cs_a].ravel())
+                out_b.append(b[rs_b, cs_b].ravel())
+            else:
+                w = where[rs_a, cs_a]
+                out_a.append(a[rs_a, cs_a][w])
+                out_b.append(b[rs_b, cs_b][w])
         if wrap and di != 0:
             ra, rb = (-1, 0) if di == 1 else (0, -1)
-            out_a.append(a[ra, cs_a])
-            out_b.append(b[rb, cs_b])
+            if where is None:
+                out_a.append(a[ra, cs_a])
+                out_b.append(b[rb, cs_b])
+            else:
+                w = where[ra, cs_a]
+                out_a.append(a[ra, cs_a][w])
+                out_b.append(b[rb, cs_b][w])
+    if not out_a:
+        return np.empty(0, dtype=a.dtype), np.empty(0, dtype=b.dtype)
     return np.concatenate(out_a), np.concatenate(out_b)
 
 
@@ -50,7 +75,7 @@ def label_components(mask: NDArray[np.bool_], wrap: bool) -> tuple[NDArray[np.in
     lab, n = ndimage.label(mask, structure=MESH_STRUCTURE)
     lab = lab.astype(np.int32)
     if wrap and n > 1 and mask.shape[0] > 1:
-        a, b = _pairs(lab, lab, True)
+        a, b = _pairs(lab, lab, True, seam_only=True)  # inside the array: ndimage.label
         keep = (a > 0) & (b > 0) & (a != b)
         if keep.any():
             g = coo_matrix((np.ones(int(keep.sum())), (a[keep], b[keep])), shape=(n + 1, n + 1))
@@ -77,8 +102,8 @@ def assign_shadows(
     if not shadow.any() or obstacle_id.max() == 0:
         return owner
     sl, ns = label_components(shadow, wrap)
-    a, b = _pairs(sl, obstacle_id, wrap)
-    keep = (a > 0) & (b > 0)
+    a, b = _pairs(sl, obstacle_id, wrap, sl > 0)
+    keep = b > 0
     if not keep.any():
         return owner
     nobs = int(obstacle_id.max()) + 1
@@ -220,7 +245,8 @@ def merge_close_components(
     n_az, n_el = points.shape[:2]
     vid, boundary = boundary_vertices(obstacle_id, n_az, n_el, wrap)
     vflat = vid.ravel()
-    P = points.reshape(-1, 3)
+    # one contiguous array per coordinate: gathers of single values, no (K, 3) row reductions
+    X, Y, Z = (np.ascontiguousarray(points[..., k]).ravel() for k in range(3))
     # a gap to another obstacle starts at a boundary vertex: only those are sources
     src = np.flatnonzero(boundary.ravel())
     si, sj = np.divmod(src, n_el)
@@ -232,7 +258,8 @@ def merge_close_components(
             ti, tj = si + di, sj + dj
             ok = (tj >= 0) & (tj < n_el)
             if wrap:
-                ti = ti % n_az
+                # 0 <= di: one subtraction wraps unless the gap spans the whole grid
+                ti = np.where(ti >= n_az, ti - n_az, ti) if gap_cells < n_az else ti % n_az
             else:
                 ok &= ti < n_az
             s_ok = src[ok]
@@ -241,7 +268,9 @@ def merge_close_components(
             cand = (vb > 0) & (va != vb)
             if not cand.any():
                 continue
-            d = np.linalg.norm(P[s_ok[cand]] - P[t[cand]], axis=-1)
+            sc, tc = s_ok[cand], t[cand]
+            dx, dy, dz = X[sc] - X[tc], Y[sc] - Y[tc], Z[sc] - Z[tc]
+            d = np.sqrt(dx * dx + dy * dy + dz * dz)
             close = d < distance_m
             a_all.append(va[cand][close])
             b_all.append(vb[cand][close])
