@@ -8,15 +8,15 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, settings
 
+from navkit import datasets
+from navkit.errors import DataNotFoundError
+
 # Hypothesis' per-example deadline measures wall time, which on a loaded 2-core CI machine says
 # nothing about correctness: speed lives in the benchmarks. Examples stay deterministic per run.
 settings.register_profile(
     "navkit", deadline=None, suppress_health_check=[HealthCheck.too_slow], derandomize=True
 )
 settings.load_profile("navkit")
-
-from navkit import datasets
-from navkit.errors import DataNotFoundError
 
 
 @pytest.fixture

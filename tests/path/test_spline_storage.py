@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from navkit.errors import DataNotFoundError, FormatError
-from navkit.path import ApproximatorSettings, PathSpline, approximate
 from navkit.io.pathjson import read_path_json, write_path_json
+from navkit.path import ApproximatorSettings, PathSpline, approximate
 
 
 @pytest.fixture

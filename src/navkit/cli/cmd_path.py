@@ -141,8 +141,8 @@ def record(
     """Record a trajectory point by point as a cubic spline over arc length (mode 1)."""
     with cli_errors():
         from navkit.errors import InputError
-        from navkit.path import ApproximatorSettings, approximate
         from navkit.io.pathjson import write_path_json
+        from navkit.path import ApproximatorSettings, approximate
         from navkit.viz.path import plot_record
 
         _check_out(out)
@@ -219,8 +219,8 @@ def return_(
 
         from navkit.errors import ConfigError
         from navkit.io.atomic import write_json
-        from navkit.path.control import ReturnSettings
         from navkit.io.pathjson import read_path_json
+        from navkit.path.control import ReturnSettings
         from navkit.sensors import VisualOdometryNoise
         from navkit.sim.return_sim import simulate_returns
         from navkit.viz.path import plot_returns

@@ -10,6 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
 from navkit.geometry import se3_from_rt
+from navkit.geometry.linalg import rows_dot, rows_matmul, rows_norm
 from navkit.sensors import (
     PinholeCamera,
     RangeScan,
@@ -18,7 +19,6 @@ from navkit.sensors import (
     StereoRig,
     grid_directions,
 )
-from navkit.geometry.linalg import rows_dot, rows_matmul, rows_norm
 from navkit.sim.scanners import RangeNoise, SpinningLidar, TiltingScanner
 from navkit.sim.scene import RayHits, Scene
 
