@@ -156,3 +156,18 @@ def test_wall_area_and_outline_match_the_view(pairs):
 
     assert polygon_area(wall.outline) == pytest.approx(width * height, rel=0.06)
     assert wall.area >= width * height  # the raster never loses covered area
+
+
+def test_boundary_refinement_recovers_the_pixels_of_each_plane(pairs):
+    """Recall at pixel level: the pixels that truly see a plane are labelled with it, also in
+    the patches that straddle a crease or a plane's edge (the vectorised boundary pass). Only
+    the pixels within ~one noise band of the other plane at a crease, and mixed pixels, can be
+    lost: about one pixel row per crease (~1-2 % of a 10^4-pixel plane; measured 98.3-99.9 %)."""
+    p = pairs[3]
+    res = extract_planes_organized(p.f1.frame.points(), ES)
+    hit = p.f1.hit_index.ravel()
+    for seg in res.segments:
+        h = hit[seg.inliers]
+        k = np.bincount(h[h >= 0]).argmax()
+        truth = np.flatnonzero(hit == k)
+        assert np.isin(truth, seg.inliers).mean() > 0.97

@@ -82,3 +82,75 @@ def test_slambook_relative_pose(data_path, use_prior):
     # and Kinect depth bias; the bound records the current quality, not a target
     assert np.degrees(rotation_angle(E[:3, :3])) < 5.0
     assert np.linalg.norm(E[:3, 3]) < 0.3
+
+
+def test_slambook_one_plane_pair_is_not_a_silent_guess(data_path):
+    """Frames 1 -> 2 (25 deg, 41 cm): only the low-contrast carpet is common. Either solved to
+    the reference's accuracy or a MotionFailure naming the texture's DoF - never the former
+    silent 41 cm / 10.5 deg answer."""
+    from navkit.io.rgbd import read_simple_rgbd
+
+    root = data_path("rgbd/slambook-ch5")
+    seq = read_simple_rgbd(
+        root, {"fx": 518.0, "fy": 519.0, "cx": 325.5, "cy": 253.5, "depth_scale": 1000.0}
+    )
+    P = np.loadtxt(root / "pose.txt")
+    Tw = [se3_from_xyz_quat(p[:3], p[3:]) for p in P]
+    truth = se3_inverse(Tw[0]) @ Tw[1]
+    est = estimate_motion(observe_rgbd(seq.frame(0)), observe_rgbd(seq.frame(1)))
+    if isinstance(est, MotionEstimate):
+        E = se3_inverse(truth) @ est.T
+        # reference poses from a SLAM run: a few cm / ~1 deg; 10 cm / 3 deg = "solved"
+        assert np.linalg.norm(E[:3, 3]) < 0.10 and np.degrees(rotation_angle(E[:3, :3])) < 3.0
+    else:
+        assert est.case in (1, 2) and len(est.free_dof) >= 1
+        assert set(est.free_dof) <= {"lambda", "mu", "eta"}
+
+
+def test_depth_check_accepts_reference_motions(data_path):
+    """Under the reference poses the off-plane points agree with the other frame (measured
+    0.12-0.16 violation: Kinect noise, edges, reference error), below the 0.35 limit; the
+    identity (no motion) is rejected on every pair."""
+    from navkit.io.rgbd import read_simple_rgbd
+    from navkit.planes.motion import MotionSettings, depth_consistency
+
+    root = data_path("rgbd/slambook-ch5")
+    seq = read_simple_rgbd(
+        root, {"fx": 518.0, "fy": 519.0, "cx": 325.5, "cy": 253.5, "depth_scale": 1000.0}
+    )
+    P = np.loadtxt(root / "pose.txt")
+    Tw = [se3_from_xyz_quat(p[:3], p[3:]) for p in P]
+    obs = [observe_rgbd(seq.frame(k)) for k in range(3)]
+    limit = MotionSettings().max_depth_violation
+    for a, b in [(0, 1), (1, 2), (0, 2)]:
+        ok = depth_consistency(obs[a], obs[b], se3_inverse(Tw[a]) @ Tw[b])
+        assert ok.tested > 10_000 and ok.violation < limit
+        assert depth_consistency(obs[a], obs[b], np.eye(4)).violation > limit
+
+
+def test_slambook_one_plane_texture_step_stays_in_the_coarse_basin(data_path):
+    """With the depth check switched off, the 1-plane texture solution of frames 1 -> 2 is near
+    the reference: the coarse stage's best candidate is 2 cm / 0.1 deg from it, and the bounded
+    fine stage no longer slides into the basin 40 cm / 11 deg away (measured now: 13 cm, 1.3 deg).
+    Bound: the floor normal itself differs by 1.2 deg between the frames under the reference
+    poses (Kinect / reference error) - at 3-5 m that is 6-10 cm - plus a few cm of reference
+    error: 20 cm / 3 deg."""
+    from navkit.io.rgbd import read_simple_rgbd
+    from navkit.planes.motion import MotionSettings
+
+    root = data_path("rgbd/slambook-ch5")
+    seq = read_simple_rgbd(
+        root, {"fx": 518.0, "fy": 519.0, "cx": 325.5, "cy": 253.5, "depth_scale": 1000.0}
+    )
+    P = np.loadtxt(root / "pose.txt")
+    Tw = [se3_from_xyz_quat(p[:3], p[3:]) for p in P]
+    truth = se3_inverse(Tw[0]) @ Tw[1]
+    est = estimate_motion(
+        observe_rgbd(seq.frame(0)),
+        observe_rgbd(seq.frame(1)),
+        settings=MotionSettings(max_depth_violation=1.0),
+    )
+    assert isinstance(est, MotionEstimate) and est.case == 1
+    E = se3_inverse(truth) @ est.T
+    assert np.linalg.norm(E[:3, 3]) < 0.20
+    assert np.degrees(rotation_angle(E[:3, :3])) < 3.0

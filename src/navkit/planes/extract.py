@@ -131,6 +131,30 @@ def _segment(
     return PlaneSegment(plane=plane, inliers=idx.astype(np.int64), outline=outline, area=area)
 
 
+def _segment_from_moments(
+    idx: NDArray[np.int64],
+    P_flat: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    rho: float,
+    centroid: NDArray[np.float64],
+    rms: float,
+    outline_cell: float,
+) -> PlaneSegment:
+    """Package inliers as a segment whose TLS plane came from their summed moments."""
+    n, r = canonical_plane(normal, float(rho))
+    plane = Plane(normal=n, rho=r, centroid=centroid, rms=float(rms), count=len(idx))
+    origin, axes = plane_frame(plane)
+    step = max(1, len(idx) // 40_000)  # outlines from at most ~40k points (dense grids)
+    sub = idx[::step]
+    x, y, z = (P_flat[sub, k] for k in range(3))  # 1D gathers, no (N, 3) temporaries
+    uv = np.empty((len(sub), 2))
+    for k in range(2):
+        a = axes[k]
+        uv[:, k] = x * a[0] + y * a[1] + z * a[2] - float(a @ origin)
+    outline, area = outline_from_points(uv, outline_cell)
+    return PlaneSegment(plane=plane, inliers=idx.astype(np.int64), outline=outline, area=area)
+
+
 def extract_planes_organized(
     points: ArrayLike, settings: ExtractionSettings | None = None
 ) -> ExtractionResult:
@@ -168,7 +192,7 @@ def extract_planes_organized(
     vc = valid[: hc * c, : wc * c]
     # 1. patch moments: block sums of 1, x, y, z, xx, xy, xz, yy, yz, zz - one contiguous 2D
     #    image per quantity, rows of a patch summed first, then columns (exact in float64)
-    gx, gy, gz = (np.where(vc, Pc[..., k], 0.0) for k in range(3))
+    gx, gy, gz = np.where(vc, np.moveaxis(Pc, 2, 0), 0.0)  # one pass, contiguous planes
 
     def block_sum(a: NDArray[np.float64]) -> NDArray[np.float64]:
         return a.reshape(hc, c, wc * c).sum(axis=1).reshape(hc, wc, c).sum(axis=2).ravel()
@@ -255,11 +279,9 @@ def extract_planes_organized(
     #    bordering them join the plane when close enough to it
     #    (every pixel of a region's patches is tested against its plane in one pass; the pixels
     #    of the patches bordering a region are also tested against it, the closest plane wins)
-    P_flat = P.reshape(-1, 3)
     cellmap = comp.reshape(hc, wc)
     lab_c = labels[: hc * c, : wc * c].reshape(hc, c, wc, c)
     vcb = vc.reshape(hc, c, wc, c)
-    blocks = Pc.reshape(hc, c, wc, c, 3).transpose(0, 2, 1, 3, 4)  # views: (hc, wc, c, c, 3)
     vblocks = vcb.transpose(0, 2, 1, 3)
     # interior: every pixel against its own region's plane, in one pass
     k_cell = np.maximum(cellmap, 0)
@@ -271,41 +293,81 @@ def extract_planes_organized(
     lab_c[...] = np.where(ok4, cellmap[:, None, :, None], -1)
     d_in = d4.transpose(0, 2, 1, 3)  # (hc, wc, c, c) views for the ring step
     ok_in = ok4.transpose(0, 2, 1, 3)
-    best: dict[int, NDArray[np.float64]] = {}
-    ring_lab: dict[int, NDArray[np.int64]] = {}
-    for k in range(n_reg):
-        ring = ndimage.binary_dilation(cellmap == k, structure=np.ones((3, 3), bool)) & (
-            cellmap != k
-        )
-        cells = np.flatnonzero(ring.ravel())
-        if len(cells) == 0:
-            continue
-        ci, cj = np.divmod(cells, wc)
-        pts = blocks[ci, cj]  # gathers only the ring's patches
+    # ring: every (bordering patch, region) pair at once; per pixel the closest plane wins
+    # among the patch's own region (interior pass above) and the regions it borders
+    # (patch, region) pairs: the regions among a patch's 8 neighbours other than its own
+    padded = np.pad(cellmap, 1, constant_values=-1)
+    nb = np.stack(
+        [
+            padded[1 + di : 1 + di + hc, 1 + dj : 1 + dj + wc]
+            for di in (-1, 0, 1)
+            for dj in (-1, 0, 1)
+        ]
+    ).reshape(9, -1)
+    own_l = cellmap.ravel()
+    pair_ok = (nb >= 0) & (nb != own_l[None, :])
+    cell_idx = np.broadcast_to(np.arange(hc * wc), nb.shape)[pair_ok]
+    pair_key = np.unique(cell_idx * (n_reg + 1) + nb[pair_ok])  # sorted by cell, then region
+    rc_, rk_ = np.divmod(pair_key, n_reg + 1)  # patch, bordering region
+    if len(rc_):
+        U, first, per = np.unique(rc_, return_index=True, return_counts=True)
+        slot = np.arange(len(rc_)) - np.repeat(first, per) + 1  # 0 = the patch's own region
+        gpos = np.repeat(np.arange(len(U)), per)
+        ci, cj = np.divmod(rc_, wc)
+        # gathers of the ring patches only, per coordinate (contiguous (hc, c, wc, c) images)
+        xr, yr, zr, rr = (a.transpose(0, 2, 1, 3)[ci, cj] for a in (xb, yb, zb, r4))
         with np.errstate(invalid="ignore"):
-            dist = np.abs(rows_matmul(pts, rn[k][:, None])[..., 0] - rd[k])
-            z = np.linalg.norm(pts, axis=3)
+            dist = np.abs(
+                xr * rn[rk_, 0, None, None]
+                + yr * rn[rk_, 1, None, None]
+                + zr * rn[rk_, 2, None, None]
+                - rd[rk_, None, None]
+            )
+            z = rr
             ok = vblocks[ci, cj] & (dist < s.inlier_factor * s.noise(z))
-        for cell, okc, dc in zip(cells, ok, dist, strict=True):
-            i, j = divmod(int(cell), wc)
-            b = best.setdefault(int(cell), np.where(ok_in[i, j], d_in[i, j], np.inf))
-            lab = ring_lab.setdefault(int(cell), np.where(ok_in[i, j], cellmap[i, j], -1))
-            take = okc & (dc < b)
-            b[take] = dc[take]
-            lab[take] = k
-    for key, lab in ring_lab.items():
-        ci0, cj0 = divmod(key, wc)
-        lab_c[ci0, :, cj0, :] = lab
+        ui, uj = np.divmod(U, wc)
+        Dd = np.full((len(U), int(per.max()) + 1, c, c), np.inf, np.float32)  # ranking only
+        Kd = np.full(Dd.shape, -1, np.int32)
+        oin = ok_in[ui, uj]
+        Dd[:, 0] = np.where(oin, d_in[ui, uj], np.inf)
+        Kd[:, 0] = np.where(oin, cellmap[ui, uj][:, None, None], -1)
+        Dd[gpos, slot] = np.where(ok, dist, np.inf)
+        Kd[gpos, slot] = np.where(ok, rk_[:, None, None], -1)
+        win = np.argmin(Dd, axis=1)[:, None]
+        lab_c[ui, :, uj, :] = np.take_along_axis(Kd, win, axis=1)[:, 0]
     labels[: hc * c, : wc * c] = lab_c.reshape(hc * c, wc * c)
+    # 6. final planes from the moments of their pixels (one weighted bincount per quantity),
+    #    inlier lists by one stable sort of the labels (radix sort for 16-bit labels)
     flat = labels.ravel()
-    order = np.argsort(flat, kind="stable")
-    bounds = np.searchsorted(flat[order], np.arange(n_reg + 1))
+    lc = lab_c.reshape(hc * c, wc * c).ravel()
+    sel = lc >= 0
+    g = lc[sel]
+    fx, fy, fz = (a.ravel()[sel] for a in (gx, gy, gz))
+    n_pix = np.bincount(g, minlength=n_reg).astype(np.float64)
+    fS = np.stack([np.bincount(g, a, minlength=n_reg) for a in (fx, fy, fz)], axis=1)
+    fQ = np.stack(
+        [
+            np.bincount(g, (fx, fy, fz)[a] * (fx, fy, fz)[b], minlength=n_reg)
+            for a, b in zip(*iu, strict=True)
+        ],
+        axis=1,
+    )
+    fSS = np.empty((n_reg, 3, 3))
+    fSS[:, iu[0], iu[1]] = fQ
+    fSS[:, iu[1], iu[0]] = fQ
+    fn, frho, frms, fmean, _ = _planes_from_moments(n_pix, fS, fSS)
+    P_flat = P.reshape(-1, 3)
+    key = flat.astype(np.int16) if n_reg < 32000 else flat
+    order = np.argsort(key, kind="stable")
+    bounds = np.searchsorted(key[order], np.arange(n_reg + 1))
     segs = []
     for k in range(n_reg):
-        idx = order[bounds[k] : bounds[k + 1]]
-        if len(idx) < s.min_cells * c * c * s.min_fill:
+        if n_pix[k] < s.min_cells * c * c * s.min_fill:
             continue
-        segs.append(_segment(idx, P_flat, s.outline_cell))
+        idx = order[bounds[k] : bounds[k + 1]]
+        segs.append(
+            _segment_from_moments(idx, P_flat, fn[k], frho[k], fmean[k], frms[k], s.outline_cell)
+        )
     segs.sort(key=lambda sg: -sg.plane.count)
     labels = -np.ones(H * W, np.int64)
     for k, sg in enumerate(segs):

@@ -48,17 +48,22 @@ def outline_from_points(uv: NDArray[np.float64], cell: float) -> tuple[NDArray[n
     area : float
         Area covered by the rasterised points (all components), m^2.
     """
-    uv = uv[np.all(np.isfinite(uv), axis=1)]
-    if len(uv) < 3:
+    # per-coordinate contiguous rows: reductions over axis 0 of an (N, 2) array are slow
+    uT = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).T)
+    fin = np.isfinite(uT[0]) & np.isfinite(uT[1])
+    if not fin.all():
+        uT = uT[:, fin]
+    if uT.shape[1] < 3:
         return np.zeros((0, 2)), 0.0
-    lo = uv.min(axis=0) - cell
-    ij = np.floor((uv - lo) / cell).astype(np.int64)
-    shape = ij.max(axis=0) + 2
+    lo = np.array([uT[0].min(), uT[1].min()]) - cell
+    ii = ((uT[0] - lo[0]) * (1.0 / cell)).astype(np.int64)  # >= 0: floor == truncation
+    jj = ((uT[1] - lo[1]) * (1.0 / cell)).astype(np.int64)
+    shape = np.array([ii.max(), jj.max()]) + 2
     if shape[0] * shape[1] > 4_000_000:  # keep the raster bounded for huge, sparse planes
         scale = np.sqrt(shape[0] * shape[1] / 4_000_000)
-        return outline_from_points(uv, cell * scale)
+        return outline_from_points(uT.T, cell * scale)
     grid = np.zeros((int(shape[1]), int(shape[0])), np.uint8)
-    grid[ij[:, 1], ij[:, 0]] = 1
+    grid[jj, ii] = 1
     grid = np.asarray(cv2.morphologyEx(grid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)), np.uint8)
     area = float(grid.sum()) * cell * cell
     contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)

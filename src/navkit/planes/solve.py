@@ -86,7 +86,7 @@ class SolverSettings:
     parallel_deg: float = 15.0
     nu: float = 0.01
     max_shift: float = 0.6
-    max_turn_deg: float = 30.0
+    max_turn_deg: float = 90.0
     min_overlap: int = 400
     min_contrast: float = 0.01
     min_distinctness: float = 0.1
@@ -415,6 +415,7 @@ def solve_one_plane(
         texture_D=res.D,
         texture_overlap=float(res.overlap),
         texture_peak=res.peak,
+        texture_distinctness=res.distinctness,
         lambda_rad=res.lam,
         mu_m=float(res.t[0]),
         eta_m=float(res.t[1]),
