@@ -2,8 +2,8 @@
 
 Paper 4 returns the robot on its VO; the mission corrects the VO with plane-based motion
 (paper 2) and room-map fixes (paper 3). Both runs use the same world, route, seed and sensor
-noise; the "VO only" run has every correction weight set to zero (the planes and the room are
-still computed, so the time figures are comparable). Figures per seed: final distance of the
+noise; the "VO only" run has every correction weight set to zero (plane motions, room fixes,
+obstacle-map fixes; the planes and the room are still computed, so the time figures compare). Figures per seed: final distance of the
 robot to the operator, mean position error, obstacle recall and phantoms, wall time.
 
 ``python -m benchmarks mission`` (``--quick``: seed 0 only).
@@ -39,6 +39,7 @@ def _run(seed: int, corrected: bool) -> tuple[dict, float]:
             weight_xy_texture=0.0,
             weight_heading_texture=0.0,
             fix_weight=0.0,
+            map_fix_weight=0.0,
         )
         s = dataclasses.replace(s, fusion=f)
     t0 = time.perf_counter()

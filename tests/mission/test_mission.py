@@ -54,6 +54,16 @@ def test_robot_ends_within_the_stated_radius_of_the_operator(mission_run):
     assert r["final_distance_to_operator_m"] <= 0.16 * r["outbound_length_m"]
 
 
+def test_obstacle_map_fixes_on_the_way_back(mission_run):
+    f = mission_metrics(mission_run)["obstacle_map_fixes"]
+    assert f["used"] >= 5
+    # a fix places the robot in the outbound obstacle map, whose frame is the estimate of the
+    # way out; against the truth it is off by about that estimate's error (<= its max) plus the
+    # matcher's resolution (one 0.1 m cell)
+    pe = mission_metrics(mission_run)["pose_error"]["corrected_outbound_m"]["max"]
+    assert f["fix_error_mean_m"] <= pe + 0.1
+
+
 def test_path_memory_holds_the_estimate_within_its_tolerance(mission_run):
     path = mission_run.path
     summary = mission_run.path_summary

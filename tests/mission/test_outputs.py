@@ -69,8 +69,8 @@ def test_report_and_metrics_exist_and_agree(outputs):
 
 def test_trajectories_and_maps_read_back(outputs, mission_run):
     from navkit.io.maps import read_occupancy_grid
+    from navkit.io.pathjson import read_path_json
     from navkit.io.trajectory import read_tum
-    from navkit.path.storage import read_path_json
 
     out, _, _ = outputs
     tr = read_tum(out / "truth.tum")

@@ -1,12 +1,15 @@
-"""``navkit demo``: render the built-in world with every simulated sensor, pictures with the truth.
+"""``navkit demo``: the built-in mission - out, map, localize, come back - and its report.
 
-Interim body (the mission replaces it later): load the world, place the robot at the world's start
-pose, render a 64-beam spinning lidar, a SICK-like tilting scanner, an RGB-D camera and a
-rectified stereo pair, and write one picture per sensor plus ``settings.toml`` / ``summary.json``.
+Runs :func:`navkit.mission.run_demo` (the "yard" world by default: the robot is driven out
+through the yard into the room, the link is lost, it returns along its stored path) and writes
+``report.html``, ``metrics.json``, the trajectories, the stored path and the obstacle map into
+``--out``; then, as before, one picture per simulated sensor at the start pose (lidar, tilting
+scanner, RGB-D, stereo, the world) with the truth. ``settings.toml`` / ``summary.json`` hold both.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import time
 from dataclasses import dataclass, field
@@ -125,7 +128,7 @@ def write_scan_cloud(path: Path, sim: Any) -> None:
     write_pcd(path, cloud, compressed=True)
 
 
-def run_demo(out: Path, settings: DemoSettings) -> dict[str, Any]:
+def render_sensor_pictures(out: Path, settings: DemoSettings) -> dict[str, Any]:
     """Render every sensor, write the pictures into ``out``, return the summary figures.
 
     The rendered data also go to ``out/data/`` in standard formats: ``lidar.pcd`` and
@@ -272,7 +275,9 @@ def run_demo(out: Path, settings: DemoSettings) -> dict[str, Any]:
 def register(app: typer.Typer) -> None:
     @app.command("demo")
     def demo(
-        out: Path = typer.Option(Path("out/demo"), "--out", help="Folder for the pictures."),
+        out: Path = typer.Option(
+            Path("out/demo"), "--out", help="Folder for the report, metrics, maps and pictures."
+        ),
         seed: int = typer.Option(0, "--seed", help="Seed of the sensor noise."),
         scene: str = typer.Option(
             "yard", "--scene", help="Built-in world name or a scene TOML file."
@@ -282,7 +287,8 @@ def register(app: typer.Typer) -> None:
         heading_deg: float = typer.Option(None, "--heading-deg", help="Robot heading (deg)."),  # type: ignore[assignment]
         small: bool = typer.Option(False, "--small", help="Low resolution (fast; for tests)."),
     ) -> None:
-        """Render the built-in world with every simulated sensor and save pictures with the truth."""
+        """Run the built-in mission (out, map, localize, come back) into report.html, metrics.json
+        and maps; then save a picture of every simulated sensor at the start, with the truth."""
         with cli_errors():
             import math
 
@@ -304,6 +310,24 @@ def register(app: typer.Typer) -> None:
                 start[2] if heading_deg is None else math.radians(heading_deg),
             )
             settings = DemoSettings.make(scene, seed, small, pose)
-            summary = run_demo(out, settings)
-            write_run_files(out, settings, summary)
-            typer.echo(f"wrote {len(summary['outputs'])} pictures to {out}")
+            # the mission (report.html, metrics.json, maps) ...
+            import json
+
+            from navkit.mission import run_demo
+            from navkit.mission.settings import tomllib  # tomllib / tomli by Python version
+
+            metrics = run_demo(out, seed, progress, scene=scene, small=small, start=pose)
+            mission_summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+            # ... and the sensor pictures at the start pose
+            summary = render_sensor_pictures(out, settings)
+            summary["mission"] = {
+                k: v for k, v in mission_summary.items() if k not in ("navkit_version", "argv")
+            }
+
+            mission_settings = tomllib.loads((out / "settings.toml").read_text(encoding="utf-8"))
+            write_run_files(out, {**dataclasses.asdict(settings), **mission_settings}, summary)
+            r = metrics["return"]
+            typer.echo(
+                f"mission {r['outcome']}: {r['final_distance_to_operator_m']:.2f} m from the operator; "
+                f"report in {out / 'report.html'}; {len(summary['outputs'])} sensor pictures"
+            )

@@ -31,7 +31,7 @@ def register(app: typer.Typer) -> None:
         mission: Path = typer.Option(
             None,
             "--mission",  # type: ignore[assignment]
-            help="Mission TOML ([route] waypoints, room; [settings] overrides). "
+            help="Mission TOML (a route table: waypoints, room; a settings table: overrides). "
             "Default: <scene>.mission.toml beside the scene.",
         ),
         seed: int = typer.Option(None, "--seed", help="Seed of every random draw."),  # type: ignore[assignment]

@@ -53,8 +53,8 @@ def write_outputs(lg: Any, metrics: dict[str, Any], out: Path) -> list[str]:
     """Write the report, the metrics and the maps of a run into ``out``; returns the file names."""
     from navkit.io.atomic import write_json
     from navkit.io.maps import write_occupancy_grid
+    from navkit.io.pathjson import write_path_json
     from navkit.io.trajectory import Trajectory, write_tum
-    from navkit.path.storage import write_path_json
     from navkit.viz.mission import write_report
 
     files = []
@@ -81,6 +81,29 @@ def write_outputs(lg: Any, metrics: dict[str, Any], out: Path) -> list[str]:
     return files
 
 
+def _write_run_files(out: Path, settings: dict[str, Any], summary: dict[str, Any]) -> None:
+    """``settings.toml`` and ``summary.json`` as every navkit command writes them (the mission may
+    not import the CLI layer, so this mirrors ``navkit.cli.common.write_run_files``)."""
+    import sys
+
+    import tomli_w
+
+    from navkit import __version__
+    from navkit.io.atomic import to_jsonable, write_json, write_text
+
+    def clean(value: Any) -> Any:  # TOML has no null
+        if isinstance(value, dict):
+            return {k: clean(v) for k, v in value.items() if v is not None}
+        if isinstance(value, list):
+            return [clean(v) for v in value if v is not None]
+        return value
+
+    write_text(out / "settings.toml", tomli_w.dumps(clean(to_jsonable(settings))))
+    write_json(
+        out / "summary.json", {"navkit_version": __version__, "argv": sys.argv[1:], **summary}
+    )
+
+
 def run_to_dir(
     scene: Any,
     route: Route,
@@ -89,11 +112,15 @@ def run_to_dir(
     progress: ProgressFn | None = None,
 ) -> dict[str, Any]:
     """Run the mission and write every output into ``out``; returns the metrics."""
-    from navkit.cli.common import write_run_files
+    from navkit.errors import InputError
     from navkit.mission.metrics import mission_metrics
     from navkit.mission.run import run_mission
 
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError(
+            "exists and is not a folder", source=out, field="--out", expected="an output folder"
+        )
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     lg = run_mission(scene, route, settings, progress)
@@ -107,15 +134,7 @@ def run_to_dir(
     write_json(out / "metrics.json", metrics)
     summary = summary_of(metrics)
     summary["outputs"] = [*files, "settings.toml", "summary.json"]
-    write_run_files(
-        out,
-        {
-            "mission": dataclasses.asdict(settings),
-            "route": dataclasses.asdict(route),
-            "scene": scene.name,
-        },
-        summary,
-    )
+    _write_run_files(out, {"mission": settings, "route": route, "scene": scene.name}, summary)
     return metrics
 
 
@@ -126,17 +145,21 @@ def run_scene_file(
     mission: str | Path | None = None,
     seed: int | None = None,
     small: bool = False,
+    start: tuple[float, float, float] | None = None,
     progress: ProgressFn | None = None,
 ) -> dict[str, Any]:
     """``navkit mission run``: a scene TOML (or built-in name) and its mission file.
 
     The mission file is ``mission`` if given, else ``<scene stem>.mission.toml`` beside the
-    scene, else the built-in ``mission_<name>.toml`` for a built-in scene.
+    scene, else the built-in ``mission_<name>.toml`` for a built-in scene. ``start`` overrides
+    the scene's start pose ``(x, y, theta)`` (the operator's place; the route is joined to it).
     """
     from navkit.errors import DataNotFoundError
-    from navkit.sim import load_scene
+    from navkit.sim import Scene, load_scene
 
     scene = load_scene(scene_path)
+    if start is not None:
+        scene = Scene(scene.primitives, name=scene.name, start=start)
     if mission is None:
         p = Path(scene_path)
         beside = p.with_name(f"{p.stem}.mission.toml")
@@ -158,6 +181,27 @@ def run_scene_file(
     return run_to_dir(scene, route, settings, out, progress)
 
 
-def run_demo(out: str | Path, seed: int = 0, progress: ProgressFn | None = None) -> dict[str, Any]:
-    """The built-in mission (``navkit demo``): the yard world and its route, into ``out``."""
-    return run_scene_file("yard", out, seed=seed, progress=progress)
+def run_demo(
+    out: str | Path,
+    seed: int = 0,
+    progress: ProgressFn | None = None,
+    *,
+    scene: str | Path = "yard",
+    small: bool = False,
+    start: tuple[float, float, float] | None = None,
+) -> dict[str, Any]:
+    """The built-in mission (``navkit demo``): the yard world and its route, into ``out``.
+
+    Parameters
+    ----------
+    out : path
+        Output folder (``report.html``, ``metrics.json``, ...; see the module docstring).
+    seed : int
+        Seed of every random draw.
+    progress : callable, optional
+        ``progress(iterable, description, total)``, e.g. :func:`navkit.cli.common.progress`.
+    scene, small, start
+        Another built-in or TOML world (with its mission file), reduced resolutions, another
+        start pose.
+    """
+    return run_scene_file(scene, out, seed=seed, small=small, start=start, progress=progress)

@@ -22,7 +22,11 @@ CAPABILITY_NAMES = {
     "planes_extract": "planes: extraction per RGB-D frame (paper 2)",
     "planes_motion": "planes: motion between frames (paper 2)",
     "room_map": "room map: build on the first visit (paper 3)",
-    "localize": "localization: correlation fix (paper 3)",
+    "localize": "localization: correlation fix in the room map (paper 3)",
+    "localize_obstacle_map": "localization: correlation fix in the obstacle map (return)",
+    "obstacle_map_field": "localization: obstacle map -> likelihood field (once)",
+    "sim_stereo": "simulator: render a stereo pair",
+    "stereo_points": "stereo: disparity -> wall points (paper 3)",
     "path_record": "path memory: add one point (paper 4)",
     "path_finish": "path memory: finish",
     "return_control": "return: one control cycle (paper 4)",
@@ -172,6 +176,21 @@ def _plane_metrics(lg: MissionLog) -> dict[str, Any]:
     return out
 
 
+def _fix_stats(fixes: list[Any]) -> dict[str, Any]:
+    used = [f for f in fixes if f.used]
+    out: dict[str, Any] = {
+        "attempted": len(fixes),
+        "ok": sum(f.ok for f in fixes),
+        "used": len(used),
+    }
+    if used:
+        fe = np.array([np.hypot(*(f.pose[:2] - f.truth[:2])) for f in used])
+        be = np.array([np.hypot(*(f.estimate_before[:2] - f.truth[:2])) for f in used])
+        out["fix_error_mean_m"] = float(fe.mean())
+        out["estimate_error_before_fix_mean_m"] = float(be.mean())
+    return out
+
+
 def mission_metrics(lg: MissionLog) -> dict[str, Any]:
     """All figures of a run (what ``metrics.json`` holds).
 
@@ -234,6 +253,7 @@ def mission_metrics(lg: MissionLog) -> dict[str, Any]:
         "obstacles": obst,
         "planes": _plane_metrics(lg),
         "room": _room_metrics(lg),
+        "obstacle_map_fixes": _fix_stats(lg.map_fixes),
         "path": lg.path_summary,
         "return": ret,
         "timing": timing_table(lg),

@@ -136,6 +136,7 @@ class MissionLog:
     room_map: Any = None
     room_views: list[tuple[NDArray[np.float64], NDArray[np.float64]]] = field(default_factory=list)
     fixes: list[Fix2D] = field(default_factory=list)
+    map_fixes: list[Fix2D] = field(default_factory=list)
     link_lost_index: int = -1
     outcome: str = ""
     blocked: dict[str, Any] | None = None
@@ -254,7 +255,8 @@ def run_mission(
     MissionLog
         Trajectories, maps, fixes, timings; score it with :func:`navkit.mission.metrics.mission_metrics`.
     """
-    from navkit.localization.matcher import MatcherSettings
+    from navkit.localization.field import LikelihoodField
+    from navkit.localization.matcher import MatcherSettings, match_scan
     from navkit.obstacles.detector import detect_obstacles
     from navkit.path import ApproximatorSettings, OnlineApproximator
     from navkit.path.control import ReturnController, ReturnSettings
@@ -344,6 +346,10 @@ def run_mission(
     )
     cam_prev: Any = None  # (observation, vo pose, truth pose)
     blocked_since: float | None = None
+    return_field: Any = None  # the outbound obstacle map as a likelihood field
+    map_matcher = MatcherSettings(
+        linear_window=F.map_fix_gate_m, angular_window_deg=8.0, point_spacing=0.2
+    )
     n_stops = 0  # times the return stopped for an obstacle ahead (a stop may clear again)
     n_max = int(np.ceil(2 * s.max_time / dt))
 
@@ -385,6 +391,13 @@ def run_mission(
                     ),
                 )
                 grid.freeze_known(s.block.known_margin)
+                if F.map_fix_weight > 0:
+                    rows_o, cols_o = np.nonzero(grid.occupied)
+                    if len(rows_o) >= 10:
+                        with _Timer(T_, "obstacle_map_field"):
+                            return_field = LikelihoodField.from_points(
+                                grid.centres(rows_o, cols_o), resolution=M.resolution, sigma=0.15
+                            )
                 if route.block_at is not None:
                     scene, lg.dropped_obstacle = _drop_obstacle(
                         scene, route, np.array(rows_truth)[:, :2]
@@ -439,13 +452,44 @@ def run_mission(
             lg.seen_primitives.update(np.unique(sim.hit_index[in_range]).tolist())
             with _Timer(T_, "obstacles_detect"):
                 det = detect_obstacles(sim.scan)
+            P = det.points
+            r2 = P[..., 0] ** 2 + P[..., 1] ** 2
+            near = det.valid & (r2 <= M.max_range**2)
+            # obstacle vertices only (vertex_obstacle also marks the shadows an obstacle owns)
+            is_obst = (det.vertex_labels == OBSTACLE_LABEL) & (det.vertex_obstacle > 0)
+            # on the way back: correlation fix of this scan's obstacles in the outbound obstacle
+            # map (paper 3's matching, on the map the stored path was recorded with)
+            if phase == RETURN and return_field is not None and k % every_cam == 0:
+                body = P[near & is_obst][:, :2]
+                if len(body) >= F.map_fix_min_points:
+                    with (
+                        _Timer(T_, "localize_obstacle_map"),
+                        np.errstate(invalid="ignore", divide="ignore"),
+                    ):
+                        fx = match_scan(return_field, body, prior=est, settings=map_matcher)
+                    d = float(np.hypot(*(fx.pose[:2] - est[:2])))
+                    used = bool(fx.ok and d <= F.map_fix_gate_m)
+                    reason = (
+                        fx.ambiguity.reason
+                        if fx.ambiguity.ambiguous
+                        else ("" if fx.ok else "low score")
+                    )
+                    lg.map_fixes.append(
+                        Fix2D(
+                            t,
+                            fx.pose.copy(),
+                            float(fx.score),
+                            bool(fx.ok),
+                            used,
+                            est.copy(),
+                            truth.copy(),
+                            reason,
+                        )
+                    )
+                    if used:
+                        est = blend(est, fx.pose, F.map_fix_weight)
             with _Timer(T_, "obstacles_fuse"):
-                P = det.points
-                r2 = P[..., 0] ** 2 + P[..., 1] ** 2
-                near = det.valid & (r2 <= M.max_range**2)
                 Tm = _se2(est)
-                # obstacle vertices only (vertex_obstacle also marks the shadows an obstacle owns)
-                is_obst = (det.vertex_labels == OBSTACLE_LABEL) & (det.vertex_obstacle > 0)
                 obst = P[near & is_obst][:, :2] @ Tm[:2, :2].T + Tm[:2, 2]
                 seen = P[near][:, :2] @ Tm[:2, :2].T + Tm[:2, 2]
                 grid.add_scan(obst, seen)
@@ -691,12 +735,16 @@ class _Room:
 def _build_room_field(lg: MissionLog) -> Any:
     """Room wall map from the first-visit views (paper 3) and its likelihood field."""
     from navkit.localization.field import LikelihoodField
-    from navkit.localization.mapping import build_map, sample_segments
+    from navkit.localization.mapping import MapSettings, build_map, sample_segments
 
     views = [v for v, _ in lg.room_views]
     poses = np.array([p for _, p in lg.room_views]).reshape(-1, 3)
     try:
-        wm = build_map(views, poses, ordered=False)
+        # stereo wall points scatter by their depth error (the floor-plan front end keeps it
+        # below 0.25 m): walls closer than that are one wall
+        wm = build_map(
+            views, poses, MapSettings(merge_distance=0.25, merge_angle_deg=8.0), ordered=False
+        )
     except Exception as exc:
         log.warning("room map failed: %s", exc)
         wm = None

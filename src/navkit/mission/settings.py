@@ -168,6 +168,15 @@ class FusionSettings:
         Wall points farther than this from the robot are not used, metres.
     fragment_views : int
         Views (this one and the previous ones) that make the fragment localized in the room map.
+    map_fix_weight : float
+        On the way back, each lidar scan's obstacles (at the camera rate) are located by
+        correlation in the obstacle map of the way out - the map the stored path was recorded
+        with - and the fix pulls the estimate with this weight (0 = off). This keeps the
+        estimate consistent with the path, which is what the return needs.
+    map_fix_gate_m : float
+        Search window and gate of those fixes, metres.
+    map_fix_min_points : int
+        Fewest obstacle points a scan needs for such a fix.
     """
 
     weight_xy_geometry: float = 0.9
@@ -184,6 +193,9 @@ class FusionSettings:
     wall_z_max: float = 2.8
     room_view_range: float = 6.0
     fragment_views: int = 4
+    map_fix_weight: float = 0.5
+    map_fix_gate_m: float = 0.8
+    map_fix_min_points: int = 40
 
 
 @dataclass(frozen=True)

@@ -199,6 +199,16 @@ def figure_errors(lg: Any) -> Any:
             ax.plot(
                 used, np.interp(used, lg.time, b), "|", color="tab:blue", ms=8, label="room fix"
             )
+        mused = [f.time for f in lg.map_fixes if f.used]
+        if mused:
+            ax.plot(
+                mused,
+                np.interp(mused, lg.time, b),
+                "|",
+                color="tab:orange",
+                ms=8,
+                label="obstacle-map fix",
+            )
     axes[0].legend(fontsize=8)
     axes[1].set_xlabel("time (s)")
     axes[0].set_title("pose error against the truth")
@@ -355,6 +365,11 @@ def write_report(lg: Any, metrics: dict[str, Any], path: str | Path) -> Path:
             f"{rm.get('fixes_used', 0)} / {rm.get('fixes_attempted', 0)}",
         ),
         ("fix error vs truth: mean", "m", _fmt(rm.get("fix_error_mean_m", float("nan")))),
+        (
+            "return: obstacle-map fixes used / attempted",
+            "",
+            f"{m['obstacle_map_fixes']['used']} / {m['obstacle_map_fixes']['attempted']}",
+        ),
         (
             "stored path: segments / length / max deviation",
             "m",
