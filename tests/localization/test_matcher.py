@@ -124,3 +124,29 @@ def test_bad_input():
         MatcherSettings(peak_tolerance=2.0)
     with pytest.raises(ConfigError, match="sigma"):
         LikelihoodField.from_points(np.zeros((3, 2)), 0.05, -1.0)
+
+
+def test_one_pass_collects_every_leaf_near_the_optimum(rng):
+    """``keep < 1`` keeps exactly the leaves within that ratio of the optimum (the runner-up
+    search of a global fix); checked against brute force on the same discretised score."""
+    from navkit.localization.matcher import _Search, _thin
+
+    fld = LikelihoodField.from_points(sample_walls(RECT, 0.01), 0.05, 0.1)
+    pose = np.array([2.0, 2.5, 0.4])
+    pts = _thin(scan_points(RECT, pose, n=181, noise=0.005, rng=rng), 0.1)
+    # the pose and its half-turn twin about the room centre (4, 3) are both in the window
+    thetas = np.array([0.4, 0.4 + np.pi])
+    base = np.array([1.5, 1.5])
+    n = 101  # 5 m x 5 m at 5 cm: covers (2, 2.5) and the twin (6, 3.5)
+    search = _Search(fld, pts, thetas, base, n)
+    best, exact = search.run(levels=7, lower=-1.0, cap=10**9, keep=0.9)
+    assert exact
+    K, IX, IY = np.meshgrid(np.arange(len(thetas)), np.arange(n), np.arange(n), indexing="ij")
+    brute = search.scores(0, K.ravel(), IX.ravel(), IY.ravel())
+    assert best[0] == pytest.approx(brute.max(), abs=1e-12)
+    ls, lk, lx, ly = (np.concatenate(a) for a in zip(*search.leaves, strict=True))
+    found = {(int(a), int(b), int(c)) for a, b, c in zip(lk, lx, ly, strict=True)}
+    want = np.flatnonzero(brute > 0.9 * brute.max())
+    assert {(int(K.ravel()[j]), int(IX.ravel()[j]), int(IY.ravel()[j])) for j in want} <= found
+    # both peaks of the symmetric room survive: one leaf near each heading
+    assert set(lk[ls > 0.9 * best[0]].tolist()) == {0, 1}

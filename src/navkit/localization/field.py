@@ -41,6 +41,12 @@ class LikelihoodField:
         ``pyramid[h][i, j] = max(values[i:i+2^h, j:j+2^h])`` (zero outside the grid).
     points : (N, 2) array or None
         The occupied points the field was built from (for :meth:`exact`).
+
+    Notes
+    -----
+    Derived data is cached on the instance (the KD-tree of :meth:`exact`, the fields of
+    :meth:`coarsen`, the global matcher's padded ``uint8`` pyramids): build one field per map,
+    reuse it for every fix, and do not modify ``values`` in place.
     """
 
     values: NDArray[np.float32]
@@ -143,18 +149,24 @@ class LikelihoodField:
         """A field ``factor`` times coarser: each cell the maximum of the ``factor x factor`` block."""
         if factor <= 1:
             return self
+        # Cached per factor on the (frozen) field: a global search coarsens the same map for
+        # every scan, and pooling a building-sized grid costs more than the search itself.
+        cache: dict[int, LikelihoodField] = self.__dict__.setdefault("_coarse", {})
+        if factor in cache:
+            return cache[factor]
         H, W = self.shape
         Hc, Wc = -(-H // factor), -(-W // factor)
         pad = np.zeros((Hc * factor, Wc * factor), dtype=np.float32)
         pad[:H, :W] = self.values
         values = pad.reshape(Hc, factor, Wc, factor).max(axis=(1, 3))
-        return LikelihoodField(
+        cache[factor] = LikelihoodField(
             values=values,
             resolution=self.resolution * factor,
             origin=self.origin.copy(),
             sigma=self.sigma,
             pyramid=_pyramid(values, len(self.pyramid)),
         )
+        return cache[factor]
 
     @property
     def shape(self) -> tuple[int, int]:

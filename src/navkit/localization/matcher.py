@@ -10,12 +10,18 @@ real-time correlative scan matching (Olson, ICRA 2009) makes it fast and exact:
    (rotation step such that the farthest point moves at most one cell);
 3. a max-pooled resolution pyramid: a node covering ``2^h x 2^h`` translations gets an upper
    bound of their scores with one look-up per point;
-4. branch-and-bound: nodes are expanded level by level (vectorised over all surviving nodes),
-   pruned when their bound cannot beat the best exact score found (greedy descents seed it);
-5. sub-cell refinement of the winner on the bilinear field (L-BFGS-B, analytic gradient);
+4. branch-and-bound: nodes are expanded depth-first in batches sorted by bound (each batch's
+   scores one vectorised gather over all its candidates, ``uint8`` look-up tables), pruned when
+   their bound cannot beat the best exact score found (greedy descents seed it);
+5. sub-cell refinement of the winner on the exact field (quadratic fits, see ``_refine``);
 6. an ambiguity report: the shape of the score around the peak (a straight featureless wall is
    flat along itself: its direction and extent are reported) and the best *distinct* second
-   peak (a second branch-and-bound with the winner's neighbourhood excluded).
+   peak (the same pass prunes at ``second_peak_ratio`` times the best and keeps every leaf
+   above it; the runner-up is the best of those outside the winner's neighbourhood).
+
+Speed (global search): the coarse field and its padded ``uint8`` pyramid are computed once per
+map and cached on the field object; the scan is thinned to one point per coarse cell for the
+coarse stage; the fine angular step is used only in the +-2-step fine stage.
 
 The score of a pose is the mean field value at the scan's points, in ``[0, 1]``.
 """
@@ -197,9 +203,16 @@ def _thin(points: NDArray[np.float64], spacing: float) -> NDArray[np.float64]:
     return points[np.sort(first)]
 
 
-def _rot(theta: NDArray[np.float64]) -> NDArray[np.float64]:
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+_GLOBAL_TOP_BLOCKS = 8  # global search: top pyramid level ~ map / 8 per axis (see match_scan)
+_REGION_BLOCK = 64  # cells; cached search regions are grown to multiples of this
+_CACHE_ENTRIES = 2  # cached region pyramids per coarse field
+
+
+def _rotate(theta: NDArray[np.float64], pts: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Points ``(N, 2)`` rotated by each angle ``(K,)``: ``(K, N, 2)`` (broadcast, no einsum)."""
+    c, s = np.cos(theta)[:, None], np.sin(theta)[:, None]
+    x, y = pts[None, :, 0], pts[None, :, 1]
+    return np.stack([c * x - s * y, s * x + c * y], axis=-1)
 
 
 @dataclass
@@ -226,12 +239,16 @@ class _Search:
         thetas: NDArray[np.float64],
         base: NDArray[np.float64],
         n_cells: int,
+        *,
+        cache: list[tuple[NDArray[np.int64], NDArray[np.int64], list[NDArray[np.uint8]]]]
+        | None = None,
+        levels: int | None = None,
     ) -> None:
         self.f = fld
         self.thetas = thetas
         self.base = base
         self.n = n_cells
-        Q = np.einsum("kij,nj->kni", _rot(thetas), pts)  # (K, N, 2)
+        Q = _rotate(thetas, pts)  # (K, N, 2)
         off = np.floor((Q + base - fld.origin) / fld.resolution).astype(np.int64)  # (K, N, 2)
         H, W = fld.shape
         # The region of cells any look-up of this search can touch: [lo, hi) per axis. The
@@ -240,6 +257,20 @@ class _Search:
         # gather, grid[F[k] + iy * Wr + ix].
         lo = off.min(axis=(0, 1))
         hi = off.max(axis=(0, 1)) + n_cells
+        levels = len(fld.pyramid) if levels is None else levels
+        flat = None
+        if cache is not None:
+            # A region that a cached pyramid covers is reused (global searches of one map);
+            # otherwise the region is grown to multiples of _REGION_BLOCK cells so that the
+            # next scans (similar reach) hit the cache. Zero padding beyond the map changes no
+            # look-up value, so the scores are those of the tight region.
+            for c_lo, c_hi, c_flat in cache:
+                if len(c_flat) == levels and np.all(c_lo <= lo) and np.all(hi <= c_hi):
+                    lo, hi, flat = c_lo, c_hi, c_flat
+                    break
+            else:
+                lo = np.floor_divide(lo, _REGION_BLOCK) * _REGION_BLOCK
+                hi = -np.floor_divide(-hi, _REGION_BLOCK) * _REGION_BLOCK
         Wr, Hr = int(hi[0] - lo[0]), int(hi[1] - lo[1])
         if Wr * Hr > 60_000_000:
             raise ConfigError(
@@ -247,17 +278,20 @@ class _Search:
                 field="linear_window",
                 expected="a smaller search window, a coarser map or shorter ranges",
             )
-        region = np.zeros((Hr, Wr), dtype=np.float32)
-        x0, y0 = max(0, int(lo[0])), max(0, int(lo[1]))
-        x1, y1 = min(W, int(hi[0])), min(H, int(hi[1]))
-        if x1 > x0 and y1 > y0:
-            region[y0 - lo[1] : y1 - lo[1], x0 - lo[0] : x1 - lo[0]] = fld.values[y0:y1, x0:x1]
+        if flat is None:
+            region = np.zeros((Hr, Wr), dtype=np.float32)
+            x0, y0 = max(0, int(lo[0])), max(0, int(lo[1]))
+            x1, y1 = min(W, int(hi[0])), min(H, int(hi[1]))
+            if x1 > x0 and y1 > y0:
+                region[y0 - lo[1] : y1 - lo[1], x0 - lo[0] : x1 - lo[0]] = fld.values[y0:y1, x0:x1]
+            # uint8 copies of the pooled levels (rounded up, so level bounds stay upper bounds).
+            flat = [np.ceil(g * 255.0).astype(np.uint8).ravel() for g in _pyramid(region, levels)]
+            if cache is not None:
+                cache.insert(0, (lo, hi, flat))
+                del cache[_CACHE_ENTRIES:]
         self.Wp = Wr
         self.F = ((off[..., 1] - lo[1]) * Wr + off[..., 0] - lo[0]).astype(np.int64)  # (K, N)
-        # uint8 copies of the pooled levels (rounded up, so level bounds stay upper bounds).
-        self.flat = [
-            np.ceil(g * 255.0).astype(np.uint8).ravel() for g in _pyramid(region, len(fld.pyramid))
-        ]
+        self.flat = flat
         self.evaluated = 0
         self.batch = 512
 
@@ -272,9 +306,10 @@ class _Search:
         shift = iy.astype(np.int64) * self.Wp + ix
         for a in range(0, len(k), step):
             b = min(len(k), a + step)
-            out[a:b] = grid[self.F[k[a:b]] + shift[a:b, None]].sum(axis=1, dtype=np.int64) / (
-                255.0 * N
-            )
+            # one gather over all candidates of the chunk: score[c] = sum_i L[F[k_c, i] + shift_c]
+            idx = self.F[k[a:b]]
+            idx += shift[a:b, None]
+            out[a:b] = np.take(grid, idx).sum(axis=1, dtype=np.uint32) / (255.0 * N)
         self.evaluated += len(k)
         return out
 
@@ -290,11 +325,19 @@ class _Search:
         ok = (ix4 < self.n) & (iy4 < self.n)
         return k4[ok], ix4[ok], iy4[ok], np.repeat(np.arange(len(k)), 4)[ok]
 
-    def run(self, levels: int, lower: float, cap: int, exclude=None, seeds: int = 8):  # type: ignore[no-untyped-def]
+    def run(  # type: ignore[no-untyped-def]
+        self, levels: int, lower: float, cap: int, exclude=None, seeds: int = 8, keep: float = 1.0
+    ):
         """Best leaf ``(score, k, ix, iy)`` with score > ``lower`` (or None) and an exactness flag.
 
         ``exclude(k, ix, iy) -> bool mask`` removes leaves (second-peak search).
+        ``keep < 1``: nodes are pruned only when their bound is ``<= keep * best``, and every leaf
+        scoring above that is collected in ``self.leaves`` (arrays ``score, k, ix, iy``): all
+        leaves within ``keep`` of the optimum, so a runner-up search needs no second pass.
         """
+        self.leaves: list[
+            tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]
+        ] = []
         L = levels - 1
         step = 2**L
         g = np.arange(0, self.n, step)
@@ -326,6 +369,8 @@ class _Search:
             if exclude is not None:
                 bound[exclude(k, ix, iy)] = -1.0
             j = int(np.argmax(bound))
+            m0 = bound > keep * max(lower, float(bound[j]))
+            self.leaves.append((bound[m0], k[m0], ix[m0], iy[m0]))
             return (
                 (float(bound[j]), int(k[j]), int(ix[j]), int(iy[j])) if bound[j] > lower else best
             ), True
@@ -344,11 +389,11 @@ class _Search:
             order = np.argsort(-bound, kind="stable")
             k, ix, iy, bound = k[order], ix[order], iy[order], bound[order]
             for a in range(0, len(k), self.batch):
-                if bound[a] <= state.lower or state.budget <= 0:
+                if bound[a] <= keep * state.lower or state.budget <= 0:
                     return
                 sl = slice(a, a + self.batch)
-                keep = bound[sl] > state.lower
-                ck, cx, cy, _ = self._children(h, k[sl][keep], ix[sl][keep], iy[sl][keep])
+                live = bound[sl] > keep * state.lower
+                ck, cx, cy, _ = self._children(h, k[sl][live], ix[sl][live], iy[sl][live])
                 state.budget -= len(ck)
                 cb = self.scores(h - 1, ck, cx, cy)
                 if h == 1:
@@ -359,13 +404,16 @@ class _Search:
                         if cb[j] > state.lower:
                             state.lower = float(cb[j])
                             state.best = (float(cb[j]), int(ck[j]), int(cx[j]), int(cy[j]))
+                        if keep < 1.0:
+                            m = cb > keep * state.lower
+                            self.leaves.append((cb[m], ck[m], cx[m], cy[m]))
                 else:
-                    m = cb > state.lower
+                    m = cb > keep * state.lower
                     if m.any():
                         descend(h - 1, ck[m], cx[m], cy[m], cb[m])
 
-        keep = bound > lower
-        descend(L, k[keep], ix[keep], iy[keep], bound[keep])
+        top_live = bound > keep * lower
+        descend(L, k[top_live], ix[top_live], iy[top_live], bound[top_live])
         return state.best, bool(state.budget > 0)
 
 
@@ -373,7 +421,7 @@ def score_poses(fld: LikelihoodField, points: ArrayLike, poses: ArrayLike) -> ND
     """Scores ``(M,)`` (mean nearest-cell field value) of scan points ``(N, 2)`` at poses ``(M, 3)``."""
     P = as_points(points, 2)
     X = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    W = np.einsum("mij,nj->mni", _rot(X[:, 2]), P) + X[:, None, :2]
+    W = _rotate(X[:, 2], P) + X[:, None, :2]
     return fld.lookup(W).mean(axis=1).astype(np.float64)
 
 
@@ -381,7 +429,7 @@ def _exact_scores(
     fld: LikelihoodField, pts: NDArray[np.float64], poses: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     """Mean exact field values (KD-tree distances) of the scan at poses ``(M, 3)``."""
-    W = np.einsum("mij,nj->mni", _rot(poses[:, 2]), pts) + poses[:, None, :2]
+    W = _rotate(poses[:, 2], pts) + poses[:, None, :2]
     v = fld.exact(W.reshape(-1, 2))
     return v.reshape(len(poses), -1).mean(axis=1)
 
@@ -486,6 +534,7 @@ def analyse_peak(
         np.asarray(x0[2] + np.array([-step, 0.0, step]), dtype=np.float64),
         x0[:2] - n * r,
         2 * n + 1,
+        levels=1,  # exhaustive level-0 scores only: no pyramid needed
     )
     IX, IY = np.meshgrid(np.arange(2 * n + 1), np.arange(2 * n + 1), indexing="ij")
     ix, iy = IX.ravel(), IY.ravel()
@@ -561,8 +610,13 @@ def match_scan(
         n_th = int(np.ceil(2 * np.pi / step_c))
         thetas = np.asarray(-np.pi + np.arange(n_th) * (2 * np.pi / n_th), dtype=np.float64)
         step_c = 2 * np.pi / n_th
-        search = _Search(coarse, P, thetas, base, n_cells)
-        best, exact = search.run(levels, -1.0, s.max_candidates)
+        Pc = _thin(P, rc) if rc > s.point_spacing else P
+        cache = coarse.__dict__.setdefault("_search_regions", [])
+        levels_g = max(levels, int(np.ceil(np.log2(max(n_cells, 1) / _GLOBAL_TOP_BLOCKS))) + 1)
+        search = _Search(coarse, Pc, thetas, base, n_cells, cache=cache, levels=levels_g)
+        # keep = second_peak_ratio: the same pass collects every leaf within that ratio of the
+        # optimum, from which the runner-up peak is taken (no second branch-and-bound).
+        best, exact = search.run(levels_g, -1.0, s.max_candidates, keep=s.second_peak_ratio)
         assert best is not None
         coarse_best = best
         x0 = search.pose(best[1], best[2], best[3])
@@ -574,7 +628,9 @@ def match_scan(
     m = int(np.ceil(lin / r))
     n_th = int(np.ceil(ang / step))
     fine = _Search(fld, P, x0[2] + np.arange(-n_th, n_th + 1) * step, x0[:2] - m * r, 2 * m + 1)
-    best, exact_f = fine.run(levels, -1.0, s.max_candidates)
+    best, exact_f = fine.run(
+        levels, -1.0, s.max_candidates, keep=s.second_peak_ratio if search is None else 1.0
+    )
     assert best is not None  # lower = -1 < any score
     exact = exact and exact_f
     score, kb, ixb, iyb = best
@@ -601,17 +657,16 @@ def match_scan(
         near_a = np.abs(wrap_angle(sec_search.thetas[k] - th_best)) < excl_ang
         return near_t & near_a
 
-    before = sec_search.evaluated
-    second, exact2 = sec_search.run(
-        levels, s.second_peak_ratio * sb[0], s.max_candidates, exclude=exclude
-    )
-    evaluated += (
-        sec_search.evaluated
-        - before
-        + (search.evaluated if search is not None and search is not sec_search else 0)
-    )
-    if search is not None:
-        evaluated += before
+    # The runner-up: the best collected leaf (all leaves scoring > second_peak_ratio * best were
+    # kept by the search) outside the winner's neighbourhood.
+    ls, lk, lx, ly = (np.concatenate(a) for a in zip(*sec_search.leaves, strict=True))
+    cand = (ls > s.second_peak_ratio * sb[0]) & ~exclude(lk, lx, ly)
+    second: tuple[float, int, int, int] | None = None
+    if cand.any():
+        j = int(np.flatnonzero(cand)[np.argmax(ls[cand])])
+        second = (float(ls[j]), int(lk[j]), int(lx[j]), int(ly[j]))
+    exact2 = True
+    evaluated += search.evaluated if search is not None else 0
     second_score, second_pose = float("nan"), np.full(3, np.nan)
     if second is not None:
         second_score = second[0] * score / max(sb[0], 1e-12) if search is not None else second[0]
