@@ -150,3 +150,15 @@ def test_one_pass_collects_every_leaf_near_the_optimum(rng):
     assert {(int(K.ravel()[j]), int(IX.ravel()[j]), int(IY.ravel()[j])) for j in want} <= found
     # both peaks of the symmetric room survive: one leaf near each heading
     assert set(lk[ls > 0.9 * best[0]].tolist()) == {0, 1}
+
+
+def test_scan_far_from_every_wall_is_maximally_ambiguous_not_nan():
+    """A scan that touches no wall near the pose scores 0 everywhere: the peak analysis must say
+    'ambiguous over the whole window' (finite extents), not divide by zero."""
+    fld = LikelihoodField.from_points(sample_walls(RECT, 0.05), 0.05, 0.1)
+    far = np.array([[100.0, 100.0], [101.0, 100.0], [100.0, 101.0]])
+    s = MatcherSettings()
+    direction, extent, extent_minor, cov, best = analyse_peak(fld, far, [0.0, 0.0, 0.0], s)
+    assert best == 0.0
+    assert np.all(np.isfinite(cov)) and np.isfinite(extent) and np.isfinite(extent_minor)
+    assert extent_minor >= 2 * s.ambiguity_window  # every offset in the window is as good

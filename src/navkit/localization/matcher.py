@@ -544,6 +544,8 @@ def analyse_peak(
     near = best >= (1.0 - s.peak_tolerance) * top
     T = np.stack([DX.ravel()[near], DY.ravel()[near]], axis=1)
     w = best[near]
+    if w.sum() <= 0:  # the scan touches nothing in the window: every offset is equally good
+        w = np.ones_like(w)
     mu = (w[:, None] * T).sum(0) / w.sum()
     C = ((w[:, None] * (T - mu)).T @ (T - mu)) / w.sum()
     _, evecs = np.linalg.eigh(C)
