@@ -35,18 +35,24 @@ def modules(package: str) -> list[Path]:
 
 @pytest.mark.parametrize("package", CAPABILITIES)
 def test_capabilities_do_not_import_the_edge(package):
-    offenders = {str(p.relative_to(SRC)): sorted(navkit_imports(p) & set(EDGE)) for p in modules(package)}
+    offenders = {
+        str(p.relative_to(SRC)): sorted(navkit_imports(p) & set(EDGE)) for p in modules(package)
+    }
     assert {k: v for k, v in offenders.items() if v} == {}
 
 
 @pytest.mark.parametrize("package", CORE)
 def test_core_imports_no_capability(package):
     forbidden = set(CAPABILITIES) | set(EDGE)
-    offenders = {str(p.relative_to(SRC)): sorted(navkit_imports(p) & forbidden) for p in modules(package)}
+    offenders = {
+        str(p.relative_to(SRC)): sorted(navkit_imports(p) & forbidden) for p in modules(package)
+    }
     assert {k: v for k, v in offenders.items() if v} == {}
 
 
 def test_the_checker_sees_imports(tmp_path):
     f = tmp_path / "m.py"
-    f.write_text("import navkit.io.atomic\nfrom navkit.sim import Scene\nfrom navkit import errors\n")
+    f.write_text(
+        "import navkit.io.atomic\nfrom navkit.sim import Scene\nfrom navkit import errors\n"
+    )
     assert navkit_imports(f) == {"io", "sim"}

@@ -158,7 +158,7 @@ def test_scan_far_from_every_wall_is_maximally_ambiguous_not_nan():
     fld = LikelihoodField.from_points(sample_walls(RECT, 0.05), 0.05, 0.1)
     far = np.array([[100.0, 100.0], [101.0, 100.0], [100.0, 101.0]])
     s = MatcherSettings()
-    direction, extent, extent_minor, cov, best = analyse_peak(fld, far, [0.0, 0.0, 0.0], s)
+    _direction, extent, extent_minor, cov, best = analyse_peak(fld, far, [0.0, 0.0, 0.0], s)
     assert best == 0.0
     assert np.all(np.isfinite(cov)) and np.isfinite(extent) and np.isfinite(extent_minor)
     assert extent_minor >= 2 * s.ambiguity_window  # every offset in the window is as good
