@@ -28,7 +28,7 @@ import time
 from collections import defaultdict, deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -38,6 +38,9 @@ from navkit.geometry import R_BODY_FROM_OPTICAL, se3_from_rt, se3_inverse, wrap_
 from navkit.mission.driver import PurePursuit, polyline_arclength, polyline_point
 from navkit.mission.obstacle_map import ObstacleGrid
 from navkit.mission.settings import MissionSettings, Route
+
+if TYPE_CHECKING:
+    from navkit.localization.matcher import Fix
 
 __all__ = ["Fix2D", "MissionLog", "PlaneStep", "run_mission"]
 
@@ -170,6 +173,27 @@ def blend(a: NDArray[np.float64], b: NDArray[np.float64], w: float) -> NDArray[n
     out = a + w * (b - a)
     out[2] = a[2] + w * float(wrap_angle(b[2] - a[2]))
     return out
+
+
+def take_fix(
+    fx: Fix,
+    est: NDArray[np.float64],
+    truth: NDArray[np.float64],
+    t: float,
+    gate_m: float,
+    weight: float,
+    log: list[Fix2D],
+) -> NDArray[np.float64]:
+    """Log a correlation fix and blend it into the estimate when it is confident (``fx.ok``)
+    and within ``gate_m`` of the estimate; returns the (possibly corrected) estimate."""
+    used = bool(fx.ok and float(np.hypot(*(fx.pose[:2] - est[:2]))) <= gate_m)
+    reason = fx.ambiguity.reason if fx.ambiguity.ambiguous else ("" if fx.ok else "low score")
+    log.append(
+        Fix2D(
+            t, fx.pose.copy(), float(fx.score), bool(fx.ok), used, est.copy(), truth.copy(), reason
+        )
+    )
+    return blend(est, fx.pose, weight) if used else est
 
 
 def _pose3(p: NDArray[np.float64], z: float) -> NDArray[np.float64]:
@@ -462,32 +486,11 @@ def run_mission(
             if phase == RETURN and return_field is not None and k % every_cam == 0:
                 body = P[near & is_obst][:, :2]
                 if len(body) >= F.map_fix_min_points:
-                    with (
-                        _Timer(T_, "localize_obstacle_map"),
-                        np.errstate(invalid="ignore", divide="ignore"),
-                    ):
+                    with _Timer(T_, "localize_obstacle_map"):
                         fx = match_scan(return_field, body, prior=est, settings=map_matcher)
-                    d = float(np.hypot(*(fx.pose[:2] - est[:2])))
-                    used = bool(fx.ok and d <= F.map_fix_gate_m)
-                    reason = (
-                        fx.ambiguity.reason
-                        if fx.ambiguity.ambiguous
-                        else ("" if fx.ok else "low score")
+                    est = take_fix(
+                        fx, est, truth, t, F.map_fix_gate_m, F.map_fix_weight, lg.map_fixes
                     )
-                    lg.map_fixes.append(
-                        Fix2D(
-                            t,
-                            fx.pose.copy(),
-                            float(fx.score),
-                            bool(fx.ok),
-                            used,
-                            est.copy(),
-                            truth.copy(),
-                            reason,
-                        )
-                    )
-                    if used:
-                        est = blend(est, fx.pose, F.map_fix_weight)
             with _Timer(T_, "obstacles_fuse"):
                 Tm = _se2(est)
                 obst = P[near & is_obst][:, :2] @ Tm[:2, :2].T + Tm[:2, 2]
@@ -704,24 +707,9 @@ class _Room:
         )
         if len(frag) < 20:
             return est
-        with _Timer(lg.timings, "localize"), np.errstate(invalid="ignore", divide="ignore"):
+        with _Timer(lg.timings, "localize"):
             fx = match_scan(self.field, frag, prior=est, settings=self.matcher)
-        d = float(np.hypot(*(fx.pose[:2] - est[:2])))
-        used = bool(fx.ok and d <= F.fix_gate_m)
-        reason = fx.ambiguity.reason if fx.ambiguity.ambiguous else ("" if fx.ok else "low score")
-        lg.fixes.append(
-            Fix2D(
-                t,
-                fx.pose.copy(),
-                float(fx.score),
-                bool(fx.ok),
-                used,
-                est.copy(),
-                truth.copy(),
-                reason,
-            )
-        )
-        return blend(est, fx.pose, F.fix_weight) if used else est
+        return take_fix(fx, est, truth, t, F.fix_gate_m, F.fix_weight, lg.fixes)
 
     def finish(self) -> None:
         """Build the map from the views collected (once)."""
