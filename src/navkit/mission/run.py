@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.errors import ConfigError, InputError
+from navkit.errors import ConfigError, InputError, NavkitError
 from navkit.geometry import R_BODY_FROM_OPTICAL, se3_from_rt, se3_inverse, wrap_angle
 from navkit.mission.driver import PurePursuit, polyline_arclength, polyline_point
 from navkit.mission.obstacle_map import ObstacleGrid
@@ -550,7 +550,7 @@ def run_mission(
                 with _Timer(T_, "planes_motion"):
                     try:
                         mot = estimate_motion(obs0, obs, prior)
-                    except Exception as exc:
+                    except NavkitError as exc:
                         log.debug("plane motion failed: %s", exc)
                         mot = None
                 if isinstance(mot, MotionEstimate):
@@ -733,7 +733,7 @@ def _build_room_field(lg: MissionLog) -> Any:
         wm = build_map(
             views, poses, MapSettings(merge_distance=0.25, merge_angle_deg=8.0), ordered=False
         )
-    except Exception as exc:
+    except NavkitError as exc:
         log.warning("room map failed: %s", exc)
         wm = None
     lg.room_map = wm

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from navkit.errors import NavkitError
 from navkit.geometry import Plane, canonical_plane, points_in_polygon, se3_inverse
 from navkit.geometry.linalg import rows_matmul
 from navkit.planes.frame import PlaneObservation
@@ -312,7 +313,7 @@ class PlaneOdometry:
                 ref_c = R.T @ (mp.tex_ref - t)
                 try:
                     tex = obs.texture(k, axes_c, ref_c, s.map_nu)
-                except Exception as exc:  # texture is optional for the map
+                except NavkitError as exc:  # texture is optional for the map
                     log.debug("map texture of plane %d skipped: %s", k, exc)
                     continue
                 mp.add_texture(tex.image, tex.mask, tex.index0)

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from navkit.errors import NavkitError
 from navkit.geometry import Plane, matrix_to_quat, quat_to_matrix, se3_from_rt
 from navkit.planes.align import Search1D, Search2D, search_1d, search_2d
 from navkit.planes.quaternion import (
@@ -316,7 +317,7 @@ def solve_two_planes(
         try:
             e1 = tex1(k, axes1, ref1, s.nu)
             e2 = tex2(k, axes2, ref2, s.nu)
-        except Exception as exc:  # a plane without texture is skipped, the others decide
+        except NavkitError as exc:  # a plane without texture is skipped, the others decide
             log.debug("plane %d: no texture (%s)", k, exc)
             continue
         if e1.contrast() < s.min_contrast or e2.contrast() < s.min_contrast:
@@ -387,7 +388,7 @@ def solve_one_plane(
     try:
         e1 = tex1(k1, axes1, p1.rho * n1, s.nu)
         e2 = tex2(k2, axes2, p2.rho * n2, s.nu)
-    except Exception as exc:
+    except NavkitError as exc:
         return MotionFailure(1, free, f"no texture: {exc}")
     if min(e1.contrast(), e2.contrast()) < s.min_contrast:
         return MotionFailure(
