@@ -44,7 +44,7 @@ class MapOptions:
 
     resolution_m: float = 0.1
     extent_m: float | None = 40.0
-    png_shapes: tuple[str, ...] = ("A1", "A3", "A6", "MVEE")
+    png_shapes: tuple[str, ...] = ("A1", "A6")
 
 
 @dataclass(frozen=True)
@@ -385,6 +385,11 @@ def detect(
     extent: float = typer.Option(
         40.0, "--extent", help="Half-width of the maps around the sensor, m."
     ),
+    plot_shapes: str = typer.Option(
+        "A1,A6",
+        "--plot-shapes",
+        help="Shapes drawn in map.png, comma-separated (A1..A6, MEC, MVEE); all are in obstacles.json.",
+    ),
 ) -> None:
     """Detect obstacles in every input; write labels, obstacles, occupancy map, GeoJSON and PNG."""
     with cli_errors():
@@ -423,7 +428,18 @@ def detect(
             cam,  # type: ignore[arg-type]
             depth_scale,
         )
-        mopts = MapOptions(resolution_m=resolution, extent_m=extent)
+        drawn = tuple(n.strip() for n in plot_shapes.split(",") if n.strip())
+        from navkit.errors import ConfigError
+        from navkit.geometry.shapes import SHAPES
+
+        unknown = [n for n in drawn if n not in SHAPES]
+        if unknown:
+            raise ConfigError(
+                f"unknown shapes {unknown}",
+                field="--plot-shapes",
+                expected=f"names from {sorted(SHAPES)}",
+            )
+        mopts = MapOptions(resolution_m=resolution, extent_m=extent, png_shapes=drawn)
         files = expand_inputs(inputs, SUFFIXES)
         frames = []
         used: dict[str, int] = {}

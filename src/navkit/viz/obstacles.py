@@ -34,7 +34,7 @@ SHAPE_STYLE = {
 def plot_obstacle_map(
     detection: Any,
     *,
-    shapes: Sequence[str] = ("A1", "A3", "A6", "MVEE"),
+    shapes: Sequence[str] = ("A1", "A6"),
     guaranteed: bool = True,
     extent_m: float | None = None,
     ax: Any = None,
@@ -45,7 +45,7 @@ def plot_obstacle_map(
     Parameters
     ----------
     detection : ObstacleDetection
-    shapes : names of the shapes to draw (A7 in dashed red when ``guaranteed``)
+    shapes : names of the shapes to draw (their A7 versions in dashed red when ``guaranteed``)
     extent_m : half-width of the view around the sensor (m); by default the obstacles' extent
         plus 3 m, at least 10 m.
     ax : matplotlib axes, optional
@@ -77,8 +77,8 @@ def plot_obstacle_map(
                 color, ls = SHAPE_STYLE.get(name, ("#333333", "-"))
                 o = ob.shapes[name].outline(72)
                 ax.plot(*np.vstack([o, o[:1]]).T, color=color, ls=ls, lw=1.2)
-        if guaranteed:
-            for g in ob.guaranteed.values():
+        if guaranteed:  # A7: the drawn shapes over the obstacle and its shadows
+            for g in (ob.guaranteed[n] for n in shapes if n in ob.guaranteed):
                 o = g.outline(72)
                 ax.plot(*np.vstack([o, o[:1]]).T, color="#d62728", ls=(0, (2, 2)), lw=0.8)
         c = ob.polygon_xy.mean(axis=0)
