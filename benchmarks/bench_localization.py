@@ -7,7 +7,8 @@ corrected pose disturbed by a uniform error of up to 0.5 m and 10 deg (the same 
 methods), navkit ``match_scan`` vs point-to-point ICP (nearest neighbours by ``scipy.spatial.cKDTree``
 on the same map points, up to 50 iterations, correspondences beyond a shrinking gate rejected);
 (b) *global*: navkit without prior (ICP cannot). Success = within 0.3 m and 5 deg of the corrected
-pose. Figures: success %, median error, ms per fix (median).
+pose. Figures: success %, median error, CPU ms per fix (median of `time.process_time`; the peer
+is timed in the same loop on the same scan and prior).
 
 The simulated stereo rooms are in :mod:`benchmarks.bench_rooms`.
 """
@@ -87,23 +88,30 @@ def _real_logs(quick: bool) -> list[Row]:
         idx = np.linspace(0, len(lg) - 1, n_track).astype(int)
         ref = lg.poses[idx]
         prior = ref + rng.uniform(-1, 1, (len(idx), 3)) * [0.5, 0.5, np.radians(10)]
-        est_nk, est_icp, t_nk, t_icp, c_nk = [], [], [], [], []
+        est_nk, est_icp, t_nk, t_icp, c_nk, c_icp = [], [], [], [], [], []
         for k, p in zip(idx, prior, strict=True):
             pts = lg.points(int(k), 30.0)
             c0, t0 = time.process_time(), time.perf_counter()
             est_nk.append(match_scan(fld, pts, p).pose)
             t1, c1 = time.perf_counter(), time.process_time()
-            c_nk.append(c1 - c0)
             est_icp.append(icp_2d(fld.points, tree, pts, p))
-            t2 = time.perf_counter()
+            t2, c2 = time.perf_counter(), time.process_time()
+            c_nk.append(c1 - c0)
+            c_icp.append(c2 - c1)
             t_nk.append(t1 - t0)
             t_icp.append(t2 - t1)
+        # the first fix on a map builds its per-map caches (padded pyramid): reported apart,
+        # the medians are those of the 100 fixes (the first included)
+        first_ms = 1e3 * c_nk[0]
         pe_n, he_n = _err(np.array(est_nk), ref)
         pe_i, he_i = _err(np.array(est_icp), ref)
         ok_n = (pe_n <= SUCCESS_M) & (he_n <= SUCCESS_DEG)
         ok_i = (pe_i <= SUCCESS_M) & (he_i <= SUCCESS_DEG)
         gidx = idx[:: max(1, len(idx) // n_global)][:n_global]
         est_g, t_g, c_g, ok_flag = [], [], [], []
+        c0 = time.process_time()
+        match_scan(fld, lg.points(int(gidx[0]), 30.0), None)  # builds the coarse field's caches
+        first_g = 1e3 * (time.process_time() - c0)
         for k in gidx:
             c0, t0 = time.process_time(), time.perf_counter()
             fix = match_scan(fld, lg.points(int(k), 30.0), None)
@@ -139,11 +147,12 @@ def _real_logs(quick: bool) -> list[Row]:
                 "localization",
                 f"{name}: tracking ms per fix",
                 "ms",
-                1e3 * float(np.median(t_nk)),
-                1e3 * float(np.median(t_icp)),
+                1e3 * float(np.median(c_nk)),
+                1e3 * float(np.median(c_icp)),
                 "ICP point-to-point (cKDTree)",
-                time_ratio(float(np.median(t_nk)), float(np.median(t_icp))),
-                f"wall time; navkit CPU (process_time) median {1e3 * np.median(c_nk):.1f} ms",
+                time_ratio(float(np.median(c_nk)), float(np.median(c_icp))),
+                f"CPU (process_time) medians; wall {1e3 * np.median(t_nk):.1f} vs "
+                f"{1e3 * np.median(t_icp):.1f} ms; first fix {first_ms:.0f} ms (map caches)",
             ),
             Row(
                 "localization",
@@ -153,15 +162,15 @@ def _real_logs(quick: bool) -> list[Row]:
                 None,
                 "",
                 None,
-                f"{len(gidx)} scans, median {1e3 * np.median(t_g):.0f} ms per fix (CPU {1e3 * np.median(c_g):.0f} ms), false confident fixes {100 * false_fix:.0f} %",
+                f"{len(gidx)} scans, median {1e3 * np.median(t_g):.0f} ms per fix (CPU {1e3 * np.median(c_g):.0f} ms), false confident fixes {100 * false_fix:.0f} %; first global fix on the map {first_g:.0f} ms CPU (coarse field and pyramid, cached)",
             ),
         ]
         totals["nk"].append(ok_n.mean())
         totals["icp"].append(ok_i.mean())
         totals["glob"].append(ok_g.mean())
-        totals["t_nk"].append(np.median(t_nk))
-        totals["t_icp"].append(np.median(t_icp))
-        totals["t_glob"].append(np.median(t_g))
+        totals["t_nk"].append(np.median(c_nk))
+        totals["t_icp"].append(np.median(c_icp))
+        totals["t_glob"].append(np.median(c_g))
     rows.append(
         Row(
             "localization",
@@ -177,7 +186,7 @@ def _real_logs(quick: bool) -> list[Row]:
     rows.append(
         Row(
             "localization",
-            "all logs: tracking ms per fix (mean of medians)",
+            "all logs: tracking ms per fix (mean of CPU medians)",
             "ms",
             1e3 * float(np.mean(totals["t_nk"])),
             1e3 * float(np.mean(totals["t_icp"])),
@@ -195,7 +204,7 @@ def _real_logs(quick: bool) -> list[Row]:
             None,
             "",
             None,
-            f"median {1e3 * float(np.mean(totals['t_glob'])):.0f} ms per global fix",
+            f"mean of the logs' CPU medians {1e3 * float(np.mean(totals['t_glob'])):.0f} ms per global fix",
         )
     )
     return rows

@@ -104,6 +104,64 @@ def blocked_run():
     return run_mission(small_scene(), small_route(block_at=5.0), MissionSettings.small(seed=4))
 
 
+CORRIDOR_HALF_WIDTH = 1.1
+
+
+def corridor_scene() -> Scene:
+    """A 2.2 m wide corridor, closed behind the operator (at x = -1.5), open at x = 9."""
+    x0, x1, w = -1.5, 9.0, CORRIDOR_HALF_WIDTH
+
+    def tex(seed):
+        return Texture(
+            "noise", scale=0.4, seed=seed, color=(0.8, 0.75, 0.7), color2=(0.3, 0.3, 0.28)
+        )
+
+    return Scene(
+        [
+            Ground(
+                name="ground",
+                texture=Texture(
+                    "noise", scale=1.5, seed=7, color=(0.5, 0.49, 0.46), color2=(0.22, 0.22, 0.21)
+                ),
+            ),
+            Wall(
+                origin=(x0, -w, 0.0),
+                u=(x1 - x0, 0, 0),
+                v=(0, 0, 2.0),
+                name="corridor_south",
+                texture=tex(1),
+            ),
+            Wall(
+                origin=(x0, w, 0.0),
+                u=(x1 - x0, 0, 0),
+                v=(0, 0, 2.0),
+                name="corridor_north",
+                texture=tex(2),
+            ),
+            Wall(
+                origin=(x0, -w, 0.0),
+                u=(0, 2 * w, 0),
+                v=(0, 0, 2.0),
+                name="corridor_end",
+                texture=tex(3),
+            ),
+        ],
+        name="corridor",
+    )
+
+
+@pytest.fixture(scope="session")
+def closed_run():
+    """7 m out along the corridor; on the way back a wall (a 0.3 m thick box as wide as the
+    corridor and overlapping both walls) closes it 3.5 m from the operator."""
+    route = Route(
+        waypoints=((0.0, 0.0), (7.0, 0.0)),
+        block_at=3.5,
+        block_size=(0.3, 2 * CORRIDOR_HALF_WIDTH + 0.2, 1.0),
+    )
+    return run_mission(corridor_scene(), route, MissionSettings.small(seed=5))
+
+
 @pytest.fixture
 def np_rng():
     return np.random.default_rng(7)

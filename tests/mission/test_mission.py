@@ -92,25 +92,80 @@ def test_room_map_and_fixes(mission_run):
     assert rm["fix_error_max_m"] <= pose_max + mission_run.settings.fusion.fix_gate_m
 
 
-def test_blocked_return_is_detected_and_the_robot_stops(blocked_run):
-    m = mission_metrics(blocked_run)
-    r = m["return"]
-    assert r["outcome"] == "blocked"
-    b = r["blocked"]
-    assert b is not None and b["distance_ahead_m"] <= blocked_run.settings.block.lookahead
-    box = blocked_run.dropped_obstacle
-    poly = _rect(np.asarray(box.center), np.asarray(box.size), float(box.yaw))
-    # no collision: the robot's centre stayed more than half its length from the box
-    d_end = _distance_to_polygon(blocked_run.truth[-1:, :2], poly)[0]
-    assert d_end > 0.5 * blocked_run.settings.robot.length
-    # what stopped it is the dropped box: the first blocked path point lies within the corridor
-    # half-width (plus half a cell diagonal) of an obstacle cell, and that cell lies on the box
-    # up to the estimate's error at that time plus one 0.1 m cell
-    k = int(np.searchsorted(blocked_run.time, b["time"]))
-    est_err = float(np.hypot(*(blocked_run.estimate[k, :2] - blocked_run.truth[k, :2])))
-    s = blocked_run.settings
+def _box_outline(box) -> np.ndarray:
+    return _rect(np.asarray(box.center), np.asarray(box.size), float(box.yaw))
+
+
+def _check_block_is_the_box(run, point_xy, t_block) -> None:
+    """What blocked the way is the dropped box: the blocked path point lies within the corridor
+    half-width (plus half a cell diagonal) of an obstacle cell, and that cell lies on the box up
+    to the estimate's error at that time plus one 0.1 m cell."""
+    k = int(np.searchsorted(run.time, t_block))
+    est_err = float(np.hypot(*(run.estimate[k, :2] - run.truth[k, :2])))
+    s = run.settings
     half_width = 0.5 * s.robot.width + s.block.clearance
-    d_point = _distance_to_polygon(np.array([b["blocked_path_point_xy"]]), poly)[0]
+    d_point = _distance_to_polygon(np.array([point_xy]), _box_outline(run.dropped_obstacle))[0]
     assert d_point <= est_err + half_width + 0.5 * np.sqrt(2) * 0.1 + 0.1
-    # the robot never got home
+
+
+def test_blocked_return_goes_round_the_box_and_reaches_home(blocked_run):
+    m = mission_metrics(blocked_run)
+    r, pe = m["return"], m["pose_error"]
+    s = blocked_run.settings
+    # the block was detected ahead, within the checked look-ahead, and it was the box
+    assert r["detours"] >= 1
+    first = r["detour_list"][0]
+    assert first["distance_ahead_m"] <= s.block.lookahead
+    _check_block_is_the_box(blocked_run, first["blocked_path_point_xy"], first["time"])
+    # the robot went round and resumed the stored path, it never had to stop and wait
+    assert first["completed_time"] is not None
+    assert r["blocked"] is None or not r["blocked"]["active"]
+    # home within the stated radius (as for the unblocked return: stop radius + the corrected
+    # estimate's largest error, triangle inequality)
+    assert r["outcome"] == "returned"
+    assert r["final_distance_to_operator_m"] <= s.return_stop_radius + pe["corrected_m"]["max"]
+    # without touching the box (truth from the simulator): the robot's centre stayed outside
+    # the box's footprint, and more than half the robot's width from it. Budget: the plan
+    # keeps width / 2 + clearance + detour_margin = 0.5 m from the box's cells, which lie
+    # within half a cell diagonal (0.07 m) of its faces; the remaining 0.18 m beyond half the
+    # width covers the estimate's drift since the scans that placed those cells (a few
+    # seconds of VO, a few cm) and the controller's cutting of the detour's corners (its
+    # look-ahead on a bend of a few tens of degrees: below 0.1 m)
+    ret = blocked_run.phase == 1
+    d_box = _distance_to_polygon(
+        blocked_run.truth[ret, :2], _box_outline(blocked_run.dropped_obstacle)
+    )
+    assert d_box.min() > 0.5 * s.robot.width
+    # and it really went round: it passed the box, the return ends on the operator's side
+    assert r["stopped_distance_to_dropped_obstacle_m"] > 2.0
+    # the planned detour itself is on the map's free cells: its clearance from the obstacle
+    # cells is at least the corridor half-width plus the margin, up to half a cell diagonal
+    assert (
+        first["min_clearance_m"]
+        >= 0.5 * s.robot.width
+        + s.block.clearance
+        + s.block.detour_margin
+        - 0.5 * np.sqrt(2) * 0.1
+        - 1e-9
+    )
+
+
+def test_no_detour_when_a_wall_closes_the_corridor(closed_run):
+    m = mission_metrics(closed_run)
+    r = m["return"]
+    s = closed_run.settings
+    assert r["outcome"] == "blocked"
+    assert r["detours"] == 0
+    b = r["blocked"]
+    assert b is not None and b["active"]
+    assert b["distance_ahead_m"] <= s.block.lookahead
+    # it says why: the planner found no way past the block
+    assert b["detour"].startswith("no detour: no path to the rejoin")
+    _check_block_is_the_box(closed_run, b["blocked_path_point_xy"], b["time"])
+    # it stopped before the wall: its centre stayed more than half its length from it
+    d_end = _distance_to_polygon(
+        closed_run.truth[-1:, :2], _box_outline(closed_run.dropped_obstacle)
+    )[0]
+    assert d_end > 0.5 * s.robot.length
+    # and it never got home
     assert r["final_distance_to_operator_m"] > 2.0

@@ -163,3 +163,54 @@ def test_settings_reject_bad_rates_and_keys(tmp_path):
     badroom.write_text("[route]\nwaypoints = [[0, 0], [3, 0]]\nroom = [5, 0, 1, 1]\n")
     with pytest.raises(ConfigError, match=r"route\.room"):
         load_route(badroom)
+
+
+def test_detour_on_the_obstacle_map_avoids_known_and_new_obstacles():
+    """The mission's planning step (``_plan_round``) on an ObstacleGrid: the confirmed cells of
+    the way out and the recent cells of a new box are both avoided, the rejoin lies on the
+    stored path beyond the box, and the controller on the detour starts at the robot."""
+    from navkit.mission.run import _plan_round
+    from navkit.path import approximate
+
+    s = MissionSettings()
+    grid = ObstacleGrid((-2, -5), (14, 5), 0.1, min_hits=1, min_ratio=0.0, recent_scans=2)
+    wall = np.c_[np.linspace(0.0, 12.0, 121), np.full(121, 1.3)]  # mapped on the way out
+    grid.add_scan(wall, wall)
+    xx, yy = np.meshgrid(np.arange(5.6, 6.45, 0.05), np.arange(-0.4, 0.45, 0.05))
+    box = np.c_[xx.ravel(), yy.ravel()]  # a new 0.8 m box on the path, seen on the way back
+    grid.add_scan(np.vstack([wall, box]), wall)
+    # the stored path: recorded from the operator at x = 0 to x = 12 (the robot is at x = 9)
+    path = approximate(np.c_[np.linspace(0.0, 12.0, 241), np.zeros(241)]).spline
+    s_now = 9.0
+    half = 0.5 * s.robot.width + s.block.clearance
+    got = _plan_round(grid, np.array([9.0, 0.0, np.pi]), path, s_now, 2.6, s, half)
+    assert not isinstance(got, Exception), got
+    d = got.detour
+    inflation = half + s.block.detour_margin
+    rows, cols = np.nonzero(grid.occupied | grid.recent_occupied)
+    C = grid.centres(rows, cols)
+    P = np.vstack(
+        [
+            a + np.linspace(0, 1, 50)[:, None] * (b - a)
+            for a, b in zip(d.points[:-1], d.points[1:], strict=True)
+        ]
+    )
+    clear = np.hypot(*(P[:, None, :] - C[None]).transpose(2, 0, 1)).min(axis=1)
+    # every point keeps the inflation radius from the cells, up to half a cell diagonal
+    assert clear.min() >= inflation - 0.5 * np.sqrt(2) * 0.1 - 1e-9
+    # the box lies between y = -0.4 and 0.4 and the wall at y = 1.3: the gap (0.9 m) is narrower
+    # than twice the inflation (1.0 m), so the detour goes south of the box
+    assert P[:, 1].min() < -0.4 - inflation + 0.1
+    # rejoins the stored path beyond the box (x < 5.6 - inflation), at s_rejoin on the path
+    assert abs(d.rejoin[1]) < 0.05 and d.rejoin[0] < 5.6 - inflation
+    np.testing.assert_allclose(path.position(np.array([got.s_rejoin]))[0], d.rejoin, atol=0.05)
+    np.testing.assert_allclose(
+        got.controller.path.position(np.array([got.controller.path.total_length]))[0],
+        [9.0, 0.0],
+        atol=1e-9,
+    )
+    # a closed way (the box grown to the wall and far south) -> the planner's reason
+    south = np.c_[np.full(90, 6.0), np.linspace(-5.0, 1.3, 90)]
+    grid.add_scan(np.vstack([wall, box, south]), wall)
+    fail = _plan_round(grid, np.array([9.0, 0.0, np.pi]), path, s_now, 2.6, s, half)
+    assert isinstance(fail, Exception) and "no detour" in str(fail)

@@ -120,3 +120,24 @@ def test_global_association_handles_large_motions(seed):
     assert T is not None
     assert np.allclose(T[:3, :3], R, atol=1e-6) and np.allclose(T[:3, 3], t, atol=1e-6)
     assert sorted(pairs) == sorted((int(order[j]), j) for j in range(6))
+
+
+def test_a_tread_matched_to_its_neighbour_is_dropped():
+    """Stairs: treads 20 cm apart fall inside the 25 cm distance gate. Frame 2 has lost tread
+    1.2 m and sees a new one at 1.4 m: the gates pair 1.2 with 1.4 (same normal, 20 cm), but that
+    match disagrees with the translation of all the others (eq. 2) and is dropped."""
+    R = Rotation.from_rotvec([0.0, 0.02, 0.0]).as_matrix()
+    t = np.array([0.01, 0.0, -0.02])
+    wall = (np.array([0.0, 0.0, 1.0]), 2.5)
+    treads = [(np.array([0.0, 1.0, 0.0]), r) for r in (0.6, 0.8, 1.0, 1.2)]
+    f1 = [segment(n, r) for n, r in [wall, *treads]]
+
+    def seen_from_2(n, r):  # frame 2 sees N2 = R^T N1, rho2 = rho1 - N1 . t (eqs. 1, 2)
+        return segment(R.T @ n, r - n @ t)
+
+    f2 = [seen_from_2(n, r) for n, r in [wall, *treads[:3]]]
+    f2.append(seen_from_2(np.array([0.0, 1.0, 0.0]), 1.4))  # a new tread, 20 cm beyond
+    pairs = associate(f1, f2)
+    assert pairs == [(0, 0), (1, 1), (2, 2), (3, 3)]
+    # without the translation check the wrong match is kept
+    assert (4, 4) in associate(f1, f2, settings=AssociationSettings(consistency_m=0.0))

@@ -170,3 +170,47 @@ def test_closed_form_recovers_any_motion_exactly(normals, rhos, axis, angle, t):
     if abs(ref[1]) < np.radians(89):
         diff = np.angle(np.exp(1j * (euler_zxy_from_quat(res.quaternion) - ref)))
         assert np.allclose(diff, 0, atol=1e-6)
+
+
+@settings(max_examples=50, deadline=None)
+@given(
+    st.floats(30, 150),
+    st.lists(st.floats(0.5, 5), min_size=4, max_size=4),
+    unit,
+    unit,
+    st.floats(0, np.pi),
+    st.lists(st.floats(-2, 2), min_size=3, max_size=3),
+)
+def test_two_plane_geometry_fixes_all_but_mu(between_deg, rhos, axis, first, angle, t):
+    """Noise-free planes in two directions (plus parallel copies): the rotation is exact and the
+    translation is exact across the intersection line; along it (mu) it is left free (t0 . d =
+    0), whatever the true shift along the line."""
+    from navkit.planes.solve import PartialMotion, two_plane_geometry
+
+    a = first / np.linalg.norm(first)
+    perp = np.cross(a, [1.0, 0, 0] if abs(a[0]) < 0.9 else [0, 1.0, 0])
+    perp /= np.linalg.norm(perp)
+    b = np.cos(np.radians(between_deg)) * a + np.sin(np.radians(between_deg)) * perp
+    R = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix()
+    t = np.array(t)
+    p1, p2 = [], []
+    for n, rho in zip([a, b, a, b], rhos, strict=True):
+        n1, r1 = canonical_plane(n, rho)
+        n2, r2 = R.T @ n1, r1 - n1 @ t
+        p1.append(Plane(n1, r1, n1 * r1, count=1000))
+        p2.append(Plane(n2, r2, n2 * r2, count=1000))
+    g = two_plane_geometry(p1, p2)
+    assert isinstance(g, PartialMotion) and g.free_dof == ("mu",)
+    assert np.allclose(g.R, R, atol=1e-8)
+    assert abs(g.d @ a) < 1e-9 and abs(g.d @ b) < 1e-9 and abs(g.t0 @ g.d) < 1e-9
+    assert np.allclose(g.t0, t - (t @ g.d) * g.d, atol=1e-8)
+
+
+def test_two_plane_geometry_needs_two_directions():
+    from navkit.planes.solve import two_plane_geometry
+
+    n = np.array([0.0, 0.0, 1.0])
+    p = [Plane(n, 1.0, n), Plane(n, 2.0, 2 * n)]
+    res = two_plane_geometry(p, p)
+    assert isinstance(res, MotionFailure) and res.case == 1
+    assert res.free_dof == ("lambda", "mu", "eta")

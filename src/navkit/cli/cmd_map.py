@@ -59,6 +59,7 @@ class LocateInput:
     sigma: float
     success_m: float
     success_deg: float
+    refine: bool
 
 
 def _is_carmen(path: Path) -> bool:
@@ -217,6 +218,14 @@ def locate_cmd(
         0.3, help="A fix within this (metres) of the reference is a success."
     ),
     success_deg: float = typer.Option(5.0, help="... and within this heading error, degrees."),
+    refine: bool | None = typer.Option(
+        None,
+        "--refine/--no-refine",
+        help="Refine each fix by weighted point-to-line least squares against the map's walls "
+        "(kept only when it converges and is not degenerate along a wall). Default: on for "
+        "stereo frames, off for laser logs (a real building is not all straight walls: on the "
+        "Intel log it raises the median error from 1.1 to 2.8 cm).",
+    ),
 ) -> None:
     """Localize scans / frames in a wall map by correlative matching; poses as TUM, fixes as CSV."""
     with cli_errors():
@@ -233,7 +242,8 @@ def locate_cmd(
         )
         from navkit.io.atomic import atomic_write
         from navkit.io.trajectory import Trajectory, write_tum
-        from navkit.localization import MatcherSettings, match_scan
+        from navkit.localization import MatcherSettings, match_scan, refine_pose
+        from navkit.localization.refine import stereo_range_sigma
         from navkit.viz.maps import plot_map
 
         wall_map = load_map(map_json)
@@ -255,6 +265,9 @@ def locate_cmd(
 
             def points(k: int) -> Any:
                 return lg.points(int(sel[k]), max_range)
+
+            def range_sigma(pts: Any) -> Any:
+                return None  # laser: every point weighs the same
         else:
             from navkit.io.images import read_image
             from navkit.io.stereo import read_stereo_frames
@@ -297,8 +310,14 @@ def locate_cmd(
                     parts.append(se2_apply(rel, B) if len(B) else B)
                 return np.concatenate(parts)
 
+            def range_sigma(pts: Any) -> Any:
+                return stereo_range_sigma(pts, fr.rig.baseline, fr.rig.camera.fx)
+
+        if refine is None:
+            refine = kind == "stereo"
         est = np.full((len(sel), 3), np.nan)
         rows: list[tuple[int, Any]] = []
+        refinements: list[Any] = []  # one per fix (None: not refined)
         last = None
         for k in progress(range(len(sel)), "localizing"):
             pts = points(k)
@@ -310,11 +329,18 @@ def locate_cmd(
                 guess = se2_to_xytheta(se2_compose(se2_from_xytheta(*last[1]), delta))
             if len(pts) < 3:
                 rows.append((k, None))
+                refinements.append(None)
                 continue
             fix = match_scan(fld, pts, guess, settings)
-            est[k] = fix.pose
-            last = (k, fix.pose)
+            pose, refined = fix.pose, None
+            if refine and wall_map.walls:
+                refined = refine_pose(wall_map.walls, pts, fix.pose, range_sigma=range_sigma(pts))
+                if refined.converged and not refined.degenerate:
+                    pose = refined.pose
+            est[k] = pose
+            last = (k, pose)
             rows.append((k, fix))
+            refinements.append(refined)
         # outputs
         out.mkdir(parents=True, exist_ok=True)
         found = np.all(np.isfinite(est), axis=1)
@@ -334,20 +360,26 @@ def locate_cmd(
         with atomic_write(out / "fixes.csv") as fh:
             fh.write(
                 "index,timestamp,x,y,theta,score,ok,ambiguous,reason,direction_x,direction_y,extent_m,"
-                "second_score,exact,ms,ref_x,ref_y,ref_theta,position_error_m,heading_error_deg\n"
+                "second_score,exact,ms,refined,refine_rms_m,refine_sigma_weak_m,"
+                "ref_x,ref_y,ref_theta,position_error_m,heading_error_deg\n"
             )
-            for k, fix in rows:
+            for (k, fix), rf in zip(rows, refinements, strict=True):
                 r = reference[k]
                 if fix is None:
                     fh.write(
-                        f"{sel[k]},{stamps[k]:.6f},,,,,False,,no points,,,,,,,{r[0]:.4f},{r[1]:.4f},{r[2]:.5f},,\n"
+                        f"{sel[k]},{stamps[k]:.6f},,,,,False,,no points,,,,,,,,,,"
+                        f"{r[0]:.4f},{r[1]:.4f},{r[2]:.5f},,\n"
                     )
                     continue
                 a = fix.ambiguity
+                used = rf is not None and rf.converged and not rf.degenerate
+                rcols = f"{used},{rf.rms:.4f},{rf.sigma_weak:.4f}" if rf is not None else "False,,"
+                e = est[k]
                 fh.write(
-                    f"{sel[k]},{stamps[k]:.6f},{fix.pose[0]:.4f},{fix.pose[1]:.4f},{fix.pose[2]:.5f},{fix.score:.4f},"
+                    f"{sel[k]},{stamps[k]:.6f},{e[0]:.4f},{e[1]:.4f},{e[2]:.5f},{fix.score:.4f},"
                     f"{fix.ok},{a.ambiguous},{a.reason},{a.direction[0]:.4f},{a.direction[1]:.4f},{a.extent:.3f},"
-                    f"{a.second_score:.4f},{fix.exact},{1e3 * fix.seconds:.2f},{r[0]:.4f},{r[1]:.4f},{r[2]:.5f},"
+                    f"{a.second_score:.4f},{fix.exact},{1e3 * fix.seconds:.2f},{rcols},"
+                    f"{r[0]:.4f},{r[1]:.4f},{r[2]:.5f},"
                     f"{pos_err[k]:.4f},{head_err[k]:.3f}\n"
                 )
         fixes = [f for _, f in rows if f is not None]
@@ -362,6 +394,11 @@ def locate_cmd(
             "ms_per_fix_median": float(np.median(ms)),
             "ms_per_fix_mean": float(np.mean(ms)),
             "ms_per_fix_p95": float(np.percentile(ms, 95)),
+            "refined_rate": float(
+                np.mean(
+                    [rf is not None and rf.converged and not rf.degenerate for rf in refinements]
+                )
+            ),
             "ok_rate": float(ok.mean()),
             "success_rate": float(success.mean()),
             "success_rate_of_ok": float(success[ok].mean()) if ok.any() else float("nan"),
@@ -404,6 +441,7 @@ def locate_cmd(
                     sigma,
                     success_m,
                     success_deg,
+                    refine,
                 ),
                 "matcher": settings,
             },

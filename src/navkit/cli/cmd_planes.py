@@ -330,6 +330,8 @@ def odometry_cmd(
                     "motion_ms": r.ms,
                     "texture_dof": list(getattr(r.motion, "texture_dof", ())),
                     "free_dof": list(getattr(r.motion, "free_dof", ())),
+                    "prior_dof": list(getattr(r.motion, "prior_dof", ())),
+                    "source": r.source,
                 }
             )
         poses = odo.trajectory
@@ -341,7 +343,7 @@ def odometry_cmd(
         write_ply(out / "map.ply", V, colors=C, faces=F if len(F) else None)
         summary: dict[str, Any] = {
             "frames": n,
-            "ok": sum(f["status"] == "ok" for f in frames),
+            "ok": sum(str(f["status"]).startswith("ok") for f in frames),
             "failed": sum(str(f["status"]).startswith("failed") for f in frames),
             "cases": {str(c): sum(f["case"] == c for f in frames[1:]) for c in (1, 2, 3)},
             "map_planes": len(mp["planes"]),

@@ -7,13 +7,17 @@ Stages, usable apart from NumPy arrays:
 - :mod:`~navkit.localization.mapping` - views with known poses -> :class:`WallMap` (the same
   wall seen twice merged, corners, room outline, occupancy grid, JSON);
 - :mod:`~navkit.localization.correlation` - the paper's method: known heading, the fragment
-  slid over the map, the maximum of the correlation, the robot position by the paper's formula;
+  slid over the map, the maximum of the correlation, the robot position by the paper's formula,
+  with an ambiguity report;
+- :mod:`~navkit.localization.refine` - the final weighted point-to-line least-squares pose
+  refinement against the map's walls (stereo depth-error weights, degeneracy along one wall);
 - :mod:`~navkit.localization.matcher` - unknown heading: multi-resolution correlative scan
   matching over ``(x, y, theta)`` (Olson 2009) with sub-cell refinement and an ambiguity report.
 """
 
 from navkit.localization.correlation import (
     KnownHeadingFix,
+    KnownHeadingSettings,
     correlate_profiles,
     locate_known_heading,
     robot_position,
@@ -40,6 +44,12 @@ from navkit.localization.matcher import (
     match_scan,
     score_poses,
 )
+from navkit.localization.refine import (
+    PoseRefinement,
+    RefineSettings,
+    refine_pose,
+    stereo_range_sigma,
+)
 from navkit.localization.walls import (
     SegmentationSettings,
     WallSegment,
@@ -54,9 +64,12 @@ __all__ = [
     "Corner",
     "Fix",
     "KnownHeadingFix",
+    "KnownHeadingSettings",
     "LikelihoodField",
     "MapSettings",
     "MatcherSettings",
+    "PoseRefinement",
+    "RefineSettings",
     "SegmentationSettings",
     "WallMap",
     "WallSegment",
@@ -73,9 +86,11 @@ __all__ = [
     "merge_two",
     "ransac_walls",
     "rasterize",
+    "refine_pose",
     "robot_position",
     "sample_segments",
     "score_poses",
     "segment_from_points",
     "split_and_merge",
+    "stereo_range_sigma",
 ]

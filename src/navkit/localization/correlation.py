@@ -25,17 +25,32 @@ axes (camera x to the left of travel, y forward, heading measured from world y).
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import fftconvolve
 
-from navkit.errors import InputError
+from navkit.errors import ConfigError, InputError
+from navkit.geometry import points_in_polygon
 from navkit.geometry._validate import as_points
 from navkit.localization.field import LikelihoodField
+from navkit.localization.refine import (
+    PoseRefinement,
+    RefineSettings,
+    occluded_fraction,
+    refine_pose,
+)
+from navkit.localization.walls import WallSegment
 
-__all__ = ["KnownHeadingFix", "correlate_profiles", "locate_known_heading", "robot_position"]
+__all__ = [
+    "KnownHeadingFix",
+    "KnownHeadingSettings",
+    "correlate_profiles",
+    "locate_known_heading",
+    "robot_position",
+]
 
 log = logging.getLogger(__name__)
 
@@ -114,24 +129,91 @@ def robot_position(
 
 
 @dataclass(frozen=True)
+class KnownHeadingSettings:
+    """Ambiguity rules and refinement of :func:`locate_known_heading`.
+
+    Attributes
+    ----------
+    peak_tolerance : float
+        Offsets scoring within this fraction of the best belong to the peak.
+    ambiguity_extent : float
+        Metres; a peak (its connected near-optimal set) longer than this along its major axis is
+        ambiguous (the fragment slides along a straight wall).
+    second_peak_ratio : float
+        A distinct second peak (outside ``exclusion_radius`` of the best) scoring at least this
+        fraction of the best makes the fix ambiguous (a twin corner, a repeated wall).
+    exclusion_radius : float
+        Metres; offsets nearer than this to the best belong to the same peak.
+    min_score : float
+        Fixes scoring below this fail.
+    max_occluded : float
+        With walls: a fix from which more than this fraction of the fragment would have been
+        seen through a map wall is inconsistent (reason ``"occluded"``; see
+        :func:`~navkit.localization.refine.occluded_fraction`).
+    refine : RefineSettings
+        The final point-to-line refinement (when the map's walls are given).
+    """
+
+    peak_tolerance: float = 0.05
+    ambiguity_extent: float = 0.5
+    second_peak_ratio: float = 0.9
+    exclusion_radius: float = 1.0
+    min_score: float = 0.3
+    max_occluded: float = 0.05
+    refine: RefineSettings = field(default_factory=RefineSettings)
+
+    def __post_init__(self) -> None:
+        if not 0 < self.peak_tolerance < 1:
+            raise ConfigError(
+                f"is {self.peak_tolerance}", field="peak_tolerance", expected="in (0, 1)"
+            )
+        if not 0 < self.second_peak_ratio <= 1:
+            raise ConfigError(
+                f"is {self.second_peak_ratio}", field="second_peak_ratio", expected="in (0, 1]"
+            )
+        for name in ("ambiguity_extent", "exclusion_radius"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ConfigError(f"is {v}", field=name, expected="a positive number of metres")
+
+
+@dataclass(frozen=True)
 class KnownHeadingFix:
     """Result of :func:`locate_known_heading`.
 
     Attributes
     ----------
     position : (2,) array
-        Robot ``(x, y)``, metres.
+        Robot ``(x, y)``, metres (after the point-to-line refinement when walls were given).
     fragment_world : (2,) array
-        Where the fragment's centroid lies on the map.
+        Where the fragment's centroid lies on the map (the correlation's peak).
     score : float
         Peak correlation divided by the number of fragment cells, ``[0, 1]``.
     correlation : (H, W) array
         ``R(dx, dy)`` over the searched offsets (row = y).
     peak_extent : float
-        Metres; length of the set of offsets within 5 % of the peak along its major axis
-        (large = ambiguous, e.g. a straight wall).
+        Metres; length of the peak (the connected set of offsets within ``peak_tolerance`` of
+        the best) along its major axis (large = ambiguous, e.g. a straight wall).
     peak_direction : (2,) array
-        World unit vector of that axis.
+        World unit vector of that axis (along the wall for a straight wall).
+    ok : bool
+        A confident fix: score above ``min_score`` and not ambiguous.
+    ambiguous : bool
+        The fragment fits along a line (elongated peak, or a degenerate refinement) or in two
+        distinct places (second peak).
+    reason : str
+        ``""``, ``"elongated peak"``, ``"second peak"``, ``"degenerate"``, ``"occluded"`` (the
+        fragment would have been seen through a map wall from there), joined by ``" and "``.
+    second_score : float
+        Best correlation outside the peak's neighbourhood, same units as ``score`` (NaN when the
+        correlation has no offset there).
+    second_position : (2,) array
+        Robot position of that second peak, metres.
+    correlation_position : (2,) array
+        The robot position from the correlation peak alone (the paper's method, before the
+        refinement).
+    refinement : PoseRefinement or None
+        The point-to-line refinement (None without walls).
     """
 
     position: NDArray[np.float64]
@@ -140,16 +222,56 @@ class KnownHeadingFix:
     correlation: NDArray[np.float64]
     peak_extent: float
     peak_direction: NDArray[np.float64]
+    ok: bool = True
+    ambiguous: bool = False
+    reason: str = ""
+    second_score: float = float("nan")
+    second_position: NDArray[np.float64] = field(default_factory=lambda: np.full(2, np.nan))
+    correlation_position: NDArray[np.float64] = field(default_factory=lambda: np.full(2, np.nan))
+    refinement: PoseRefinement | None = None
 
 
-def locate_known_heading(fld: LikelihoodField, points: ArrayLike, theta: float) -> KnownHeadingFix:
+def _peak_shape(
+    R: NDArray[np.float64], y: int, x: int, r: float, tolerance: float
+) -> tuple[NDArray[np.float64], float, NDArray[np.bool_]]:
+    """Major direction, extent (metres) and mask of the connected near-optimal set at (y, x)."""
+    from scipy import ndimage
+
+    near = R >= (1.0 - tolerance) * R[y, x]
+    labels, _ = ndimage.label(near)
+    comp = labels == labels[y, x]
+    yy, xx = np.nonzero(comp)
+    T = np.stack([xx, yy], axis=1) * r
+    if len(T) > 1:
+        _, V = np.linalg.eigh(np.cov(T.T))
+        d = V[:, 1]
+        proj = T @ d
+        return d, float(proj.max() - proj.min()) + r, comp
+    return np.array([1.0, 0.0]), r, comp
+
+
+def locate_known_heading(
+    fld: LikelihoodField,
+    points: ArrayLike,
+    theta: float,
+    *,
+    walls: Sequence[WallSegment] | ArrayLike | None = None,
+    range_sigma: ArrayLike | None = None,
+    region: ArrayLike | None = None,
+    settings: KnownHeadingSettings | None = None,
+) -> KnownHeadingFix:
     """Paper 3's correlation localization in 2D with a known heading.
 
     Stages: (1) turn the fragment's body-frame points by ``theta`` (paper eq. 2); (2) rasterise
     them on the field's grid, relative to their centroid; (3) correlate with the map over every
     offset (``R(dx, dy) = sum phi_1 phi_2``, by FFT); (4) the maximum, refined by a parabola per
     axis, places the fragment's centroid in the world; (5) the robot position from
-    :func:`robot_position`.
+    :func:`robot_position`; (6) the ambiguity report: the shape of the peak (its connected
+    near-optimal set: a straight wall makes it long, along the wall) and the best distinct
+    second peak; (7) with the map's ``walls``, the position is refined by weighted point-to-line
+    least squares (:func:`navkit.localization.refine.refine_pose`, heading kept), whose
+    information matrix also flags a fragment of one straight wall as degenerate, and the fix
+    is checked against the map's free space (no fragment point seen through a wall).
 
     Parameters
     ----------
@@ -159,16 +281,33 @@ def locate_known_heading(fld: LikelihoodField, points: ArrayLike, theta: float) 
         Fragment points in the body frame, metres (NaN rows dropped).
     theta : float
         Known heading, radians.
+    walls : list of WallSegment or (K, 2, 2) array, optional
+        The map's walls, for the final refinement (stage 7).
+    range_sigma : (N,) array, optional
+        Metres; each point's error along its ray (stereo:
+        :func:`~navkit.localization.refine.stereo_range_sigma`), weights of the refinement.
+    region : (P, 2) array, optional
+        A polygon the robot is known to be in (e.g. the map's room outline,
+        ``WallMap.outline``): offsets that would put the robot outside are no candidates (their
+        correlation is set to -1). Without it a wall fragment also fits the far side of a wall,
+        seen from outside the room.
+    settings : KnownHeadingSettings, optional
+
+    Returns
+    -------
+    KnownHeadingFix
     """
+    s = settings or KnownHeadingSettings()
     P = as_points(points, 2)
-    P = P[np.all(np.isfinite(P), axis=1)]
+    finite = np.all(np.isfinite(P), axis=1)
+    P = P[finite]
     if len(P) < 2:
         raise InputError(
             f"has {len(P)} finite points", field="points", expected="at least 2 points"
         )
     r = fld.resolution
-    c, s = np.cos(theta), np.sin(theta)
-    Q = P @ np.array([[c, -s], [s, c]]).T
+    c, sn = np.cos(theta), np.sin(theta)
+    Q = P @ np.array([[c, -sn], [sn, c]]).T
     centroid_body = P.mean(axis=0)
     q0 = Q.mean(axis=0)
     rel = Q - q0
@@ -183,6 +322,20 @@ def locate_known_heading(fld: LikelihoodField, points: ArrayLike, theta: float) 
     R = fftconvolve(fld.values.astype(np.float64), kernel[::-1, ::-1], mode="full")
     R = R[kh - 1 :, kw - 1 :]  # R[y, x]: kernel cell (0, 0) on map cell (y, x)
     R = R / len(P)
+    if region is not None:
+        # the robot position of each offset: cell centre - lo r - R(theta) c_body
+        poly = as_points(region, 2, "region")
+        gy, gx = np.mgrid[0 : R.shape[0], 0 : R.shape[1]]
+        cells = np.stack([gx.ravel(), gy.ravel()], axis=1) + 0.5
+        robot = robot_position(fld.origin + cells * r - lo * r, centroid_body, theta)
+        inside = points_in_polygon(robot, poly).reshape(R.shape)
+        if not inside.any():
+            raise InputError(
+                "no offset places the robot inside it",
+                field="region",
+                expected="a polygon overlapping the map",
+            )
+        R = np.where(inside, R, -1.0)
     y, x = np.unravel_index(int(np.argmax(R)), R.shape)
 
     def parabola(a: float, b: float, cc: float) -> float:
@@ -191,27 +344,78 @@ def locate_known_heading(fld: LikelihoodField, points: ArrayLike, theta: float) 
 
     dx = parabola(R[y, x - 1], R[y, x], R[y, x + 1]) if 0 < x < R.shape[1] - 1 else 0.0
     dy = parabola(R[y - 1, x], R[y, x], R[y + 1, x]) if 0 < y < R.shape[0] - 1 else 0.0
-    # map cell (y, x) has centre origin + (x + 0.5, y + 0.5) r; the kernel cell (0, 0) holds
-    # points at rel = lo * r, so the centroid sits at that centre - lo * r
-    cell0 = fld.origin + (np.array([x + dx, y + dy]) + 0.5) * r
-    frag_world = cell0 - lo * r
-    # peak shape
-    near = R >= 0.95 * R[y, x]
-    yy, xx = np.nonzero(near)
-    T = np.stack([xx, yy], axis=1) * r
-    if len(T) > 1:
-        _, V = np.linalg.eigh(np.cov(T.T))
-        d = V[:, 1]
-        proj = T @ d
-        extent = float(proj.max() - proj.min()) + r
-    else:
-        d, extent = np.array([1.0, 0.0]), r
+
+    def to_world(yx: NDArray[np.float64]) -> NDArray[np.float64]:
+        # map cell (y, x) has centre origin + (x + 0.5, y + 0.5) r; the kernel cell (0, 0)
+        # holds points at rel = lo * r, so the centroid sits at that centre - lo * r
+        return fld.origin + (yx[::-1] + 0.5) * r - lo * r
+
+    frag_world = to_world(np.array([y + dy, x + dx]))
     pos = robot_position(frag_world, centroid_body, theta)
+    # Stage 6: the peak's shape and a distinct second peak.
+    d, extent, comp = _peak_shape(R, int(y), int(x), r, s.peak_tolerance)
+    yy, xx = np.mgrid[0 : R.shape[0], 0 : R.shape[1]]
+    # the second peak lies outside the peak's own near-optimal set and the exclusion radius
+    away = ~comp & (np.hypot(yy - y, xx - x) * r >= s.exclusion_radius)
+    second, second_pos = float("nan"), np.full(2, np.nan)
+    if away.any():
+        k = int(np.argmax(np.where(away, R, -np.inf)))
+        y2, x2 = np.unravel_index(k, R.shape)
+        second = float(R[y2, x2])
+        second_pos = robot_position(to_world(np.array([y2, x2], float)), centroid_body, theta)
+    score = float(R[y, x])
+    reasons = []
+    if extent > s.ambiguity_extent:
+        reasons.append("elongated peak")
+    if np.isfinite(second) and second >= s.second_peak_ratio * score:
+        reasons.append("second peak")
+    # Stage 7: point-to-line refinement against the walls (heading kept).
+    refinement = None
+    correlation_position = pos.copy()
+    if walls is not None:
+        sig = None
+        if range_sigma is not None:
+            sig = np.asarray(range_sigma, dtype=np.float64).reshape(-1)
+            if len(sig) != len(finite):
+                raise InputError(
+                    f"has {len(sig)} values for {len(finite)} points",
+                    field="range_sigma",
+                    expected="one sigma per point",
+                )
+            sig = sig[finite]
+        refinement = refine_pose(
+            walls,
+            P,
+            np.array([pos[0], pos[1], theta]),
+            range_sigma=sig,
+            known_heading=True,
+            settings=s.refine,
+        )
+        if refinement.converged:
+            pos = refinement.pose[:2].copy()
+        if refinement.degenerate:
+            reasons.append("degenerate")
+            if "elongated peak" not in reasons:
+                d = refinement.weak_direction
+        # a point may lie up to 3 sigma of its range error behind its own wall
+        margin = 0.15 if sig is None else np.maximum(0.15, 3.0 * sig)
+        occluded = occluded_fraction(walls, P, np.array([pos[0], pos[1], theta]), margin=margin)
+        if occluded > s.max_occluded:
+            reasons.append("occluded")
+    ambiguous = bool(reasons)
+    log.debug("known-heading fix %s score %.3f %s", pos, score, " and ".join(reasons))
     return KnownHeadingFix(
         position=pos,
         fragment_world=frag_world,
-        score=float(R[y, x]),
+        score=score,
         correlation=R,
         peak_extent=extent,
         peak_direction=d,
+        ok=bool(score >= s.min_score and not ambiguous),
+        ambiguous=ambiguous,
+        reason=" and ".join(reasons),
+        second_score=second,
+        second_position=second_pos,
+        correlation_position=correlation_position,
+        refinement=refinement,
     )

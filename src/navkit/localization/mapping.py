@@ -92,7 +92,11 @@ class MapSettings:
         (stray pieces of stereo outliers; a no-op for laser maps, whose walls have few points).
     min_strongest_support : float
         Unordered clouds (stereo): walls with fewer points than this fraction of the strongest
-        wall's are dropped too.
+        wall's, scaled by their length relative to it, are dropped too (a 0.6 m column face
+        needs a 0.6 m share of the support, not that of an 8 m wall).
+    min_relative_density : float
+        Unordered clouds (stereo): walls with fewer points per metre than this fraction of the
+        strongest wall's are dropped (stray pieces of outliers spread thin along a line).
     shadow_distance : float
         Metres; see :func:`drop_wall_shadows`.
     shadow_support : float
@@ -112,6 +116,7 @@ class MapSettings:
     shadow_distance: float = 0.25
     min_strongest_support: float = 0.03
     shadow_support: float = 0.1
+    min_relative_density: float = 0.2
 
     def __post_init__(self) -> None:
         for name in (
@@ -341,7 +346,11 @@ def merge_segments(
         t_e = np.einsum("ijk,ik->ij", E[None, :, :] - C[i][:, None, :], D[i])
         inside = (np.abs(t_s) <= half[i][:, None]) & (np.abs(t_e) <= half[i][:, None])
         subsumed = j_shorter & (np.maximum(dSj, dEj) < s.merge_distance) & inside
-        link = (parallel & near & overlap) | subsumed
+        # a short piece's direction is poorly determined (stereo noise over < 1 m): when both
+        # its ends lie near the longer one's line it is the same wall up to 15 deg
+        short = np.minimum(half[i][:, None], half[None, :]) < 0.5
+        loose = np.abs(D[i] @ D.T) > np.cos(np.radians(max(15.0, s.merge_angle_deg)))
+        link = (parallel & near & overlap) | (loose & short & near & overlap) | subsumed
         r, c = np.nonzero(link)
         rows.append(r + i0)
         cols.append(c)
@@ -601,8 +610,13 @@ def drop_corner_stubs(
 ) -> list[WallSegment]:
     """Remove short pieces lying across a corner of two longer walls (stereo smear at corners).
 
-    A wall shorter than ``2 * corner_reach`` whose both end points lie within ``corner_reach``
-    of a corner formed by two other, longer walls is an artefact, not a wall.
+    A wall shorter than ``2 * corner_reach`` whose both end points lie within
+    ``1.5 * corner_reach`` of a corner formed by two other, longer walls is an artefact, not a
+    wall; so is a weak one (fewer than ``shadow_support`` times the points of the weaker corner
+    wall) or a chord across the corner (each end within ``corner_reach / 2`` of one of the two
+    walls' lines) with both ends within ``2.5 * corner_reach``: the rounded diagonal that the
+    stereo matching window makes of a far corner (noisy there: the depth error grows as
+    ``z^2``).
     """
     s = settings or MapSettings()
     walls = list(walls)
@@ -614,9 +628,16 @@ def drop_corner_stubs(
         for c in corners:
             if k in c.walls or min(walls[c.walls[0]].length, walls[c.walls[1]].length) <= w.length:
                 continue
-            if (
-                max(np.linalg.norm(w.start - c.point), np.linalg.norm(w.end - c.point))
-                <= s.corner_reach * 1.5
+            reach = max(np.linalg.norm(w.start - c.point), np.linalg.norm(w.end - c.point))
+            a, b = walls[c.walls[0]], walls[c.walls[1]]
+            weak = w.count < s.shadow_support * min(a.count, b.count)
+            # a rounded corner: one end on each wall's line (a chord across the corner)
+            ends = np.stack([w.start, w.end])
+            da, db = np.abs(a.distance(ends)), np.abs(b.distance(ends))
+            tol = 0.5 * s.corner_reach
+            bridge = bool((da[0] <= tol and db[1] <= tol) or (db[0] <= tol and da[1] <= tol))
+            if reach <= s.corner_reach * 1.5 or (
+                (weak or bridge) and reach <= s.corner_reach * 2.5
             ):
                 drop.add(k)
                 break
@@ -669,11 +690,17 @@ def _finish(
         # support filter: a wall needs min_relative_support of the points of a well-supported
         # wall (the 75th percentile: robust to many stubs and to a few huge walls)
         counts = np.array([w.count for w in walls], dtype=np.float64)
-        floor = max(
-            s.min_relative_support * float(np.percentile(counts, 75)),
-            strongest_fraction * counts.max(),
-        )
-        walls = [w for w in walls if w.count >= floor]
+        floor = np.full(len(walls), s.min_relative_support * float(np.percentile(counts, 75)))
+        keep = counts >= floor
+        if strongest_fraction > 0:
+            # stereo clouds: support judged against the strongest wall's, for the wall's length,
+            # and the density of points along the wall against the strongest wall's
+            lengths = np.maximum([w.length for w in walls], 0.1)
+            k = int(np.argmax(counts))
+            share = np.minimum(1.0, lengths / lengths[k])
+            keep &= counts >= strongest_fraction * counts[k] * share
+            keep &= counts / lengths >= s.min_relative_density * counts[k] / lengths[k]
+        walls = [w for w, ok in zip(walls, keep, strict=True) if ok]
     walls = drop_wall_shadows(walls, s)
     walls = drop_corner_stubs(walls, s)
     corners = find_corners(walls, s)

@@ -31,6 +31,7 @@ CAPABILITY_NAMES = {
     "path_finish": "path memory: finish",
     "return_control": "return: one control cycle (paper 4)",
     "block_check": "return: check the map ahead",
+    "detour_plan": "return: plan a way round a block (detour)",
     "sim_lidar": "simulator: render a lidar scan",
     "sim_camera": "simulator: render an RGB-D frame",
 }
@@ -238,6 +239,10 @@ def mission_metrics(lg: MissionLog) -> dict[str, Any]:
         "outbound_length_m": outbound_len,
         "return_time_s": float(lg.time[-1] - lg.time[L]) if L >= 0 else float("nan"),
         "blocked": lg.blocked,
+        "detours": len(lg.detours),
+        "detours_completed": sum(1 for d in lg.detours if d.get("completed_time") is not None),
+        "detour_length_m": float(sum(d["length_m"] for d in lg.detours)),
+        "detour_list": lg.detours,
     }
     if lg.dropped_obstacle is not None:
         c = np.asarray(lg.dropped_obstacle.center)[:2]

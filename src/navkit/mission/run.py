@@ -5,7 +5,9 @@ stages of a step, in order (each uses the capabilities' public API):
 
 1. drive: outbound, the scripted operator (:class:`~navkit.mission.driver.PurePursuit`) steers on
    the true pose; after "link lost", paper 4's :class:`~navkit.path.ReturnController` steers on
-   the robot's corrected estimate, unless the obstacle map shows the way blocked;
+   the robot's corrected estimate; when the obstacle map shows the stored path blocked, the
+   same controller follows a detour planned round the block (:mod:`navkit.path.detour`) and
+   then resumes the stored path; with no detour the robot stops;
 2. move the simulated robot (exact unicycle arcs) and read the visual odometry (the true body
    increment corrupted by :class:`~navkit.sensors.VisualOdometryNoise`'s error model);
 3. dead-reckon the estimate with the VO increment;
@@ -143,6 +145,8 @@ class MissionLog:
     link_lost_index: int = -1
     outcome: str = ""
     blocked: dict[str, Any] | None = None
+    detours: list[dict[str, Any]] = field(default_factory=list)
+    detour_paths: list[NDArray[np.float64]] = field(default_factory=list)
     dropped_obstacle: Any = None
     timings: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
 
@@ -284,7 +288,7 @@ def run_mission(
     from navkit.obstacles.detector import detect_obstacles
     from navkit.path import ApproximatorSettings, OnlineApproximator
     from navkit.path.control import ReturnController, ReturnSettings
-    from navkit.planes import estimate_motion, observe_rgbd
+    from navkit.planes import MotionPrior, estimate_motion, observe_rgbd
     from navkit.planes.solve import MotionEstimate
     from navkit.sensors import PinholeCamera, StereoRig, VisualOdometryNoise
     from navkit.sim import (
@@ -375,6 +379,8 @@ def run_mission(
         linear_window=F.map_fix_gate_m, angular_window_deg=8.0, point_spacing=0.2
     )
     n_stops = 0  # times the return stopped for an obstacle ahead (a stop may clear again)
+    round_: _Detouring | None = None  # the detour being followed (round a blocked stretch)
+    no_detour = ""  # why the last detour planning failed
     n_max = int(np.ceil(2 * s.max_time / dt))
 
     steps: Iterator[int] = iter(range(1, n_max + 1))
@@ -435,11 +441,22 @@ def run_mission(
                 )
         if phase == RETURN:
             with _Timer(T_, "return_control"):
-                cmd = controller.command(est[None, :])
+                if round_ is not None and round_.done(est):
+                    # round the block: resume the stored path at the rejoin point
+                    controller.progress[:] = round_.s_rejoin
+                    lg.detours[-1]["completed_time"] = t
+                    log.info("detour done at t = %.1f s; back on the stored path", t)
+                    round_ = None
+                if round_ is not None:
+                    cmd = round_.controller.command(est[None, :])
+                    home = False
+                else:
+                    cmd = controller.command(est[None, :])
+                    home = bool(cmd.done[0])
             v, om = float(cmd.v[0]), float(cmd.omega[0])
             if lg.blocked is not None and lg.blocked.get("active"):
                 v, om = 0.0, 0.0
-            if bool(cmd.done[0]):
+            if home:
                 lg.outcome = "returned"
                 break
             if t - t_phase > s.max_time:
@@ -447,6 +464,8 @@ def run_mission(
                 break
             if blocked_since is not None and t - blocked_since >= s.block.wait:
                 lg.outcome = "blocked"
+                if lg.blocked is not None:
+                    lg.blocked["detour"] = no_detour or "detours disabled"
                 break
         # --- 2. move, read the VO -------------------------------------------------------------
         new_truth = unicycle_step(truth, v, om, dt)
@@ -502,31 +521,96 @@ def run_mission(
                 z_ok = (B[:, 2] >= F.wall_z_min) & (B[:, 2] <= F.wall_z_max)
                 r_ok = np.hypot(B[:, 0], B[:, 1]) <= F.room_view_range
                 est = room.step(B[z_ok & r_ok][:, :2], est, truth, t, phase, k % every_cam == 0)
-            # the way back: is the stored path ahead blocked?
+            # the way back: is the way ahead blocked? (the detour being followed, or the
+            # stored path) -> plan a way round it on the obstacle map, or stop
             if phase == RETURN and lg.path is not None:
+                half_width = 0.5 * R.width + s.block.clearance
                 with _Timer(T_, "block_check"):
-                    s_now = float(controller.progress[0])
-                    ss = np.linspace(s_now, max(s_now - s.block.lookahead, 0.0), 21)
-                    ahead = lg.path.position(ss)
-                    hit = grid.blocked(ahead, 0.5 * R.width + s.block.clearance)
+                    if round_ is not None:
+                        ahead, s_now = round_.ahead(est, s.block.lookahead), round_.s_from
+                    else:
+                        s_now = float(controller.progress[0])
+                        ss = np.linspace(s_now, max(s_now - s.block.lookahead, 0.0), 21)
+                        ahead = lg.path.position(ss)
+                    hit = grid.blocked(ahead, half_width)
+                if round_ is not None and s.block.detour:
+                    # replan on every scan while going round: the far side of the obstacle
+                    # comes into view as the robot turns
+                    with _Timer(T_, "detour_plan"):
+                        new_det = _plan_round(
+                            grid, est, lg.path, round_.s_from, round_.block_dist, s, half_width
+                        )
+                    if isinstance(new_det, _Detouring):
+                        round_ = new_det
+                        # the first plan stays in the log (the figure draws it); the rejoin
+                        # point may move as more of the obstacle is seen
+                        lg.detours[-1]["replans"] += 1
+                        lg.detours[-1]["rejoin_xy"] = round_.detour.rejoin.tolist()
+                        lg.detours[-1]["rejoin_s_m"] = round_.s_rejoin
+                        hit = np.zeros(1, dtype=bool)
+                    elif hit.any():
+                        no_detour = str(new_det)
+                if hit.any() and round_ is None and s.block.detour:
+                    j = int(np.argmax(hit))
+                    with _Timer(T_, "detour_plan"):
+                        new_det = _plan_round(
+                            grid, est, lg.path, s_now, s_now - float(ss[j]), s, half_width
+                        )
+                    if isinstance(new_det, _Detouring):
+                        round_ = new_det
+                        lg.detours.append(
+                            {
+                                "time": t,
+                                "start_xy": est[:2].tolist(),
+                                "start_true_xy": truth[:2].tolist(),
+                                "blocked_path_point_xy": ahead[j].tolist(),
+                                "distance_ahead_m": float(s_now - ss[j]),
+                                "length_m": round_.detour.length,
+                                "min_clearance_m": round_.detour.min_clearance,
+                                "rejoin_xy": round_.detour.rejoin.tolist(),
+                                "rejoin_s_m": round_.s_rejoin,
+                                "replans": 0,
+                                "completed_time": None,
+                            }
+                        )
+                        lg.detour_paths.append(round_.detour.points)
+                        log.info(
+                            "return blocked %.2f m ahead at t = %.1f s: going round (%.1f m)",
+                            s_now - ss[j],
+                            t,
+                            round_.detour.length,
+                        )
+                        hit = np.zeros(1, dtype=bool)
+                        blocked_since = None
+                        if lg.blocked is not None:
+                            lg.blocked["active"] = False
+                    else:
+                        no_detour = str(new_det)
                 if hit.any():
                     j = int(np.argmax(hit))
+                    d_ahead = (
+                        float(np.hypot(*np.diff(ahead[: j + 1], axis=0).T).sum())
+                        if round_ is not None
+                        else abs(float(ss[j]) - s_now)
+                    )
                     if blocked_since is None:
                         blocked_since = t
                         n_stops += 1
                         log.warning(
-                            "return blocked %.2f m ahead at t = %.1f s: stopping",
-                            abs(ss[j] - s_now),
+                            "return blocked %.2f m ahead at t = %.1f s: stopping (%s)",
+                            d_ahead,
                             t,
+                            no_detour or "detours disabled",
                         )
                     lg.blocked = {
                         "active": True,
                         "stops": n_stops,
                         "time": blocked_since,
                         "s": s_now,
-                        "distance_ahead_m": float(abs(ss[j] - s_now)),
+                        "distance_ahead_m": d_ahead,
                         "blocked_path_point_xy": ahead[j].tolist(),
                         "robot_true": truth.tolist(),
+                        "detour": no_detour or "detours disabled",
                     }
                 elif blocked_since is not None:
                     blocked_since = None
@@ -538,7 +622,13 @@ def run_mission(
             T_wc = _pose3(truth, gz) @ T_bc
             with _Timer(T_, "sim_camera"):
                 frame = render_rgbd(
-                    scene, camera, T_wc, RangeNoise(C.depth_relative_sigma), rng, timestamp=t
+                    scene,
+                    camera,
+                    T_wc,
+                    RangeNoise(C.depth_relative_sigma),
+                    rng,
+                    timestamp=t,
+                    max_depth=C.max_depth,
                 )
             with _Timer(T_, "planes_extract"):
                 obs = observe_rgbd(frame.frame)
@@ -546,7 +636,11 @@ def run_mission(
                 obs0, vo0, truth0 = cam_prev
                 vo_int = relative(vo0, vo)
                 true_int = relative(truth0, truth)
-                prior = T_cb @ _inc_se3(vo_int) @ T_bc  # T_c1_c2 predicted by the VO
+                # T_c1_c2 predicted by the VO, with the fusion gate as its 3-sigma bound: it gates
+                # the association, starts the texture search and fills what the planes cannot fix
+                prior = MotionPrior(
+                    T_cb @ _inc_se3(vo_int) @ T_bc, F.gate_deg / 3.0, F.gate_m / 3.0
+                )
                 with _Timer(T_, "planes_motion"):
                     try:
                         mot = estimate_motion(obs0, obs, prior)
@@ -624,6 +718,92 @@ def run_mission(
         lg.blocked["active"] = lg.outcome == "blocked"
     log.info("mission %s after %.1f s simulated", lg.outcome, t)
     return lg
+
+
+@dataclass
+class _Detouring:
+    """A detour being followed: paper 4's return controller on the detour polyline (its start
+    is the rejoin point), then the stored path resumed at arc length ``s_rejoin``."""
+
+    detour: Any  # navkit.path.detour.Detour
+    controller: Any  # ReturnController on the reversed detour
+    s_from: float  # stored-path arc length where the searched stretch starts
+    block_dist: float  # the blocked point, metres along the stored path from s_from
+    s_rejoin: float
+    stop_radius: float
+
+    def done(self, est: NDArray[np.float64]) -> bool:
+        """The estimate is within the stop radius of the rejoin point."""
+        return bool(np.hypot(*(est[:2] - self.detour.rejoin)) <= self.stop_radius)
+
+    def ahead(self, est: NDArray[np.float64], length: float) -> NDArray[np.float64]:
+        """``(21, 2)`` points of the detour still ahead, up to ``length`` metres."""
+        p = float(self.controller.progress[0])
+        return np.asarray(self.controller.path.position(np.linspace(p, max(p - length, 0.0), 21)))
+
+
+def _plan_round(
+    grid: ObstacleGrid,
+    est: NDArray[np.float64],
+    path: Any,
+    s_from: float,
+    block_dist: float | None,
+    s: MissionSettings,
+    half_width: float,
+) -> _Detouring | NavkitError:
+    """Plan a way round the block on the obstacle map (:func:`navkit.path.detour.plan_detour`):
+    the confirmed cells and those of the recent scans, inflated by the corridor half-width plus
+    ``block.detour_margin``; the stored path from arc length ``s_from`` towards home is searched
+    for the rejoin point. Returns the detour to follow, or the planner's
+    :class:`~navkit.path.detour.DetourFailure`."""
+    from navkit.path.control import ReturnController, ReturnSettings
+    from navkit.path.detour import DetourFailure, DetourSettings, plan_detour, polyline_spline
+
+    B = s.block
+    step = 0.5 * grid.resolution
+    s_to = max(s_from - B.detour_search, 0.0)
+    if s_from - s_to < step:
+        return DetourFailure("no free path point beyond the block", "the block is at home")
+    ss = np.linspace(s_from, s_to, int(np.ceil((s_from - s_to) / step)) + 1)
+    bi = None if block_dist is None else int(np.clip(round(block_dist / step), 0, len(ss) - 1))
+    settings = DetourSettings(
+        robot_radius=half_width,
+        margin=B.detour_margin,
+        search_length=B.detour_search,
+        rejoin_offset=0.5,
+    )
+    try:
+        d = plan_detour(
+            grid.occupied | grid.recent_occupied,
+            grid.resolution,
+            grid.origin,
+            est[:2],
+            path.position(ss),
+            settings,
+            block_index=bi,
+        )
+    except DetourFailure as exc:
+        log.info("%s", exc)
+        return exc
+    stop = s.return_stop_radius
+    ctrl = ReturnController(
+        polyline_spline(d.points[::-1]),
+        ReturnSettings(
+            delta=0.4,
+            v_max=s.return_v_max,
+            stop_radius=stop,
+            approach_radius=stop,
+            omega_max=s.robot.omega_max,
+        ),
+    )
+    return _Detouring(
+        detour=d,
+        controller=ctrl,
+        s_from=s_from,
+        block_dist=float(ss[0] - ss[bi]) if bi is not None else float("nan"),
+        s_rejoin=float(s_from - d.rejoin_arclength),
+        stop_radius=stop,
+    )
 
 
 def _add_plane_map(

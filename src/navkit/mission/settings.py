@@ -102,7 +102,13 @@ class LidarSettings:
 
 @dataclass(frozen=True)
 class CameraSettings:
-    """The forward RGB-D camera (plane-based motion, paper 2)."""
+    """The forward RGB-D camera (plane-based motion, paper 2).
+
+    ``max_depth`` is the sensor's range: structured-light and active-stereo RGB-D cameras
+    return no depth beyond about 4-10 m (Kinect v2 4.5 m, RealSense D435 about 10 m). Without
+    it the simulated camera would see the ground out to the horizon, a "plane" whose gentle
+    hills fit only to tens of centimetres.
+    """
 
     rate_hz: float = 1.0
     height: float = 1.0
@@ -111,6 +117,7 @@ class CameraSettings:
     height_px: int = 150
     hfov_deg: float = 80.0
     depth_relative_sigma: float = 0.003
+    max_depth: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -249,12 +256,23 @@ class BlockSettings:
         Obstacle cells within this of an obstacle mapped on the way out do not block the return
         (the robot drove past them; seen again with a drifted estimate they may land on the
         path): about the corrected estimate's largest error along the default mission, metres.
+    detour : bool
+        Go round a blocked stretch (:func:`navkit.path.detour.plan_detour` on the obstacle
+        map) instead of stopping; the robot stops only when no detour exists.
+    detour_margin : float
+        Clearance the detour keeps beyond the corridor half-width ``width / 2 + clearance``
+        (cell placement, half a cell diagonal, and the controller's corner cutting), metres.
+    detour_search : float
+        Length of stored path ahead searched for the rejoin point, metres.
     """
 
     lookahead: float = 2.0
     clearance: float = 0.05
     wait: float = 3.0
     known_margin: float = 0.6
+    detour: bool = True
+    detour_margin: float = 0.2
+    detour_search: float = 8.0
 
 
 @dataclass(frozen=True)

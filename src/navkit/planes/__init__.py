@@ -13,7 +13,7 @@ Everything works on NumPy arrays; readers for files are in :mod:`navkit.io.rgbd`
 :mod:`navkit.io.pointcloud`.
 """
 
-from navkit.planes.associate import AssociationSettings, associate
+from navkit.planes.associate import AssociationSettings, associate, associate_global
 from navkit.planes.extract import (
     CloudExtractionSettings,
     ExtractionSettings,
@@ -22,7 +22,7 @@ from navkit.planes.extract import (
 )
 from navkit.planes.frame import PlaneObservation, observe_points, observe_rgbd
 from navkit.planes.mapping import FrameResult, MapPlane, OdometrySettings, PlaneMap, PlaneOdometry
-from navkit.planes.motion import MotionSettings, estimate_motion
+from navkit.planes.motion import MotionPrior, MotionSettings, estimate_motion
 from navkit.planes.quaternion import euler_zxy_from_quat
 from navkit.planes.segments import ExtractionResult, PlaneSegment, plane_frame
 from navkit.planes.solve import (
@@ -44,6 +44,7 @@ __all__ = [
     "MapPlane",
     "MotionEstimate",
     "MotionFailure",
+    "MotionPrior",
     "MotionSettings",
     "OdometrySettings",
     "PlaneMap",
@@ -53,6 +54,7 @@ __all__ = [
     "PlaneTexture",
     "SolverSettings",
     "associate",
+    "associate_global",
     "estimate_motion",
     "euler_zxy_from_quat",
     "extract_planes_cloud",

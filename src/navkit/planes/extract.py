@@ -1,17 +1,31 @@
 """Plane extraction: organised grids (CAPE-like cell region growing) and unorganised clouds.
 
 Organised input (depth image back-projected, organised PCD, a range-scan grid), in the spirit of
-CAPE (Proenca & Gao, 2018):
+CAPE (Proenca & Gao, 2018, "Fast cylinder and plane extraction from depth cameras for visual
+odometry"):
 
-1. cut the grid into ``cell x cell`` patches and accumulate their moments (count, sum, scatter);
-2. a patch is *planar* when it is nearly complete and its PCA thickness (smallest eigenvalue)
-   is below a depth-dependent noise bound ``rms_base + rms_quadratic * z^2``;
+1. cut the grid into ``cell x cell`` patches and accumulate their moments (count, mean, scatter)
+   in one pass of block reductions, in float32 on coordinates centred per patch;
+2. a patch is *planar* when it is nearly complete and its PCA thickness (smallest eigenvalue,
+   closed form for all patches at once) is below a depth-dependent noise bound
+   ``rms_base + rms_quadratic * r^2``;
 3. neighbouring planar patches are joined when their normals agree and each centroid lies on the
-   other's plane (region growing = connected components of that cell graph);
+   other's plane (region growing = connected components of that cell graph, drawn as an image
+   for ``cv2.connectedComponents``);
 4. each region is refit from its summed moments; patches that disagree with the region's plane are
    dropped and the regions recomputed; coplanar regions are merged;
-5. pixels of the region and of the cells bordering it are re-assigned by their distance to the
-   plane (boundary refinement) and the plane is refit by total least squares.
+5. boundary refinement (CAPE): the patches *inside* a region (all eight neighbours in the same
+   region) are assigned wholesale - their valid pixels are inliers and their moments enter the
+   refit as they are; only the pixels of the patches at a region's border and of the patches
+   bordering it are tested against the planes (distance below ``inlier_factor`` x the noise
+   bound; the closest plane wins). ``refine="full"`` tests every pixel of every region instead;
+6. each plane is refit by total least squares from the moments of its inliers (interior patches
+   + boundary pixels); its outline is rasterised in the plane from the densely sampled interior
+   patches (one quadrilateral each) and a strided sample of the other pixels - not from all
+   inliers. Inlier lists come from one radix sort of an 8-bit label image.
+
+Temporaries are kept per thread between calls (:class:`_Workspace`); the results never share
+memory with them.
 
 Unorganised clouds: :mod:`navkit.planes.extract_cloud` (sequential RANSAC with vectorised
 hypotheses, a TLS refit, and the largest connected part of the inliers kept per plane); its names
@@ -21,12 +35,12 @@ are re-exported here.
 from __future__ import annotations
 
 import logging
+import threading
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from navkit.errors import InputError
 from navkit.geometry import Plane, canonical_plane
@@ -38,9 +52,14 @@ __all__ = [
     "ExtractionSettings",
     "extract_planes_cloud",
     "extract_planes_organized",
+    "smallest_eigenpairs",
 ]
 
 log = logging.getLogger(__name__)
+
+_REFINE_MODES = ("boundary", "full")
+# upper-triangle index pairs of a symmetric 3 x 3 matrix: xx, xy, xz, yy, yz, zz
+_IU = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
 
 
 @dataclass(frozen=True)
@@ -54,7 +73,7 @@ class ExtractionSettings:
     min_fill : float
         Fraction of valid points a patch needs to be tested.
     rms_base, rms_quadratic : float
-        Patch thickness bound ``rms_base + rms_quadratic * z^2`` (metres, z in metres): the
+        Patch thickness bound ``rms_base + rms_quadratic * r^2`` (metres, range r in metres): the
         structured-light noise model (Khoshelham & Elberink 2012: sigma_z ~ 1.4e-3 z^2 ... 2.9e-3 z^2)
         plus a margin for quantisation.
     angle_deg : float
@@ -65,9 +84,18 @@ class ExtractionSettings:
         Smallest region kept, patches.
     inlier_factor : float
         Boundary refinement: a pixel is an inlier when its distance to the plane is below
-        ``inlier_factor`` x the thickness bound at its depth.
+        ``inlier_factor`` x the thickness bound at its range.
     outline_cell : float
         Raster size for outlines and areas, metres.
+    refine : {"boundary", "full"}
+        ``"boundary"`` (default, CAPE): the patches inside a region (8 neighbours in the same
+        region) are assigned wholesale - all their valid pixels are inliers, as a planar patch is
+        within the noise bound by step 2 - and only the patches at and around a region's border
+        are refined pixel by pixel. ``"full"``: every pixel of every region's patches is tested
+        against its plane too, which also drops the rare far outlier inside a planar patch (a
+        flying pixel that did not push the patch's thickness over the bound). Identical labels
+        on the simulator and the slambook frames (``docs/planes.md``); ``"full"`` costs the
+        per-pixel test of the interior patches (most of a frame with large planes).
     """
 
     cell: int = 20
@@ -79,55 +107,484 @@ class ExtractionSettings:
     min_cells: int = 4
     inlier_factor: float = 3.0
     outline_cell: float = 0.02
+    refine: str = "boundary"
 
     def __post_init__(self) -> None:
         if int(self.cell) < 3:
             raise InputError(f"is {self.cell}", field="cell", expected="an integer >= 3")
         if not 0 < self.angle_deg < 90:
             raise InputError(f"is {self.angle_deg}", field="angle_deg", expected="0 < angle < 90")
+        if self.refine not in _REFINE_MODES:
+            raise InputError(
+                f"is {self.refine!r}", field="refine", expected=" or ".join(_REFINE_MODES)
+            )
 
-    def noise(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Thickness bound (metres) at range ``z`` (metres)."""
-        return self.rms_base + self.rms_quadratic * z * z
+    def noise(self, r2: NDArray[np.floating]) -> NDArray[np.floating]:
+        """Thickness bound (metres) at squared range ``r2`` (metres^2)."""
+        return self.rms_base + self.rms_quadratic * r2
 
 
-def _planes_from_moments(cnt, S, SS):
-    """Normals ``(G, 3)`` (pointing away from the origin), rho ``(G,)``, rms ``(G,)``, means."""
-    n = np.maximum(cnt, 1.0)
-    m = S / n[:, None]
-    C = SS / n[:, None, None] - m[:, :, None] * m[:, None, :]
-    w, V = np.linalg.eigh(C)
-    normal = V[:, :, 0]
+# ------------------------------------------------------------------------------ linear algebra
+
+
+def smallest_eigenpairs(
+    C: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Smallest eigenvalue and its unit eigenvector of many symmetric 3 x 3 matrices.
+
+    Closed form (Smith 1961, "Eigenvalues of a symmetric 3 x 3 matrix"): with ``q = tr(C) / 3``,
+    ``p = sqrt(tr((C - qI)^2) / 6)`` and ``r = det((C - qI) / p) / 2``, the eigenvalues are
+    ``q + 2 p cos(acos(r) / 3 + 2 pi k / 3)``, the smallest for ``k = 1``. Its eigenvector is the
+    longest cross product of two rows of ``C - lambda I`` (the null space of a rank-2 matrix).
+    ~20x faster than ``numpy.linalg.eigh`` on 768 matrices, and as accurate for a plane's scatter
+    (smallest eigenvalue well separated from the others); a matrix with a repeated smallest
+    eigenvalue (no defined normal: a line or a blob of points) gets one eigenvector of its
+    eigenspace, an all-zero matrix ``(0, 0, 1)``.
+
+    Parameters
+    ----------
+    C : (G, 3, 3) array
+        Symmetric matrices (covariances, m^2).
+
+    Returns
+    -------
+    lam : (G,) array
+        Smallest eigenvalues (clipped at 0).
+    vec : (G, 3) array
+        Unit eigenvectors (sign arbitrary).
+    """
+    a00, a11, a22 = C[:, 0, 0], C[:, 1, 1], C[:, 2, 2]
+    a01, a02, a12 = C[:, 0, 1], C[:, 0, 2], C[:, 1, 2]
+    q = (a00 + a11 + a22) / 3.0
+    b00, b11, b22 = a00 - q, a11 - q, a22 - q
+    p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
+    p = np.sqrt(p2)
+    det = (
+        b00 * (b11 * b22 - a12 * a12)
+        - a01 * (a01 * b22 - a12 * a02)
+        + a02 * (a01 * a12 - b11 * a02)
+    )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = np.where(p > 0, det / (2.0 * p * p2), 0.0)
+    phi = np.arccos(np.clip(r, -1.0, 1.0)) / 3.0
+    lam = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+    # null vector of C - lam I: the longest cross product of two of its rows
+    m00, m11, m22 = a00 - lam, a11 - lam, a22 - lam
+    rows = (
+        (m00, a01, a02),
+        (a01, m11, a12),
+        (a02, a12, m22),
+    )
+    best = np.zeros((len(q), 3))
+    best[:, 2] = 1.0
+    best_n = np.zeros(len(q))
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        (x0, y0, z0), (x1, y1, z1) = rows[i], rows[j]
+        cx, cy, cz = y0 * z1 - z0 * y1, z0 * x1 - x0 * z1, x0 * y1 - y0 * x1
+        n2 = cx * cx + cy * cy + cz * cz
+        take = n2 > best_n
+        best[take] = np.stack([cx, cy, cz], axis=1)[take]
+        best_n = np.where(take, n2, best_n)
+    # a repeated smallest eigenvalue (rank <= 1): any unit vector orthogonal to the largest row
+    rank1 = best_n <= 1e-30 * np.maximum(p2 * p2, 1e-300)
+    if rank1.any():
+        _, V = np.linalg.eigh(C[rank1])
+        best[rank1] = V[:, :, 0]
+        best_n[rank1] = 1.0
+    best /= np.sqrt(np.einsum("gi,gi->g", best, best))[:, None]
+    return np.maximum(lam, 0.0), best
+
+
+class _Workspace(threading.local):
+    """Per-thread scratch buffers reused from call to call (CAPE preallocates its buffers the
+    same way). Only temporaries that never leave :func:`extract_planes_organized` live here; the
+    results are fresh arrays. Fresh multi-megabyte temporaries cost a page fault per 4 kB on
+    first touch - measured 7-8 ms of a ~16 ms frame on the loaded 2-core development VM. Holds
+    ~20 MB per thread after a 640 x 480 frame."""
+
+    def __init__(self) -> None:
+        self.buffers: dict[str, NDArray] = {}
+
+    def get(self, name: str, shape: tuple[int, ...], dtype: type) -> NDArray:
+        n = int(np.prod(shape, dtype=np.int64))
+        buf = self.buffers.get(name)
+        if buf is None or buf.dtype != np.dtype(dtype) or buf.size < n:
+            buf = np.empty(max(n, 1), dtype)
+            self.buffers[name] = buf
+        return buf[:n].reshape(shape)
+
+
+_WS = _Workspace()
+
+
+# ------------------------------------------------------------------------------ moments
+
+# a moment row: [n, S (3), SS (3 x 3, row-major)] - count, sums and sums of outer products (raw)
+_NM = 13
+
+
+def _moment_rows(
+    n: NDArray[np.float64],
+    ref: NDArray[np.float64],
+    Sd: NDArray[np.float64],
+    SSd: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Raw float64 moment rows ``(G, 13)`` from moments about a reference point per group:
+    ``S = n ref + Sd`` and ``SS = SSd + ref Sd^T + Sd ref^T + n ref ref^T``."""
+    M = np.empty((len(n), _NM))
+    M[:, 0] = n
+    M[:, 1:4] = n[:, None] * ref + Sd
+    rS = ref[:, :, None] * Sd[:, None, :]
+    SS = SSd + rS + rS.transpose(0, 2, 1) + n[:, None, None] * ref[:, :, None] * ref[:, None, :]
+    M[:, 4:] = SS.reshape(-1, 9)
+    return M
+
+
+def _sum_rows(
+    groups: NDArray[np.int64], n_groups: int, M: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Sums of the rows of ``M`` per group (``-1`` = none): ``(n_groups, M.shape[1])``. A one-hot
+    matrix product: ~4x faster than a weighted ``bincount`` per column for a few hundred rows."""
+    onehot = (groups[None, :] == np.arange(n_groups)[:, None]).astype(np.float64)
+    return onehot @ M
+
+
+def _planes_from_rows(
+    M: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """TLS planes of moment rows: normals ``(G, 3)`` pointing away from the origin, rho ``(G,)``,
+    RMS orthogonal residual ``(G,)`` and means ``(G, 3)`` (metres)."""
+    n = np.maximum(M[:, 0], 1.0)
+    m = M[:, 1:4] / n[:, None]
+    C = M[:, 4:].reshape(-1, 3, 3) / n[:, None, None] - m[:, :, None] * m[:, None, :]
+    if len(C) > 64:
+        lam, normal = smallest_eigenpairs(C)
+    else:  # a few regions: LAPACK has less overhead than the closed form's ~40 array operations
+        w, V = np.linalg.eigh(C)
+        lam, normal = np.maximum(w[:, 0], 0.0), V[:, :, 0]
     d = np.einsum("gi,gi->g", normal, m)
-    flip = d < 0
-    normal[flip] *= -1
-    d = np.abs(d)
-    rms = np.sqrt(np.maximum(w[:, 0], 0.0))
-    return normal, d, rms, m, w
+    normal[d < 0] *= -1
+    return normal, np.abs(d), np.sqrt(lam), m
 
 
-def _segment_from_moments(
-    idx: NDArray[np.int64],
-    P_flat: NDArray[np.float64],
-    normal: NDArray[np.float64],
-    rho: float,
-    centroid: NDArray[np.float64],
-    rms: float,
-    outline_cell: float,
-) -> PlaneSegment:
-    """Package inliers as a segment whose TLS plane came from their summed moments."""
-    n, r = canonical_plane(normal, float(rho))
-    plane = Plane(normal=n, rho=r, centroid=centroid, rms=float(rms), count=len(idx))
-    origin, axes = plane_frame(plane)
-    step = max(1, len(idx) // 40_000)  # outlines from at most ~40k points (dense grids)
-    sub = idx[::step]
-    x, y, z = (P_flat[sub, k] for k in range(3))  # 1D gathers, no (N, 3) temporaries
-    uv = np.empty((len(sub), 2))
-    for k in range(2):
-        a = axes[k]
-        uv[:, k] = x * a[0] + y * a[1] + z * a[2] - float(a @ origin)
-    outline, area = outline_from_points(uv, outline_cell)
-    return PlaneSegment(plane=plane, inliers=idx.astype(np.int64), outline=outline, area=area)
+def _block_sum(a: NDArray[np.float32], hc: int, wc: int, c: int) -> NDArray[np.float32]:
+    """Sums over ``c x c`` blocks of the last two axes: ``(..., hc*c, wc*c) -> (..., hc, wc)``."""
+    lead = a.shape[:-2]
+    b = a.reshape(*lead, hc, c, wc * c).sum(axis=-2)
+    return b.reshape(*lead, hc, wc, c).sum(axis=-1)
+
+
+@dataclass(frozen=True)
+class _Patches:
+    """Pixels and patch moments (internal)."""
+
+    P: NDArray[np.float64]  # (H, W, 3) the input points
+    valid: NDArray[np.bool_]  # (Hc, Wc) over the whole patches
+    ref: NDArray[np.float32]  # (G, 3) each patch's reference point (its float32 mean)
+    M: NDArray[np.float64]  # (G, 13) raw moment rows
+    D: NDArray[np.float32]  # (3, Hc, Wc) coordinates minus their patch's ref, 0 where invalid
+    tol: NDArray[np.float32]  # (Hc, Wc) inlier bound at each pixel's range, -1 where invalid
+
+
+def _patch_moments(P: NDArray[np.float64], s: ExtractionSettings, hc: int, wc: int) -> _Patches:
+    """Step 1: moments of every patch in one pass of block reductions (float32, centred).
+
+    A patch's scatter about its mean is ~1e-3 m^2 along the plane and ~1e-6 m^2 across it (the
+    thickness), while raw second moments at 5 m are ~25 m^2: in float32 (eps 6e-8) raw moments
+    would lose the thickness to cancellation (25 * 6e-8 = 1.5e-6 m^2). Centred on the patch's
+    float32 mean, the products are <= ~0.01 m^2 and keep ~1e-9 m^2; the moments about the
+    reference are converted to raw float64 moments for the region sums. The coordinates are
+    centred in place, and one scratch image serves all products (no per-product allocation).
+    """
+    c = int(s.cell)
+    Hc, Wc = hc * c, wc * c
+    X = _WS.get("X", (3, Hc, Wc), np.float32)
+    for k in range(3):
+        X[k] = P[:Hc, :Wc, k]
+    x, y, z = X
+    r2 = np.multiply(x, x, out=_WS.get("r2", (Hc, Wc), np.float32))
+    tmp = np.multiply(y, y, out=_WS.get("tmp", (Hc, Wc), np.float32))
+    r2 += tmp
+    np.multiply(z, z, out=tmp)
+    r2 += tmp  # NaN / inf anywhere -> not finite
+    valid = np.greater(r2, 0, out=_WS.get("valid", (Hc, Wc), np.bool_))
+    invalid = np.less(r2, np.inf, out=_WS.get("invalid", (Hc, Wc), np.bool_))
+    valid &= invalid
+    np.logical_not(valid, out=invalid)
+    np.copyto(X, np.float32(0), where=invalid)
+    np.copyto(tmp, valid)
+    cnt = _block_sum(tmp, hc, wc, c)
+    ref = _block_sum(X, hc, wc, c) / np.maximum(cnt, 1)  # (3, hc, wc) float32 means
+    X.reshape(3, hc, c, wc, c)[...] -= ref[:, :, None, :, None]
+    np.copyto(X, np.float32(0), where=invalid)
+    D = X
+    Sd = _block_sum(D, hc, wc, c).reshape(3, -1).T.astype(np.float64)  # (G, 3)
+    SSd = np.empty((hc * wc, 3, 3))
+    for a, b in zip(*_IU, strict=True):
+        np.multiply(D[a], D[b], out=tmp)
+        v = _block_sum(tmp, hc, wc, c).ravel()
+        SSd[:, a, b] = v
+        SSd[:, b, a] = v
+    ref_g = np.ascontiguousarray(ref.reshape(3, -1).T, dtype=np.float32)
+    M = _moment_rows(cnt.ravel().astype(np.float64), ref_g.astype(np.float64), Sd, SSd)
+    # the refinement's per-pixel bound inlier_factor * noise(r^2), in place of r^2
+    r2 *= np.float32(s.inlier_factor * s.rms_quadratic)
+    r2 += np.float32(s.inlier_factor * s.rms_base)
+    np.copyto(r2, np.float32(-1), where=invalid)
+    return _Patches(P=P, valid=valid, ref=ref_g, M=M, D=D, tol=r2)
+
+
+def _sample_stride(M: NDArray[np.float64], c: int, raster: float) -> NDArray[np.int64]:
+    """Pixel stride per patch for rasterising outlines: every ``t``-th row and column of a patch
+    still puts a point in every raster cell it covers.
+
+    A patch's pixel spacing is ~ its side / ``c``; the side from its scatter (a uniformly
+    sampled square of side L has trace 2 L^2 / 12, so L = sqrt(6 trace), an upper bound for an
+    elongated patch's mean side). Points ``t`` pixels apart fill a ``raster`` grid in any
+    orientation when ``t * spacing <= raster / sqrt(2)``.
+    """
+    n = np.maximum(M[:, 0], 1.0)
+    m = M[:, 1:4] / n[:, None]
+    tr = M[:, 4] / n - m[:, 0] ** 2 + M[:, 8] / n - m[:, 1] ** 2 + M[:, 12] / n - m[:, 2] ** 2
+    spacing = np.sqrt(6.0 * np.maximum(tr, 0.0)) / c
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.floor(raster / (np.sqrt(2.0) * spacing))
+    t[~(t >= 1.0)] = 1.0  # NaN (no pixels) and < 1
+    return np.minimum(t, c).astype(np.int64)
+
+
+# ------------------------------------------------------------------------------ region growing
+
+
+def _grow_regions(
+    M: NDArray[np.float64], hc: int, wc: int, s: ExtractionSettings
+) -> tuple[int, NDArray[np.int64], int]:
+    """Steps 2-4: planar patches, region growing, pruning, merging.
+
+    Returns the number of regions, the region of each patch ``(G,)`` (``-1`` = none) and the
+    number of planar patches.
+    """
+    c = int(s.cell)
+    G = hc * wc
+    normal, d, rms, mean = _planes_from_rows(M)
+    bound = s.noise(np.einsum("gi,gi->g", mean, mean))
+    planar = (M[:, 0] >= s.min_fill * c * c) & (rms < bound)
+    cos_t = np.cos(np.radians(s.angle_deg))
+    ids = np.arange(G).reshape(hc, wc)
+    pa = np.concatenate([ids[:, :-1].ravel(), ids[:-1, :].ravel()])
+    pb = np.concatenate([ids[:, 1:].ravel(), ids[1:, :].ravel()])
+    # edge tests that do not depend on the kept set: normals agree, centroids on each other's plane
+    tol = s.distance_factor * np.maximum(bound[pa], bound[pb])
+    edge_ok = (
+        (np.einsum("ei,ei->e", normal[pa], normal[pb]) > cos_t)
+        & (np.abs(np.einsum("ei,ei->e", normal[pa], mean[pb]) - d[pa]) < tol)
+        & (np.abs(np.einsum("ei,ei->e", normal[pb], mean[pa]) - d[pb]) < tol)
+    )
+
+    # the cell graph as an image: patches at even (row, col), the edge between two neighbours
+    # at the odd position between them; its 4-connected components are the graph's components
+    eh = edge_ok[: hc * (wc - 1)].reshape(hc, wc - 1)
+    ev = edge_ok[hc * (wc - 1) :].reshape(hc - 1, wc)
+    graph = np.zeros((2 * hc - 1, 2 * wc - 1), np.uint8)
+
+    def regions(keep: NDArray[np.bool_]) -> tuple[int, NDArray[np.int64]]:
+        k2 = keep.reshape(hc, wc)
+        graph[0::2, 0::2] = k2
+        graph[0::2, 1::2] = eh & k2[:, :-1] & k2[:, 1:]
+        graph[1::2, 0::2] = ev & k2[:-1, :] & k2[1:, :]
+        n_comp, lab = cv2.connectedComponents(graph, connectivity=4, ltype=cv2.CV_32S)
+        comp = lab[0::2, 0::2].ravel().astype(np.int64) - 1  # background 0 -> -1
+        sizes = np.bincount(comp[comp >= 0], minlength=n_comp - 1)
+        big = sizes >= s.min_cells
+        remap = -np.ones(n_comp, np.int64)  # index 0 = no component
+        remap[1:][big] = np.arange(int(big.sum()))
+        return int(big.sum()), remap[comp + 1]
+
+    n_planar = int(planar.sum())
+    n_reg, comp = regions(planar)
+    if n_reg == 0:
+        return 0, comp, n_planar
+    # 4. prune patches that disagree with their region's refit plane, then regroup
+    rn, rd, _, _ = _planes_from_rows(_sum_rows(comp, n_reg, M))
+    r = np.maximum(comp, 0)
+    agree = (np.einsum("gi,gi->g", normal, rn[r]) > cos_t) & (
+        np.abs(np.einsum("gi,gi->g", rn[r], mean) - rd[r]) < s.distance_factor * bound
+    )
+    n_reg, comp = regions(planar & (comp >= 0) & agree)
+    if n_reg == 0:
+        return 0, comp, n_planar
+    # merge coplanar regions (e.g. a wall cut in two by an object in front of it)
+    rn, rd, _, rmean = _planes_from_rows(_sum_rows(comp, n_reg, M))
+    rtol = s.distance_factor * s.noise(np.einsum("gi,gi->g", rmean, rmean))
+    same = (rn @ rn.T > cos_t) & (
+        np.abs(np.einsum("ai,bi->ab", rn, rmean) - rd[:, None])
+        < np.maximum(rtol[:, None], rtol[None, :])
+    )
+    same &= same.T
+    n_m, merged = _dense_components(same)
+    comp = np.where(comp >= 0, merged[np.maximum(comp, 0)], -1)
+    return n_m, comp, n_planar
+
+
+def _dense_components(adj: NDArray[np.bool_]) -> tuple[int, NDArray[np.int64]]:
+    """Connected components of a small symmetric adjacency matrix ``(n, n)`` by repeated
+    squaring of its reachability matrix (log2(n) products of n x n: microseconds for the few
+    dozen regions of a frame). Components are numbered by their first member."""
+    n = len(adj)
+    R = (adj | np.eye(n, dtype=bool)).astype(np.float32)
+    for _ in range(max(1, int(np.ceil(np.log2(max(n, 2)))))):
+        R2 = np.minimum(R @ R, 1.0)
+        if np.array_equal(R2, R):
+            break
+        R = R2
+    first = np.argmax(R > 0, axis=1)  # smallest member of each node's component
+    roots, comp = np.unique(first, return_inverse=True)
+    return len(roots), comp.astype(np.int64)
+
+
+# ------------------------------------------------------------------------------ refinement
+
+
+def _border_patches(
+    cellmap: NDArray[np.int64], full: bool
+) -> tuple[NDArray[np.bool_], NDArray[np.int64], NDArray[np.int64]]:
+    """Which patches are assigned wholesale, and the candidate regions of the others.
+
+    Returns ``wholesale (hc, wc)`` - region patches whose 8 neighbours are in the same region
+    (the image border counts as the same region; none for ``refine="full"``) - the ids of the
+    patches to refine pixel by pixel ``(B,)`` and their candidate regions ``(B, m)`` (their own
+    and their 8 neighbours', each once, ``-1`` padded), by decreasing number of candidates.
+    """
+    hc, wc = cellmap.shape
+    padded = np.pad(cellmap, 1, mode="edge")
+    nb = np.stack(
+        [
+            padded[1 + di : 1 + di + hc, 1 + dj : 1 + dj + wc]
+            for di in (-1, 0, 1)
+            for dj in (-1, 0, 1)
+        ]
+    )  # (9, hc, wc), the patch itself in the middle
+    if full:
+        interior = np.zeros((hc, wc), bool)
+    else:
+        interior = (cellmap >= 0) & np.all(nb == cellmap[None], axis=0)
+    cand = np.sort(nb.reshape(9, -1).T, axis=1)  # (G, 9)
+    cand[:, 1:][cand[:, 1:] == cand[:, :-1]] = -1  # each region once
+    cand = -np.sort(-cand, axis=1)  # regions first, -1 last
+    n_cand = (cand >= 0).sum(axis=1)
+    border = ~interior.ravel() & (n_cand > 0)
+    ids = np.flatnonzero(border)
+    ids = ids[np.argsort(-n_cand[ids], kind="stable")]
+    m = int(n_cand[ids].max()) if len(ids) else 0
+    return interior, ids, cand[ids, :m]
+
+
+@dataclass(frozen=True)
+class _Border:
+    """Pixel-level result of the border patches (internal)."""
+
+    ids: NDArray[np.int64]  # (B,) patch ids
+    label: NDArray[np.signedinteger]  # (B, c, c) region of each pixel, -1 = none
+    complete: NDArray[np.bool_]  # (B,) region patches whose valid pixels all stayed in it
+    M: NDArray[np.float64]  # (n_reg, 13) raw moments of the pixels of the mixed patches
+    points: list[NDArray[np.floating]]  # per region: (3, K) pixels of its mixed patches
+
+
+def _refine_border(
+    pt: _Patches,
+    comp: NDArray[np.int64],
+    ids: NDArray[np.int64],
+    cand: NDArray[np.int64],
+    rn: NDArray[np.float64],
+    rd: NDArray[np.float64],
+    n_reg: int,
+    hc: int,
+    wc: int,
+    c: int,
+    raster: float,
+) -> _Border:
+    """Step 5: the pixels of the border patches against their candidate planes.
+
+    A pixel joins the closest candidate plane whose distance is below ``inlier_factor`` x the
+    noise bound at its range. Distances use the centred coordinates: ``n . x - rho =
+    n . d + (n . ref - rho)``, one offset per (patch, plane). A region patch whose valid pixels
+    all stay in its own region is *complete* (its patch moments stand); the pixels of the other
+    (*mixed*) patches give per-pixel moments, grouped by (patch, plane).
+    """
+    B, m = cand.shape
+    ci, cj = np.divmod(ids, wc)
+    d = [pt.D[k].reshape(hc, c, wc, c)[ci, :, cj, :] for k in range(3)]  # (B, c, c) each
+    tol = pt.tol.reshape(hc, c, wc, c)[ci, :, cj, :]  # -1 where invalid: never an inlier
+    ref = pt.ref[ids]  # (B, 3) float32
+    e = (slice(None), None, None)
+    best_d = _WS.get("best_d", (B, c, c), np.float32)
+    best_d.fill(np.inf)
+    label = np.full((B, c, c), -1, np.int16 if n_reg < 32767 else np.int32)
+    dist_ws = _WS.get("dist", (B, c, c), np.float32)
+    tmp_ws = _WS.get("dist_tmp", (B, c, c), np.float32)
+    better_ws = _WS.get("better", (B, c, c), np.bool_)
+    ok_ws = _WS.get("ok", (B, c, c), np.bool_)
+    n32 = rn.astype(np.float32)
+    rho32 = rd.astype(np.float32)
+    n_with = (cand >= 0).sum(axis=0)  # patches with more than `slot` candidates: a prefix
+    for slot in range(m):
+        b = int(n_with[slot])
+        k = cand[:b, slot]
+        nk = n32[k]
+        off = np.einsum("bi,bi->b", nk, ref[:b]) - rho32[k]
+        dist, tmp, better, ok = dist_ws[:b], tmp_ws[:b], better_ws[:b], ok_ws[:b]
+        np.multiply(d[0][:b], nk[:, 0][e], out=dist)
+        for a in (1, 2):
+            np.multiply(d[a][:b], nk[:, a][e], out=tmp)
+            dist += tmp
+        dist += off[e]
+        np.abs(dist, out=dist)
+        np.less(dist, tol[:b], out=better)
+        better &= np.less(dist, best_d[:b], out=ok)
+        np.copyto(best_d[:b], dist, where=better)
+        np.copyto(label[:b], k.astype(label.dtype)[e], where=better)
+    own = comp[ids]
+    complete = (own >= 0) & np.all((label == own[e]) | (tol < 0), axis=(1, 2))
+    # per-pixel moments of the mixed patches per (patch, candidate): one batched product of
+    # the candidate indicators (Bm, m, c^2) with the pixels' [1, d, d d^T] (Bm, c^2, 10)
+    mixed = np.flatnonzero(~complete)
+    M = np.zeros((n_reg, _NM))
+    points: list[NDArray[np.floating]] = [np.zeros((3, 0))] * n_reg
+    if len(mixed):
+        Bm = len(mixed)
+        lm = label[mixed].reshape(Bm, -1)
+        cm = cand[mixed]
+        onehot = _WS.get("onehot", (Bm, cm.shape[1], c * c), np.float32)
+        np.equal(lm[:, None, :], cm[:, :, None], out=onehot)  # -1 slots never match
+        dx, dy, dz = (a[mixed].reshape(Bm, -1) for a in d)
+        Q = _WS.get("Q", (10, Bm, c * c), np.float32)  # one contiguous image per quantity
+        Q[0] = 1.0
+        Q[1], Q[2], Q[3] = dx, dy, dz
+        for j, (a_, b_) in enumerate(zip(*_IU, strict=True)):
+            np.multiply(Q[1 + a_], Q[1 + b_], out=Q[4 + j])
+        G = np.matmul(onehot, Q.transpose(1, 2, 0)).astype(np.float64).reshape(-1, 10)
+        used = np.flatnonzero(G[:, 0] > 0)
+        g = G[used]
+        Sdd = np.empty((len(used), 3, 3))
+        Sdd[:, _IU[0], _IU[1]] = g[:, 4:]
+        Sdd[:, _IU[1], _IU[0]] = g[:, 4:]
+        gref = np.repeat(ref[mixed].astype(np.float64), cm.shape[1], axis=0)[used]
+        M = _sum_rows(cm.ravel()[used], n_reg, _moment_rows(g[:, 0], gref, g[:, 1:4], Sdd))
+        # the pixels of the mixed patches per region for the outlines, every t-th row / column
+        t = _sample_stride(pt.M[ids[mixed]], c, raster)[:, None, None]
+        px = np.arange(c)
+        thin = (label[mixed] >= 0) & (px[None, :, None] % t == 0) & (px[None, None, :] % t == 0)
+        bi = np.nonzero(thin)[0]
+        lab = label[mixed][thin]
+        order = np.argsort(lab, kind="stable")
+        cuts = np.searchsorted(lab[order], np.arange(n_reg + 1))
+        rb = ref[mixed][bi[order]]
+        pts = np.stack([Q[1 + k].reshape(thin.shape)[thin][order] + rb[:, k] for k in range(3)])
+        points = [pts[:, cuts[k] : cuts[k + 1]] for k in range(n_reg)]
+    return _Border(ids=ids, label=label, complete=complete, M=M, points=points)
+
+
+# ------------------------------------------------------------------------------ main entry
 
 
 def extract_planes_organized(
@@ -139,13 +596,14 @@ def extract_planes_organized(
     ----------
     points : (H, W, 3) array
         Points in the sensor frame, metres; NaN (or all-zero rows) = no measurement. Depth-like
-        range for the noise model is the distance from the origin.
+        range for the noise model is the distance from the origin. Rows / columns beyond the last
+        whole ``cell`` are not used.
     settings : ExtractionSettings, optional
 
     Returns
     -------
     ExtractionResult
-        ``labels`` is ``(H, W)``; inlier indices are ``row * W + col``.
+        ``labels`` is ``(H, W)``; inlier indices are ``row * W + col``, increasing.
     """
     s = settings or ExtractionSettings()
     P = np.asarray(points, dtype=np.float64)
@@ -156,201 +614,139 @@ def extract_planes_organized(
     H, W = P.shape[:2]
     c = int(s.cell)
     hc, wc = H // c, W // c
-    labels = -np.ones((H, W), np.int64)
     if hc == 0 or wc == 0:
-        return ExtractionResult((), labels)
-    px, py, pz = P[..., 0], P[..., 1], P[..., 2]
-    valid = (
-        np.isfinite(px) & np.isfinite(py) & np.isfinite(pz) & ((px != 0) | (py != 0) | (pz != 0))
-    )
-    Pc = P[: hc * c, : wc * c]
-    vc = valid[: hc * c, : wc * c]
-    # 1. patch moments: block sums of 1, x, y, z, xx, xy, xz, yy, yz, zz - one contiguous 2D
-    #    image per quantity, rows of a patch summed first, then columns (exact in float64)
-    gx, gy, gz = np.where(vc, np.moveaxis(Pc, 2, 0), 0.0)  # one pass, contiguous planes
-
-    def block_sum(a: NDArray[np.float64]) -> NDArray[np.float64]:
-        return a.reshape(hc, c, wc * c).sum(axis=1).reshape(hc, wc, c).sum(axis=2).ravel()
-
-    cnt = block_sum(vc.astype(np.float64))
-    S = np.stack([block_sum(gx), block_sum(gy), block_sum(gz)], axis=1)
-    iu = np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2])
-    xyz = (gx, gy, gz)
-    Q = np.stack([block_sum(xyz[a] * xyz[b]) for a, b in zip(*iu, strict=True)], axis=1)
-    SS = np.empty((hc * wc, 3, 3))
-    SS[:, iu[0], iu[1]] = Q
-    SS[:, iu[1], iu[0]] = Q
-    # 2. planar patches
-    normal, d, rms, mean, _ = _planes_from_moments(cnt, S, SS)
-    z = np.linalg.norm(mean, axis=1)
-    bound = s.noise(z)
-    planar = (cnt >= s.min_fill * c * c) & (rms < bound)
-    # 3. region growing on the patch graph
-    cos_t = np.cos(np.radians(s.angle_deg))
-    ids = np.arange(hc * wc).reshape(hc, wc)
-    pairs = np.concatenate(
-        [
-            np.stack([ids[:, :-1].ravel(), ids[:, 1:].ravel()], axis=1),
-            np.stack([ids[:-1, :].ravel(), ids[1:, :].ravel()], axis=1),
-        ]
-    )
-
-    def edges_ok(keep: NDArray[np.bool_]) -> NDArray[np.int64]:
-        a, b = pairs[:, 0], pairs[:, 1]
-        ok = keep[a] & keep[b]
-        ok &= np.einsum("ei,ei->e", normal[a], normal[b]) > cos_t
-        tol = s.distance_factor * np.maximum(bound[a], bound[b])
-        ok &= np.abs(np.einsum("ei,ei->e", normal[a], mean[b]) - d[a]) < tol
-        ok &= np.abs(np.einsum("ei,ei->e", normal[b], mean[a]) - d[b]) < tol
-        return pairs[ok]
-
-    def regions(keep: NDArray[np.bool_]) -> tuple[int, NDArray[np.int64]]:
-        e = edges_ok(keep)
-        g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(hc * wc, hc * wc))
-        n_comp, comp = connected_components(g, directed=False)
-        comp = np.where(keep, comp, -1)
-        sizes = np.bincount(comp[comp >= 0], minlength=n_comp)
-        big = sizes >= s.min_cells
-        remap = -np.ones(n_comp, np.int64)
-        remap[big] = np.arange(big.sum())
-        comp = np.where(comp >= 0, remap[np.maximum(comp, 0)], -1)
-        return int(big.sum()), comp
-
-    def region_planes(n_reg, comp):
-        sel = comp >= 0
-        g = comp[sel]
-        rc = np.bincount(g, cnt[sel], minlength=n_reg)
-        rS = np.stack([np.bincount(g, S[sel, k], minlength=n_reg) for k in range(3)], axis=1)
-        rSS = np.zeros((n_reg, 3, 3))
-        np.add.at(rSS, g, SS[sel])
-        return _planes_from_moments(rc, rS, rSS)
-
-    n_reg, comp = regions(planar)
+        return ExtractionResult((), -np.ones((H, W), np.int64))
+    # 1. patch moments
+    pt = _patch_moments(P, s, hc, wc)
+    # 2.-4. planar patches, region growing, pruning, merging
+    n_reg, comp, n_planar = _grow_regions(pt.M, hc, wc, s)
     if n_reg == 0:
-        return ExtractionResult((), labels)
-    # 4. prune patches that disagree with their region's refit plane, then regroup
-    rn, rd, _, _, _ = region_planes(n_reg, comp)
-    r = np.maximum(comp, 0)
-    agree = (np.einsum("gi,gi->g", normal, rn[r]) > cos_t) & (
-        np.abs(np.einsum("gi,gi->g", rn[r], mean) - rd[r]) < s.distance_factor * bound
-    )
-    n_reg, comp = regions(planar & (comp >= 0) & agree)
-    if n_reg == 0:
-        return ExtractionResult((), labels)
-    rn, rd, _, rmean, _ = region_planes(n_reg, comp)
-    # merge coplanar regions (e.g. a wall cut in two by an object in front of it)
-    rz = np.linalg.norm(rmean, axis=1)
-    rtol = s.distance_factor * s.noise(rz)
-    same = (rn @ rn.T > cos_t) & (
-        np.abs(np.einsum("ai,bi->ab", rn, rmean) - rd[:, None])
-        < np.maximum(rtol[:, None], rtol[None, :])
-    )
-    same &= same.T
-    n_m, merged = connected_components(same.astype(np.int8), directed=False)
-    comp = np.where(comp >= 0, merged[np.maximum(comp, 0)], -1)
-    n_reg = n_m
-    rn, rd, _, _, _ = region_planes(n_reg, comp)
-    # 5. boundary refinement at pixel level: pixels of the region's patches and of the patches
-    #    bordering them join the plane when close enough to it
-    #    (every pixel of a region's patches is tested against its plane in one pass; the pixels
-    #    of the patches bordering a region are also tested against it, the closest plane wins)
+        return ExtractionResult((), -np.ones((H, W), np.int64))
+    # 5. wholesale patches; the others pixel by pixel against the region planes
+    rn, rd, _, _ = _planes_from_rows(_sum_rows(comp, n_reg, pt.M))
     cellmap = comp.reshape(hc, wc)
-    lab_c = labels[: hc * c, : wc * c].reshape(hc, c, wc, c)
-    vcb = vc.reshape(hc, c, wc, c)
-    vblocks = vcb.transpose(0, 2, 1, 3)
-    # interior: every pixel against its own region's plane, in one pass
-    k_cell = np.maximum(cellmap, 0)
-    nx, ny, nz = (rn[k_cell][:, None, :, None, k] for k in range(3))  # (hc, 1, wc, 1) each
-    xb, yb, zb = (a.reshape(hc, c, wc, c) for a in (gx, gy, gz))  # contiguous, zeros where invalid
-    d4 = np.abs(xb * nx + yb * ny + zb * nz - rd[k_cell][:, None, :, None])
-    r4 = np.sqrt(xb * xb + yb * yb + zb * zb)
-    ok4 = vcb & (cellmap >= 0)[:, None, :, None] & (d4 < s.inlier_factor * s.noise(r4))
-    lab_c[...] = np.where(ok4, cellmap[:, None, :, None], -1)
-    d_in = d4.transpose(0, 2, 1, 3)  # (hc, wc, c, c) views for the ring step
-    ok_in = ok4.transpose(0, 2, 1, 3)
-    # ring: every (bordering patch, region) pair at once; per pixel the closest plane wins
-    # among the patch's own region (interior pass above) and the regions it borders
-    # (patch, region) pairs: the regions among a patch's 8 neighbours other than its own
-    padded = np.pad(cellmap, 1, constant_values=-1)
-    nb = np.stack(
-        [
-            padded[1 + di : 1 + di + hc, 1 + dj : 1 + dj + wc]
-            for di in (-1, 0, 1)
-            for dj in (-1, 0, 1)
-        ]
-    ).reshape(9, -1)
-    own_l = cellmap.ravel()
-    pair_ok = (nb >= 0) & (nb != own_l[None, :])
-    cell_idx = np.broadcast_to(np.arange(hc * wc), nb.shape)[pair_ok]
-    pair_key = np.unique(cell_idx * (n_reg + 1) + nb[pair_ok])  # sorted by cell, then region
-    rc_, rk_ = np.divmod(pair_key, n_reg + 1)  # patch, bordering region
-    if len(rc_):
-        U, first, per = np.unique(rc_, return_index=True, return_counts=True)
-        slot = np.arange(len(rc_)) - np.repeat(first, per) + 1  # 0 = the patch's own region
-        gpos = np.repeat(np.arange(len(U)), per)
-        ci, cj = np.divmod(rc_, wc)
-        # gathers of the ring patches only, per coordinate (contiguous (hc, c, wc, c) images)
-        xr, yr, zr, rr = (a.transpose(0, 2, 1, 3)[ci, cj] for a in (xb, yb, zb, r4))
-        with np.errstate(invalid="ignore"):
-            dist = np.abs(
-                xr * rn[rk_, 0, None, None]
-                + yr * rn[rk_, 1, None, None]
-                + zr * rn[rk_, 2, None, None]
-                - rd[rk_, None, None]
-            )
-            z = rr
-            ok = vblocks[ci, cj] & (dist < s.inlier_factor * s.noise(z))
-        ui, uj = np.divmod(U, wc)
-        Dd = np.full((len(U), int(per.max()) + 1, c, c), np.inf, np.float32)  # ranking only
-        Kd = np.full(Dd.shape, -1, np.int32)
-        oin = ok_in[ui, uj]
-        Dd[:, 0] = np.where(oin, d_in[ui, uj], np.inf)
-        Kd[:, 0] = np.where(oin, cellmap[ui, uj][:, None, None], -1)
-        Dd[gpos, slot] = np.where(ok, dist, np.inf)
-        Kd[gpos, slot] = np.where(ok, rk_[:, None, None], -1)
-        win = np.argmin(Dd, axis=1)[:, None]
-        lab_c[ui, :, uj, :] = np.take_along_axis(Kd, win, axis=1)[:, 0]
-    labels[: hc * c, : wc * c] = lab_c.reshape(hc * c, wc * c)
-    # 6. final planes from the moments of their pixels (one weighted bincount per quantity),
-    #    inlier lists by one stable sort of the labels (radix sort for 16-bit labels)
-    flat = labels.ravel()
-    lc = lab_c.reshape(hc * c, wc * c).ravel()
-    sel = lc >= 0
-    g = lc[sel]
-    fx, fy, fz = (a.ravel()[sel] for a in (gx, gy, gz))
-    n_pix = np.bincount(g, minlength=n_reg).astype(np.float64)
-    fS = np.stack([np.bincount(g, a, minlength=n_reg) for a in (fx, fy, fz)], axis=1)
-    fQ = np.stack(
-        [
-            np.bincount(g, (fx, fy, fz)[a] * (fx, fy, fz)[b], minlength=n_reg)
-            for a, b in zip(*iu, strict=True)
-        ],
-        axis=1,
-    )
-    fSS = np.empty((n_reg, 3, 3))
-    fSS[:, iu[0], iu[1]] = fQ
-    fSS[:, iu[1], iu[0]] = fQ
-    fn, frho, frms, fmean, _ = _planes_from_moments(n_pix, fS, fSS)
-    P_flat = P.reshape(-1, 3)
-    key = flat.astype(np.int16) if n_reg < 32000 else flat
-    order = np.argsort(key, kind="stable")
-    bounds = np.searchsorted(key[order], np.arange(n_reg + 1))
+    wholesale, ids, cand = _border_patches(cellmap, s.refine == "full")
+    bd = _refine_border(pt, comp, ids, cand, rn, rd, n_reg, hc, wc, c, s.outline_cell)
+    wholesale = wholesale.ravel()
+    wholesale[ids[bd.complete]] = True
+    # 6. final planes from the moments of their inliers: wholesale patches + mixed pixels
+    Mf = _sum_rows(np.where(wholesale, comp, -1), n_reg, pt.M) + bd.M
+    normal, rho, rms, mean = _planes_from_rows(Mf)
+    count = np.rint(Mf[:, 0]).astype(np.int64)
+    keep = np.flatnonzero(count >= s.min_cells * c * c * s.min_fill)
+    keep = keep[np.argsort(-count[keep], kind="stable")]  # segments by decreasing inlier count
+    new_id = np.full(n_reg + 1, -1, np.int64)  # region + 1 -> segment index
+    new_id[keep + 1] = np.arange(len(keep))
+    # label image (8- or 16-bit): wholesale patches, then the pixels of the mixed patches
+    small = np.int8 if len(keep) < 127 else np.int16 if len(keep) < 32767 else np.int32
+    lab_cell = new_id[np.where(wholesale, comp, -1) + 1].astype(small).reshape(hc, wc)
+    lab4 = np.where(pt.valid.reshape(hc, c, wc, c), lab_cell[:, None, :, None], small(-1))
+    mixed = ~bd.complete
+    if mixed.any():
+        mi, mj = np.divmod(ids[mixed], wc)
+        lab4[mi, :, mj, :] = new_id[bd.label[mixed].astype(np.int64) + 1]
+    Hc, Wc = hc * c, wc * c
+    if (Hc, Wc) == (H, W):
+        lab_small = lab4.reshape(H, W)
+    else:
+        lab_small = np.full((H, W), -1, small)
+        lab_small[:Hc, :Wc] = lab4.reshape(Hc, Wc)
+    labels = lab_small.astype(np.int64)
+    # inliers: one stable radix sort of the small labels, in raster order per plane
+    order = np.argsort(lab_small.ravel(), kind="stable")
+    kept = count[keep]
+    bounds = np.concatenate([[H * W - kept.sum()], H * W - kept.sum() + np.cumsum(kept)])
+    outlines = _Outlines(pt, lab_small, wholesale.reshape(hc, wc), cellmap, c)
     segs = []
-    for k in range(n_reg):
-        if n_pix[k] < s.min_cells * c * c * s.min_fill:
-            continue
-        idx = order[bounds[k] : bounds[k + 1]]
-        segs.append(
-            _segment_from_moments(idx, P_flat, fn[k], frho[k], fmean[k], frms[k], s.outline_cell)
-        )
-    segs.sort(key=lambda sg: -sg.plane.count)
-    labels = -np.ones(H * W, np.int64)
-    for k, sg in enumerate(segs):
-        labels[sg.inliers] = k
+    for new, k in enumerate(keep):
+        idx = order[bounds[new] : bounds[new + 1]]
+        n, r = canonical_plane(normal[k], float(rho[k]))
+        plane = Plane(normal=n, rho=r, centroid=mean[k], rms=float(rms[k]), count=len(idx))
+        outline, area = outlines.of(plane, int(k), new, bd.points[k], s.outline_cell)
+        segs.append(PlaneSegment(plane=plane, inliers=idx, outline=outline, area=area))
     log.debug(
-        "organised extraction: %d planar patches of %d, %d planes",
-        int(planar.sum()),
+        "organised extraction: %d planar patches of %d, %d refined (%d pixel by pixel), %d planes",
+        n_planar,
         hc * wc,
+        len(ids),
+        int(mixed.sum()),
         len(segs),
     )
-    return ExtractionResult(tuple(segs), labels.reshape(H, W))
+    return ExtractionResult(tuple(segs), labels)
+
+
+class _Outlines:
+    """Step 6, outlines: a plane's wholesale patches as quadrilaterals, its other pixels as
+    points, rasterised in the plane (:func:`navkit.planes.segments.outline_from_points`).
+
+    Each corner of a patch's quadrilateral is its lattice corner - pixel ``(i c, j c)`` for the
+    top left, ``(i c, (j + 1) c)`` for the top right ..., shared with the neighbours, so that
+    quadrilaterals tile a region without gaps - when that pixel is an inlier of the plane, else
+    the patch's own corner pixel (``(i c, j c + c - 1)`` ...: at a region's edge the outline then
+    stops one pixel short of the lattice). A quadrilateral stands for its pixels only where they
+    sample the plane densely, i.e. as the pixels themselves would fill the raster: pixel spacing
+    along each side (``side / c``) at most two raster cells (the 3 x 3 closing bridges one empty
+    cell). Sparser patches (far, grazing: up to the horizon of an infinite floor) and patches
+    with a corner off the plane are rasterised pixel by pixel, as before the quadrilaterals.
+    """
+
+    def __init__(
+        self,
+        pt: _Patches,
+        labels: NDArray[np.signedinteger],
+        wholesale: NDArray[np.bool_],
+        cellmap: NDArray[np.int64],
+        c: int,
+    ) -> None:
+        self.pt, self.labels, self.wholesale, self.cellmap, self.c = (
+            pt,
+            labels,
+            wholesale,
+            cellmap,
+            c,
+        )
+
+    def _xyz(self, r: NDArray[np.int64], q: NDArray[np.int64]) -> list[NDArray[np.float64]]:
+        """Coordinates of pixels ``(r, q)`` (any shape)."""
+        return [self.pt.P[r, q, a] for a in range(3)]
+
+    def of(
+        self, plane: Plane, k: int, new: int, mixed_points: NDArray[np.floating], cell: float
+    ) -> tuple[NDArray[np.float64], float]:
+        """Outline ``(M, 2)`` and area (m^2) of region ``k`` (segment ``new``)."""
+        c = self.c
+        hc, wc = self.cellmap.shape
+        origin, axes = plane_frame(plane)
+        off = axes @ origin
+        ii, jj = np.nonzero(self.wholesale & (self.cellmap == k))
+        # corners in order around the patch: lattice, else the patch's own corner pixel
+        r0, q0 = ii * c, jj * c
+        lat_r = np.minimum(np.stack([r0, r0, r0 + c, r0 + c], axis=1), hc * c - 1)
+        lat_q = np.minimum(np.stack([q0, q0 + c, q0 + c, q0], axis=1), wc * c - 1)
+        own_r = np.stack([r0, r0, r0 + c - 1, r0 + c - 1], axis=1)
+        own_q = np.stack([q0, q0 + c - 1, q0 + c - 1, q0], axis=1)
+        lat_ok = self.labels[lat_r, lat_q] == new
+        x, y, z = self._xyz(np.where(lat_ok, lat_r, own_r), np.where(lat_ok, lat_q, own_q))
+        quads = np.stack(
+            [x * axes[a, 0] + y * axes[a, 1] + z * axes[a, 2] - off[a] for a in range(2)], axis=2
+        )  # (Q, 4, 2)
+        edge = np.diff(quads, axis=1, append=quads[:, :1])  # (Q, 4, 2) the four sides
+        longest = np.sqrt(np.max(np.einsum("qei,qei->qe", edge, edge), axis=1))
+        use = np.all(lat_ok | (self.labels[own_r, own_q] == new), axis=1)
+        use &= longest <= 2.0 * cell * c
+        pts = [mixed_points[a] for a in range(3)]
+        if not use.all():  # the other wholesale patches: their pixels, every t-th row / column
+            bi, bj = ii[~use], jj[~use]
+            t = _sample_stride(self.pt.M[bi * wc + bj], c, cell)[:, None, None]
+            px = np.arange(c)
+            vb = self.pt.valid.reshape(hc, c, wc, c)[bi, :, bj, :]
+            vb &= (px[None, :, None] % t == 0) & (px[None, None, :] % t == 0)
+            b, r, q = np.nonzero(vb)
+            Pb = self.pt.P[bi[b] * c + r, bj[b] * c + q]  # (K, 3): only the sampled pixels
+            pts = [np.concatenate([pts[a], Pb[:, a]]) for a in range(3)]
+        step = max(1, len(pts[0]) // 40_000)  # outlines from at most ~40k points
+        x, y, z = (p[::step] for p in pts)
+        uv = np.stack(
+            [x * axes[a, 0] + y * axes[a, 1] + z * axes[a, 2] - off[a] for a in range(2)], axis=1
+        )
+        return outline_from_points(uv, cell, quads=quads[use])

@@ -3,37 +3,55 @@
 :class:`PlaneOdometry` reads like the paper's pipeline, one call per frame:
 
 1. extract the frame's planes (done by the caller: a :class:`~navkit.planes.frame.PlaneObservation`);
-2. associate them with the previous frame's planes, predicted by the last motion (constant
-   velocity);
-3. solve the motion with the case the geometry allows (>= 3, 2 or 1 plane directions);
-4. chain the motion onto the trajectory (``T_world_frame``; the first frame is the world);
-5. merge the frame's planes into the map: the same physical plane (normal, distance and overlap
+2. predict the pose: the previous pose moved by the motion prior (:class:`~navkit.planes.motion.
+   MotionPrior`, e.g. visual odometry) or, without one, by the last motion (constant velocity);
+3. **frame-to-map**: associate the frame's planes with the *map* planes seen from the predicted
+   pose (:class:`MapView`) and solve the correction with the case the geometry allows (>= 3, 2
+   or 1 plane directions; the 1- and 2-plane texture steps run against the map's fused
+   textures);
+4. **frame-to-frame** against the previous frame when the map gives less (fewer plane
+   directions, a texture step the depth check rejects, or nothing): the better-determined
+   result wins (measured before prior-filled, then more plane directions, then the map);
+5. chain onto the trajectory (``T_world_frame``; the first frame is the world);
+6. merge the frame's planes into the map: the same physical plane (normal, distance and overlap
    agree in the world frame) becomes one map plane whose extent (a sample of its inlier points)
    and texture (running mean of brightness on a fixed lattice of the plane) are fused.
 
-When a motion cannot be determined the constant-velocity prediction is used for the trajectory,
-the frame is flagged (``FrameResult.status``), never silently, and its planes are not merged into
-the map.
+Tracking against the map bounds the drift: while a map plane stays in view, every frame is
+referred to the same fused plane (and texture) instead of to the previous frame's noisy one.
+
+When a motion cannot be determined the prediction is used for the trajectory, the frame is
+flagged (``FrameResult.status``), never silently, and its planes are not merged into the map;
+neither are the planes of a frame whose pose holds degrees of freedom filled from the prior
+(``FrameResult.motion.prior_dof``).
 """
 
 from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
+import cv2
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
-from navkit.errors import NavkitError
+from navkit.errors import InputError, NavkitError
 from navkit.geometry import Plane, canonical_plane, points_in_polygon, se3_inverse
 from navkit.geometry.linalg import rows_matmul
 from navkit.planes.frame import PlaneObservation
-from navkit.planes.motion import MotionSettings, estimate_motion
-from navkit.planes.segments import outline_from_points
-from navkit.planes.solve import MotionEstimate, MotionFailure
+from navkit.planes.motion import (
+    MotionPrior,
+    MotionSettings,
+    as_prior,
+    depth_consistency,
+    estimate_motion,
+)
+from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points
+from navkit.planes.solve import MotionEstimate, MotionFailure, normal_rank
+from navkit.planes.texture import PlaneTexture
 
-__all__ = ["FrameResult", "MapPlane", "OdometrySettings", "PlaneMap", "PlaneOdometry"]
+__all__ = ["FrameResult", "MapPlane", "MapView", "OdometrySettings", "PlaneMap", "PlaneOdometry"]
 
 log = logging.getLogger(__name__)
 
@@ -49,20 +67,30 @@ class OdometrySettings:
         A frame plane joins a map plane when normals agree within ``merge_angle_deg``, distances
         within ``merge_distance`` metres and their outlines come within ``merge_margin`` metres.
     map_nu : float
-        Pixel size of the fused map textures, metres.
+        Pixel size of the fused map textures, metres. Keep it equal to the solver's ``nu``:
+        the texture steps against the map compare the fused texture with the frame's at the
+        solver's ``nu``, and a coarser map texture (2 cm, resampled to 1 cm) matched worse
+        (D 0.57 instead of 0.28) and with a 4-6 mm bias on the simulated wall.
     map_points : int
         Inlier points kept per observation for the map plane's extent.
     min_map_plane_points : int
         Smallest frame plane (inliers) added to the map.
+    frame_to_map : bool
+        Track against the map (stage 3 of the module docstring); False = frame-to-frame only.
+    map_texture_pixels : int
+        Largest side of a map texture window handed to the texture steps, pixels of the
+        solver's ``nu`` (the window is centred on where the frame sees the plane).
     """
 
     motion: MotionSettings = field(default_factory=MotionSettings)
     merge_angle_deg: float = 8.0
     merge_distance: float = 0.08
     merge_margin: float = 0.2
-    map_nu: float = 0.02
+    map_nu: float = 0.01
     map_points: int = 3000
     min_map_plane_points: int = 3000
+    frame_to_map: bool = True
+    map_texture_pixels: int = 400
 
 
 @dataclass
@@ -200,6 +228,109 @@ class PlaneMap:
 
 
 @dataclass(frozen=True)
+class MapView(PlaneObservation):
+    """The map's planes seen from a predicted pose, shaped like a frame for
+    :func:`~navkit.planes.motion.estimate_motion` (the map plays frame 1).
+
+    Segments are the map planes in the view frame (``T_world_view`` maps view coordinates to
+    the world): fused normal and distance, world outline moved into the view, the fused point
+    count. :meth:`texture` resamples the map's fused texture (bilinear, valid where every
+    neighbour was seen) onto the lattice the solver asks for, cropped to a window around where
+    the current frame sees the plane. There is no camera: the depth check of texture steps is
+    made against the previous frame instead (:class:`PlaneOdometry`).
+
+    Attributes
+    ----------
+    map_planes : tuple of MapPlane
+        ``map_planes[k]`` is segment ``k``.
+    T_world_view : (4, 4) array
+    nu_map : float
+        Pixel size of the fused textures, metres.
+    focus : tuple of (K_k, 3) arrays
+        Per segment, view-frame points of the current frame near the plane (where the
+        texture window is centred; empty = the whole fused texture).
+    margin : float
+        Window margin around ``focus``, metres (the solver's search range).
+    max_pixels : int
+        Largest window side, pixels.
+    """
+
+    map_planes: tuple[MapPlane, ...] = ()
+    T_world_view: NDArray[np.float64] = field(default_factory=lambda: np.eye(4))
+    nu_map: float = 0.02
+    focus: tuple[NDArray[np.float64], ...] = ()
+    margin: float = 0.6
+    max_pixels: int = 400
+
+    @property
+    def has_texture(self) -> bool:
+        return any(mp.tex_sum.size > 0 for mp in self.map_planes)
+
+    def texture(
+        self, k: int, axes: ArrayLike | None = None, ref: ArrayLike | None = None, nu: float = 0.01
+    ) -> PlaneTexture:
+        """Fused texture of map plane ``k`` on the lattice ``ref + (i0 + i) nu u + (j0 + j) nu v``
+        (view frame; default: the plane's own frame), see :mod:`navkit.planes.texture`."""
+        mp, seg = self.map_planes[k], self.segments[k]
+        if mp.tex_sum.size == 0 or not np.any(mp.tex_count > 0):
+            raise InputError(
+                f"map plane {mp.id} has no fused texture", field="texture", expected="a seen plane"
+            )
+        ax = seg.plane.basis() if axes is None else np.asarray(axes, dtype=np.float64)
+        o = seg.plane.rho * seg.plane.normal if ref is None else np.asarray(ref, dtype=np.float64)
+        R, t = self.T_world_view[:3, :3], self.T_world_view[:3, 3]
+        # the fused texture's valid extent, in the requested lattice
+        jj, ii = np.nonzero(mp.tex_count > 0)
+        corners = np.array([[ii.min(), jj.min()], [ii.max(), jj.max()]]) + mp.tex_index0
+        Cw = (
+            mp.tex_ref
+            + (corners[[0, 1, 0, 1], 0, None] * self.nu_map) * mp.tex_axes[0]
+            + (corners[[0, 0, 1, 1], 1, None] * self.nu_map) * mp.tex_axes[1]
+        )
+        uv = rows_matmul(rows_matmul(Cw - t, R) - o, ax.T)
+        lo = np.floor(uv.min(0) / nu).astype(np.int64) - 1
+        hi = np.ceil(uv.max(0) / nu).astype(np.int64) + 1
+        F = self.focus[k] if k < len(self.focus) else np.zeros((0, 3))
+        if len(F):
+            fuv = rows_matmul(F - o, ax.T)
+            flo = np.floor((fuv.min(0) - self.margin) / nu).astype(np.int64)
+            fhi = np.ceil((fuv.max(0) + self.margin) / nu).astype(np.int64)
+            lo, hi = np.maximum(lo, flo), np.minimum(hi, fhi)
+            mid = np.rint(np.median(fuv, axis=0) / nu).astype(np.int64)
+        else:
+            mid = (lo + hi) // 2
+        half = self.max_pixels // 2
+        lo, hi = np.maximum(lo, mid - half), np.minimum(hi, mid + half)
+        size = np.maximum(hi - lo + 1, 1)
+        # lattice points -> world -> the map texture's pixel coordinates (inverse mapping)
+        i = (lo[0] + np.arange(size[0])) * nu
+        j = (lo[1] + np.arange(size[1])) * nu
+        Pv = o + i[None, :, None] * ax[0] + j[:, None, None] * ax[1]
+        Pw = Pv @ R.T + t
+        d = Pw - mp.tex_ref
+        mx = ((d @ mp.tex_axes[0]) / self.nu_map - mp.tex_index0[0]).astype(np.float32)
+        my = ((d @ mp.tex_axes[1]) / self.nu_map - mp.tex_index0[1]).astype(np.float32)
+        seen = mp.tex_count > 0
+        tex = np.where(seen, mp.tex_sum / np.maximum(mp.tex_count, 1), 0.0).astype(np.float32)
+        bc = cv2.BORDER_CONSTANT
+        img = np.asarray(cv2.remap(tex, mx, my, cv2.INTER_LINEAR, borderMode=bc, borderValue=0))
+        seen_f = seen.astype(np.float32)
+        msk = (
+            np.asarray(cv2.remap(seen_f, mx, my, cv2.INTER_LINEAR, borderMode=bc, borderValue=0))
+            > 0.999
+        )
+        return PlaneTexture(
+            np.where(msk, img, np.nan).astype(np.float32),
+            msk,
+            o,
+            ax,
+            lo.astype(np.int64),
+            nu,
+            seg.plane,
+        )
+
+
+@dataclass(frozen=True)
 class FrameResult:
     """What :meth:`PlaneOdometry.register_frame` did with one frame.
 
@@ -217,6 +348,9 @@ class FrameResult:
     ms : float
         Wall time of association + motion + map update, milliseconds.
     n_planes : int
+    source : str
+        Where the motion came from: ``"map"`` (frame-to-map), ``"frame"`` (frame-to-frame),
+        ``""`` (first frame, or failed: the prediction).
     """
 
     index: int
@@ -226,10 +360,12 @@ class FrameResult:
     case: int
     ms: float
     n_planes: int
+    source: str = ""
 
 
 class PlaneOdometry:
-    """Frame-to-frame plane odometry with a merged plane map."""
+    """Plane odometry over a sequence: frame-to-map tracking with a frame-to-frame fallback,
+    an optional motion prior per frame, and the merged plane map (module docstring)."""
 
     def __init__(self, settings: OdometrySettings | None = None) -> None:
         self.settings = settings or OdometrySettings()
@@ -238,36 +374,174 @@ class PlaneOdometry:
         self.results: list[FrameResult] = []
         self._prev: PlaneObservation | None = None
         self._velocity = np.eye(4)
+        self._velocity_known = False  # a measured motion, not the start or a failure
+        self._anchor: tuple[PlaneObservation, NDArray[np.float64]] | None = None  # last merged
 
-    def register_frame(self, obs: PlaneObservation) -> FrameResult:
-        """Track one frame (stages 2-5 of the module docstring)."""
+    def register_frame(
+        self, obs: PlaneObservation, prior: MotionPrior | ArrayLike | None = None
+    ) -> FrameResult:
+        """Track one frame (stages 2-6 of the module docstring).
+
+        Parameters
+        ----------
+        obs : PlaneObservation
+            The frame's planes.
+        prior : MotionPrior or (4, 4) array, optional
+            Predicted motion ``T_prev_curr`` from the previous frame to this one (e.g. visual
+            odometry) with its uncertainty (a bare array gets
+            :class:`~navkit.planes.motion.MotionPrior`'s default uncertainty). It replaces the
+            constant-velocity prediction, sets the association gates, starts the texture
+            searches and fills the degrees of freedom neither geometry nor texture fix
+            (``FrameResult.motion.prior_dof``; such a frame is not merged into the map).
+        """
         t0 = time.perf_counter()
         idx = len(self.poses)
         motion: MotionEstimate | MotionFailure | None = None
+        source = ""
         if self._prev is None:
             T = np.eye(4)
             status, case = "first", 0
         else:
-            motion = estimate_motion(self._prev, obs, self._velocity, self.settings.motion)  # 2-3
-            if isinstance(motion, MotionEstimate):
-                step = motion.T
-                status, case = "ok", motion.case
-            else:
-                step = self._velocity
-                status, case = f"failed: {motion.reason}", motion.case
-                log.warning(
-                    "frame %d: motion not determined (%s); using the prediction", idx, motion.reason
+            mprior = None if prior is None else as_prior(prior)
+            step_pred = self._velocity if mprior is None else mprior.T  # 2
+            T_prev = self.poses[-1]
+            T_pred = T_prev @ step_pred
+            # without a prior and a measured last motion (second frame, after a failure) the
+            # prediction is weak: frame-to-frame then uses the global (prior-free)
+            # association, whose solution is verified on the points; the map is still tried
+            # (it is what recovers the pose after a failed frame)
+            predicted = mprior is not None or self._velocity_known
+            f2f_prior: MotionPrior | NDArray[np.float64] | None = (
+                mprior if mprior is not None else (step_pred if predicted else None)
+            )
+            found: list[tuple[str, MotionEstimate, NDArray[np.float64]]] = []
+            failure: MotionFailure | None = None
+            if self.settings.frame_to_map and self.map.planes:  # 3
+                r_map = self._track_map(obs, T_pred, mprior)
+                if isinstance(r_map, MotionEstimate):
+                    found.append(("map", r_map, T_pred @ r_map.T))
+                else:
+                    failure = r_map
+            if not found or found[0][1].prior_dof or found[0][1].case < self._rank(obs):  # 4
+                r_f = estimate_motion(self._prev, obs, f2f_prior, self.settings.motion)
+                if isinstance(r_f, MotionEstimate):
+                    found.append(("frame", r_f, T_prev @ r_f.T))
+                else:
+                    failure = r_f
+            if found:
+                source, est, T = max(
+                    found, key=lambda f: (not f[1].prior_dof, f[1].case, f[0] == "map")
                 )
-            self._velocity = step
-            T = self.poses[-1] @ step  # 4
+                step = se3_inverse(T_prev) @ T
+                motion = replace(est, T=step)  # always reported as T_prev_curr
+                status, case = "ok", est.case
+                if est.prior_dof:
+                    status = f"ok (from the prior: {', '.join(est.prior_dof)})"
+            else:
+                assert failure is not None
+                motion, step, T = failure, step_pred, T_pred
+                status, case = f"failed: {failure.reason}", failure.case
+                log.warning(
+                    "frame %d: motion not determined (%s); using the prediction",
+                    idx,
+                    failure.reason,
+                )
+            self._velocity = step  # 5
+            self._velocity_known = status.startswith("ok")
         self.poses.append(T)
-        if not status.startswith("failed"):  # a predicted pose is not good enough for the map
-            self._merge(obs, T, idx)  # 5
+        measured = isinstance(motion, MotionEstimate) and not motion.prior_dof
+        if status == "first" or measured:  # a predicted pose is not good enough for the map
+            self._merge(obs, T, idx)  # 6
+            self._anchor = (obs, T)
         self._prev = obs
         res = FrameResult(
-            idx, T, motion, status, case, 1000 * (time.perf_counter() - t0), len(obs.segments)
+            idx,
+            T,
+            motion,
+            status,
+            case,
+            1000 * (time.perf_counter() - t0),
+            len(obs.segments),
+            source,
         )
         self.results.append(res)
+        return res
+
+    def _rank(self, obs: PlaneObservation) -> int:
+        """Plane directions among the frame's own solver-sized planes: the most any solution
+        can use (frame-to-frame is skipped when the map already reached it)."""
+        m = self.settings.motion
+        N = np.array([sg.normal for sg in obs.segments if sg.plane.count >= m.min_plane_points])
+        return normal_rank(N.reshape(-1, 3), m.solver.parallel_deg)[0]
+
+    def map_view(self, obs: PlaneObservation, T_world_view: NDArray[np.float64]) -> MapView:
+        """The map planes seen from ``T_world_view``, with the texture windows centred on where
+        the frame ``obs`` (placed at ``T_world_view``) sees each of them."""
+        s = self.settings
+        R, t = T_world_view[:3, :3], T_world_view[:3, 3]
+        P = np.asarray(obs.points, dtype=np.float64).reshape(-1, 3)
+        P = P[:: max(1, len(P) // 20_000)]
+        P = P[np.all(np.isfinite(P), axis=1)]
+        segs, focus, pts = [], [], []
+        for mp in self.map.planes:
+            nv = R.T @ mp.plane.normal
+            n, rho = canonical_plane(nv, float(mp.plane.rho - mp.plane.normal @ t))
+            c = R.T @ (mp.plane.centroid - t)
+            plane = Plane(n, rho, c, mp.plane.rms, mp.plane.count)
+            o_w, ax_w = mp.plane.rho * mp.plane.normal, mp.plane.basis()
+            ov = (
+                rows_matmul(o_w + mp.outline @ ax_w - t, R) if len(mp.outline) else np.zeros((0, 3))
+            )
+            outline = rows_matmul(ov - rho * n, plane.basis().T)
+            segs.append(PlaneSegment(plane, np.zeros(0, np.int64), outline, mp.area))
+            near = np.abs(P @ n - rho) < 3 * s.motion.association.max_distance
+            focus.append(P[near])
+            pts.append(rows_matmul(mp.points[:: max(1, len(mp.points) // 2000)] - t, R))
+        X = np.concatenate(pts) if pts else np.zeros((0, 3))
+        return MapView(
+            ExtractionResult(tuple(segs), -np.ones(len(X), np.int64)),
+            X,
+            map_planes=tuple(self.map.planes),
+            T_world_view=np.asarray(T_world_view, dtype=np.float64),
+            nu_map=self.map.nu,
+            focus=tuple(focus),
+            margin=s.motion.solver.max_shift,
+            max_pixels=s.map_texture_pixels,
+        )
+
+    def _track_map(
+        self, obs: PlaneObservation, T_pred: NDArray[np.float64], prior: MotionPrior | None
+    ) -> MotionEstimate | MotionFailure:
+        """Stage 3: the correction ``T_pred_frame`` against the map (identity = the prediction).
+
+        A texture step (1 or 2 plane directions) against the map is checked against the depth
+        of the last frame merged into the map (:func:`~navkit.planes.motion.depth_consistency`;
+        its pose is measured, unlike that of a failed previous frame), the map view having no
+        camera of its own.
+        """
+        s = self.settings
+        view = self.map_view(obs, T_pred)
+        ms = replace(s.motion, global_search=False)
+        p: MotionPrior | NDArray[np.float64] = np.eye(4)
+        if prior is not None:
+            p = MotionPrior(np.eye(4), prior.sigma_rotation_deg, prior.sigma_translation)
+        try:
+            res = estimate_motion(view, obs, p, ms)
+        except NavkitError as exc:
+            return MotionFailure(0, ("rotation", "translation"), f"map tracking: {exc}")
+        if isinstance(res, MotionEstimate) and res.texture_dof and self._anchor is not None:
+            a_obs, a_T = self._anchor
+            T_a_curr = se3_inverse(a_T) @ T_pred @ res.T
+            chk = depth_consistency(a_obs, obs, T_a_curr, [j for _, j in res.pairs])
+            if chk.tested >= ms.min_depth_points and chk.violation > ms.max_depth_violation:
+                log.info(
+                    "map texture step rejected: %.0f %% of %d points in free space",
+                    100 * chk.violation,
+                    chk.tested,
+                )
+                return MotionFailure(
+                    res.case, res.texture_dof, "map texture step rejected by the depth check"
+                )
         return res
 
     def _merge(self, obs: PlaneObservation, T: NDArray[np.float64], frame: int) -> None:

@@ -1,27 +1,42 @@
-"""Frame-to-frame motion from planes: association, then the solver the geometry allows."""
+"""Motion between two frames from planes: association, then the solver the geometry allows.
+
+An optional :class:`MotionPrior` (a measured motion with its uncertainty) gates the association,
+starts the texture searches and fills the degrees of freedom nothing else fixes; texture
+solutions are checked against the rest of the scene (:func:`depth_consistency`).
+"""
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from navkit.geometry import Plane, canonical_plane, se3_from_rt
 from navkit.geometry.linalg import rows_matmul
 from navkit.planes.associate import AssociationSettings, associate, associate_global
 from navkit.planes.frame import PlaneObservation
+from navkit.planes.quaternion import q1_normal_alignment
 from navkit.planes.solve import (
     MotionEstimate,
     MotionFailure,
     SolverSettings,
+    _residuals,
     normal_rank,
     solve_one_plane,
     solve_three_planes,
     solve_two_planes,
 )
 
-__all__ = ["DepthCheck", "MotionSettings", "depth_consistency", "estimate_motion", "point_fit"]
+__all__ = [
+    "DepthCheck",
+    "MotionPrior",
+    "MotionSettings",
+    "depth_consistency",
+    "estimate_motion",
+    "point_fit",
+]
 
 log = logging.getLogger(__name__)
 
@@ -33,6 +48,11 @@ class MotionSettings:
     association: AssociationSettings = field(default_factory=AssociationSettings)
     solver: SolverSettings = field(default_factory=SolverSettings)
     min_plane_points: int = 2000
+    """Smallest plane (points) used for motion in an organised frame (depth image, scan grid)."""
+    min_cloud_plane_points: int = 500
+    """The same for unorganised clouds (``points`` of shape ``(N, 3)``). Their extraction
+    works on a voxel grid, so a wall far from the scanner keeps few points: the one wall that
+    fixes the third direction between the PCL room scans has about 700."""
     global_search: bool = True
     """Without a prior, also try :func:`~navkit.planes.associate.associate_global` (large
     motions); its >= 3-plane solution replaces the gated one when it puts more of frame 2's
@@ -49,6 +69,73 @@ class MotionSettings:
     a scene of only the matched planes has nothing else to check)."""
 
 
+NORMAL_SCATTER_DEG = 3.0
+"""Allowance for the planes' own normal error in the prior's association gate, degrees (far
+Kinect walls: 1-2 deg between frames on slambook, see docs/benchmarks/planes.md)."""
+RHO_SCATTER = 0.05
+"""Allowance for the planes' own distance error in the prior's association gate, metres
+(Kinect depth noise ``0.0025 d^2`` is 4 cm at 4 m)."""
+
+
+@dataclass(frozen=True)
+class MotionPrior:
+    """A predicted motion ``T_1_2`` with its uncertainty (visual odometry, wheel odometry, IMU).
+
+    The prior is used three ways by :func:`estimate_motion` (decisions: the paper has no prior):
+
+    1. **association gate**: normals must agree within ``3 sigma_rotation_deg + 3`` deg and
+       distances within ``3 sigma_translation + 0.05`` m after the prior (the additive terms are
+       the planes' own scatter, :data:`NORMAL_SCATTER_DEG`, :data:`RHO_SCATTER`);
+    2. **start of the texture search**: frame 2's planes are moved by the prior before solving,
+       so ``mu = eta = lambda = 0`` is the prior; the 1-plane search covers turns within
+       ``3 sigma_rotation_deg + 5`` deg and shifts within ``3 sigma_translation + 0.15`` m
+       (never more than :class:`~navkit.planes.solve.SolverSettings`' ranges); the 2-plane
+       search keeps its full range (a narrow window makes ``D(mu)`` look flat), centred on
+       the prior;
+    3. **degrees of freedom neither geometry nor texture fix** (uniform or missing texture,
+       texture rejected by the depth check) are taken from the prior; the result is then a
+       :class:`~navkit.planes.solve.MotionEstimate` whose ``prior_dof`` names them (never
+       silently). With no plane matched at all the result stays a
+       :class:`~navkit.planes.solve.MotionFailure` (nothing was measured).
+
+    Attributes
+    ----------
+    T : (4, 4) array
+        Predicted ``T_1_2`` (frame 2 -> frame 1, ``X1 = R X2 + t``).
+    sigma_rotation_deg : float
+        1-sigma rotation uncertainty, degrees.
+    sigma_translation : float
+        1-sigma translation uncertainty, metres.
+    """
+
+    T: NDArray[np.float64]
+    sigma_rotation_deg: float = 2.0
+    sigma_translation: float = 0.05
+
+    def association(self, base: AssociationSettings) -> AssociationSettings:
+        """Association gates from the prior's uncertainty (see the class docstring)."""
+        return replace(
+            base,
+            max_angle_deg=3.0 * self.sigma_rotation_deg + NORMAL_SCATTER_DEG,
+            max_distance=3.0 * self.sigma_translation + RHO_SCATTER,
+        )
+
+    def one_plane_solver(self, base: SolverSettings) -> SolverSettings:
+        """1-plane texture search ranges from the prior's uncertainty."""
+        return replace(
+            base,
+            max_turn_deg=min(base.max_turn_deg, 3.0 * self.sigma_rotation_deg + 5.0),
+            max_shift=min(base.max_shift, 3.0 * self.sigma_translation + 0.15),
+        )
+
+
+def as_prior(prior: ArrayLike | MotionPrior) -> MotionPrior:
+    """A :class:`MotionPrior` (a bare ``(4, 4)`` array gets the default uncertainty)."""
+    if isinstance(prior, MotionPrior):
+        return prior
+    return MotionPrior(np.asarray(prior, dtype=np.float64).reshape(4, 4))
+
+
 def _rank(segs, pairs, s: MotionSettings) -> int:
     if not pairs:
         return 0
@@ -58,7 +145,7 @@ def _rank(segs, pairs, s: MotionSettings) -> int:
 def estimate_motion(
     obs1: PlaneObservation,
     obs2: PlaneObservation,
-    T_1_2_prior: ArrayLike | None = None,
+    T_1_2_prior: ArrayLike | MotionPrior | None = None,
     settings: MotionSettings | None = None,
 ) -> MotionEstimate | MotionFailure:
     """Motion ``T_1_2`` between two frames from their planes (paper 2).
@@ -67,16 +154,32 @@ def estimate_motion(
     the matches, then the closed form (>= 3), rotation + 1D texture search (2) or the quaternion
     route with the 3D texture search (1). Without a prior, a global association is tried as well
     (see :attr:`MotionSettings.global_search`).
+
+    Parameters
+    ----------
+    obs1, obs2 : PlaneObservation
+    T_1_2_prior : (4, 4) array, MotionPrior or None
+        A bare array is a *prediction* (constant velocity): it gates the association with
+        :class:`~navkit.planes.associate.AssociationSettings`' fixed gates and centres the
+        2-plane search. A :class:`MotionPrior` (a measured motion with its uncertainty) also
+        sets the gates, starts every texture search and fills the degrees of freedom nothing
+        else fixes (``MotionEstimate.prior_dof``).
+    settings : MotionSettings, optional
     """
     s = settings or MotionSettings()
-    res = _estimate(obs1, obs2, T_1_2_prior, s)
+    if isinstance(T_1_2_prior, MotionPrior):
+        return _estimate_with_prior(obs1, obs2, T_1_2_prior, s)
     if not (s.global_search and T_1_2_prior is None):
-        return res
+        return _estimate(obs1, obs2, T_1_2_prior, s)
+    # no prior: the global (prior-free) association, computed once and shared
+    floor = min_plane_points(obs1, obs2, s)
+    big1 = [sg for sg in obs1.segments if sg.plane.count >= floor]
+    big2 = [sg for sg in obs2.segments if sg.plane.count >= floor]
+    global_match = associate_global(big1, big2, points1=obs1.points, points2=obs2.points)
+    res = _estimate(obs1, obs2, None, s, global_match)
     # no prior: also try the global (prior-free) association and keep whichever motion puts
     # more of frame 2's points onto frame 1's (large motions defeat the gated association)
-    big1 = [sg for sg in obs1.segments if sg.plane.count >= s.min_plane_points]
-    big2 = [sg for sg in obs2.segments if sg.plane.count >= s.min_plane_points]
-    _, T_g = associate_global(big1, big2, points1=obs1.points, points2=obs2.points)
+    T_g = global_match[1]
     if T_g is None:
         return res
     res_g = _estimate(obs1, obs2, T_g, s)
@@ -226,24 +329,33 @@ def point_fit(
     return out
 
 
+def min_plane_points(obs1: PlaneObservation, obs2: PlaneObservation, s: MotionSettings) -> int:
+    """Smallest plane used for motion: :attr:`MotionSettings.min_plane_points` for organised
+    frames, :attr:`MotionSettings.min_cloud_plane_points` when either frame is a cloud."""
+    organised = obs1.points.ndim == 3 and obs2.points.ndim == 3
+    return s.min_plane_points if organised else s.min_cloud_plane_points
+
+
 def _estimate(
     obs1: PlaneObservation,
     obs2: PlaneObservation,
     T_1_2_prior: ArrayLike | None,
     s: MotionSettings,
+    global_match: tuple[list[tuple[int, int]], NDArray[np.float64] | None] | None = None,
 ) -> MotionEstimate | MotionFailure:
+    """One association + solve. ``global_match`` is :func:`associate_global`'s answer for the
+    planes of at least :func:`min_plane_points` points (used when the gated association spans
+    fewer than 3 directions and no prior is given)."""
     segs1 = [sg for sg in obs1.segments]
     segs2 = [sg for sg in obs2.segments]
+    floor = min_plane_points(obs1, obs2, s)
     pairs = associate(segs1, segs2, T_1_2_prior, s.association)
-    pairs = [
-        (i, j)
-        for i, j in pairs
-        if min(segs1[i].plane.count, segs2[j].plane.count) >= s.min_plane_points
-    ]
-    if s.global_search and T_1_2_prior is None and _rank(segs1, pairs, s) < 3:
-        big1 = [sg for sg in segs1 if sg.plane.count >= s.min_plane_points]
-        big2 = [sg for sg in segs2 if sg.plane.count >= s.min_plane_points]
-        gpairs, _ = associate_global(big1, big2, points1=obs1.points, points2=obs2.points)
+    pairs = [(i, j) for i, j in pairs if min(segs1[i].plane.count, segs2[j].plane.count) >= floor]
+    if global_match is not None and _rank(segs1, pairs, s) < 3:
+        # associate_global indexed the big planes only: back to indices of all segments
+        big1 = [i for i, sg in enumerate(segs1) if sg.plane.count >= floor]
+        big2 = [j for j, sg in enumerate(segs2) if sg.plane.count >= floor]
+        gpairs = [(big1[i], big2[j]) for i, j in global_match[0]]
         if _rank(segs1, gpairs, s) == 3:
             log.debug("global association: %d matches", len(gpairs))
             pairs = gpairs
@@ -309,3 +421,151 @@ def _estimate(
             res.T, res.case, res.geometry_dof, res.texture_dof, resid, tuple(pairs)
         )
     return res
+
+
+def _moved_plane(p: Plane, T: NDArray[np.float64]) -> Plane:
+    """Plane ``p`` of frame 2 expressed in the frame ``X = T x`` (rho >= 0 again)."""
+    R, t = T[:3, :3], T[:3, 3]
+    n = R @ p.normal
+    n, rho = canonical_plane(n, float(p.rho + n @ t))
+    return Plane(n, rho, R @ np.asarray(p.centroid, float) + t, p.rms, p.count)
+
+
+def _rotation_two_normals(
+    n1a: NDArray[np.float64],
+    n1b: NDArray[np.float64],
+    n2a: NDArray[np.float64],
+    n2b: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """Least-squares rotation of eqs. 1 and 5: ``n1a ~ R n2a``, ``n1b ~ R n2b`` and their cross
+    products (Procrustes on three vectors, as :func:`~navkit.planes.solve.solve_two_planes`)."""
+    c1, c2 = np.cross(n1a, n1b), np.cross(n2a, n2b)
+    A = np.stack([n1a, n1b, c1 / np.linalg.norm(c1)])
+    B = np.stack([n2a, n2b, c2 / np.linalg.norm(c2)])
+    U, _, Vt = np.linalg.svd(B.T @ A)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+
+
+def _fill_from_prior(
+    p1: list[Plane], p2: list[Plane], rank: int, Tp: NDArray[np.float64], s: MotionSettings
+) -> tuple[NDArray[np.float64], tuple[str, ...]]:
+    """Motion ``T_1_2`` with the geometric DoF measured and the others left at the prior's.
+
+    Case 2: rotation from the two normal directions (eqs. 1, 5: Procrustes on the normals and
+    their cross product), translation across their line from eq. 2 (minimum norm); the position
+    along the line ``d`` is the prior's, ``t . d = t_prior . d``. Case 1: the prior's rotation
+    turned by ``q1`` (eq. 8) so the normals agree, the shift along the normal from eq. 2; the
+    turn about the normal and the in-plane translation are the prior's.
+    """
+    from navkit.geometry import quat_to_matrix
+
+    Rp, tp = Tp[:3, :3], Tp[:3, 3]
+    N1 = np.array([p.normal for p in p1])
+    N2 = np.array([p.normal for p in p2]) @ Rp.T  # frame-2 normals turned by the prior
+    sg = np.where(np.einsum("ij,ij->i", N1, N2) < 0, -1.0, 1.0)  # a normal flipped by rho >= 0
+    N2 *= sg[:, None]
+    drho = np.array([a.rho for a in p1]) - sg * np.array([b.rho for b in p2])
+    if rank == 2:
+        _, (a, b) = normal_rank(N1, s.solver.parallel_deg)
+        R = _rotation_two_normals(N1[a], N1[b], N2[a], N2[b]) @ Rp
+        d = np.cross(N1[a], N1[b])
+        d /= np.linalg.norm(d)
+        t = np.linalg.lstsq(N1, drho, rcond=None)[0]
+        t += (tp @ d - t @ d) * d
+        return se3_from_rt(R, t), ("rotation", "translation across the line")
+    n = N1[0]
+    R = quat_to_matrix(q1_normal_alignment(N2[0], n)) @ Rp
+    t = drho[0] * n + (tp - (tp @ n) * n)
+    return se3_from_rt(R, t), ("rotation aligning the normal", "translation along the normal")
+
+
+def _estimate_with_prior(
+    obs1: PlaneObservation,
+    obs2: PlaneObservation,
+    prior: MotionPrior,
+    s: MotionSettings,
+) -> MotionEstimate | MotionFailure:
+    """:func:`estimate_motion` with a :class:`MotionPrior` (see its docstring for the three uses).
+
+    Frame 2's planes are moved by the prior (frame 2' = frame 2 seen from where the prior puts
+    it); the solvers then find the small correction ``T_1_2'`` and ``T_1_2 = T_1_2' T_prior``.
+    """
+    Tp = np.asarray(prior.T, dtype=np.float64).reshape(4, 4)
+    Rp, tp = Tp[:3, :3], Tp[:3, 3]
+    segs1, segs2 = obs1.segments, obs2.segments
+    pairs = associate(segs1, segs2, Tp, prior.association(s.association))  # 1. gate
+    floor = min_plane_points(obs1, obs2, s)
+    pairs = [(i, j) for i, j in pairs if min(segs1[i].plane.count, segs2[j].plane.count) >= floor]
+    if not pairs:
+        return MotionFailure(0, ("rotation", "translation"), "no plane matched between the frames")
+    pairs.sort(key=lambda p: -min(segs1[p[0]].plane.count, segs2[p[1]].plane.count))
+    idx1 = [i for i, _ in pairs]
+    idx2 = [j for _, j in pairs]
+    p1 = [segs1[i].plane for i in idx1]
+    p2m = [_moved_plane(segs2[j].plane, Tp) for j in idx2]  # 2. frame 2' (prior-centred)
+    rank, _ = normal_rank(np.array([p.normal for p in p1]), s.solver.parallel_deg)
+    has_tex = obs1.has_texture and obs2.has_texture
+
+    def tex2m(k: int, ax, ref, nu):  # frame 2' lattice -> frame 2's sampler
+        return obs2.texture(k, np.asarray(ax) @ Rp, Rp.T @ (np.asarray(ref) - tp), nu)
+
+    res: MotionEstimate | MotionFailure
+    if rank >= 3:
+        res = solve_three_planes(p1, p2m, s.solver)
+    elif rank == 2:
+        if has_tex:
+            res = solve_two_planes(
+                p1,
+                p2m,
+                lambda k, ax, ref, nu: obs1.texture(idx1[k], ax, ref, nu),
+                lambda k, ax, ref, nu: tex2m(idx2[k], ax, ref, nu),
+                s.solver,
+                prior_translation=np.zeros(3),
+            )
+        else:
+            res = MotionFailure(2, ("mu",), "two plane directions and no camera image")
+    else:
+        if has_tex:
+            res = solve_one_plane(
+                p1[0],
+                p2m[0],
+                obs1.texture,
+                tex2m,
+                idx1[0],
+                idx2[0],
+                prior.one_plane_solver(s.solver),
+            )
+        else:
+            res = MotionFailure(
+                1, ("lambda", "mu", "eta"), "one plane direction and no camera image"
+            )
+    if isinstance(res, MotionEstimate):
+        T = res.T @ Tp
+        chk = depth_consistency(obs1, obs2, T, idx2)
+        resid = dict(res.residuals)
+        resid.update(depth_tested=float(chk.tested), depth_violation=chk.violation)
+        if (
+            res.texture_dof
+            and chk.tested >= s.min_depth_points
+            and chk.violation > s.max_depth_violation
+        ):
+            res = MotionFailure(
+                res.case,
+                res.texture_dof,
+                f"texture match rejected by the depth check ({100 * chk.violation:.0f} % of "
+                f"{chk.tested} off-plane points in frame 1's free space)",
+            )
+        else:
+            return MotionEstimate(
+                T, res.case, res.geometry_dof, res.texture_dof, resid, tuple(pairs)
+            )
+    # 3. the degrees of freedom nothing measured come from the prior, and say so
+    free = res.free_dof
+    if rank >= 3 or not free or "rotation" in free:
+        return res
+    p2 = [segs2[j].plane for j in idx2]
+    T, geo = _fill_from_prior(p1, p2, min(rank, 2), Tp, s)
+    resid = _residuals(T[:3, :3], T[:3, 3], p1, p2)
+    log.info("case %d: %s from the prior (%s)", rank, ", ".join(free), res.reason)
+    return MotionEstimate(T, rank, geo, (), resid, tuple(pairs), prior_dof=tuple(free))

@@ -16,7 +16,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.geometry import Plane, polygon_area
+from navkit.geometry import Plane
 
 __all__ = ["ExtractionResult", "PlaneSegment", "outline_from_points", "plane_frame"]
 
@@ -28,11 +28,14 @@ def plane_frame(plane: Plane) -> tuple[NDArray[np.float64], NDArray[np.float64]]
     return plane.rho * plane.normal, plane.basis()
 
 
-def outline_from_points(uv: NDArray[np.float64], cell: float) -> tuple[NDArray[np.float64], float]:
-    """Outline polygon and area of planar points given in plane coordinates.
+def outline_from_points(
+    uv: NDArray[np.float64], cell: float, *, quads: NDArray[np.float64] | None = None
+) -> tuple[NDArray[np.float64], float]:
+    """Outline polygon and area of planar points (and filled quadrilaterals) in plane coordinates.
 
-    The points are rasterised at ``cell`` metres, the raster is closed (3 x 3) to bridge sampling
-    gaps, and the largest outer contour is simplified to within one cell (Douglas-Peucker).
+    The points are rasterised at ``cell`` metres, the quadrilaterals filled, the raster is closed
+    (3 x 3) to bridge sampling gaps, and the largest outer contour is simplified to within one
+    cell (Douglas-Peucker).
 
     Parameters
     ----------
@@ -40,42 +43,56 @@ def outline_from_points(uv: NDArray[np.float64], cell: float) -> tuple[NDArray[n
         In-plane coordinates, metres.
     cell : float
         Raster cell size, metres.
+    quads : (Q, 4, 2) array, optional
+        Quadrilaterals (in-plane coordinates, metres, corners in order) covered entirely: the
+        organised extraction passes each patch inside a plane as one quadrilateral instead of its
+        pixels. Quadrilaterals that tile a region (shared corners) fill it without gaps.
 
     Returns
     -------
     outline : (M, 2) array
         Counter-clockwise polygon, metres (empty ``(0, 2)`` if fewer than 3 points).
     area : float
-        Area covered by the rasterised points (all components), m^2.
+        Area covered by the rasterised points and quadrilaterals (all components), m^2.
     """
     # per-coordinate contiguous rows: reductions over axis 0 of an (N, 2) array are slow
-    uT = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).T)
+    uT = np.ascontiguousarray(np.asarray(uv, dtype=np.float64).reshape(-1, 2).T)
     fin = np.isfinite(uT[0]) & np.isfinite(uT[1])
     if not fin.all():
         uT = uT[:, fin]
-    if uT.shape[1] < 3:
+    Q = np.zeros((0, 4, 2)) if quads is None else np.asarray(quads, np.float64).reshape(-1, 4, 2)
+    if len(Q):
+        Q = Q[np.isfinite(Q).all(axis=(1, 2))]
+    if uT.shape[1] + 4 * len(Q) < 3:
         return np.zeros((0, 2)), 0.0
-    lo = np.array([uT[0].min(), uT[1].min()]) - cell
-    ii = ((uT[0] - lo[0]) * (1.0 / cell)).astype(np.int64)  # >= 0: floor == truncation
-    jj = ((uT[1] - lo[1]) * (1.0 / cell)).astype(np.int64)
-    shape = np.array([ii.max(), jj.max()]) + 2
+    qT = Q.reshape(-1, 2).T
+    lo = np.array([min(a.min(initial=np.inf) for a in (uT[k], qT[k])) for k in range(2)]) - cell
+    hi = np.array([max(a.max(initial=-np.inf) for a in (uT[k], qT[k])) for k in range(2)])
+    shape = ((hi - lo) * (1.0 / cell)).astype(np.int64) + 2
     if shape[0] * shape[1] > 4_000_000:  # keep the raster bounded for huge, sparse planes
         scale = np.sqrt(shape[0] * shape[1] / 4_000_000)
-        return outline_from_points(uT.T, cell * scale)
+        return outline_from_points(uT.T, cell * scale, quads=Q)
     grid = np.zeros((int(shape[1]), int(shape[0])), np.uint8)
+    ii = ((uT[0] - lo[0]) * (1.0 / cell)).astype(np.int64)  # >= 0: floor == truncation
+    jj = ((uT[1] - lo[1]) * (1.0 / cell)).astype(np.int64)
     grid[jj, ii] = 1
+    if len(Q):
+        # raster cell i spans [lo + i cell, lo + (i + 1) cell): its centre is OpenCV's pixel i;
+        # corners in 1/16 pixel (shift = 4)
+        q = np.rint(((Q - lo) * (1.0 / cell) - 0.5) * 16.0).astype(np.int32)
+        cv2.fillPoly(grid, list(q), 1, cv2.LINE_8, 4)
     grid = np.asarray(cv2.morphologyEx(grid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)), np.uint8)
-    area = float(grid.sum()) * cell * cell
+    area = float(np.count_nonzero(grid)) * cell * cell
     contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
         return np.zeros((0, 2)), area
     c = max(contours, key=cv2.contourArea)
-    c = cv2.approxPolyDP(c, 1.0, True).reshape(-1, 2).astype(np.float64)
-    poly = (c + 0.5) * cell + lo
-    if len(poly) >= 3 and polygon_area(poly) > 0:
-        from navkit.geometry import ensure_ccw
-
-        poly = ensure_ccw(poly)
+    c = cv2.approxPolyDP(c, 1.0, True)
+    # raster (x, y) = (u, v); OpenCV's oriented area is > 0 for a counter-clockwise polygon in
+    # (u, v) (checked against navkit.geometry.signed_area): the others are reversed
+    if len(c) >= 3 and cv2.contourArea(c, oriented=True) < 0:
+        c = c[::-1]
+    poly = (c.reshape(-1, 2).astype(np.float64) + 0.5) * cell + lo
     return poly, area
 
 

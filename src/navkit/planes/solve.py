@@ -46,12 +46,14 @@ from navkit.planes.texture import PlaneTexture
 __all__ = [
     "MotionEstimate",
     "MotionFailure",
+    "PartialMotion",
     "SolverSettings",
     "TextureFn",
     "normal_rank",
     "solve_one_plane",
     "solve_three_planes",
     "solve_two_planes",
+    "two_plane_geometry",
 ]
 
 log = logging.getLogger(__name__)
@@ -115,6 +117,9 @@ class MotionEstimate:
         and for texture cases ``texture_D`` (eq. 4 / 7), ``texture_overlap`` (pixels), ...
     pairs : tuple of (int, int)
         The plane matches used (frame-1 index, frame-2 index).
+    prior_dof : tuple of str
+        Degrees of freedom neither geometry nor texture fixed, taken from a motion prior
+        (:class:`navkit.planes.motion.MotionPrior`); empty when everything was measured.
     """
 
     T: NDArray[np.float64]
@@ -123,6 +128,7 @@ class MotionEstimate:
     texture_dof: tuple[str, ...]
     residuals: dict[str, float] = field(default_factory=dict)
     pairs: tuple[tuple[int, int], ...] = ()
+    prior_dof: tuple[str, ...] = ()
 
     ok = True
 
@@ -251,6 +257,72 @@ def solve_three_planes(
     )
 
 
+@dataclass(frozen=True)
+class PartialMotion:
+    """What geometry alone fixes when the matched planes span two normal directions.
+
+    The rotation (3 DoF) and the translation across the planes' intersection line (2 DoF);
+    the position ``mu`` along the line (direction ``d`` in frame 1) is free:
+    ``T_1_2 = (R, t0 + mu d)`` for any ``mu``.
+
+    Attributes
+    ----------
+    R : (3, 3) array
+        Rotation, least squares of eqs. 1 and 5.
+    t0 : (3,) array
+        Minimum-norm translation of eqs. 2 and 6 (``t0 . d = 0``), metres.
+    d : (3,) array
+        Unit direction of the intersection line, frame 1.
+    free_dof : tuple of str
+        ``("mu",)``.
+    """
+
+    R: NDArray[np.float64]
+    t0: NDArray[np.float64]
+    d: NDArray[np.float64]
+    free_dof: tuple[str, ...] = ("mu",)
+
+
+def two_plane_geometry(
+    p1: Sequence[Plane], p2: Sequence[Plane], settings: SolverSettings | None = None
+) -> PartialMotion | MotionFailure:
+    """The geometric part of the 2-plane case: rotation and translation across the line.
+
+    Parameters
+    ----------
+    p1, p2 : sequences of Plane
+        Matched planes (largest first); their normals must span exactly two directions.
+
+    Returns
+    -------
+    PartialMotion, or MotionFailure when the normals do not span two directions.
+    """
+    s = settings or SolverSettings()
+    N1 = np.array([p.normal for p in p1], dtype=np.float64).reshape(-1, 3)
+    N2 = np.array([p.normal for p in p2], dtype=np.float64).reshape(-1, 3)
+    rank, chosen = normal_rank(N1, s.parallel_deg)
+    if rank != 2:
+        free = {0: ("rotation", "translation"), 1: ("lambda", "mu", "eta"), 3: ()}[min(rank, 3)]
+        return MotionFailure(rank, free, f"the normals span {rank} direction(s), 2 expected")
+    a, b = chosen
+    # rotation: least squares of eqs. 1 and 5 (normals and their cross product)
+    c1 = np.cross(N1[a], N1[b])
+    c2 = np.cross(N2[a], N2[b])
+    R = _kabsch(
+        np.stack([N1[a], N1[b], c1 / np.linalg.norm(c1)]),
+        np.stack([N2[a], N2[b], c2 / np.linalg.norm(c2)]),
+        np.ones(3),
+    )
+    # translation: minimum-norm solution of eqs. 2 and 6 (all planes, weighted by sqrt of the
+    # smaller inlier count as in the closed form); free along the line
+    d = c1 / np.linalg.norm(c1)
+    drho = np.array([x.rho - y.rho for x, y in zip(p1, p2, strict=True)])
+    w = np.sqrt(np.minimum([max(x.count, 1) for x in p1], [max(y.count, 1) for y in p2]))
+    t0 = np.linalg.lstsq(N1 * w[:, None], drho * w, rcond=None)[0]
+    t0 -= (t0 @ d) * d
+    return PartialMotion(R, t0, d)
+
+
 def solve_two_planes(
     p1: Sequence[Plane],
     p2: Sequence[Plane],
@@ -278,24 +350,13 @@ def solve_two_planes(
     """
     s = settings or SolverSettings()
     N1 = np.array([p.normal for p in p1])
-    N2 = np.array([p.normal for p in p2])
-    rank, chosen = normal_rank(N1, s.parallel_deg)
+    rank, _ = normal_rank(N1, s.parallel_deg)
     if rank != 2:
         return MotionFailure(rank, ("mu",), f"the normals span {rank} direction(s), 2 expected")
-    a, b = chosen
-    # rotation: least squares of eqs. 1 and 5 (normals and their cross product)
-    c1 = np.cross(N1[a], N1[b])
-    c2 = np.cross(N2[a], N2[b])
-    R = _kabsch(
-        np.stack([N1[a], N1[b], c1 / np.linalg.norm(c1)]),
-        np.stack([N2[a], N2[b], c2 / np.linalg.norm(c2)]),
-        np.ones(3),
-    )
-    # translation: minimum-norm solution of eqs. 2 and 6 (all planes), plus mu along the line
-    d = c1 / np.linalg.norm(c1)
-    drho = np.array([x.rho - y.rho for x, y in zip(p1, p2, strict=True)])
-    t0 = np.linalg.lstsq(N1, drho, rcond=None)[0]
-    t0 -= (t0 @ d) * d
+    # rotation (eqs. 1, 5) and translation across the line (eqs. 2, 6); mu along d is free
+    geo = two_plane_geometry(p1, p2, s)
+    assert isinstance(geo, PartialMotion)  # rank 2 checked above
+    R, t0, d = geo.R, geo.t0, geo.d
     prior_shift = (
         0.0 if prior_translation is None else float(np.asarray(prior_translation, float) @ d)
     )

@@ -12,6 +12,7 @@ y left: the fragment to localize).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -53,6 +54,10 @@ class FloorplanSettings:
     max_disparity_step : float
         Pixels; :func:`stereo_wall_points` drops pixels whose 5 x 5 neighbourhood spans a larger
         disparity range (depth edges, where matchers smear foreground into background).
+    subpixel : {"lk", "parabola"}
+        Sub-pixel step of the default matcher of :func:`stereo_wall_points` (see
+        :class:`~navkit.stereo.disparity.DisparitySettings`): ``"lk"`` removes the matcher's
+        pixel locking, a per-wall depth bias of up to several centimetres.
     """
 
     min_height: float = 0.3
@@ -63,6 +68,7 @@ class FloorplanSettings:
     disparity_sigma: float = 0.25
     max_disparity_step: float = 1.0
     min_depth: float = 0.5
+    subpixel: Literal["lk", "parabola"] = "lk"
 
     def __post_init__(self) -> None:
         if not self.max_height > self.min_height:
@@ -158,7 +164,7 @@ def stereo_wall_points(
         bf0 = rig.baseline * rig.camera.fx
         nd = int(16 * np.ceil(bf0 / s.min_depth / 16))
         nd = max(16, min(nd, 16 * ((rig.camera.width - 1) // 32)))
-        disparity = DisparitySettings(num_disparities=nd)
+        disparity = DisparitySettings(num_disparities=nd, subpixel=s.subpixel)
     d = compute_disparity(left, right, disparity).disparity
     # Stage: drop depth edges (a large disparity range in the 5 x 5 neighbourhood).
     k = np.ones((5, 5), np.uint8)

@@ -151,7 +151,7 @@ def figure_trajectories(lg: Any) -> Any:
             alpha=0.7,
             label=f"stored spline ({lg.path.n_segments} segments)",
         )
-        ax.plot(*lg.path.position(lg.path.knots).T, "o", color="tab:orange", ms=4)
+        ax.plot(*lg.path.knots.T, "o", color="tab:orange", ms=4)
     ax.plot(*lg.scene.start[:2], marker="*", ms=16, color="gold", mec="k", ls="", label="operator")
     ax.plot(*lg.truth[-1, :2], marker="X", ms=11, color="k", ls="", label="robot at the end")
     if lg.link_lost_index >= 0:
@@ -169,6 +169,35 @@ def figure_trajectories(lg: Any) -> Any:
         b = lg.dropped_obstacle
         poly = _rect(np.asarray(b.center), np.asarray(b.size), float(b.yaw))
         ax.fill(*poly.T, color="tab:blue", alpha=0.6, label="obstacle dropped on the way back")
+    for i, (pts, d) in enumerate(zip(lg.detour_paths, lg.detours, strict=True)):
+        # the detour as first planned (estimate frame), and where it rejoined the stored path
+        ax.plot(
+            *pts.T,
+            "-o",
+            color="tab:pink",
+            lw=2.0,
+            ms=4,
+            label="detour round the block (first plan)" if i == 0 else None,
+        )
+        ax.plot(
+            *d["rejoin_xy"],
+            marker="D",
+            ms=8,
+            color="tab:pink",
+            mec="k",
+            ls="",
+            label="rejoin point" if i == 0 else None,
+        )
+    if lg.outcome == "blocked" and lg.blocked is not None:
+        ax.plot(
+            *lg.blocked["blocked_path_point_xy"],
+            marker="x",
+            ms=12,
+            mew=3,
+            color="tab:red",
+            ls="",
+            label="blocked, no detour",
+        )
     ax.legend(loc="best", fontsize=8)
     _finish(ax, "trajectories")
     fig.tight_layout()
@@ -384,10 +413,19 @@ def write_report(lg: Any, metrics: dict[str, Any], path: str | Path) -> Path:
         )
         if ret["outcome"] == "blocked":
             rows.append(("return blocked: obstacle ahead at", "m", _fmt(b.get("distance_ahead_m"))))
+            rows.append(("return blocked: why it stopped", "", str(b.get("detour", ""))))
+    if ret.get("detours"):
+        rows.append(
+            (
+                "return: detours round a block (completed) / planned length",
+                "m",
+                f"{ret['detours']} ({ret['detours_completed']}) / {ret['detour_length_m']:.2f}",
+            )
+        )
     if "stopped_distance_to_dropped_obstacle_m" in ret:
         rows.append(
             (
-                "stopped at, from the dropped obstacle's centre",
+                "ended at, from the dropped obstacle's centre",
                 "m",
                 _fmt(ret["stopped_distance_to_dropped_obstacle_m"]),
             )

@@ -1,0 +1,85 @@
+"""Organised plane extraction: this working tree against a git revision's, and Open3D's loop.
+
+The revision's ``src/navkit/planes/segments.py`` and ``extract.py`` are loaded beside the working
+tree (``git show REV:...``, the extract module's import of ``segments`` redirected), and the two
+versions and Open3D's ``segment_plane`` loop are timed interleaved in one process on the
+benchmark's frames (``bench_planes.extraction_frames``): CPU time medians, 3 x ``--repeats``.
+
+Run from the repository root::
+
+    PYTHONPATH=. .venv/bin/python benchmarks/planes_extract_vs_rev.py [--rev HEAD] [--repeats 15]
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import types
+
+import numpy as np
+
+from benchmarks.bench_planes import _cpu_median, _o3d, _segment_plane_loop, extraction_frames
+from navkit.planes import ExtractionSettings, extract_planes_organized
+
+
+def _load_revision(rev: str) -> types.ModuleType:
+    """The revision's organised extraction as a module (``rev_extract``)."""
+    src = {
+        name: subprocess.run(
+            ["git", "show", f"{rev}:src/navkit/planes/{name}.py"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout
+        for name in ("segments", "extract")
+    }
+    seg = types.ModuleType("rev_segments")
+    sys.modules["rev_segments"] = seg
+    exec(compile(src["segments"], f"{rev}:segments.py", "exec"), seg.__dict__)
+    ex = types.ModuleType("rev_extract")
+    sys.modules["rev_extract"] = ex
+    code = src["extract"].replace("from navkit.planes.segments import", "from rev_segments import")
+    exec(compile(code, f"{rev}:extract.py", "exec"), ex.__dict__)
+    return ex
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--rev", default="HEAD", help="git revision to compare with")
+    parser.add_argument("--repeats", type=int, default=15)
+    args = parser.parse_args()
+    before = _load_revision(args.rev)
+    o3d = _o3d()
+    full = ExtractionSettings(refine="full")
+    print(f"frame | planes ({args.rev} -> now) | {args.rev} ms | now ms | now full ms | Open3D ms")
+    for name, f in extraction_frames():
+        P = f.points()
+        n = len(extract_planes_organized(P))
+        nb = len(before.extract_planes_organized(P))
+        flat = P.reshape(-1, 3)
+        flat = flat[np.all(np.isfinite(flat), axis=1)]
+        t: dict[str, list[float]] = {"before": [], "now": [], "full": [], "o3d": []}
+        for _ in range(3):
+            t["before"].append(
+                _cpu_median(lambda P=P: before.extract_planes_organized(P), args.repeats)
+            )
+            t["now"].append(_cpu_median(lambda P=P: extract_planes_organized(P), args.repeats))
+            t["full"].append(
+                _cpu_median(lambda P=P: extract_planes_organized(P, full), args.repeats)
+            )
+            t["o3d"].append(
+                _cpu_median(
+                    lambda flat=flat, n=n: _segment_plane_loop(o3d, flat, n),
+                    max(1, args.repeats // 3),
+                )
+            )
+        m = {k: 1000 * float(np.median(v)) for k, v in t.items()}
+        print(
+            f"{name} | {nb} -> {n} | {m['before']:.1f} | {m['now']:.1f} | {m['full']:.1f} | "
+            f"{m['o3d']:.0f} | {m['before'] / m['now']:.2f}x | Open3D {m['o3d'] / m['now']:.0f}x"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,148 @@
+"""The matcher's fast paths against reference implementations in the test: the per-map padded
+pyramid, the optimistic first pass of the branch-and-bound, the peak analysis by
+branch-and-bound, and the bicubic sub-cell field."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from navkit.localization import LikelihoodField, MatcherSettings, analyse_peak, score_poses
+from navkit.localization.matcher import _Search, _thin
+from tests.localization.helpers import LSHAPE, RECT, sample_walls, scan_points
+
+
+@pytest.fixture(scope="module")
+def lfield():
+    return LikelihoodField.from_points(sample_walls(LSHAPE, 0.01), 0.05, 0.1)
+
+
+def _all(search: _Search, level: int = 0):
+    """Every candidate of a search and its brute-force score at ``level``."""
+    K, IX, IY = np.meshgrid(
+        np.arange(len(search.thetas)), np.arange(search.n), np.arange(search.n), indexing="ij"
+    )
+    k, ix, iy = K.ravel(), IX.ravel(), IY.ravel()
+    return k, ix, iy, search.scores(level, k, ix, iy)
+
+
+@pytest.mark.parametrize("corner", [(0.3, 0.4), (9.8, 7.7), (-1.9, 3.0)])
+def test_padded_pyramid_scores_equal_the_region_pyramid(lfield, rng, corner):
+    """A tracking-sized window (<= 64 cells) reads the per-map padded pyramid; one reaching past
+    the map's edges must score every candidate exactly as the per-search region pyramid does
+    (the reference), at every level, and its branch-and-bound must return the brute-force
+    optimum."""
+    pose = np.array([1.5, 1.5, 0.4])
+    pts = _thin(scan_points(LSHAPE, pose, n=181, noise=0.01, rng=rng), 0.1)
+    thetas = 0.4 + np.linspace(-0.05, 0.05, 5)
+    base, n = np.array(corner), 41  # 2 m windows at, and beyond, the map's corners
+    padded = _Search(lfield, pts, thetas, base, n)
+    region = _Search(lfield, pts, thetas, base, n, cache=[])  # the region path (reference)
+    assert padded.flat.shape[1] != region.flat.shape[1]  # really two different layouts
+    for level in range(len(lfield.pyramid)):
+        assert np.array_equal(_all(padded, level)[3], _all(region, level)[3])
+    best, exact = padded.run(levels=7, lower=-1.0, cap=10**9)
+    assert exact and best[0] == pytest.approx(_all(region)[3].max(), abs=1e-12)
+    # and the scores are the public nearest-cell scores (uint8 rounding: <= 1/255 per point)
+    k, ix, iy, sc = _all(padded)
+    j = np.argsort(sc)[-5:]
+    poses = np.stack([base[0] + ix[j] * 0.05, base[1] + iy[j] * 0.05, thetas[k[j]]], axis=1)
+    assert np.allclose(score_poses(lfield, pts, poses), sc[j], atol=1 / 255 + 1e-6)
+
+
+@pytest.mark.parametrize("optimism", [0.0, 0.001, 0.03, 0.5])
+@pytest.mark.parametrize("keep", [1.0, 0.9])
+def test_optimistic_first_pass_is_exact(rng, optimism, keep):
+    """Whatever the first pass assumes (an optimum just under the top bound, far under it, or
+    above the true one so that the second pass or the fallback must run), the search returns
+    the brute-force optimum and, with ``keep < 1``, every leaf within ``keep`` of it."""
+    fld = LikelihoodField.from_points(sample_walls(RECT, 0.01), 0.05, 0.1)
+    pose = np.array([2.0, 2.5, 0.4])
+    good = scan_points(RECT, pose, n=181, noise=0.005, rng=rng)
+    junk = rng.uniform(-3.0, 3.0, (60, 2))  # points that fit no wall: a low optimum
+    for pts in (_thin(good, 0.1), _thin(np.vstack([good[::4], junk]), 0.1)):
+        search = _Search(
+            fld, pts, np.array([0.38, 0.4, 0.42, 0.4 + np.pi]), np.array([1.5, 1.5]), 101
+        )
+        search.optimism = optimism
+        best, exact = search.run(levels=7, lower=-1.0, cap=10**9, keep=keep)
+        k, ix, iy, brute = _all(search)
+        assert exact and best[0] == pytest.approx(brute.max(), abs=1e-12)
+        if keep < 1:
+            _ls, lk, lx, ly = (np.concatenate(a) for a in zip(*search.leaves, strict=True))
+            found = set(zip(lk.tolist(), lx.tolist(), ly.tolist(), strict=True))
+            want = np.flatnonzero(brute > keep * brute.max())
+            assert {(int(k[j]), int(ix[j]), int(iy[j])) for j in want} <= found
+
+
+def _peak_reference(fld, pts, pose, s):
+    """The peak analysis by exhaustive scoring of the whole window (the former implementation)."""
+    r = fld.resolution
+    n = int(np.ceil(s.ambiguity_window / r))
+    step = r / max(np.percentile(np.linalg.norm(pts, axis=1), 95), r)
+    search = _Search(fld, pts, pose[2] + np.array([-step, 0.0, step]), pose[:2] - n * r, 2 * n + 1)
+    IX, IY = np.meshgrid(np.arange(2 * n + 1), np.arange(2 * n + 1), indexing="ij")
+    ix, iy = IX.ravel(), IY.ravel()
+    best = np.max([search.scores(0, np.full(len(ix), k), ix, iy) for k in range(3)], axis=0)
+    near = best >= (1.0 - s.peak_tolerance) * best.max()
+    T = np.stack([(ix[near] - n) * r, (iy[near] - n) * r], axis=1)
+    w = best[near]
+    mu = (w[:, None] * T).sum(0) / w.sum()
+    C = ((w[:, None] * (T - mu)).T @ (T - mu)) / w.sum()
+    major, minor = np.linalg.eigh(C)[1][:, 1], np.linalg.eigh(C)[1][:, 0]
+    return float(np.ptp(T @ major)) + r, float(np.ptp(T @ minor)) + r, C, float(best.max())
+
+
+@pytest.mark.parametrize(
+    "walls, pose",
+    [
+        (LSHAPE, (2.0, 3.0, 0.7)),  # a corner: a compact peak
+        (np.array([[[-20.0, 2.0], [20.0, 2.0]]]), (0.0, 0.0, 0.0)),  # a wall: a long ridge
+    ],
+)
+def test_peak_analysis_by_branch_and_bound_equals_exhaustive_scoring(rng, walls, pose):
+    fld = LikelihoodField.from_points(sample_walls(walls, 0.01), 0.05, 0.1)
+    pose = np.array(pose)
+    pts = _thin(scan_points(walls, pose, n=181, noise=0.01, rng=rng), 0.1)
+    s = MatcherSettings()
+    guess = pose + np.array([0.02, -0.03, 0.01])
+    _, extent, minor, cov, top = analyse_peak(fld, pts, guess, s)
+    r_extent, r_minor, r_cov, r_top = _peak_reference(fld, pts, guess, s)
+    assert top == pytest.approx(r_top, abs=1e-12)
+    assert extent == pytest.approx(r_extent, abs=1e-9)
+    assert minor == pytest.approx(r_minor, abs=1e-9)
+    assert np.allclose(cov, r_cov, atol=1e-12)
+
+
+def test_bicubic_field_matches_the_exact_gaussian_of_the_distance(rng):
+    """Sub-cell values for the refinement: the Catmull-Rom spline through the cell centres
+    against the exact ``exp(-d^2 / 2 sigma^2)`` of a straight wall (d known analytically)."""
+    sigma, h = 0.1, 0.05
+    wall = np.array([[[-5.0, 0.013], [5.0, 0.013]]])  # off the cell grid on purpose
+    fld = LikelihoodField.from_points(sample_walls(wall, 0.002), h, sigma)
+    P = np.stack([rng.uniform(-3, 3, 5000), rng.uniform(-0.35, 0.35, 5000)], axis=1)
+    truth = np.exp(-0.5 * ((P[:, 1] - 0.013) / sigma) ** 2)
+    # Bilinear interpolation errs by up to h^2 / 8 max|f''| = 0.0025 / 8 * (1 / sigma^2) = 0.031
+    # (kinks at the cells: it pins the refined pose to cell centres); Catmull-Rom is third order
+    # (error ~ h^3 |f'''|, |f'''| <= 1.38 / sigma^3, with a small constant): allow a third of
+    # the bilinear bound. The wall samples are 2 mm apart: <= 1 mm of distance error, < 1e-3.
+    assert np.max(np.abs(fld.interpolate_cubic(P) - truth)) < 0.01
+    # it interpolates: at the cell centres it returns the stored values
+    H, W = fld.shape
+    jj, ii = rng.integers(2, H - 2, 50), rng.integers(2, W - 2, 50)
+    centres = fld.origin + (np.stack([ii, jj], axis=1) + 0.5) * h
+    assert np.allclose(fld.interpolate_cubic(centres), fld.values[jj, ii], atol=1e-6)
+    # and it is zero far outside the grid
+    assert np.all(fld.interpolate_cubic(np.array([[1e3, 0.0], [-1e3, -1e3]])) == 0.0)
+
+
+def test_a_search_out_of_budget_returns_a_real_leaf_flagged_inexact(lfield, rng):
+    """``max_candidates`` cut: the answer is a leaf that was scored (its score is its true
+    score), flagged ``exact=False`` - never None, never a bound passed off as a score."""
+    pose = np.array([2.0, 3.0, 0.7])
+    pts = _thin(scan_points(LSHAPE, pose, n=181, noise=0.01, rng=rng), 0.1)
+    search = _Search(lfield, pts, 0.7 + np.linspace(-0.2, 0.2, 21), pose[:2] - 1.5, 61)
+    best, exact = search.run(levels=7, lower=-1.0, cap=16, keep=0.9)
+    assert best is not None and not exact
+    sc = search.scores(0, np.array([best[1]]), np.array([best[2]]), np.array([best[3]]))[0]
+    assert best[0] == pytest.approx(sc, abs=1e-12)
