@@ -12,6 +12,10 @@
   planes' intersection line), beside Open3D point-to-plane ICP round trips.
 - **slambook-ch5 2 -> 3** (>= 3 planes) against ``pose.txt``.
 
+Every navkit figure is also computed with the paper's literal eq. 2 (``N1 . dT = rho1 - rho2``,
+``SolverSettings(translation="rho")``) beside the default (eq. 2 at the planes' centroids,
+:func:`navkit.planes.solve.plane_translation`): before -> after in one run.
+
 CPU times are ``time.process_time`` medians, navkit and the peers in the same run.
 """
 
@@ -25,6 +29,14 @@ from typing import Any
 import numpy as np
 
 from benchmarks.common import Row
+
+
+def _rho_settings():
+    from navkit.planes.motion import MotionSettings
+    from navkit.planes.solve import SolverSettings
+
+    return MotionSettings(solver=SolverSettings(translation="rho"))
+
 
 AREA = "planes_real"
 ROOM = "scans3d/pcl-room/room_scan{}.pcd"
@@ -73,6 +85,70 @@ def point_to_plane(
     ok = np.isfinite(d)
     r = np.einsum("ij,ij->i", X[ok] - A[j[ok]], nA[j[ok]])
     return float(100 * np.sqrt(np.mean(r**2))), float(ok.mean())
+
+
+def _scatter_covariance(obs: Any, k: int) -> tuple[np.ndarray, float]:
+    """Normal covariance ``(3, 3)`` and centroid-offset variance of plane ``k``'s TLS fit from
+    its inliers' scatter matrix: ``C_N = sigma^2 sum_(in-plane k) e_k e_k^T / (n lambda_k)``,
+    ``var = sigma^2 / n``, ``sigma`` = the fit's rms (first-order perturbation of the smallest
+    eigenvector)."""
+    seg = obs.segments[k]
+    P = np.asarray(obs.points, dtype=np.float64).reshape(-1, 3)[seg.inliers]
+    P = P[np.all(np.isfinite(P), axis=1)]
+    X = P - P.mean(axis=0)
+    lam, E = np.linalg.eigh(X.T @ X / len(P))
+    s2 = seg.plane.rms**2
+    C = s2 * (np.outer(E[:, 1], E[:, 1]) / lam[1] + np.outer(E[:, 2], E[:, 2]) / lam[2])
+    return C / len(P), s2 / len(P)
+
+
+def information_rows(name: str, o1: Any, o2: Any, pairs: Any, T_ref: np.ndarray) -> list[Row]:
+    """The closed form on the same plane pairs with the planes' information as weights (tried,
+    not the default): rotation by weighted Kabsch with ``1 / (tr C_N1 + tr C_N2)``, translation
+    at the centroids with generalised least-squares weights ``1 / sqrt(D^T (C_N1 + R C_N2 R^T) D
+    + var1 + var2)`` (``D = R c2 + t - c1``, iterated 3 times), beside the default weights
+    ``sqrt(min inliers)``."""
+    from navkit.geometry import se3_from_rt
+    from navkit.planes.solve import _kabsch, plane_translation
+
+    p1 = [o1.segments[i].plane for i, _ in pairs]
+    p2 = [o2.segments[j].plane for _, j in pairs]
+    N1 = np.array([p.normal for p in p1])
+    N2 = np.array([p.normal for p in p2])
+    w = np.sqrt(np.minimum([p.count for p in p1], [p.count for p in p2]).astype(float))
+    C1 = [_scatter_covariance(o1, i) for i, _ in pairs]
+    C2 = [_scatter_covariance(o2, j) for _, j in pairs]
+    info = 1.0 / np.array([np.trace(a[0]) + np.trace(b[0]) for a, b in zip(C1, C2, strict=True)])
+    out = []
+    for rname, wr in (("sqrt(inliers)", w), ("information", info)):
+        R = _kabsch(N1, N2, wr)
+        t = plane_translation(R, p1, p2, w, "centroid")
+        for _ in range(3):
+            D = np.array([R @ b.centroid + t - a.centroid for a, b in zip(p1, p2, strict=True)])
+            var = np.array(
+                [
+                    d @ (a[0] + R @ b[0] @ R.T) @ d + a[1] + b[1]
+                    for d, a, b in zip(D, C1, C2, strict=True)
+                ]
+            )
+            t = plane_translation(R, p1, p2, 1.0 / np.sqrt(var), "centroid")
+        for tname, tt in (
+            ("rho1 - rho2, sqrt(inliers)", plane_translation(R, p1, p2, w, "rho")),
+            ("centroids, sqrt(inliers)", plane_translation(R, p1, p2, w, "centroid")),
+            ("centroids, GLS", t),
+        ):
+            rot, tr = motion_error(se3_from_rt(R, tt), T_ref)
+            out.append(
+                Row(
+                    AREA,
+                    f"{name}: rotation weights {rname}, translation {tname}",
+                    "cm",
+                    tr,
+                    note=f"rotation {rot:.2f} deg; {len(pairs)} pairs; information weights "
+                    f"(max 1) {np.round(info / info.max(), 3).tolist()}",
+                )
+            )
+    return out
 
 
 def _o3d_cloud(P: np.ndarray, voxel: float):
@@ -152,6 +228,7 @@ def room_rows(quick: bool) -> list[Row]:
     from navkit.planes.frame import PlaneObservation
     from navkit.planes.solve import normal_rank
 
+    RHO = _rho_settings()
     P1, P2 = (read_pcd(datasets.find(ROOM.format(k))).points for k in (1, 2))
     reps = 1 if quick else 3
     rows: list[Row] = []
@@ -171,6 +248,7 @@ def room_rows(quick: bool) -> list[Row]:
         )
         obs.append(PlaneObservation(ext, P))
     cpu_nk, est = cpu_median(lambda: estimate_motion(obs[0], obs[1]), reps)
+    est_rho = estimate_motion(obs[0], obs[1], settings=RHO)
     t0 = time.process_time()
     ref = room_reference(P1, P2)
     cpu_icp = (time.process_time() - t0) / 3
@@ -178,6 +256,18 @@ def room_rows(quick: bool) -> list[Row]:
     spread = [motion_error(ref[k], T_ref) for k in ("0.30", "0.20")]
     r_ref, f_ref = point_to_plane(P1, P2, T_ref)
     ok = isinstance(est, MotionEstimate)
+    if isinstance(est_rho, MotionEstimate):
+        rows.append(
+            Row(
+                AREA,
+                "room scans 2 -> 1, no guess: eq. 2 as rho1 - rho2 (before) vs ICP reference",
+                "deg / cm",
+                None,
+                note="rotation {:.2f} deg, translation {:.1f} cm, {} pairs".format(
+                    *motion_error(est_rho.T, T_ref), len(est_rho.pairs)
+                ),
+            )
+        )
     if ok:
         e_rot, e_t = motion_error(est.T, T_ref)
         r_nk, f_nk = point_to_plane(P1, P2, est.T)
@@ -233,6 +323,8 @@ def room_rows(quick: bool) -> list[Row]:
             "navkit: association + solve, extraction excluded (rows above)",
         )
     )
+    if ok:
+        rows += information_rows("room scans 2 -> 1", obs[0], obs[1], est.pairs, T_ref)
     # peers without a guess
     s1, s2 = _o3d_cloud(P1, 0.05), _o3d_cloud(P2, 0.05)
     T_id = icp_p2plane(s2, s1, np.eye(4), 0.1)
@@ -271,7 +363,7 @@ def kinect_rows(quick: bool) -> list[Row]:
     from navkit.io.pointcloud import read_pcd
     from navkit.planes import estimate_motion, observe_points
     from navkit.planes.associate import associate
-    from navkit.planes.solve import PartialMotion, two_plane_geometry
+    from navkit.planes.solve import PartialMotion, SolverSettings, two_plane_geometry
 
     clouds = [read_pcd(datasets.find(KINECT.format(k))) for k in (1, 2, 3)]
     rows: list[Row] = []
@@ -290,7 +382,7 @@ def kinect_rows(quick: bool) -> list[Row]:
         )
     )
 
-    def partial(a: int, b: int) -> PartialMotion:
+    def partial(a: int, b: int, method: str = "centroid") -> PartialMotion:
         sa, sb = obs[a].segments, obs[b].segments
         pr = [
             (i, j)
@@ -298,15 +390,23 @@ def kinect_rows(quick: bool) -> list[Row]:
             if min(sa[i].plane.count, sb[j].plane.count) >= 2000
         ]
         pr.sort(key=lambda p: -min(sa[p[0]].plane.count, sb[p[1]].plane.count))
-        g = two_plane_geometry([sa[i].plane for i, _ in pr], [sb[j].plane for _, j in pr])
+        g = two_plane_geometry(
+            [sa[i].plane for i, _ in pr],
+            [sb[j].plane for _, j in pr],
+            SolverSettings(translation=method),
+        )
         assert isinstance(g, PartialMotion), g
         return g
 
-    P = {(a, b): partial(a, b) for a in range(3) for b in range(3) if a != b}
+    keys = [(a, b) for a in range(3) for b in range(3) if a != b]
+    P = {k: partial(*k) for k in keys}
+    P_rho = {k: partial(*k, method="rho") for k in keys}
     s = [_o3d_cloud(c.points, 0.02) for c in clouds]
     icp = {k: icp_p2plane(s[k[1]], s[k[0]], np.eye(4), 0.05) for k in P}
 
-    def cycle(c: tuple[int, ...]) -> tuple[float, float, float, float]:
+    def cycle(
+        c: tuple[int, ...], P: dict[tuple[int, int], PartialMotion] = P
+    ) -> tuple[float, float, float, float]:
         R, t, T = np.eye(3), np.zeros(3), np.eye(4)
         for a, b in pairwise(c):
             g = P[a, b]
@@ -320,6 +420,7 @@ def kinect_rows(quick: bool) -> list[Row]:
 
     for c in ((0, 1, 0), (1, 2, 1), (0, 2, 0), (0, 1, 2, 0)):
         rot, across, irot, it = cycle(c)
+        across_rho = cycle(c, P_rho)[1]
         name = " -> ".join("ABC"[k] for k in c)
         rows.append(
             Row(
@@ -329,7 +430,8 @@ def kinect_rows(quick: bool) -> list[Row]:
                 across,
                 it,
                 "Open3D p2plane ICP round trip (full translation, cm)",
-                note=f"rotation: navkit {rot:.4f} deg (same two planes: identity by "
+                note=f"eq. 2 as rho1 - rho2 (before): {across_rho:.2f} cm; "
+                f"rotation: navkit {rot:.4f} deg (same two planes: identity by "
                 f"construction), ICP {irot:.3f} deg; A->B turn "
                 f"{np.degrees(rotation_angle(P[c[0], c[1]].R)):.2f} deg",
             )
@@ -350,19 +452,26 @@ def slambook_rows(quick: bool) -> list[Row]:
     Tw = [se3_from_xyz_quat(p[:3], p[3:]) for p in np.loadtxt(root / "pose.txt")]
     o1, o2 = observe_rgbd(seq.frame(1)), observe_rgbd(seq.frame(2))
     cpu, est = cpu_median(lambda: estimate_motion(o1, o2), 1 if quick else 3)
+    est_rho = estimate_motion(o1, o2, settings=_rho_settings())
     truth = se3_inverse(Tw[1]) @ Tw[2]
+    if isinstance(est_rho, MotionEstimate):
+        rot_b, tr_b = motion_error(est_rho.T, truth)
+        before = f"before (eq. 2 as rho1 - rho2): {tr_b:.1f} cm / {rot_b:.2f} deg; "
+    else:
+        before = f"before: {est_rho}; "
     if not isinstance(est, MotionEstimate):
         return [Row(AREA, "slambook 2 -> 3", "-", None, note=f"failure: {est}")]
     rot, tr = motion_error(est.T, truth)
     return [
+        *information_rows("slambook 2 -> 3", o1, o2, est.pairs, truth),
         Row(
             AREA,
             "slambook 2 -> 3, no prior: translation / rotation error vs pose.txt",
             "cm",
             tr,
-            note=f"rotation {rot:.2f} deg; case {est.case}, pairs {list(est.pairs)}; "
+            note=f"rotation {rot:.2f} deg; {before}case {est.case}, pairs {list(est.pairs)}; "
             f"{1000 * cpu:.0f} ms CPU",
-        )
+        ),
     ]
 
 

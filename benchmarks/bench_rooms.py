@@ -19,20 +19,49 @@ from benchmarks.common import Row
 
 
 def sim_rooms(
-    n_poses: int = 100, width: int = 320, seed: int = 0, kinds: tuple[str, ...] | None = None
+    n_poses: int = 100,
+    width: int = 320,
+    seed: int = 0,
+    kinds: tuple[str, ...] | None = None,
+    weighted_map: bool = True,
+    negative_information: bool = True,
 ) -> dict[str, dict[str, float]]:
-    """Map accuracy and localization statistics in the simulated rooms (see the module docstring)."""
+    """Map accuracy and localization statistics in the simulated rooms (see the module docstring).
+
+    ``weighted_map``: the map's walls refitted by inverse-variance weighted TLS (stereo depth
+    error along the rays; False = plain TLS, the figures before). ``negative_information``: the
+    single-view known-heading fixes are checked for walls the map puts in view that the
+    fragment lacks (False = the figures before).
+    """
     from navkit.geometry import points_in_polygon, se2_apply, se2_from_xytheta
-    from navkit.localization import MatcherSettings, build_map, evaluate_map, match_scan
-    from navkit.localization.correlation import locate_known_heading
+    from navkit.localization import (
+        MapSettings,
+        MatcherSettings,
+        build_map,
+        evaluate_map,
+        match_scan,
+    )
+    from navkit.localization.correlation import KnownHeadingSettings, locate_known_heading
     from navkit.localization.refine import occluded_fraction, refine_pose, stereo_range_sigma
+    from navkit.localization.visibility import ViewModel, check_visibility
     from navkit.sensors import PinholeCamera, StereoRig
     from navkit.sim import render_stereo, scene_from_dict
     from navkit.stereo import planar_camera_pose, stereo_wall_points
+    from navkit.stereo.floorplan import FloorplanSettings, default_num_disparities, usable_depth
     from navkit.stereo.rooms import ROOM_KINDS, room, sample_poses
 
     rig = StereoRig(PinholeCamera.from_fov(width, width * 3 // 4, 90.0), 0.2)
     height = 1.2
+    # the single view's usable bearings and depth, from the front end's own settings
+    # (stereo_wall_points: disparity range b f / min_depth, depth cut at the error budget)
+    fp = FloorplanSettings()
+    view = ViewModel.from_stereo(
+        rig,
+        max_depth=usable_depth(rig, fp),
+        num_disparities=default_num_disparities(rig, fp),
+        disparity_sigma=fp.disparity_sigma,
+    )
+    max_unseen = KnownHeadingSettings().max_unseen
     out: dict[str, dict[str, float]] = {}
     for kind in kinds or ROOM_KINDS:
         truth = room(kind)
@@ -47,7 +76,13 @@ def sim_rooms(
         for pose in truth.survey:
             st, T = render(pose)
             views.append(stereo_wall_points(st.pair.left, st.pair.right, rig, T_world_camera=T))
-        m = build_map(views)
+        survey_xy = np.asarray(truth.survey, dtype=np.float64)[:, :2]  # the cameras' positions
+        map_settings = MapSettings(
+            range_sigma_coefficient=fp.disparity_sigma / (rig.baseline * rig.camera.fx)
+            if weighted_map
+            else 0.0
+        )
+        m = build_map(views, settings=map_settings, origins=survey_xy)
         acc = evaluate_map(m, truth.walls, truth.corners)
         fld = m.likelihood_field(0.1)
         poses = sample_poses(truth, n_poses, rng)
@@ -57,6 +92,7 @@ def sim_rooms(
             k: []
             for k in (
                 "paper_ok",
+                "paper_unseen",
                 "paper_succ",
                 "paper_err",
                 "paper_err_corr",
@@ -93,11 +129,18 @@ def sim_rooms(
                     # (a) the paper's method: correlation at the known heading + refinement
                     t0 = time.process_time()
                     kf = locate_known_heading(
-                        fld, B, p[2], walls=m.walls, range_sigma=sig1, region=m.outline
+                        fld,
+                        B,
+                        p[2],
+                        walls=m.walls,
+                        range_sigma=sig1,
+                        region=m.outline,
+                        view=view if negative_information else None,
                     )
                     kh["paper_ms"].append(1e3 * (time.process_time() - t0))
                     e_k = float(np.hypot(*(kf.position - p[:2])))
                     kh["paper_ok"].append(kf.ok)
+                    kh["paper_unseen"].append(kf.reason == "unseen wall")
                     kh["paper_succ"].append(e_k <= SUCCESS_M)
                     kh["paper_err"].append(e_k)
                     kh["paper_err_corr"].append(float(np.hypot(*(kf.correlation_position - p[:2]))))
@@ -119,7 +162,14 @@ def sim_rooms(
                     occl = occluded_fraction(
                         m.walls, B, np.array([*pos_s, p[2]]), margin=np.maximum(0.15, 3 * sig1)
                     )
-                    kh["search_ok"].append(sf.ok and not rf.degenerate and inside and occl <= 0.05)
+                    unseen = check_visibility(m.walls, B, np.array([*pos_s, p[2]]), view)
+                    kh["search_ok"].append(
+                        sf.ok
+                        and not rf.degenerate
+                        and inside
+                        and occl <= 0.05
+                        and (not negative_information or unseen.unseen_fraction <= max_unseen)
+                    )
                     kh["search_succ"].append(e_s <= SUCCESS_M)
                     kh["search_err"].append(e_s)
                     kh["search_err_raw"].append(float(np.hypot(*(sf.pose[:2] - p[:2]))))
@@ -293,6 +343,10 @@ def _known_heading_stats(kh: dict[str, list[float]], size: float) -> dict[str, f
     out["kh_search_unrefined_error_m_median_confident"] = (
         float(np.median(raw[sok & ssucc])) if (sok & ssucc).any() else float("nan")
     )
+    # fixes refused by the negative-information check alone (confident without it)
+    out["kh_paper_unseen_only_rate"] = (
+        float(np.mean(kh["paper_unseen"])) if kh["paper_unseen"] else float("nan")
+    )
     out["kh_line_reports"] = float(len(kh["line_ok"]))
     out["kh_line_truth_on_line_rate"] = (
         float(np.mean(kh["line_ok"])) if kh["line_ok"] else float("nan")
@@ -365,7 +419,8 @@ def run(quick: bool = False) -> list[Row]:
                 "",
                 None,
                 f"success among confident fixes; confident {100 * s['kh_paper_confident_rate']:.0f} %, "
-                f"false confident {100 * s['kh_paper_false_confident_rate']:.0f} %, median error "
+                f"false confident {100 * s['kh_paper_false_confident_rate']:.0f} % (refused as "
+                f"unseen wall {100 * s['kh_paper_unseen_only_rate']:.0f} %), median error "
                 f"{100 * s['kh_paper_error_m_median_confident']:.1f} cm; 2D search: confident "
                 f"{100 * s['kh_search_confident_rate']:.0f} %, success among them "
                 f"{100 * s['kh_search_success_among_confident']:.0f} %, false confident "

@@ -214,3 +214,83 @@ def test_two_plane_geometry_needs_two_directions():
     res = two_plane_geometry(p, p)
     assert isinstance(res, MotionFailure) and res.case == 1
     assert res.free_dof == ("lambda", "mu", "eta")
+
+
+def _seen_from_2(n1, r1, c1, R, t):
+    """Frame 2's view of the frame-1 plane ``(n1, r1)`` through a frame-1 point ``c1`` on it."""
+    return Plane(R.T @ n1, r1 - n1 @ t, R.T @ (c1 - t), count=1000)
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    st.lists(st.floats(0.5, 5), min_size=4, max_size=4),
+    st.lists(st.floats(-3, 3), min_size=16, max_size=16),
+    unit,
+    st.floats(0, np.pi),
+    st.lists(st.floats(-2, 2), min_size=3, max_size=3),
+    st.sampled_from(["centroid", "rho"]),
+)
+def test_plane_translation_is_exact_wherever_the_centroids_lie(rhos, offs, axis, angle, t, method):
+    """Noise-free planes: both forms of eq. 2 give the true translation, whatever in-plane points
+    the two frames' centroids are (different parts of each plane seen from each frame)."""
+    from navkit.planes.solve import plane_translation
+
+    N = np.array([[1.0, 0.2, 0.0], [0.0, 1.0, 0.3], [0.2, 0.0, 1.0], [1.0, 1.0, 1.0]])
+    N /= np.linalg.norm(N, axis=1)[:, None]
+    R = Rotation.from_rotvec(axis / np.linalg.norm(axis) * angle).as_matrix()
+    t = np.array(t)
+    off = np.array(offs).reshape(4, 2, 2)
+    p1, p2 = [], []
+    for k, (n, rho) in enumerate(zip(N, rhos, strict=True)):
+        ax = Plane(n, rho, n * rho).basis()
+        c1 = rho * n + off[k, 0] @ ax  # where frame 1 saw the plane
+        c2 = rho * n + off[k, 1] @ ax  # where frame 2 saw it (frame-1 coordinates)
+        p1.append(Plane(n, rho, c1, count=1000))
+        p2.append(_seen_from_2(n, rho, c2, R, t))
+    est = plane_translation(R, p1, p2, np.ones(4), method)
+    assert np.allclose(est, t, atol=1e-8)
+
+
+def test_centroid_form_removes_the_lever_arm_of_a_normal_error():
+    """A plane fitted with a tilted normal still passes through its points' centroid ``c``;
+    its rho (the distance extrapolated to the origin) is off by ``c . dN``. Three orthogonal
+    planes, frame 1's x-plane tilted by 3 deg (towards -z) about its centroid 3 m ahead (a side
+    wall at grazing incidence, as on slambook 2 -> 3), true rotation:
+
+    - eq. 2 as ``rho1 - rho2``: the equation of the tilted plane is off by
+      ``(c - t) . dN`` = (3.0 - 0.7) m x sin 3 deg = 12.0 cm (frame 2's distance is measured
+      from its own origin ``t``), the other planes keep y and z: error ~12 cm (> 10 cm);
+    - at the centroids the lever is the distance between the two views' centroids, here 0.5 m
+      in the plane: one of the pair's two equations is off by at most 0.5 m x sin 3 deg =
+      2.6 cm, the other (frame 2's normal) is exact, the orthogonal normals keep the axes
+      apart: < 2.7 cm (least squares of the two: ~1.3 cm).
+    """
+    from navkit.planes.solve import plane_translation
+
+    R = Rotation.from_rotvec([0.0, 0.0, 0.1]).as_matrix()
+    t = np.array([0.3, -0.2, 0.7])
+    tilt = Rotation.from_rotvec([0.0, np.radians(3.0), 0.0]).as_matrix()  # x towards -z
+    p1, p2 = [], []
+    for n, rho, c in (
+        ([1.0, 0.0, 0.0], 0.5, [0.5, 0.3, 3.0]),  # side wall, centroid 3 m ahead
+        ([0.0, 1.0, 0.0], 1.4, [0.2, 1.4, 2.0]),  # floor
+        ([0.0, 0.0, 1.0], 4.0, [0.1, -0.2, 4.0]),  # far wall
+    ):
+        n, c = np.array(n), np.array(c)
+        c2 = c + (np.array([0.0, 0.0, -0.5]) if n[0] else 0.0)  # frame 2 saw 0.5 m nearer part
+        p2.append(_seen_from_2(n, rho, c2, R, t))
+        nt = tilt @ n if n[0] else n
+        p1.append(Plane(nt, float(nt @ c), c, count=1000))
+    e_rho = np.linalg.norm(plane_translation(R, p1, p2, np.ones(3), "rho") - t)
+    e_c = np.linalg.norm(plane_translation(R, p1, p2, np.ones(3), "centroid") - t)
+    assert e_rho > 0.10
+    assert e_c < 0.027
+
+
+def test_unknown_translation_method_is_a_config_error():
+    from navkit.errors import ConfigError
+    from navkit.planes.solve import plane_translation
+
+    p = [Plane(np.array([0.0, 0, 1]), 1.0, np.zeros(3))]
+    with pytest.raises(ConfigError, match="translation"):
+        plane_translation(np.eye(3), p, p, np.ones(1), "normal")

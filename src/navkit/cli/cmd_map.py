@@ -17,7 +17,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+import time
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
@@ -59,7 +61,30 @@ class LocateInput:
     sigma: float
     success_m: float
     success_deg: float
+    known_heading: bool
     refine: bool
+
+
+@dataclass(frozen=True)
+class _FixRecord:
+    """One row of ``fixes.csv``: a correlative or a known-heading fix, after refinement."""
+
+    pose: Any  # (3,) x, y, theta
+    score: float
+    ok: bool
+    ambiguous: bool
+    reason: str
+    direction: Any  # (2,) along the peak / the wall
+    extent: float
+    second_score: float
+    exact: bool
+    seconds: float
+    refinement: Any  # PoseRefinement or None
+
+    @property
+    def refined(self) -> bool:
+        rf = self.refinement
+        return bool(rf is not None and rf.converged and not rf.degenerate)
 
 
 def _is_carmen(path: Path) -> bool:
@@ -218,6 +243,14 @@ def locate_cmd(
         0.3, help="A fix within this (metres) of the reference is a success."
     ),
     success_deg: float = typer.Option(5.0, help="... and within this heading error, degrees."),
+    known_heading: bool = typer.Option(
+        False,
+        "--known-heading",
+        help="Paper 3's method: the heading is known (the camera drive's angle sensor; here the "
+        "reference pose's heading) and the fragment is slid over the map by correlation. "
+        "Ambiguous views (one straight wall, twin corners, a wall the map predicts but the "
+        "camera did not see) are reported, not fixed.",
+    ),
     refine: bool | None = typer.Option(
         None,
         "--refine/--no-refine",
@@ -243,6 +276,7 @@ def locate_cmd(
         from navkit.io.atomic import atomic_write
         from navkit.io.trajectory import Trajectory, write_tum
         from navkit.localization import MatcherSettings, match_scan, refine_pose
+        from navkit.localization.correlation import locate_known_heading
         from navkit.localization.refine import stereo_range_sigma
         from navkit.viz.maps import plot_map
 
@@ -268,6 +302,8 @@ def locate_cmd(
 
             def range_sigma(pts: Any) -> Any:
                 return None  # laser: every point weighs the same
+
+            view = None
         else:
             from navkit.io.images import read_image
             from navkit.io.stereo import read_stereo_frames
@@ -313,34 +349,86 @@ def locate_cmd(
             def range_sigma(pts: Any) -> Any:
                 return stereo_range_sigma(pts, fr.rig.baseline, fr.rig.camera.fx)
 
+            if group == 1:  # the view of one frame, for the negative-information check
+                from navkit.localization.visibility import ViewModel
+                from navkit.stereo.floorplan import (
+                    FloorplanSettings,
+                    default_num_disparities,
+                    usable_depth,
+                )
+
+                fp = FloorplanSettings()
+                view = ViewModel.from_stereo(
+                    fr.rig,
+                    max_depth=usable_depth(fr.rig, fp),
+                    num_disparities=default_num_disparities(fr.rig, fp),
+                    disparity_sigma=fp.disparity_sigma,
+                )
+
         if refine is None:
             refine = kind == "stereo"
         est = np.full((len(sel), 3), np.nan)
-        rows: list[tuple[int, Any]] = []
-        refinements: list[Any] = []  # one per fix (None: not refined)
+        records: list[_FixRecord | None] = []  # one per fix (None: no points)
         last = None
         for k in progress(range(len(sel)), "localizing"):
             pts = points(k)
-            guess = None
-            if prior == PriorChoice.odometry and last is not None:
-                delta = se2_compose(
-                    se2_inverse(se2_from_xytheta(*odom[last[0]])), se2_from_xytheta(*odom[k])
-                )
-                guess = se2_to_xytheta(se2_compose(se2_from_xytheta(*last[1]), delta))
             if len(pts) < 3:
-                rows.append((k, None))
-                refinements.append(None)
+                records.append(None)
                 continue
-            fix = match_scan(fld, pts, guess, settings)
-            pose, refined = fix.pose, None
-            if refine and wall_map.walls:
-                refined = refine_pose(wall_map.walls, pts, fix.pose, range_sigma=range_sigma(pts))
-                if refined.converged and not refined.degenerate:
-                    pose = refined.pose
-            est[k] = pose
-            last = (k, pose)
-            rows.append((k, fix))
-            refinements.append(refined)
+            if known_heading:
+                t0 = time.perf_counter()  # wall time, as match_scan's own timer
+                kf = locate_known_heading(
+                    fld,
+                    pts,
+                    float(reference[k, 2]),
+                    walls=wall_map.walls if refine and wall_map.walls else None,
+                    range_sigma=range_sigma(pts),
+                    region=wall_map.outline if len(wall_map.outline) >= 3 else None,
+                    view=view if refine else None,
+                )
+                rec = _FixRecord(
+                    np.array([*kf.position, reference[k, 2]]),
+                    kf.score,
+                    kf.ok,
+                    kf.ambiguous,
+                    kf.reason,
+                    kf.peak_direction,
+                    kf.peak_extent,
+                    kf.second_score,
+                    True,  # the FFT correlation scores every offset
+                    time.perf_counter() - t0,
+                    kf.refinement,
+                )
+            else:
+                guess = None
+                if prior == PriorChoice.odometry and last is not None:
+                    delta = se2_compose(
+                        se2_inverse(se2_from_xytheta(*odom[last[0]])), se2_from_xytheta(*odom[k])
+                    )
+                    guess = se2_to_xytheta(se2_compose(se2_from_xytheta(*last[1]), delta))
+                fix = match_scan(fld, pts, guess, settings)
+                a = fix.ambiguity
+                rf = None
+                if refine and wall_map.walls:
+                    rf = refine_pose(wall_map.walls, pts, fix.pose, range_sigma=range_sigma(pts))
+                rec = _FixRecord(
+                    fix.pose,
+                    fix.score,
+                    fix.ok,
+                    a.ambiguous,
+                    a.reason,
+                    a.direction,
+                    a.extent,
+                    a.second_score,
+                    fix.exact,
+                    fix.seconds,
+                    rf,
+                )
+                if rf is not None and rec.refined:
+                    rec = dataclasses.replace(rec, pose=rf.pose)
+            est[k] = rec.pose
+            last = (k, rec.pose)
+            records.append(rec)
         # outputs
         out.mkdir(parents=True, exist_ok=True)
         found = np.all(np.isfinite(est), axis=1)
@@ -363,28 +451,31 @@ def locate_cmd(
                 "second_score,exact,ms,refined,refine_rms_m,refine_sigma_weak_m,"
                 "ref_x,ref_y,ref_theta,position_error_m,heading_error_deg\n"
             )
-            for (k, fix), rf in zip(rows, refinements, strict=True):
+            for k, row in enumerate(records):
                 r = reference[k]
-                if fix is None:
+                if row is None:
                     fh.write(
                         f"{sel[k]},{stamps[k]:.6f},,,,,False,,no points,,,,,,,,,,"
                         f"{r[0]:.4f},{r[1]:.4f},{r[2]:.5f},,\n"
                     )
                     continue
-                a = fix.ambiguity
-                used = rf is not None and rf.converged and not rf.degenerate
-                rcols = f"{used},{rf.rms:.4f},{rf.sigma_weak:.4f}" if rf is not None else "False,,"
-                e = est[k]
+                rf = row.refinement
+                rcols = (
+                    f"{row.refined},{rf.rms:.4f},{rf.sigma_weak:.4f}"
+                    if rf is not None
+                    else "False,,"
+                )
+                e, d = row.pose, row.direction
                 fh.write(
-                    f"{sel[k]},{stamps[k]:.6f},{e[0]:.4f},{e[1]:.4f},{e[2]:.5f},{fix.score:.4f},"
-                    f"{fix.ok},{a.ambiguous},{a.reason},{a.direction[0]:.4f},{a.direction[1]:.4f},{a.extent:.3f},"
-                    f"{a.second_score:.4f},{fix.exact},{1e3 * fix.seconds:.2f},{rcols},"
+                    f"{sel[k]},{stamps[k]:.6f},{e[0]:.4f},{e[1]:.4f},{e[2]:.5f},{row.score:.4f},"
+                    f"{row.ok},{row.ambiguous},{row.reason},{d[0]:.4f},{d[1]:.4f},{row.extent:.3f},"
+                    f"{row.second_score:.4f},{row.exact},{1e3 * row.seconds:.2f},{rcols},"
                     f"{r[0]:.4f},{r[1]:.4f},{r[2]:.5f},"
                     f"{pos_err[k]:.4f},{head_err[k]:.3f}\n"
                 )
-        fixes = [f for _, f in rows if f is not None]
+        fixes = [f for f in records if f is not None]
         ms = np.array([1e3 * f.seconds for f in fixes]) if fixes else np.array([np.nan])
-        ok = np.array([f is not None and f.ok for _, f in rows])
+        ok = np.array([f is not None and f.ok for f in records])
         success = found & (pos_err <= success_m) & (head_err <= success_deg)
         pe = pos_err[found]
         summary: dict[str, Any] = {
@@ -394,16 +485,13 @@ def locate_cmd(
             "ms_per_fix_median": float(np.median(ms)),
             "ms_per_fix_mean": float(np.mean(ms)),
             "ms_per_fix_p95": float(np.percentile(ms, 95)),
-            "refined_rate": float(
-                np.mean(
-                    [rf is not None and rf.converged and not rf.degenerate for rf in refinements]
-                )
-            ),
+            "method": "known heading (paper 3)" if known_heading else "correlative matching",
+            "refined_rate": float(np.mean([f is not None and f.refined for f in records])),
             "ok_rate": float(ok.mean()),
             "success_rate": float(success.mean()),
             "success_rate_of_ok": float(success[ok].mean()) if ok.any() else float("nan"),
             "false_fix_rate": float((ok & ~success).mean()),
-            "ambiguous_rate": float(np.mean([f.ambiguity.ambiguous for f in fixes]))
+            "ambiguous_rate": float(np.mean([f.ambiguous for f in fixes]))
             if fixes
             else float("nan"),
             "position_error_m_median": float(np.median(pe)) if len(pe) else float("nan"),
@@ -441,6 +529,7 @@ def locate_cmd(
                     sigma,
                     success_m,
                     success_deg,
+                    known_heading,
                     refine,
                 ),
                 "matcher": settings,

@@ -42,6 +42,7 @@ from navkit.localization.refine import (
     occluded_fraction,
     refine_pose,
 )
+from navkit.localization.visibility import ViewModel, VisibilityCheck, check_visibility
 from navkit.localization.walls import WallSegment
 
 __all__ = [
@@ -150,6 +151,17 @@ class KnownHeadingSettings:
         With walls: a fix from which more than this fraction of the fragment would have been
         seen through a map wall is inconsistent (reason ``"occluded"``; see
         :func:`~navkit.localization.refine.occluded_fraction`).
+    max_unseen : float
+        With walls and a ``view``: a fix from which the map predicts a near wall, but the
+        fragment has no point at or before it, over more than this fraction of the view's
+        bearings is inconsistent (reason ``"unseen wall"``; see
+        :func:`~navkit.localization.visibility.check_visibility`). Decision: 0.15 (about 9 deg
+        of the 62 deg a 320-pixel, 90 deg stereo camera with 64 disparities returns). A correct
+        fix leaves nearly nothing unseen: the pose error (a few cm) and the map's wall
+        directions (< 0.5 deg, < 5 cm at 5 m) are far below the 0.15 m range margin, and the
+        front end's depth-edge filter removes 2 pixels (0.7 deg) on each side of an edge,
+        inside the check's one-bearing-step tolerance; 0.15 leaves room for several such bands
+        and untextured patches, and a wall missing over a sixth of the view is no such gap.
     refine : RefineSettings
         The final point-to-line refinement (when the map's walls are given).
     """
@@ -160,6 +172,7 @@ class KnownHeadingSettings:
     exclusion_radius: float = 1.0
     min_score: float = 0.3
     max_occluded: float = 0.05
+    max_unseen: float = 0.15
     refine: RefineSettings = field(default_factory=RefineSettings)
 
     def __post_init__(self) -> None:
@@ -203,7 +216,9 @@ class KnownHeadingFix:
         distinct places (second peak).
     reason : str
         ``""``, ``"elongated peak"``, ``"second peak"``, ``"degenerate"``, ``"occluded"`` (the
-        fragment would have been seen through a map wall from there), joined by ``" and "``.
+        fragment would have been seen through a map wall from there), ``"unseen wall"`` (the
+        map predicts a near wall over part of the view where the fragment has nothing), joined
+        by ``" and "``.
     second_score : float
         Best correlation outside the peak's neighbourhood, same units as ``score`` (NaN when the
         correlation has no offset there).
@@ -214,6 +229,8 @@ class KnownHeadingFix:
         refinement).
     refinement : PoseRefinement or None
         The point-to-line refinement (None without walls).
+    visibility : VisibilityCheck or None
+        The negative-information check at the final position (None without walls and view).
     """
 
     position: NDArray[np.float64]
@@ -229,6 +246,13 @@ class KnownHeadingFix:
     second_position: NDArray[np.float64] = field(default_factory=lambda: np.full(2, np.nan))
     correlation_position: NDArray[np.float64] = field(default_factory=lambda: np.full(2, np.nan))
     refinement: PoseRefinement | None = None
+    visibility: VisibilityCheck | None = None
+
+    @property
+    def unseen_fraction(self) -> float:
+        """Part of the view where the map predicts a near wall the fragment lacks (NaN: not
+        checked)."""
+        return float("nan") if self.visibility is None else self.visibility.unseen_fraction
 
 
 def _peak_shape(
@@ -258,6 +282,7 @@ def locate_known_heading(
     walls: Sequence[WallSegment] | ArrayLike | None = None,
     range_sigma: ArrayLike | None = None,
     region: ArrayLike | None = None,
+    view: ViewModel | None = None,
     settings: KnownHeadingSettings | None = None,
 ) -> KnownHeadingFix:
     """Paper 3's correlation localization in 2D with a known heading.
@@ -271,7 +296,8 @@ def locate_known_heading(
     second peak; (7) with the map's ``walls``, the position is refined by weighted point-to-line
     least squares (:func:`navkit.localization.refine.refine_pose`, heading kept), whose
     information matrix also flags a fragment of one straight wall as degenerate, and the fix
-    is checked against the map's free space (no fragment point seen through a wall).
+    is checked against the map's free space (no fragment point seen through a wall) and, with a
+    ``view``, against negative information (no near wall predicted where the fragment is empty).
 
     Parameters
     ----------
@@ -291,6 +317,10 @@ def locate_known_heading(
         ``WallMap.outline``): offsets that would put the robot outside are no candidates (their
         correlation is set to -1). Without it a wall fragment also fits the far side of a wall,
         seen from outside the room.
+    view : ViewModel, optional
+        The sensor's usable bearings and depth (stereo: :meth:`ViewModel.from_stereo`); with
+        ``walls``, the fix is checked for walls the map predicts in view that the fragment
+        lacks (:func:`~navkit.localization.visibility.check_visibility`).
     settings : KnownHeadingSettings, optional
 
     Returns
@@ -371,6 +401,7 @@ def locate_known_heading(
         reasons.append("second peak")
     # Stage 7: point-to-line refinement against the walls (heading kept).
     refinement = None
+    visibility = None
     correlation_position = pos.copy()
     if walls is not None:
         sig = None
@@ -402,6 +433,11 @@ def locate_known_heading(
         occluded = occluded_fraction(walls, P, np.array([pos[0], pos[1], theta]), margin=margin)
         if occluded > s.max_occluded:
             reasons.append("occluded")
+        if view is not None:
+            # negative information: walls the map puts in view that the fragment lacks
+            visibility = check_visibility(walls, P, np.array([pos[0], pos[1], theta]), view)
+            if visibility.unseen_fraction > s.max_unseen:
+                reasons.append("unseen wall")
     ambiguous = bool(reasons)
     log.debug("known-heading fix %s score %.3f %s", pos, score, " and ".join(reasons))
     return KnownHeadingFix(
@@ -418,4 +454,5 @@ def locate_known_heading(
         second_position=second_pos,
         correlation_position=correlation_position,
         refinement=refinement,
+        visibility=visibility,
     )

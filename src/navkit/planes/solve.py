@@ -8,7 +8,8 @@ Convention: the motion ``T_1_2`` maps points of the second frame (oxyz) into the
 Cases (by how many independent normal directions the matched planes span):
 
 - **>= 3**: closed form. Rotation: weighted orthogonal Procrustes (Kabsch) on the normal pairs;
-  translation: least squares of ``N1i . dT = rho1i - rho2i`` (all from geometry).
+  translation: least squares of eq. 2 written at the planes' centroids (see
+  :func:`plane_translation`; all from geometry).
 - **2**: rotation from the two normal directions (Procrustes on the normals and their cross
   product, the least-squares solution of eqs. 1 and 5); translation on the line of eqs. 2 and 6,
   the position along it ``mu`` from the 1D texture functional (eq. 7).
@@ -29,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.errors import NavkitError
+from navkit.errors import ConfigError, NavkitError
 from navkit.geometry import Plane, matrix_to_quat, quat_to_matrix, se3_from_rt
 from navkit.planes.align import Search1D, Search2D, search_1d, search_2d
 from navkit.planes.quaternion import (
@@ -50,6 +51,7 @@ __all__ = [
     "SolverSettings",
     "TextureFn",
     "normal_rank",
+    "plane_translation",
     "solve_one_plane",
     "solve_three_planes",
     "solve_two_planes",
@@ -84,6 +86,10 @@ class SolverSettings:
         2-plane case: ``(median D - min D) / median D`` below this = flat functional = free DoF.
     min_peak : float
         1-plane case: best coarse normalised cross-correlation below this = no texture match.
+    translation : str
+        How eq. 2 is solved for the translation (:func:`plane_translation`): ``"centroid"``
+        (default: each pair's equation evaluated where its points are, with both frames'
+        normals) or ``"rho"`` (the paper's literal ``N1 . dT = rho1 - rho2``).
     """
 
     parallel_deg: float = 15.0
@@ -94,6 +100,7 @@ class SolverSettings:
     min_contrast: float = 0.01
     min_distinctness: float = 0.1
     min_peak: float = 0.3
+    translation: str = "centroid"
 
 
 @dataclass(frozen=True)
@@ -180,6 +187,82 @@ def _kabsch(
     return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
 
 
+def _on_plane(p: Plane) -> NDArray[np.float64]:
+    """The plane's centroid projected onto it (a centroid left at the origin becomes the foot
+    point ``rho n``)."""
+    c = np.asarray(p.centroid, dtype=np.float64).reshape(3)
+    return c - (p.normal @ c - p.rho) * p.normal
+
+
+def plane_translation(
+    R: NDArray[np.float64],
+    p1: Sequence[Plane],
+    p2: Sequence[Plane],
+    w: NDArray[np.float64],
+    method: str = "centroid",
+    basis: NDArray[np.float64] | None = None,
+) -> NDArray[np.float64]:
+    """Translation ``t`` of ``T_1_2 = (R, t)`` from matched planes by weighted least squares.
+
+    ``method="rho"`` is the paper's eq. 2 as written, ``N1i . t = rho1i - rho2i``.
+    ``method="centroid"`` (default) writes the same constraint where the planes were measured:
+    the centroid ``c2`` of frame 2's points, moved into frame 1, lies on frame 1's plane, and
+    ``c1`` on frame 2's plane moved into frame 1::
+
+        N1i . (R c2i + t - c1i) = 0,     (R N2i) . (R c2i + t - c1i) = 0.
+
+    Both are eq. 2 exactly for noise-free planes (``rho = N . c``). Why: a TLS plane's ``rho``
+    is ``N . c`` - its distance is measured at the centroid and *extrapolated* to the origin,
+    so a normal error ``dN`` (covariance ``sigma^2 sum_k e_k e_k^T / (n lambda_k)`` over the
+    in-plane eigenpairs of the points' scatter matrix) moves ``rho`` by ``dN . c``:
+    ``var(rho) = c^T C_N c + sigma^2 / n``. A Kinect plane whose centroid is 3 m away (a side
+    wall at grazing incidence, ``rho`` 0.5 m) turns a 5 deg normal error into a 16 cm distance
+    error. At the centroids the lever is ``|R c2 + t - c1|`` (how far apart the two views'
+    centroids are), not ``|c|``. Using both frames' normals averages their errors.
+
+    Parameters
+    ----------
+    R : (3, 3) array
+        Rotation of the motion (frame 2 -> frame 1).
+    p1, p2 : sequences of Plane
+        Matched planes (same order); centroids are projected onto their planes first.
+    w : (K,) array
+        Weights of the pairs (both equations of a pair get the same weight).
+    method : {"centroid", "rho"}
+    basis : (m, 3) array, optional
+        Solve only within the span of these orthonormal rows (``t = basis^T u``; the 2-plane
+        case: the two directions across the planes' intersection line).
+
+    Returns
+    -------
+    (3,) array
+        ``t``, metres.
+    """
+    N1 = np.array([p.normal for p in p1], dtype=np.float64).reshape(-1, 3)
+    w = np.asarray(w, dtype=np.float64)
+    if method == "rho":
+        A = N1
+        b = np.array([a.rho - c.rho for a, c in zip(p1, p2, strict=True)])
+        ww = w
+    elif method == "centroid":
+        N2r = np.array([p.normal for p in p2], dtype=np.float64).reshape(-1, 3) @ R.T
+        N2r *= np.where(np.einsum("ij,ij->i", N1, N2r) < 0, -1.0, 1.0)[:, None]
+        D = np.array([_on_plane(a) for a in p1]) - np.array([_on_plane(c) for c in p2]) @ R.T
+        A = np.vstack([N1, N2r])
+        b = np.concatenate([np.einsum("ij,ij->i", N1, D), np.einsum("ij,ij->i", N2r, D)])
+        ww = np.concatenate([w, w])
+    else:
+        raise ConfigError(
+            f"unknown translation method {method!r}",
+            source="SolverSettings",
+            field="translation",
+            expected="'centroid' or 'rho'",
+        )
+    B = np.eye(3) if basis is None else np.asarray(basis, dtype=np.float64)
+    u = np.linalg.lstsq((A @ B.T) * ww[:, None], b * ww, rcond=None)[0]
+    return np.asarray(B.T @ u, dtype=np.float64)
+
+
 def normal_rank(normals: NDArray[np.float64], parallel_deg: float) -> tuple[int, list[int]]:
     """How many independent directions the unit normals ``(K, 3)`` span, and the indices chosen.
 
@@ -250,8 +333,7 @@ def solve_three_planes(
         )
     )
     R = _kabsch(N1, N2, w)
-    drho = np.array([a.rho - b.rho for a, b in zip(p1, p2, strict=True)])
-    t = np.linalg.lstsq(N1 * w[:, None], drho * w, rcond=None)[0]
+    t = plane_translation(R, p1, p2, w, s.translation)
     return MotionEstimate(
         se3_from_rt(R, t), 3, ("rotation", "translation"), (), _residuals(R, t, p1, p2)
     )
@@ -313,13 +395,13 @@ def two_plane_geometry(
         np.stack([N2[a], N2[b], c2 / np.linalg.norm(c2)]),
         np.ones(3),
     )
-    # translation: minimum-norm solution of eqs. 2 and 6 (all planes, weighted by sqrt of the
-    # smaller inlier count as in the closed form); free along the line
+    # translation across the line: eqs. 2 and 6 (all planes, weighted by sqrt of the smaller
+    # inlier count as in the closed form, at the centroids: plane_translation), solved in the
+    # two directions across the line so t0 . d = 0; free along the line
     d = c1 / np.linalg.norm(c1)
-    drho = np.array([x.rho - y.rho for x, y in zip(p1, p2, strict=True)])
     w = np.sqrt(np.minimum([max(x.count, 1) for x in p1], [max(y.count, 1) for y in p2]))
-    t0 = np.linalg.lstsq(N1 * w[:, None], drho * w, rcond=None)[0]
-    t0 -= (t0 @ d) * d
+    across = np.stack([N1[a], np.cross(d, N1[a])])
+    t0 = plane_translation(R, p1, p2, w, s.translation, basis=across)
     return PartialMotion(R, t0, d)
 
 

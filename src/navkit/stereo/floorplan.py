@@ -25,8 +25,10 @@ from navkit.stereo.triangulation import disparity_to_points
 
 __all__ = [
     "FloorplanSettings",
+    "default_num_disparities",
     "stereo_wall_points",
     "thin_points",
+    "usable_depth",
     "wall_points_body",
     "wall_points_world",
 ]
@@ -135,6 +137,28 @@ def wall_points_body(
     return thin_points(B[:, :2], s.cell)
 
 
+def default_num_disparities(rig: StereoRig, settings: FloorplanSettings | None = None) -> int:
+    """The disparity search range :func:`stereo_wall_points` uses without matcher settings.
+
+    ``b f / min_depth`` (the nearest depth of interest) rounded up to a multiple of 16 (OpenCV),
+    at least 16 and at most half the image width (the left-right check needs both halves).
+    """
+    s = settings or FloorplanSettings()
+    nd = int(16 * np.ceil(rig.baseline * rig.camera.fx / s.min_depth / 16))
+    return max(16, min(nd, 16 * ((rig.camera.width - 1) // 32)))
+
+
+def usable_depth(rig: StereoRig, settings: FloorplanSettings | None = None) -> float:
+    """Farthest depth :func:`stereo_wall_points` keeps, metres.
+
+    ``max_depth``, or nearer where the predicted depth error ``z^2 sigma_d / (b f)`` (paper 3,
+    eq. 1 differentiated) reaches ``max_depth_error``.
+    """
+    s = settings or FloorplanSettings()
+    bf = rig.baseline * rig.camera.fx
+    return min(s.max_depth, float(np.sqrt(s.max_depth_error * bf / s.disparity_sigma)))
+
+
 def stereo_wall_points(
     left: ArrayLike,
     right: ArrayLike,
@@ -160,11 +184,9 @@ def stereo_wall_points(
 
     s = settings or FloorplanSettings()
     if disparity is None:
-        # search range from the nearest depth of interest: d_max = b f / min_depth
-        bf0 = rig.baseline * rig.camera.fx
-        nd = int(16 * np.ceil(bf0 / s.min_depth / 16))
-        nd = max(16, min(nd, 16 * ((rig.camera.width - 1) // 32)))
-        disparity = DisparitySettings(num_disparities=nd, subpixel=s.subpixel)
+        disparity = DisparitySettings(
+            num_disparities=default_num_disparities(rig, s), subpixel=s.subpixel
+        )
     d = compute_disparity(left, right, disparity).disparity
     # Stage: drop depth edges (a large disparity range in the 5 x 5 neighbourhood).
     k = np.ones((5, 5), np.uint8)
@@ -173,8 +195,7 @@ def stereo_wall_points(
     d = np.where((hi - lo) <= s.max_disparity_step, d, np.nan)
     # Stage: drop points whose predicted depth error exceeds the budget.
     bf = rig.baseline * rig.camera.fx
-    z_max = min(s.max_depth, float(np.sqrt(s.max_depth_error * bf / s.disparity_sigma)))
-    d = np.where(d + rig.doffs >= bf / z_max, d, np.nan)
+    d = np.where(d + rig.doffs >= bf / usable_depth(rig, s), d, np.nan)
     P = disparity_to_points(d, rig)
     settings = s
     if T_world_camera is not None:
