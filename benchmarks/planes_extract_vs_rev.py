@@ -44,6 +44,24 @@ def _load_revision(rev: str) -> types.ModuleType:
     return ex
 
 
+def _same(a: object, b: object) -> str:
+    """How two extraction results compare: ``"identical"`` (labels, inliers, planes, outlines and
+    areas bit for bit) or the first difference."""
+    ra, rb = a.segments, b.segments  # type: ignore[attr-defined]
+    if len(ra) != len(rb):
+        return f"{len(ra)} vs {len(rb)} planes"
+    if not np.array_equal(a.labels, b.labels):  # type: ignore[attr-defined]
+        return "labels differ"
+    for k, (x, y) in enumerate(zip(ra, rb, strict=True)):
+        if not np.array_equal(x.inliers, y.inliers):
+            return f"plane {k}: inliers differ"
+        if not (np.array_equal(x.normal, y.normal) and x.rho == y.rho):
+            return f"plane {k}: plane differs"
+        if not (np.array_equal(x.outline, y.outline) and x.area == y.area):
+            return f"plane {k}: outline / area differ ({x.area:.4f} vs {y.area:.4f} m^2)"
+    return "identical"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rev", default="HEAD", help="git revision to compare with")
@@ -55,8 +73,9 @@ def main() -> None:
     print(f"frame | planes ({args.rev} -> now) | {args.rev} ms | now ms | now full ms | Open3D ms")
     for name, f in extraction_frames():
         P = f.points()
-        n = len(extract_planes_organized(P))
-        nb = len(before.extract_planes_organized(P))
+        now_res, before_res = extract_planes_organized(P), before.extract_planes_organized(P)
+        n, nb = len(now_res), len(before_res)
+        same = _same(before_res, now_res)
         flat = P.reshape(-1, 3)
         flat = flat[np.all(np.isfinite(flat), axis=1)]
         t: dict[str, list[float]] = {"before": [], "now": [], "full": [], "o3d": []}
@@ -78,6 +97,7 @@ def main() -> None:
         print(
             f"{name} | {nb} -> {n} | {m['before']:.1f} | {m['now']:.1f} | {m['full']:.1f} | "
             f"{m['o3d']:.0f} | {m['before'] / m['now']:.2f}x | Open3D {m['o3d'] / m['now']:.0f}x"
+            f" | results {same}"
         )
 
 

@@ -146,3 +146,42 @@ def test_a_search_out_of_budget_returns_a_real_leaf_flagged_inexact(lfield, rng)
     assert best is not None and not exact
     sc = search.scores(0, np.array([best[1]]), np.array([best[2]]), np.array([best[3]]))[0]
     assert best[0] == pytest.approx(sc, abs=1e-12)
+
+
+@pytest.mark.parametrize("keep", [1.0, 0.9])
+def test_rotation_group_bounds_are_upper_bounds_and_the_search_stays_exact(rng, keep):
+    """Nodes covering several rotations (the global search's top levels) are bounded by the
+    pyramid window dilated by the rotation sweep. Every such bound must be >= the best leaf
+    below it (all leaves scored by brute force: the ``uint8`` values are the same, so the
+    comparison is exact, no tolerance), and the branch-and-bound over them must return the
+    brute-force optimum and, with ``keep < 1``, every leaf within ``keep`` of it."""
+    fld = LikelihoodField.from_points(sample_walls(LSHAPE, 0.01), 0.05, 0.1)
+    pose = np.array([2.5, 2.0, 0.7])
+    # a long reach (the far walls at up to ~8 m): dilations of several cells per group
+    pts = _thin(scan_points(LSHAPE, pose, n=361, noise=0.005, rng=rng), 0.1)
+    K = 96  # headings over the whole turn, uniform (as in the global search)
+    thetas = -np.pi + np.arange(K) * (2 * np.pi / K)
+    n = 64
+    search = _Search(fld, pts, thetas, np.array([0.9, 0.4]), n, cache=[], levels=7, rot_groups=3)
+    assert max(search.a) > 0  # rotation groups really in use
+    k, ix, iy, leaf = _all(search)
+    S = leaf.reshape(K, n, n)
+    for h in range(1, 7):
+        g, b = 2 ** search.a[h], 2**h
+        nk, nb = -(-K // g), -(-n // b)
+        pooled = np.full((nk * g, nb * b, nb * b), -1.0)
+        pooled[:K, :n, :n] = S
+        want = pooled.reshape(nk, g, nb, b, nb, b).max(axis=(1, 3, 5))  # best leaf per node
+        GK, GX, GY = np.meshgrid(
+            np.arange(nk) * g, np.arange(nb) * b, np.arange(nb) * b, indexing="ij"
+        )
+        bound = search.scores(h, GK.ravel(), GX.ravel(), GY.ravel())
+        assert np.all(bound >= want.ravel())
+    best, exact = search.run(levels=7, lower=-1.0, cap=10**9, keep=keep)
+    assert exact and best[0] == leaf.max()
+    assert S[best[1], best[2], best[3]] == best[0]
+    if keep < 1:
+        _ls, lk, lx, ly = (np.concatenate(a) for a in zip(*search.leaves, strict=True))
+        found = set(zip(lk.tolist(), lx.tolist(), ly.tolist(), strict=True))
+        want_set = np.flatnonzero(leaf > keep * leaf.max())
+        assert {(int(k[j]), int(ix[j]), int(iy[j])) for j in want_set} <= found

@@ -330,3 +330,26 @@ def test_outline_from_patches_covers_what_the_pixels_cover(pairs):
 def test_refine_setting_is_checked():
     with pytest.raises(InputError, match="refine"):
         ExtractionSettings(refine="exact")
+
+
+def test_outline_from_quadrilaterals_and_points():
+    """Quadrilaterals alone, and with points elsewhere, never lose covered area and over-cover
+    by a bounded margin: a unit square (no points), then plus a separate 0.5 x 1 m strip sampled
+    every 5 mm, at a 2 cm raster. Upper bound: ``cv2.fillPoly`` paints the cells its edges
+    touch (side L -> L + 1 cell) and the 3 x 3 closing fills the raster's one-cell margin where
+    a shape reaches it (OpenCV's erosion treats outside the image as set: + 1 cell on each such
+    side), so a side is at most L + 3 cells: (1 + 0.06)^2 m^2 for the square and
+    (0.5 + 0.06) x (1 + 0.06) m^2 more for the strip. The outline is the largest component, the
+    square, to within that margin."""
+    from navkit.planes.segments import outline_from_points
+
+    square = np.array([[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]])
+    outline, area = outline_from_points(np.zeros((0, 2)), 0.02, quads=square)
+    assert 1.0 <= area <= 1.06**2 + 1e-9
+    assert np.all(np.abs(outline.min(axis=0)) <= 0.04)
+    assert np.all(np.abs(outline.max(axis=0) - 1.0) <= 0.04)
+    g = np.arange(0.0, 1.0 + 1e-9, 0.005)
+    strip = np.stack(np.meshgrid(1.5 + g[g <= 0.5 + 1e-9], g), axis=-1).reshape(-1, 2)
+    outline, area = outline_from_points(strip, 0.02, quads=square)
+    assert 1.5 <= area <= 1.06**2 + 0.56 * 1.06 + 1e-9
+    assert outline[:, 0].max() < 1.05  # the square, not the strip

@@ -14,7 +14,9 @@ real-time correlative scan matching (Olson, ICRA 2009) makes it fast and exact:
    scores one vectorised gather over all its candidates, ``uint8`` look-up tables), pruned when
    their bound cannot beat the best exact score found. The bound to beat starts optimistic
    (Cartographer's "good initial score bound"): a first pass assumes a leaf within 3 % of the
-   top bound; it stays exact (see ``_Search.run``);
+   top bound; it stays exact (see ``_Search.run``). On the global search the upper levels'
+   nodes also cover blocks of rotations, bounded by the window dilated by the rotation's sweep
+   (``_Search._group_tables``);
 5. sub-cell refinement of the winner on the bicubic field (quadratic fits, see ``_refine``);
 6. an ambiguity report: the shape of the score around the peak (a straight featureless wall is
    flat along itself: its direction and extent are reported) and the best *distinct* second
@@ -213,6 +215,20 @@ _GLOBAL_TOP_BLOCKS = 8  # global search: top pyramid level ~ map / 8 per axis (s
 _REGION_BLOCK = 64  # cells; cached search regions are grown to multiples of this
 _CACHE_ENTRIES = 2  # cached region pyramids per coarse field
 _PAD_WINDOW = 64  # cells; windows up to this use the per-map padded pyramid (see _Search)
+_ROT_GROUPS = 3  # global search: nodes cover up to 2^3 rotations (see _Search._group_tables)
+_ROT_START = 3  # ... from this pyramid level up (2^(h-1) rotations at level h)
+_GROUP_EXTRA_LEVELS = 2  # pyramid levels beyond the search's for the rotation groups' bounds
+
+
+def _widen(level: NDArray[np.float32], s: int) -> NDArray[np.float32]:
+    """Max over ``3 s``-wide blocks from a ``2 s``-wide max-pooled level (zero beyond)."""
+    H, W = level.shape
+    pad = np.zeros((H + s, W + s), dtype=level.dtype)
+    pad[:H, :W] = level
+    return np.maximum(
+        np.maximum(pad[:H, :W], pad[s : s + H, :W]),
+        np.maximum(pad[:H, s : s + W], pad[s : s + H, s : s + W]),
+    )
 
 
 def _rotate(theta: NDArray[np.float64], pts: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -229,6 +245,7 @@ class _BnBState:
     lower: float
     best: tuple[float, int, int, int] | None
     budget: int
+    seen: tuple[float, int, int, int] = (-np.inf, 0, 0, 0)  # best leaf visited, any score
 
 
 class _Search:
@@ -254,6 +271,7 @@ class _Search:
         *,
         cache: list[tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.uint8]]] | None = None,
         levels: int | None = None,
+        rot_groups: int = 0,
     ) -> None:
         self.f = fld
         self.thetas = thetas
@@ -264,6 +282,28 @@ class _Search:
         H, W = fld.shape
         levels = len(fld.pyramid) if levels is None else levels
         self.evaluated = 0
+        # Rotation groups (see _group_tables): a node of level h covers 2^a[h] consecutive
+        # rotations; a = 0 everywhere is the plain search (one rotation per node).
+        self.a = [0] * levels
+        self.FG: dict[int, NDArray[np.int64]] = {}
+        grouped = rot_groups > 0 and cache is not None and len(thetas) > 1 and levels > 1
+        extra = _GROUP_EXTRA_LEVELS if grouped else 0
+        if grouped:
+            dth = float(thetas[1] - thetas[0])
+            res = fld.resolution
+            rmax = float(np.max(np.linalg.norm(pts, axis=1)))
+
+            def dil(a: int) -> int:  # cells a point at rmax moves within a group of 2^a steps
+                return int(np.ceil(rmax * (2**a - 1) / 2 * abs(dth) / res))
+
+            top = levels + extra - 1  # the coarsest pyramid level built
+            a_top = min(levels - 2, rot_groups)
+            while a_top > 0 and 2 ** (levels - 1) + 2 * dil(a_top) > 2**top:
+                a_top -= 1
+            self.a[levels - 1] = a_top
+            for h in range(levels - 2, -1, -1):
+                self.a[h] = min(h - 1, self.a[h + 1]) if h >= _ROT_START else 0
+            dmax = dil(self.a[levels - 1])
         if cache is None and n_cells <= _PAD_WINDOW and levels <= len(fld.pyramid):
             # A window searched around a prior (tracking, the global fine stage, the peak
             # analysis): the per-map padded pyramid, built once (LikelihoodField.
@@ -288,14 +328,17 @@ class _Search:
         # gather, grid[F[k] + iy * Wr + ix].
         lo = off.min(axis=(0, 1))
         hi = off.max(axis=(0, 1)) + n_cells
+        if grouped:  # a group's look-ups reach dmax cells beyond its rotations' cells
+            lo, hi = lo - dmax, hi + dmax
         flat = None
+        n_stack = 2 * (levels + extra) - 2 if grouped else levels
         if cache is not None:
             # A region that a cached pyramid covers is reused (global searches of one map);
             # otherwise the region is grown to multiples of _REGION_BLOCK cells so that the
             # next scans (similar reach) hit the cache. Zero padding beyond the map changes no
             # look-up value, so the scores are those of the tight region.
             for c_lo, c_hi, c_flat in cache:
-                if len(c_flat) == levels and np.all(c_lo <= lo) and np.all(hi <= c_hi):
+                if len(c_flat) == n_stack and np.all(c_lo <= lo) and np.all(hi <= c_hi):
                     lo, hi, flat = c_lo, c_hi, c_flat
                     break
             else:
@@ -315,15 +358,64 @@ class _Search:
             if x1 > x0 and y1 > y0:
                 region[y0 - lo[1] : y1 - lo[1], x0 - lo[0] : x1 - lo[0]] = fld.values[y0:y1, x0:x1]
             # uint8 copies of the pooled levels (rounded up, so level bounds stay upper bounds).
-            flat = np.stack(
-                [np.ceil(g * 255.0).astype(np.uint8).ravel() for g in _pyramid(region, levels)]
-            )
+            pyr = _pyramid(region, levels + extra)
+            if grouped:  # + the 1.5 x 2^h windows of the rotation groups (_group_tables)
+                pyr += [_widen(pyr[h], 2 ** (h - 1)) for h in range(1, levels + extra - 1)]
+            flat = np.stack([np.ceil(g * 255.0).astype(np.uint8).ravel() for g in pyr])
             if cache is not None:
                 cache.insert(0, (lo, hi, flat))
                 del cache[_CACHE_ENTRIES:]
         self.Wp = Wr
         self.F = ((off[..., 1] - lo[1]) * Wr + off[..., 0] - lo[0]).astype(np.int32)  # (K, N)
         self.flat = flat
+        if grouped:
+            self._group_tables(pts, lo, dth, levels)
+
+    def _group_tables(
+        self, pts: NDArray[np.float64], lo: NDArray[np.int64], dth: float, levels: int
+    ) -> None:
+        """Look-up tables of the rotation groups: an exact bound over a block of rotations.
+
+        A node of level ``h`` covers translations ``[ix, ix + 2^h) x [iy, iy + 2^h)`` and the
+        rotations ``[k, k + g)``, ``g = 2^a[h]``. Rotated by the group's central angle, point
+        ``i`` is at most ``|p_i| (g - 1) / 2 dtheta`` (the arc) from its place at any rotation
+        of the group, so its cell at any of them is within ``d_i = ceil(that / resolution)``
+        cells per axis. The maximum of the field over the ``(2^h + 2 d_i)``-wide window from
+        ``(q_i - d_i)`` bounds its value at every leaf of the node; the max-pooled level
+        ``l_i = ceil(log2(2^h + 2 d_i))`` at that corner covers the window (forward blocks).
+        So ``FG[h][group, i]`` indexes level ``l_i`` of the flattened pyramid, and a node's
+        bound is one gather, as for a single rotation. Exact: the bound is an upper bound of
+        every leaf below (the leaves themselves are single rotations, ``a[0] = 0``).
+        """
+        res = self.f.resolution
+        K = len(self.thetas)
+        radius = np.linalg.norm(pts, axis=1)
+        cells = self.flat.shape[1]
+        # the windows on the stack: level h of the pyramid (2^h wide) at index h, and
+        # 1.5 x 2^h (_widen) at index nP + h - 1
+        nP = (len(self.flat) + 2) // 2
+        widths_all = np.array(
+            [2.0**h for h in range(nP)] + [1.5 * 2.0**h for h in range(1, nP - 1)]
+        )
+        order = np.argsort(widths_all, kind="stable")
+        widths, which = widths_all[order], order
+        self.flat_all = self.flat.reshape(-1)
+        dtype = np.int32 if self.flat.size < 2**31 - 1 else np.int64
+        for h in range(1, levels):
+            g = 2 ** self.a[h]
+            if g == 1:
+                continue
+            k0 = np.arange(0, K, g)
+            centre = self.thetas[0] + (k0 + (g - 1) / 2) * dth
+            q = np.floor((_rotate(centre, pts) + self.base - self.f.origin) / res).astype(
+                np.int64
+            )  # (G, N, 2)
+            d = np.ceil(radius * (g - 1) / 2 * abs(dth) / res).astype(np.int64)  # (N,)
+            j = np.searchsorted(widths, 2**h + 2 * d)  # the narrowest window that covers
+            assert j.max() < len(widths)
+            lvl = which[j]
+            idx = lvl * cells + (q[..., 1] - d - lo[1]) * self.Wp + (q[..., 0] - d - lo[0])
+            self.FG[h] = idx.astype(dtype)
 
     def scores(
         self, level: int, k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp]
@@ -332,7 +424,24 @@ class _Search:
         self.evaluated += len(k)
         # int32 flat indices (a grid is < 60 M cells): half the index traffic of int64
         shift = (iy.astype(np.int64) * self.Wp + ix).astype(np.int32)
+        if self.a[level]:
+            return self._sums_group(level, k, shift) / (255.0 * self.F.shape[1])
         return self._sums(level, k, shift) / (255.0 * self.F.shape[1])
+
+    def _sums_group(
+        self, level: int, k: NDArray[np.intp], shift: NDArray[np.int32]
+    ) -> NDArray[np.int64]:
+        """As ``_sums`` for nodes covering a rotation group (``FG``, see _group_tables)."""
+        out = np.empty(len(k), dtype=np.int64)
+        FG = self.FG[level]
+        g = k >> self.a[level]
+        step = max(1, 4_000_000 // max(FG.shape[1], 1))
+        for c in range(0, len(k), step):
+            d = min(len(k), c + step)
+            idx = FG[g[c:d]]
+            idx += shift[c:d, None]
+            out[c:d] = np.take(self.flat_all, idx).sum(axis=1, dtype=np.uint32)
+        return out
 
     def _sums(self, level: int, k: NDArray[np.intp], shift: NDArray[np.int32]) -> NDArray[np.int64]:
         """``sum_i L_level[F[k_c, i] + shift_c]`` per candidate ``c`` (uint8 units), NumPy."""
@@ -354,6 +463,12 @@ class _Search:
 
     def _children(self, h: int, k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp]):  # type: ignore[no-untyped-def]
         s = 2 ** (h - 1)
+        if self.a[h] > self.a[h - 1]:  # the rotation group splits as well
+            split = 2 ** (self.a[h] - self.a[h - 1])
+            k = (k[:, None] + np.arange(split) * 2 ** self.a[h - 1]).ravel()
+            ix, iy = np.repeat(ix, split), np.repeat(iy, split)
+            ok = k < len(self.thetas)
+            k, ix, iy = k[ok], ix[ok], iy[ok]
         k4 = np.repeat(k, 4)
         ix4 = (ix[:, None] + np.array([0, s, 0, s])).ravel()
         iy4 = (iy[:, None] + np.array([0, 0, s, s])).ravel()
@@ -362,12 +477,25 @@ class _Search:
             return k4, ix4, iy4
         return k4[ok], ix4[ok], iy4[ok]
 
+    def _drop(self, level: int, nodes, exclude):  # type: ignore[no-untyped-def]
+        """The nodes ``(k, ix, iy)`` of ``level`` that ``exclude`` does not remove whole."""
+        k, ix, iy = nodes
+        if exclude is None or not len(k):
+            return k, ix, iy
+        if self.a[level]:  # a rotation group: never dropped whole (allowed: errs towards keep)
+            return k, ix, iy
+        keep = ~exclude(k, ix, iy, 2**level)
+        return k[keep], ix[keep], iy[keep]
+
     def run(  # type: ignore[no-untyped-def]
         self, levels: int, lower: float, cap: int, exclude=None, seeds: int = 8, keep: float = 1.0
     ):
         """Best leaf ``(score, k, ix, iy)`` with score > ``lower`` (or None) and an exactness flag.
 
-        ``exclude(k, ix, iy) -> bool mask`` removes leaves (second-peak search).
+        ``exclude(k, ix, iy, size) -> bool mask``: the nodes (``size x size`` translations from
+        ``(ix, iy)`` at rotation ``k``) whose every leaf is excluded; they are dropped unscored
+        (the runner-up search: the winner's neighbourhood). It must be exact for ``size = 1``
+        and may only err towards False for blocks.
         ``keep < 1``: nodes are pruned only when their bound is ``<= keep * best``, and every leaf
         scoring above that is collected in ``self.leaves`` (arrays ``score, k, ix, iy``): all
         leaves within ``keep`` of the optimum, so a runner-up search needs no second pass.
@@ -383,13 +511,13 @@ class _Search:
         L = levels - 1
         step = 2**L
         g = np.arange(0, self.n, step)
-        K, IX, IY = np.meshgrid(np.arange(len(self.thetas)), g, g, indexing="ij")
+        K, IX, IY = np.meshgrid(np.arange(0, len(self.thetas), 2 ** self.a[L]), g, g, indexing="ij")
         k, ix, iy = K.ravel(), IX.ravel(), IY.ravel()
         bound = self.scores(L, k, ix, iy)
         best: tuple[float, int, int, int] | None = None
         if L == 0:
             if exclude is not None:
-                bound[exclude(k, ix, iy)] = -1.0
+                bound[exclude(k, ix, iy, 1)] = -1.0
             j = int(np.argmax(bound))
             m0 = bound > keep * max(lower, float(bound[j]))
             self.leaves.append((bound[m0], k[m0], ix[m0], iy[m0]))
@@ -401,7 +529,7 @@ class _Search:
         # says little; a level of a few 10^4 nodes is where the bounds start to rank.
         h = L
         while h > 1 and 4 * len(k) <= self.breadth:
-            k, ix, iy = self._children(h, k, ix, iy)
+            k, ix, iy = self._drop(h - 1, self._children(h, k, ix, iy), exclude)
             bound = self.scores(h - 1, k, ix, iy)
             h -= 1
             live = bound > keep * lower
@@ -413,11 +541,11 @@ class _Search:
         top = np.argsort(-bound, kind="stable")[: self.beam]
         sk, sx, sy = k[top], ix[top], iy[top]
         for hh in range(h, 0, -1):
-            ck, cx, cy = self._children(hh, sk, sx, sy)
+            ck, cx, cy = self._drop(hh - 1, self._children(hh, sk, sx, sy), exclude)
+            if not len(ck):
+                break
             cb = self.scores(hh - 1, ck, cx, cy)
             if hh == 1:
-                if exclude is not None:
-                    cb[exclude(ck, cx, cy)] = -1.0
                 j = int(np.argmax(cb))
                 if cb[j] > lower:
                     lower = float(cb[j])
@@ -444,14 +572,16 @@ class _Search:
                     return
                 sl = slice(a, a + self.batch)
                 live = bound[sl] > keep * state.lower
-                ck, cx, cy = self._children(h, k[sl][live], ix[sl][live], iy[sl][live])
+                ck, cx, cy = self._drop(
+                    h - 1, self._children(h, k[sl][live], ix[sl][live], iy[sl][live]), exclude
+                )
                 state.budget -= len(ck)
                 cb = self.scores(h - 1, ck, cx, cy)
                 if h == 1:
-                    if exclude is not None:
-                        cb[exclude(ck, cx, cy)] = -1.0
                     if len(cb):
                         j = int(np.argmax(cb))
+                        if cb[j] > state.seen[0]:
+                            state.seen = (float(cb[j]), int(ck[j]), int(cx[j]), int(cy[j]))
                         if cb[j] > state.lower:
                             state.lower = float(cb[j])
                             state.best = (float(cb[j]), int(ck[j]), int(cx[j]), int(cy[j]))
@@ -491,6 +621,10 @@ class _Search:
                 # b is the optimum: search again from just under it (the leaf is found again)
                 search(np.nextafter(b, -np.inf), None)
                 return state.best, bool(state.budget > 0)
+            if state.seen[0] > lower:
+                # the best leaf the pass visited (an exact score) is a better start than the
+                # beam's
+                lower, best = state.seen[0], state.seen
         search(lower, best)
         return state.best, bool(state.budget > 0)
 
@@ -711,9 +845,13 @@ def match_scan(
         Pc = _thin(P, rc) if rc > s.point_spacing else P
         cache = coarse.__dict__.setdefault("_search_regions", [])
         levels_g = max(levels, int(np.ceil(np.log2(max(n_cells, 1) / _GLOBAL_TOP_BLOCKS))) + 1)
-        search = _Search(coarse, Pc, thetas, base, n_cells, cache=cache, levels=levels_g)
+        search = _Search(
+            coarse, Pc, thetas, base, n_cells, cache=cache, levels=levels_g, rot_groups=_ROT_GROUPS
+        )
         # keep = second_peak_ratio: the same pass collects every leaf within that ratio of the
-        # optimum, from which the runner-up peak is taken (no second branch-and-bound).
+        # optimum, from which the runner-up peak is taken. (A separate runner-up search - the
+        # optimum with keep = 1, then the best leaf above the ratio outside the winner's
+        # neighbourhood - was tried: 1.2-1.4x slower, the optimum alone costs most of it.)
         best, exact = search.run(levels_g, -1.0, s.max_candidates, keep=s.second_peak_ratio)
         assert best is not None
         coarse_best = best
@@ -749,21 +887,25 @@ def match_scan(
     ixb, iyb = sb[2], sb[3]
 
     def exclude(
-        k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp]
+        k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp], size: int = 1
     ) -> NDArray[np.bool_]:
-        near_t = np.hypot(ix - ixb, iy - iyb) < excl_cells
+        # A block of size x size translations lies in the neighbourhood when its farthest
+        # corner does (the distance is convex); size 1: the leaf itself.
+        dx = np.maximum(np.abs(ix - ixb), np.abs(ix + (size - 1) - ixb))
+        dy = np.maximum(np.abs(iy - iyb), np.abs(iy + (size - 1) - iyb))
+        near_t = np.hypot(dx, dy) < excl_cells
         near_a = np.abs(wrap_angle(sec_search.thetas[k] - th_best)) < excl_ang
         return near_t & near_a
 
+    second: tuple[float, int, int, int] | None = None
+    exact2 = True
     # The runner-up: the best collected leaf (all leaves scoring > second_peak_ratio * best were
     # kept by the search) outside the winner's neighbourhood.
     ls, lk, lx, ly = (np.concatenate(a) for a in zip(*sec_search.leaves, strict=True))
     cand = (ls > s.second_peak_ratio * sb[0]) & ~exclude(lk, lx, ly)
-    second: tuple[float, int, int, int] | None = None
     if cand.any():
         j = int(np.flatnonzero(cand)[np.argmax(ls[cand])])
         second = (float(ls[j]), int(lk[j]), int(lx[j]), int(ly[j]))
-    exact2 = True
     evaluated += search.evaluated if search is not None else 0
     second_score, second_pose = float("nan"), np.full(3, np.nan)
     if second is not None:

@@ -284,9 +284,9 @@ def cloud_to_grid(
         if better.size == 0:
             break
         win[cell[better]] = better
-    grid = np.full((n_columns * n_el, 3), np.nan)
-    filled = np.flatnonzero(win >= 0)
-    grid[filled] = Q[win[filled]]
+    # gather with a NaN row appended for the empty cells (win = -1 picks the last row): one
+    # contiguous ``take`` is ~3x cheaper than a masked fancy-indexed row assignment
+    grid = np.concatenate([Q, np.full((1, 3), np.nan)]).take(win, axis=0)
     cell_of_point = np.full(N, -1, dtype=np.int64)
     cell_of_point[idx] = cell
     azimuth = -np.pi + (np.arange(n_columns) + phase) * 2 * np.pi / n_columns

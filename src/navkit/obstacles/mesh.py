@@ -179,10 +179,15 @@ def build_mesh(
         nx, ny, nz = (_interleave(a, b) for a, b in zip(na, nb, strict=True))
         norm = np.sqrt(nx * nx + ny * ny + nz * nz)
         ok = _interleave(v00 & v01 & v10, v10 & v01 & v11) & (norm > 0)
-        scale = np.where(nz < 0, -1.0, 1.0).astype(np.float32) / np.where(
-            ok, norm, np.float32(np.nan)
-        )
-        normal = np.stack([nx * scale, ny * scale, nz * scale], axis=-1)
+        # scale = (-1 if n_z < 0 else +1) / |n|, NaN where unreliable, built in place
+        # (-(1 / x) == (-1) / x exactly in IEEE arithmetic); the components written straight
+        # into the (R, 2C, 3) result instead of three temporaries and a stack
+        scale = np.where(ok, norm, np.float32(np.nan))
+        np.divide(np.float32(1.0), scale, out=scale)
+        np.negative(scale, out=scale, where=nz < 0)
+        normal = np.empty((*nx.shape, 3), dtype=np.float32)
+        for k, c in enumerate((nx, ny, nz)):
+            np.multiply(c, scale, out=normal[..., k])
         dsh = d01 + d10
         rng = _interleave(dsh + d00, dsh + d11) * np.float32(1.0 / 3.0)
         zmn, zmx = np.minimum(z01, z10), np.maximum(z01, z10)

@@ -82,8 +82,15 @@ def classify(
     ok = mesh.valid
     jump = mesh.jump
     # zones matter only across a jump: evaluate them there only
+    # (flat indices and ``take``: the jumps are a few % of the triangles, boolean masks over the
+    # (R, 2C, 3) arrays cost more than the gather)
     cosz = np.zeros(ok.shape)
-    cosz[jump] = zone_cosine(mesh.normal[jump], mesh.ray_of(jump))
+    j = np.flatnonzero(jump)
+    first = mesh.triangles.reshape(-1).take(3 * j)  # (a take on a strided view copies it)
+    cosz.ravel()[j] = zone_cosine(
+        mesh.normal.reshape(-1, 3).take(j, axis=0),
+        mesh.vertex_ray.reshape(-1, 3).take(first, axis=0),
+    )
     p2 = jump & (cosz > settings.c2)
     p3 = jump & (cosz < -settings.c2)
     p4 = ok & ~jump

@@ -66,8 +66,9 @@ def outline_from_points(
     if uT.shape[1] + 4 * len(Q) < 3:
         return np.zeros((0, 2)), 0.0
     qT = Q.reshape(-1, 2).T
-    lo = np.array([min(a.min(initial=np.inf) for a in (uT[k], qT[k])) for k in range(2)]) - cell
-    hi = np.array([max(a.max(initial=-np.inf) for a in (uT[k], qT[k])) for k in range(2)])
+    parts = [a for a in (uT, qT) if a.shape[1]]  # bounding box of points and corners: (2,)
+    lo = np.min([a.min(axis=1) for a in parts], axis=0) - cell
+    hi = np.max([a.max(axis=1) for a in parts], axis=0)
     shape = ((hi - lo) * (1.0 / cell)).astype(np.int64) + 2
     if shape[0] * shape[1] > 4_000_000:  # keep the raster bounded for huge, sparse planes
         scale = np.sqrt(shape[0] * shape[1] / 4_000_000)
