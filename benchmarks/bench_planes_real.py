@@ -362,7 +362,7 @@ def kinect_rows(quick: bool) -> list[Row]:
     from navkit.geometry import rotation_angle
     from navkit.io.pointcloud import read_pcd
     from navkit.planes import estimate_motion, observe_points
-    from navkit.planes.associate import associate
+    from navkit.planes.motion import matched_pairs
     from navkit.planes.solve import PartialMotion, SolverSettings, two_plane_geometry
 
     clouds = [read_pcd(datasets.find(KINECT.format(k))) for k in (1, 2, 3)]
@@ -384,12 +384,7 @@ def kinect_rows(quick: bool) -> list[Row]:
 
     def partial(a: int, b: int, method: str = "centroid") -> PartialMotion:
         sa, sb = obs[a].segments, obs[b].segments
-        pr = [
-            (i, j)
-            for i, j in associate(sa, sb)
-            if min(sa[i].plane.count, sb[j].plane.count) >= 2000
-        ]
-        pr.sort(key=lambda p: -min(sa[p[0]].plane.count, sb[p[1]].plane.count))
+        pr = matched_pairs(obs[a], obs[b])
         g = two_plane_geometry(
             [sa[i].plane for i, _ in pr],
             [sb[j].plane for _, j in pr],

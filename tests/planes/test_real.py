@@ -238,7 +238,7 @@ def test_pcl_kinect_captures_fix_all_but_mu(data_path):
     / 8 = 1.8 cm)."""
     from navkit.io.pointcloud import read_pcd
     from navkit.planes import MotionFailure, observe_points
-    from navkit.planes.associate import associate
+    from navkit.planes.motion import matched_pairs
     from navkit.planes.solve import PartialMotion, two_plane_geometry
 
     clouds = [read_pcd(data_path(f"rgbd/pcl-kinect/capture000{k}.pcd")) for k in (1, 2, 3)]
@@ -249,12 +249,7 @@ def test_pcl_kinect_captures_fix_all_but_mu(data_path):
 
     def partial(a, b):
         sa, sb = obs[a].segments, obs[b].segments
-        pr = [
-            (i, j)
-            for i, j in associate(sa, sb)
-            if min(sa[i].plane.count, sb[j].plane.count) >= 2000
-        ]
-        pr.sort(key=lambda p: -min(sa[p[0]].plane.count, sb[p[1]].plane.count))
+        pr = matched_pairs(obs[a], obs[b])
         g = two_plane_geometry([sa[i].plane for i, _ in pr], [sb[j].plane for _, j in pr])
         assert isinstance(g, PartialMotion)
         return g

@@ -35,6 +35,7 @@ __all__ = [
     "MotionSettings",
     "depth_consistency",
     "estimate_motion",
+    "matched_pairs",
     "point_fit",
 ]
 
@@ -336,6 +337,65 @@ def min_plane_points(obs1: PlaneObservation, obs2: PlaneObservation, s: MotionSe
     return s.min_plane_points if organised else s.min_cloud_plane_points
 
 
+def _by_size(pairs, segs1, segs2, floor: int) -> list[tuple[int, int]]:
+    """Pairs whose planes both have at least ``floor`` points, largest first."""
+    kept = [(i, j) for i, j in pairs if min(segs1[i].plane.count, segs2[j].plane.count) >= floor]
+    return sorted(kept, key=lambda p: -min(segs1[p[0]].plane.count, segs2[p[1]].plane.count))
+
+
+def matched_pairs(
+    obs1: PlaneObservation,
+    obs2: PlaneObservation,
+    T_1_2: ArrayLike | None = None,
+    settings: MotionSettings | None = None,
+    association: AssociationSettings | None = None,
+) -> list[tuple[int, int]]:
+    """The plane pairs the motion solvers use: :func:`~navkit.planes.associate.associate`
+    (predicted by ``T_1_2``), planes of at least :func:`min_plane_points` points, largest first.
+
+    ``association`` overrides ``settings.association`` (e.g. a prior's gates).
+    """
+    s = settings or MotionSettings()
+    segs1, segs2 = obs1.segments, obs2.segments
+    pairs = associate(segs1, segs2, T_1_2, association or s.association)
+    return _by_size(pairs, segs1, segs2, min_plane_points(obs1, obs2, s))
+
+
+def _confirm_by_depth(
+    obs1: PlaneObservation,
+    obs2: PlaneObservation,
+    res: MotionEstimate,
+    T: NDArray[np.float64],
+    pairs: list[tuple[int, int]],
+    s: MotionSettings,
+) -> MotionEstimate | MotionFailure:
+    """The depth-consistency check of a solution ``T`` (:attr:`MotionSettings.max_depth_violation`):
+    a texture solution that puts too many off-plane points in frame 1's free space becomes a
+    :class:`MotionFailure` naming the texture's degrees of freedom."""
+    chk = depth_consistency(obs1, obs2, T, [j for _, j in pairs])
+    resid = dict(res.residuals)
+    resid.update(depth_tested=float(chk.tested), depth_violation=chk.violation)
+    if (
+        res.texture_dof
+        and chk.tested >= s.min_depth_points
+        and chk.violation > s.max_depth_violation
+    ):
+        log.info(
+            "texture solution rejected: %.0f %% of %d off-plane points in free space",
+            100 * chk.violation,
+            chk.tested,
+        )
+        return MotionFailure(
+            res.case,
+            res.texture_dof,
+            f"the texture match is not confirmed by the rest of the scene: "
+            f"{100 * chk.violation:.0f} % of {chk.tested} off-plane points land in front of "
+            f"frame 1's surfaces (limit {100 * s.max_depth_violation:.0f} %); "
+            f"the texture cannot fix {', '.join(res.texture_dof)}",
+        )
+    return MotionEstimate(T, res.case, res.geometry_dof, res.texture_dof, resid, tuple(pairs))
+
+
 def _estimate(
     obs1: PlaneObservation,
     obs2: PlaneObservation,
@@ -349,8 +409,7 @@ def _estimate(
     segs1 = [sg for sg in obs1.segments]
     segs2 = [sg for sg in obs2.segments]
     floor = min_plane_points(obs1, obs2, s)
-    pairs = associate(segs1, segs2, T_1_2_prior, s.association)
-    pairs = [(i, j) for i, j in pairs if min(segs1[i].plane.count, segs2[j].plane.count) >= floor]
+    pairs = matched_pairs(obs1, obs2, T_1_2_prior, s)
     if global_match is not None and _rank(segs1, pairs, s) < 3:
         # associate_global indexed the big planes only: back to indices of all segments
         big1 = [i for i, sg in enumerate(segs1) if sg.plane.count >= floor]
@@ -358,10 +417,9 @@ def _estimate(
         gpairs = [(big1[i], big2[j]) for i, j in global_match[0]]
         if _rank(segs1, gpairs, s) == 3:
             log.debug("global association: %d matches", len(gpairs))
-            pairs = gpairs
+            pairs = _by_size(gpairs, segs1, segs2, floor)
     if not pairs:
         return MotionFailure(0, ("rotation", "translation"), "no plane matched between the frames")
-    pairs.sort(key=lambda p: -min(segs1[p[0]].plane.count, segs2[p[1]].plane.count))
     p1 = [segs1[i].plane for i, _ in pairs]
     p2 = [segs2[j].plane for _, j in pairs]
     # planes with rho >= 0 flip their normal if the sensor crosses them: align frame 2's signs
@@ -396,30 +454,7 @@ def _estimate(
         i, j = pairs[0]
         res = solve_one_plane(p1[0], p2[0], obs1.texture, obs2.texture, i, j, s.solver)
     if isinstance(res, MotionEstimate):
-        chk = depth_consistency(obs1, obs2, res.T, [j for _, j in pairs])
-        resid = dict(res.residuals)
-        resid.update(depth_tested=float(chk.tested), depth_violation=chk.violation)
-        if (
-            res.texture_dof
-            and chk.tested >= s.min_depth_points
-            and chk.violation > s.max_depth_violation
-        ):
-            log.info(
-                "texture solution rejected: %.0f %% of %d off-plane points in free space",
-                100 * chk.violation,
-                chk.tested,
-            )
-            return MotionFailure(
-                res.case,
-                res.texture_dof,
-                f"the texture match is not confirmed by the rest of the scene: "
-                f"{100 * chk.violation:.0f} % of {chk.tested} off-plane points land in front of "
-                f"frame 1's surfaces (limit {100 * s.max_depth_violation:.0f} %); "
-                f"the texture cannot fix {', '.join(res.texture_dof)}",
-            )
-        res = MotionEstimate(
-            res.T, res.case, res.geometry_dof, res.texture_dof, resid, tuple(pairs)
-        )
+        return _confirm_by_depth(obs1, obs2, res, res.T, pairs, s)
     return res
 
 
@@ -494,12 +529,9 @@ def _estimate_with_prior(
     Tp = np.asarray(prior.T, dtype=np.float64).reshape(4, 4)
     Rp, tp = Tp[:3, :3], Tp[:3, 3]
     segs1, segs2 = obs1.segments, obs2.segments
-    pairs = associate(segs1, segs2, Tp, prior.association(s.association))  # 1. gate
-    floor = min_plane_points(obs1, obs2, s)
-    pairs = [(i, j) for i, j in pairs if min(segs1[i].plane.count, segs2[j].plane.count) >= floor]
+    pairs = matched_pairs(obs1, obs2, Tp, s, prior.association(s.association))  # 1. gate
     if not pairs:
         return MotionFailure(0, ("rotation", "translation"), "no plane matched between the frames")
-    pairs.sort(key=lambda p: -min(segs1[p[0]].plane.count, segs2[p[1]].plane.count))
     idx1 = [i for i, _ in pairs]
     idx2 = [j for _, j in pairs]
     p1 = [segs1[i].plane for i in idx1]
@@ -541,25 +573,9 @@ def _estimate_with_prior(
                 1, ("lambda", "mu", "eta"), "one plane direction and no camera image"
             )
     if isinstance(res, MotionEstimate):
-        T = res.T @ Tp
-        chk = depth_consistency(obs1, obs2, T, idx2)
-        resid = dict(res.residuals)
-        resid.update(depth_tested=float(chk.tested), depth_violation=chk.violation)
-        if (
-            res.texture_dof
-            and chk.tested >= s.min_depth_points
-            and chk.violation > s.max_depth_violation
-        ):
-            res = MotionFailure(
-                res.case,
-                res.texture_dof,
-                f"texture match rejected by the depth check ({100 * chk.violation:.0f} % of "
-                f"{chk.tested} off-plane points in frame 1's free space)",
-            )
-        else:
-            return MotionEstimate(
-                T, res.case, res.geometry_dof, res.texture_dof, resid, tuple(pairs)
-            )
+        res = _confirm_by_depth(obs1, obs2, res, res.T @ Tp, pairs, s)
+        if isinstance(res, MotionEstimate):
+            return res
     # 3. the degrees of freedom nothing measured come from the prior, and say so
     free = res.free_dof
     if rank >= 3 or not free or "rotation" in free:
