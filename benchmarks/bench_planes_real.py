@@ -75,10 +75,10 @@ def point_to_plane(
     """
     from scipy.spatial import cKDTree
 
-    from navkit.planes.extract_cloud import _normals, _voxelize
+    from navkit.planes.extract_cloud import _normals, voxelize
 
-    A, _ = _voxelize(P1[np.all(np.isfinite(P1), axis=1)], voxel)
-    B, _ = _voxelize(P2[np.all(np.isfinite(P2), axis=1)], voxel)
+    A, _ = voxelize(P1[np.all(np.isfinite(P1), axis=1)], voxel)
+    B, _ = voxelize(P2[np.all(np.isfinite(P2), axis=1)], voxel)
     nA, _ = _normals(A, 16)
     X = B @ T[:3, :3].T + T[:3, 3]
     d, j = cKDTree(A).query(X, distance_upper_bound=max_d)

@@ -180,6 +180,8 @@ def test_locate_refines_stereo_fixes_against_the_walls(cli, tmp_path):
         errors[flag] = loc["position_error_m_median"]
         assert loc["refined_rate"] == (1.0 if flag == "--refine" else 0.0)
     assert errors["--refine"] < 0.02
+    # the refinement must not undo the matcher: same fragments, no larger median error
+    assert errors["--refine"] <= errors["--no-refine"]
 
 
 def test_locate_with_known_heading_never_gives_a_false_confident_fix(cli, tmp_path):

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
 
 from navkit.geometry import points_in_polygon
+from navkit.planes.extract_cloud import voxelize
 from navkit.planes.segments import PlaneSegment, plane_frame
 
 __all__ = [
@@ -319,13 +320,6 @@ def _kabsch_batch(A: NDArray[np.float64], B: NDArray[np.float64]) -> NDArray[np.
     return V @ D @ np.swapaxes(U, 1, 2)
 
 
-def _voxel_centroids(P: NDArray[np.float64], voxel: float) -> NDArray[np.float64]:
-    """One centroid per occupied voxel (equal weight per surface area, not per point)."""
-    from navkit.planes.extract_cloud import _voxelize
-
-    return _voxelize(P, voxel)[0]
-
-
 def global_hypotheses(
     planes1: Sequence[PlaneSegment],
     planes2: Sequence[PlaneSegment],
@@ -488,8 +482,9 @@ def _point_fit(points1, points2, s: GlobalAssociationSettings):
     B = B[np.all(np.isfinite(B), axis=1)]
     if len(A) == 0 or len(B) == 0:
         return lambda Ts: np.zeros(len(Ts))
-    A = _voxel_centroids(A, s.verify_distance / 2)
-    B = _voxel_centroids(B, s.verify_distance)
+    # one centroid per occupied voxel: equal weight per surface area, not per point
+    A = voxelize(A, s.verify_distance / 2)[0]
+    B = voxelize(B, s.verify_distance)[0]
     rng = np.random.default_rng(0)
     B = B[rng.choice(len(B), min(len(B), s.verify_points), replace=False)]
     tree = cKDTree(A)

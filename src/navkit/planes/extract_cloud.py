@@ -144,9 +144,7 @@ class CloudScales:
     extent: float
 
 
-def _voxelize(
-    P: NDArray[np.float64], voxel: float
-) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+def voxelize(P: NDArray[np.float64], voxel: float) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Centroids ``(M, 3)`` of the occupied voxels and the voxel of every point ``(N,)``."""
     if voxel <= 0:
         return P, np.arange(len(P), dtype=np.int64)
@@ -183,7 +181,7 @@ def _scales(P, s: CloudExtractionSettings):
     lo, hi = np.percentile(P, [5, 95], axis=0) if len(P) else (np.zeros(3), np.zeros(3))
     extent = float(np.linalg.norm(hi - lo))
     voxel = s.voxel if s.voxel is not None else float(np.clip(extent / 200.0, 0.01, 0.2))
-    C, inv = _voxelize(P, voxel)
+    C, inv = voxelize(P, voxel)
     n, w = _normals(C, s.neighbours) if len(C) >= 3 else (np.zeros((0, 3)), np.zeros((0, 3)))
     # the band must hold the sensor's noise (raw points about their voxel's local plane) and
     # the surface's own unevenness at the neighbourhood scale (scatter of the voxel centroids,
