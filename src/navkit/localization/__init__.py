@@ -12,7 +12,14 @@ Stages, usable apart from NumPy arrays:
 - :mod:`~navkit.localization.refine` - the final weighted point-to-line least-squares pose
   refinement against the map's walls (stereo depth-error weights, degeneracy along one wall);
 - :mod:`~navkit.localization.matcher` - unknown heading: multi-resolution correlative scan
-  matching over ``(x, y, theta)`` (Olson 2009) with sub-cell refinement and an ambiguity report.
+  matching over ``(x, y, theta)`` (Olson 2009) with sub-cell refinement and an ambiguity report;
+- :mod:`~navkit.localization.localizer` - the online object: :class:`Localizer` keeps the map
+  and the estimate and turns one scan at a time into a :class:`Fix` (prior, match, refinement,
+  gates, blending with odometry) or a :class:`LocalizationFailure`;
+- :mod:`~navkit.localization.evaluation` - a localized sequence scored against reference poses.
+
+``Fix`` is the Localizer's result; the matcher's own result is
+:class:`navkit.localization.matcher.Fix`, exported here as ``ScanMatch``.
 """
 
 from navkit.localization.correlation import (
@@ -22,7 +29,15 @@ from navkit.localization.correlation import (
     locate_known_heading,
     robot_position,
 )
+from navkit.localization.evaluation import evaluate_fixes, pose_errors, reported_poses
 from navkit.localization.field import LikelihoodField
+from navkit.localization.localizer import (
+    Fix,
+    LocalizationFailure,
+    Localizer,
+    LocalizerSettings,
+    stack_views,
+)
 from navkit.localization.mapping import (
     Corner,
     MapSettings,
@@ -38,12 +53,12 @@ from navkit.localization.mapping import (
 )
 from navkit.localization.matcher import (
     Ambiguity,
-    Fix,
     MatcherSettings,
     analyse_peak,
     match_scan,
     score_poses,
 )
+from navkit.localization.matcher import Fix as ScanMatch
 from navkit.localization.refine import (
     PoseRefinement,
     RefineSettings,
@@ -66,10 +81,14 @@ __all__ = [
     "KnownHeadingFix",
     "KnownHeadingSettings",
     "LikelihoodField",
+    "LocalizationFailure",
+    "Localizer",
+    "LocalizerSettings",
     "MapSettings",
     "MatcherSettings",
     "PoseRefinement",
     "RefineSettings",
+    "ScanMatch",
     "SegmentationSettings",
     "WallMap",
     "WallSegment",
@@ -77,6 +96,7 @@ __all__ = [
     "build_map",
     "build_map_from_scans",
     "correlate_profiles",
+    "evaluate_fixes",
     "evaluate_map",
     "find_corners",
     "find_outline",
@@ -84,13 +104,16 @@ __all__ = [
     "match_scan",
     "merge_segments",
     "merge_two",
+    "pose_errors",
     "ransac_walls",
     "rasterize",
     "refine_pose",
+    "reported_poses",
     "robot_position",
     "sample_segments",
     "score_poses",
     "segment_from_points",
     "split_and_merge",
+    "stack_views",
     "stereo_range_sigma",
 ]
