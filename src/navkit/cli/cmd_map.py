@@ -175,6 +175,41 @@ def build_cmd(
         )
 
 
+_KNOWN_HEADING_HELP = (
+    "Paper 3's method: the heading is known (the camera drive's angle sensor; here the "
+    "reference pose's heading) and the fragment is slid over the map by correlation. "
+    "Ambiguous views (one straight wall, twin corners, a wall the map predicts but the "
+    "camera did not see) are reported, not fixed."
+)
+_REFINE_HELP = (
+    "Refine each fix by weighted point-to-line least squares against the map's walls "
+    "(kept only when it converges and is not degenerate along a wall). Default: on for "
+    "stereo frames, off for laser logs (a real building is not all straight walls: on the "
+    "Intel log it raises the median error from 1.1 to 2.8 cm)."
+)
+_GROUP_HELP = "Stereo: N consecutive frames taken at one place form one fragment."
+
+
+def _locate_summary(seq: Any, wall_map: Any, stats: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    """summary.json of map locate: the run's facts, the evaluation, the error relative to the
+    map's size."""
+    import numpy as np
+
+    summary: dict[str, Any] = {
+        "input_kind": seq.kind,
+        **extra,
+        "reference": "poses.tum of the frames"
+        if seq.kind == "stereo"
+        else "corrected poses of the log",
+        **stats,
+    }
+    if wall_map.walls:
+        size = float(np.linalg.norm(np.subtract(*wall_map.bounds[::-1])))
+        summary["map_diagonal_m"] = size
+        summary["position_error_relative_median"] = stats["position_error_m_median"] / size
+    return summary
+
+
 @map_app.command("locate")
 def locate_cmd(
     map_json: Path = typer.Argument(..., help="map.json from navkit map build."),
@@ -186,12 +221,7 @@ def locate_cmd(
     every: int = typer.Option(
         1, "--every", min=1, help="Localize every N-th scan / frame (group)."
     ),
-    group: int = typer.Option(
-        1,
-        "--group",
-        min=1,
-        help="Stereo: N consecutive frames taken at one place form one fragment.",
-    ),
+    group: int = typer.Option(1, "--group", min=1, help=_GROUP_HELP),
     max_range: float = typer.Option(
         30.0, help="Laser readings at or beyond this distance (m) are no return."
     ),
@@ -200,22 +230,8 @@ def locate_cmd(
         0.3, help="A fix within this distance (m) of the reference is a success."
     ),
     success_deg: float = typer.Option(5.0, help="... and within this heading error (degrees)."),
-    known_heading: bool = typer.Option(
-        False,
-        "--known-heading",
-        help="Paper 3's method: the heading is known (the camera drive's angle sensor; here the "
-        "reference pose's heading) and the fragment is slid over the map by correlation. "
-        "Ambiguous views (one straight wall, twin corners, a wall the map predicts but the "
-        "camera did not see) are reported, not fixed.",
-    ),
-    refine: bool | None = typer.Option(
-        None,
-        "--refine/--no-refine",
-        help="Refine each fix by weighted point-to-line least squares against the map's walls "
-        "(kept only when it converges and is not degenerate along a wall). Default: on for "
-        "stereo frames, off for laser logs (a real building is not all straight walls: on the "
-        "Intel log it raises the median error from 1.1 to 2.8 cm).",
-    ),
+    known_heading: bool = typer.Option(False, "--known-heading", help=_KNOWN_HEADING_HELP),
+    refine: bool | None = typer.Option(None, "--refine/--no-refine", help=_REFINE_HELP),
     config: Path | None = typer.Option(
         None, "--config", help="TOML with a [localizer] table (as in the settings.toml written)."
     ),
@@ -237,7 +253,6 @@ def locate_cmd(
         _check_out(out, overwrite)
         wall_map = read_wall_map(map_json)
         seq = read_scan_sequence(input, every=every, group=group, max_range=max_range)
-        is_stereo = seq.kind == "stereo"
         settings = _localizer_settings(config, sigma, refine, seq)
         loc = Localizer(wall_map, settings, view=seq.view)
         tracking = prior == PriorChoice.odometry
@@ -253,17 +268,8 @@ def locate_cmd(
         write_fix_poses(out / "poses.tum", results, seq.timestamps)
         write_fixes_csv(out / "fixes.csv", results, seq.indices, seq.timestamps, seq.reference)
         stats = evaluate_fixes(results, seq.reference, success_m=success_m, success_deg=success_deg)
-        summary: dict[str, Any] = {
-            "input_kind": seq.kind,
-            "prior": prior.value,
-            "method": "known heading (paper 3)" if known_heading else "correlative matching",
-            "reference": "poses.tum of the frames" if is_stereo else "corrected poses of the log",
-            **stats,
-        }
-        if wall_map.walls:
-            size = float(np.linalg.norm(np.subtract(*wall_map.bounds[::-1])))
-            summary["map_diagonal_m"] = size
-            summary["position_error_relative_median"] = stats["position_error_m_median"] / size
+        method = "known heading (paper 3)" if known_heading else "correlative matching"
+        summary = _locate_summary(seq, wall_map, stats, prior=prior.value, method=method)
         title = f"{input.name}: {100 * stats['success_rate']:.0f}% within {success_m} m"
         est = np.where([[r.ok] for r in results], reported_poses(results), np.nan)
         plot_map(wall_map, out / "locate.png", poses=est, truth=seq.reference, title=title)
