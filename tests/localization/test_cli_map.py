@@ -114,3 +114,32 @@ def test_real_log_build_and_track(cli, data_path, tmp_path):
     # tracking on the real log against its corrected poses (reference quality: cm to dm)
     assert s["success_rate"] >= 0.9
     assert s["position_error_m_median"] < 0.1
+
+
+def test_locate_refuses_to_overwrite_and_reads_its_settings_back(cli, tiny_log, tmp_path):
+    log_path, _ = tiny_log
+    assert cli("map", "build", log_path, "-o", tmp_path / "map", "--every", "2").exit_code == 0
+    args = ("map", "locate", tmp_path / "map" / "map.json", log_path, "--every", "8")
+    assert cli(*args, "-o", tmp_path / "a", "--prior", "odometry", "--refine").exit_code == 0
+    first = (tmp_path / "a" / "fixes.csv").read_text()
+    res = cli(*args, "-o", tmp_path / "a")
+    assert res.exit_code == 2 and "--overwrite" in res.stderr
+    assert (tmp_path / "a" / "fixes.csv").read_text() == first  # untouched
+    # the [localizer] table of the settings.toml written reproduces the run (refinement on)
+    res = cli(
+        *args,
+        "-o",
+        tmp_path / "b",
+        "--prior",
+        "odometry",
+        "--config",
+        tmp_path / "a" / "settings.toml",
+    )
+    assert res.exit_code == 0, res.stderr
+    strip = lambda t: [",".join(r.split(",")[:14] + r.split(",")[15:]) for r in t.splitlines()]  # noqa: E731  (drop ms)
+    assert strip((tmp_path / "b" / "fixes.csv").read_text()) == strip(first)
+    assert "True" in {r.split(",")[15] for r in first.splitlines()[1:]}  # refined
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[localizer]\nsigmaa = 0.1\n")
+    res = cli(*args, "-o", tmp_path / "c", "--config", bad)
+    assert res.exit_code == 2 and "sigmaa" in res.stderr
