@@ -4,8 +4,9 @@ and the stereo map + localization evaluation in simulated rooms.
 Real logs (``../shared/data/laser2d``): for each log the map is built from every 2nd scan with the
 corrected poses; then scans spread over the log are localized (a) *tracking*: from a prior = the
 corrected pose disturbed by a uniform error of up to 0.5 m and 10 deg (the same prior for both
-methods), navkit ``match_scan`` vs point-to-point ICP (nearest neighbours by ``scipy.spatial.cKDTree``
-on the same map points, up to 50 iterations, correspondences beyond a shrinking gate rejected);
+methods), navkit's ``Localizer`` (correlative matching around the prior) vs point-to-point ICP
+(nearest neighbours by ``scipy.spatial.cKDTree`` on the same map points, up to 50 iterations,
+correspondences beyond a shrinking gate rejected);
 (b) *global*: navkit without prior (ICP cannot). Success = within 0.3 m and 5 deg of the corrected
 pose. Figures: success %, median error, CPU ms per fix (median of `time.process_time`; the peer
 is timed in the same loop on the same scan and prior).
@@ -64,7 +65,7 @@ def _real_logs(quick: bool) -> list[Row]:
 
     from navkit import datasets
     from navkit.io.carmen import read_carmen
-    from navkit.localization import build_map_from_scans, match_scan
+    from navkit.localization import Localizer, build_map_from_scans, reported_poses
 
     rows: list[Row] = []
     logs = LOGS[:2] if quick else LOGS
@@ -81,7 +82,8 @@ def _real_logs(quick: bool) -> list[Row]:
         lg = read_carmen(datasets.find(f"laser2d/{name}-corrected.log.gz"))
         every = max(2, len(lg) // 1200)
         m = build_map_from_scans(lg.ranges[::every], lg.bearings, lg.poses[::every], max_range=30.0)
-        fld = m.likelihood_field(0.1)
+        loc = Localizer(m)  # the likelihood field (sigma 0.1 m) on the map's grid
+        fld = loc.field
         assert fld.points is not None  # built from points
         tree = cKDTree(fld.points)
         rng = np.random.default_rng(0)
@@ -92,7 +94,7 @@ def _real_logs(quick: bool) -> list[Row]:
         for k, p in zip(idx, prior, strict=True):
             pts = lg.points(int(k), 30.0)
             c0, t0 = time.process_time(), time.perf_counter()
-            est_nk.append(match_scan(fld, pts, p).pose)
+            est_nk.append(reported_poses([loc.register(pts, prior=p)])[0])
             t1, c1 = time.perf_counter(), time.process_time()
             est_icp.append(icp_2d(fld.points, tree, pts, p))
             t2, c2 = time.perf_counter(), time.process_time()
@@ -110,14 +112,16 @@ def _real_logs(quick: bool) -> list[Row]:
         gidx = idx[:: max(1, len(idx) // n_global)][:n_global]
         est_g, t_g, c_g, ok_flag = [], [], [], []
         c0 = time.process_time()
-        match_scan(fld, lg.points(int(gidx[0]), 30.0), None)  # builds the coarse field's caches
+        loc.register(
+            lg.points(int(gidx[0]), 30.0)
+        )  # no odometry: global; builds the coarse field's caches
         first_g = 1e3 * (time.process_time() - c0)
         for k in gidx:
             c0, t0 = time.process_time(), time.perf_counter()
-            fix = match_scan(fld, lg.points(int(k), 30.0), None)
+            fix = loc.register(lg.points(int(k), 30.0))
             t_g.append(time.perf_counter() - t0)
             c_g.append(time.process_time() - c0)
-            est_g.append(fix.pose)
+            est_g.append(reported_poses([fix])[0])
             ok_flag.append(fix.ok)
         pe_g, he_g = _err(np.array(est_g), lg.poses[gidx])
         ok_g = (pe_g <= SUCCESS_M) & (he_g <= SUCCESS_DEG)
