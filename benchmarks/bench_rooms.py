@@ -35,11 +35,13 @@ def sim_rooms(
     """
     from navkit.geometry import points_in_polygon, se2_apply, se2_from_xytheta
     from navkit.localization import (
+        Localizer,
         MapSettings,
         MatcherSettings,
         build_map,
         evaluate_map,
         match_scan,
+        reported_poses,
     )
     from navkit.localization.correlation import KnownHeadingSettings, locate_known_heading
     from navkit.localization.refine import occluded_fraction, refine_pose, stereo_range_sigma
@@ -84,7 +86,8 @@ def sim_rooms(
         )
         m = build_map(views, settings=map_settings, origins=survey_xy)
         acc = evaluate_map(m, truth.walls, truth.corners)
-        fld = m.likelihood_field(0.1)
+        loc = Localizer(m)  # 4-view fragments: global and tracking fixes
+        fld = loc.field
         poses = sample_poses(truth, n_poses, rng)
         pe, he, ok, ms, single = [], [], [], [], []
         # the paper's scenario: one 90-deg view, heading known (paper's correlation / 2D search)
@@ -123,8 +126,8 @@ def sim_rooms(
                 B = stereo_wall_points(st.pair.left, st.pair.right, rig, camera_height=height)
                 parts.append(se2_apply(se2_from_xytheta(0.0, 0.0, k * np.pi / 2), B))
                 if k == 0 and len(B) >= 3:
-                    f1 = match_scan(fld, B, None)
-                    single.append(np.hypot(*(f1.pose[:2] - p[:2])))
+                    f1 = reported_poses([loc.register(B)])[0]  # global, one view
+                    single.append(np.hypot(*(f1[:2] - p[:2])))
                     sig1 = stereo_range_sigma(B, rig.baseline, rig.camera.fx)
                     # (a) the paper's method: correlation at the known heading + refinement
                     t0 = time.process_time()
@@ -175,10 +178,11 @@ def sim_rooms(
                     kh["search_err_raw"].append(float(np.hypot(*(sf.pose[:2] - p[:2]))))
             frag = np.concatenate(parts)
             sig4 = stereo_range_sigma(frag, rig.baseline, rig.camera.fx)
-            fix = match_scan(fld, frag, None)
-            rg = refine_pose(m.walls, frag, fix.pose, range_sigma=sig4)
-            rpe.append(float(np.hypot(*((rg.pose if rg.converged else fix.pose)[:2] - p[:2]))))
-            e_p, e_h = _err(fix.pose[None], p[None])
+            fix = loc.register(frag)  # no odometry: a global search
+            fix_pose = reported_poses([fix])[0]
+            rg = refine_pose(m.walls, frag, fix_pose, range_sigma=sig4)
+            rpe.append(float(np.hypot(*((rg.pose if rg.converged else fix_pose)[:2] - p[:2]))))
+            e_p, e_h = _err(fix_pose[None], p[None])
             pe.append(e_p[0])
             he.append(e_h[0])
             ok.append(fix.ok)
@@ -186,14 +190,15 @@ def sim_rooms(
             # the half-turn twin of the pose (the rectangle-based rooms are symmetric)
             centre = 0.5 * (truth.outline.min(axis=0) + truth.outline.max(axis=0))
             twin = np.array([*(2 * centre - p[:2]), p[2] + np.pi])
-            t_p, t_h = _err(fix.pose[None], twin[None])
+            t_p, t_h = _err(fix_pose[None], twin[None])
             twin_ok.append(bool(t_p[0] <= SUCCESS_M and t_h[0] <= SUCCESS_DEG))
             # tracking from a coarse prior (uniform error up to 0.5 m / 10 deg)
             prior = p + rng.uniform(-1, 1, 3) * np.array([0.5, 0.5, np.radians(10)])
-            tf = match_scan(fld, frag, prior)
-            rt = refine_pose(m.walls, frag, tf.pose, range_sigma=sig4)
-            rtpe.append(float(np.hypot(*((rt.pose if rt.converged else tf.pose)[:2] - p[:2]))))
-            k_p, k_h = _err(tf.pose[None], p[None])
+            tf = loc.register(frag, prior=prior)
+            tf_pose = reported_poses([tf])[0]
+            rt = refine_pose(m.walls, frag, tf_pose, range_sigma=sig4)
+            rtpe.append(float(np.hypot(*((rt.pose if rt.converged else tf_pose)[:2] - p[:2]))))
+            k_p, k_h = _err(tf_pose[None], p[None])
             tpe.append(k_p[0])
             the.append(k_h[0])
             tms.append(1e3 * tf.seconds)
