@@ -235,3 +235,42 @@ def test_map_locate_is_a_loop_over_the_localizer(cli, data_path, tmp_path, prior
     assert stats["success_rate_of_ok"] == 1.0
     assert stats["position_error_m_median"] < 0.02
     assert stats["ok_rate"] >= (0.99 if prior == "odometry" else 0.8)
+
+
+def test_from_views_and_from_points_cover_the_missions_use(room):
+    # the mission's room: a map from a few views at (estimated) poses, then fragments of the
+    # last views located around the estimate, blended by fix_weight within gate_m
+    _, truth = room
+    rng = np.random.default_rng(5)
+    poses = truth[:12:2]
+    views = [scan_points(LSHAPE, p, n=121, fov=np.radians(80), noise=0.02, rng=rng) for p in poses]
+    s = LocalizerSettings(
+        resolution=0.05,
+        matcher=MatcherSettings(linear_window=0.4, angular_window_deg=10.0),
+        fix_weight=0.7,
+        gate_m=0.4,
+        recentre_on_rejected=False,
+    )
+    loc = Localizer.from_views(views, poses, s)
+    assert loc.map is not None and len(loc.map.walls) >= 2
+    recent = truth[5:8]  # facing the walls the map saw (east), with fresh range noise
+    frag = stack_views(
+        [scan_points(LSHAPE, p, n=121, fov=np.radians(80), noise=0.02, rng=rng) for p in recent],
+        recent,
+        recent[-1],
+    )
+    est = recent[-1] + np.array([0.15, -0.1, 0.03])
+    r = loc.register(frag, prior=est)
+    assert isinstance(r, Fix) and r.used and r.method == "tracking"
+    assert np.hypot(*(r.pose[:2] - recent[-1, :2])) < 0.03
+    np.testing.assert_allclose(r.estimate, est + 0.7 * (r.pose - est), atol=1e-12)
+    # the obstacle-map variant: a map of occupied points, no walls
+    pts = np.concatenate(
+        [stack_views([v], [p], np.zeros(3)) for v, p in zip(views, poses, strict=True)]
+    )
+    loc2 = Localizer.from_points(pts, s)
+    assert loc2.map is None
+    r2 = loc2.register(views[0], prior=poses[0] + np.array([0.1, 0.1, 0.0]))
+    assert r2.ok and np.hypot(*(r2.pose[:2] - poses[0, :2])) < 0.03
+    with pytest.raises(InputError):
+        Localizer.from_views([], np.zeros((0, 3)))

@@ -455,6 +455,12 @@ class Localizer:
         """
         s = settings or LocalizerSettings()
         P = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        if len(views) == 0 or len(P) != len(views):
+            raise InputError(
+                f"{len(views)} views and {len(P)} poses",
+                field="views",
+                expected="at least one view, one (x, y, theta) pose per view",
+            )
         wm: WallMap | None
         try:
             wm = build_map(list(views), P, map_settings, ordered=ordered)
