@@ -18,6 +18,7 @@ from navkit.localization import (
     MatcherSettings,
     build_map_from_scans,
     evaluate_fixes,
+    reported_poses,
     stack_views,
 )
 from tests.localization.helpers import LSHAPE, cast, scan_points
@@ -177,17 +178,72 @@ def test_stack_views_brings_views_into_one_frame():
     np.testing.assert_allclose(frag, expect, atol=1e-12)
 
 
+# ``navkit map locate`` on aces-corrected (map from every 4th scan) before the Localizer existed
+# (commit 4f29c21): fixes.csv rows (index, x, y, theta, ok) of every 20th scan.
+PRE_LOCALIZER = {
+    "odometry": [
+        (0, 0.9024, -0.1895, -0.45299, True),
+        (20, 0.558, 0.0258, -0.04022, True),
+        (40, 20.2728, -0.2899, 0.08141, True),
+        (60, 23.1507, -15.492, -1.68327, True),
+        (80, 22.3849, -29.912, -1.55208, True),
+        (100, 22.0698, -38.4775, -1.15066, True),
+        (120, 10.0326, -39.5317, 3.00466, True),
+        (140, -0.5622, -38.3142, 0.92992, True),
+        (160, -15.272, -38.3492, -3.13248, True),
+        (180, -19.8676, -26.9542, 1.58339, True),
+        (200, -19.5894, -15.8093, 1.29871, True),
+        (220, -19.2559, 0.12, 1.23616, True),
+        (240, -11.6803, 0.0422, 0.02571, True),
+        (260, -0.2652, 0.2204, 0.76394, True),
+        (280, -0.6677, -13.2492, -1.61303, True),
+        (300, -0.8153, -29.9121, -1.61191, True),
+        (320, -0.7815, -31.7833, 1.5803, True),
+        (340, -5.3269, -18.5941, -3.11536, True),
+        (360, -19.2633, -18.3119, -0.47966, True),
+        (380, -0.4353, -19.2733, -1.53608, True),
+        (400, 6.6511, -18.9927, 0.04529, True),
+        (420, 23.058, -19.4221, 0.97977, True),
+    ],
+    "none": [
+        (0, 0.9024, -0.1895, -0.45299, True),
+        (20, 0.558, 0.0258, -0.04022, True),
+        (40, 20.2728, -0.2899, 0.08142, True),
+        (60, 23.1507, -15.492, -1.68327, True),
+        (80, 22.3848, -29.912, -1.55208, True),
+        (100, 22.0698, -38.4775, -1.15066, True),
+        (120, 10.0078, -39.5571, 2.98606, True),
+        (140, -0.5622, -38.3142, 0.92992, True),
+        (160, -15.272, -38.3492, -3.13248, True),
+        (180, -19.866, -26.9532, 1.58305, False),
+        (200, -19.5894, -15.8093, 1.29871, True),
+        (220, -19.2559, 0.12, 1.23616, True),
+        (240, -11.6807, 0.0416, 0.02576, True),
+        (260, -0.2654, 0.2204, 0.76385, True),
+        (280, -0.6677, -13.2492, -1.61303, False),
+        (300, -0.8153, -29.9121, -1.61191, True),
+        (320, -0.7815, -31.7834, 1.5803, True),
+        (340, -5.3269, -18.5941, -3.11536, False),
+        (360, -19.2625, -18.3125, -0.48007, True),
+        (380, -0.4353, -19.2733, -1.53608, True),
+        (400, 6.6511, -18.9927, 0.04529, True),
+        (420, 23.058, -19.4221, 0.97977, True),
+    ],
+}
+
+
 def _read_fixes(path):
     with open(path, newline="") as fh:
         return list(csv.DictReader(fh))
 
 
 @pytest.mark.realdata
-@pytest.mark.parametrize(("prior", "every"), [("odometry", 20), ("none", 40)])
-def test_map_locate_is_a_loop_over_the_localizer(cli, data_path, tmp_path, prior, every):
+@pytest.mark.parametrize("prior", ["odometry", "none"])
+def test_map_locate_is_a_loop_over_the_localizer(cli, data_path, tmp_path, prior):
     """The command's fixes equal a direct Localizer loop on the real log (poses within 1e-9,
-    the same accepted / rejected scans). Before the Localizer, ``map locate`` gave these same
-    fixes (docs/localization.md, "Localizer")."""
+    the same accepted / rejected scans), and both equal what ``map locate`` gave before the
+    Localizer (``PRE_LOCALIZER``, 4 decimals)."""
+    every = 20
     from navkit.io.carmen import read_carmen
     from navkit.io.trajectory import read_tum
     from navkit.io.wallmap import write_wall_map
@@ -230,6 +286,11 @@ def test_map_locate_is_a_loop_over_the_localizer(cli, data_path, tmp_path, prior
             np.testing.assert_allclose(
                 [float(row[c]) for c in ("x", "y", "theta")], r.candidate, atol=6e-5
             )
+    # unchanged from before the Localizer: the same accepted set, the same poses
+    pre = np.array(PRE_LOCALIZER[prior], dtype=float)
+    assert pre[:, 0].astype(int).tolist() == sel.tolist()
+    assert pre[:, 4].astype(bool).tolist() == ok.tolist()
+    np.testing.assert_allclose(reported_poses(results), pre[:, 1:4], atol=1e-4)
     # accuracy against the log's corrected poses (measured: median 8 mm both ways)
     stats = evaluate_fixes(results, lg.poses[sel])
     assert stats["success_rate_of_ok"] == 1.0

@@ -213,7 +213,9 @@ class Fix:
         The Localizer's estimate after this fix (the prediction blended with ``pose``; equal to
         ``pose`` with ``fix_weight = 1`` or without a prediction).
     prediction : (3,) array
-        The prior the fix was searched around (NaN for a global or known-heading search).
+        The prior: the caller's estimate or the odometry prediction (NaN when there is none: a
+        global search). Tracking searches around it; a known-heading fix (searched over the
+        whole map) is only gated and blended with it.
     method : str
         ``"global"``, ``"tracking"`` or ``"known heading"``.
     score : float
@@ -296,7 +298,7 @@ class LocalizationFailure:
         The Localizer's estimate after this scan (the prediction, or the rejected candidate with
         ``recentre_on_rejected``; NaN when there is none).
     prediction : (3,) array
-        The prior searched around (NaN for a global or known-heading search).
+        The prior, as in :class:`Fix` (NaN when there is none).
     candidate : (3,) array
         The rejected best pose, for reporting only (NaN with too few points).
     score, extent, second_score : float
