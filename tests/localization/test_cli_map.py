@@ -143,3 +143,18 @@ def test_locate_refuses_to_overwrite_and_reads_its_settings_back(cli, tiny_log, 
     bad.write_text("[localizer]\nsigmaa = 0.1\n")
     res = cli(*args, "-o", tmp_path / "c", "--config", bad)
     assert res.exit_code == 2 and "sigmaa" in res.stderr
+
+
+def test_build_reads_map_settings_from_config(cli, tiny_log, tmp_path):
+    log_path, _ = tiny_log
+    cfg = tmp_path / "map.toml"
+    cfg.write_text("[map]\nresolution = 0.1\nmerge_distance = 0.15\n[map.segmentation]\n")
+    res = cli("map", "build", log_path, "-o", tmp_path / "m", "--every", "2", "--config", cfg)
+    assert res.exit_code == 0, res.stderr
+    assert "resolution: 0.1" in (tmp_path / "m" / "map.yaml").read_text()
+    m = json.loads((tmp_path / "m" / "map.json").read_text())
+    assert len(m["walls"]) == 6  # the L's six walls on the coarser grid too
+    assert "merge_distance = 0.15" in (tmp_path / "m" / "settings.toml").read_text()
+    cfg.write_text("[map]\nresolution = -1\n")
+    res = cli("map", "build", log_path, "-o", tmp_path / "m2", "--config", cfg)
+    assert res.exit_code == 2 and "resolution" in res.stderr

@@ -117,9 +117,12 @@ def build_cmd(
     input: Path = typer.Argument(..., help="CARMEN log (.log/.log.gz) or stereo frame folder."),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     every: int = typer.Option(1, "--every", min=1, help="Use every N-th scan / frame."),
-    resolution: float = typer.Option(0.05, help="Occupancy grid cell (m)."),
+    resolution: float | None = typer.Option(None, help="Occupancy grid cell (m); default 0.05."),
     max_range: float = typer.Option(
         30.0, help="Laser readings at or beyond this distance (m) are no return."
+    ),
+    config: Path | None = typer.Option(
+        None, "--config", help="TOML with a [map] table (as in the settings.toml written)."
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace earlier outputs in --out."),
 ) -> None:
@@ -136,7 +139,9 @@ def build_cmd(
         from navkit.viz.maps import plot_map
 
         _check_out(out, overwrite)
-        settings = MapSettings(resolution=resolution)
+        table = dict(_read_toml(config).get("map", {})) if config is not None else {}
+        table.update({"resolution": resolution} if resolution is not None else {})
+        settings = MapSettings.from_dict(table, source=str(config or "options"))
         seq = read_scan_sequence(input, every=every, max_range=max_range)
         t0 = time.perf_counter()
         if seq.carmen is not None:

@@ -38,7 +38,6 @@ Decisions (also in ``docs/localization.md``):
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import time
 from collections.abc import Mapping, Sequence
@@ -57,6 +56,7 @@ from navkit.geometry import (
     wrap_angle,
 )
 from navkit.geometry._validate import as_points
+from navkit.localization._settings import settings_from_dict
 from navkit.localization.correlation import KnownHeadingSettings, locate_known_heading
 from navkit.localization.field import LikelihoodField
 from navkit.localization.mapping import MapSettings, WallMap, build_map, sample_segments
@@ -135,7 +135,7 @@ class LocalizerSettings:
         """Build from a mapping (e.g. the ``[localizer]`` table of a ``settings.toml``), nested
         tables for ``matcher``, ``known_heading`` (with ``refine``) and ``refinement``; unknown
         keys are rejected."""
-        return _from_dict(cls, data, source, "localizer")
+        return settings_from_dict(cls, data, source, "localizer")
 
     def __post_init__(self) -> None:
         def positive(name: str, v: float) -> None:
@@ -170,34 +170,6 @@ class LocalizerSettings:
                     field=name,
                     expected=f"a {cls.__name__}",
                 )
-
-
-def _from_dict(cls: Any, data: Mapping[str, Any], source: str, where: str) -> Any:
-    """A frozen settings dataclass from a mapping, nested dataclass fields from sub-tables."""
-    if not isinstance(data, Mapping):
-        raise ConfigError(
-            f"is a {type(data).__name__}", source=source, field=where, expected="a table"
-        )
-    known = {f.name: f for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - set(known))
-    if unknown:
-        raise ConfigError(
-            f"unknown keys {unknown}",
-            source=source,
-            field=where,
-            expected=f"keys among {sorted(known)}",
-        )
-    kwargs: dict[str, Any] = {}
-    for name, value in data.items():
-        f = known[name]
-        default = f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
-        if dataclasses.is_dataclass(default) and isinstance(value, Mapping):
-            value = _from_dict(type(default), value, source, f"{where}.{name}")
-        kwargs[name] = value
-    try:
-        return cls(**kwargs)
-    except TypeError as exc:
-        raise ConfigError(str(exc), source=source, field=where, expected="valid settings") from None
 
 
 @dataclass(frozen=True)

@@ -22,8 +22,9 @@ then "simple heuristics" for the room outline. navkit's version:
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -132,6 +133,14 @@ class MapSettings:
     min_relative_density: float = 0.2
     range_sigma_coefficient: float = 0.0
     sigma_floor: float = 0.01
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], source: str = "settings") -> MapSettings:
+        """Build from a mapping (e.g. the ``[map]`` table of a ``settings.toml``), a nested
+        ``segmentation`` table; unknown keys are rejected."""
+        from navkit.localization._settings import settings_from_dict
+
+        return settings_from_dict(cls, data, source, "map")  # type: ignore[no-any-return]
 
     def __post_init__(self) -> None:
         for name in (
