@@ -36,6 +36,7 @@ def sim_rooms(
     from navkit.geometry import points_in_polygon, se2_apply, se2_from_xytheta
     from navkit.localization import (
         Localizer,
+        LocalizerSettings,
         MapSettings,
         MatcherSettings,
         build_map,
@@ -43,7 +44,7 @@ def sim_rooms(
         match_scan,
         reported_poses,
     )
-    from navkit.localization.correlation import KnownHeadingSettings, locate_known_heading
+    from navkit.localization.correlation import KnownHeadingFix, KnownHeadingSettings
     from navkit.localization.refine import occluded_fraction, refine_pose, stereo_range_sigma
     from navkit.localization.visibility import ViewModel, check_visibility
     from navkit.sensors import PinholeCamera, StereoRig
@@ -88,6 +89,13 @@ def sim_rooms(
         acc = evaluate_map(m, truth.walls, truth.corners)
         loc = Localizer(m)  # 4-view fragments: global and tracking fixes
         fld = loc.field
+        # single views at the known heading (paper 3): refined against the walls (weights from
+        # the stereo depth error), in the map's outline, negative information with the view
+        kh_settings = LocalizerSettings(
+            refine=True,
+            range_sigma_coefficient=fp.disparity_sigma / (rig.baseline * rig.camera.fx),
+        )
+        kh_loc = Localizer(m, kh_settings, field=fld, view=view if negative_information else None)
         poses = sample_poses(truth, n_poses, rng)
         pe, he, ok, ms, single = [], [], [], [], []
         # the paper's scenario: one 90-deg view, heading known (paper's correlation / 2D search)
@@ -131,15 +139,8 @@ def sim_rooms(
                     sig1 = stereo_range_sigma(B, rig.baseline, rig.camera.fx)
                     # (a) the paper's method: correlation at the known heading + refinement
                     t0 = time.process_time()
-                    kf = locate_known_heading(
-                        fld,
-                        B,
-                        p[2],
-                        walls=m.walls,
-                        range_sigma=sig1,
-                        region=m.outline,
-                        view=view if negative_information else None,
-                    )
+                    kf = kh_loc.register(B, heading=p[2]).match
+                    assert isinstance(kf, KnownHeadingFix)
                     kh["paper_ms"].append(1e3 * (time.process_time() - t0))
                     e_k = float(np.hypot(*(kf.position - p[:2])))
                     kh["paper_ok"].append(kf.ok)

@@ -12,10 +12,12 @@ from navkit.errors import ConfigError, InputError
 from navkit.geometry import se2_compose, se2_from_xytheta, se2_inverse, se2_to_xytheta, wrap_angle
 from navkit.localization import (
     Fix,
+    KnownHeadingFix,
     LocalizationFailure,
     Localizer,
     LocalizerSettings,
     MatcherSettings,
+    ScanMatch,
     build_map_from_scans,
     evaluate_fixes,
     reported_poses,
@@ -96,6 +98,7 @@ def test_known_heading_in_the_simulated_room(room):
         assert r.pose[2] == p[2]  # the heading is kept
         assert np.hypot(*(r.pose[:2] - p[:2])) < 0.01
         assert r.covariance is not None and r.covariance.shape == (3, 3)
+        assert isinstance(r.match, KnownHeadingFix) and r.match.ok  # the paper's own report
 
 
 def test_a_straight_wall_is_a_failure_along_it(room):
@@ -109,6 +112,7 @@ def test_a_straight_wall_is_a_failure_along_it(room):
     assert r.reason == "elongated peak" and r.free_dof == ("along",)
     assert abs(r.direction[0]) > 0.99  # along the wall (x)
     assert abs(r.candidate[1] - 1.0) < 0.02  # right across the wall
+    assert isinstance(r.match, ScanMatch) and r.match.ambiguity.reason == r.reason
     assert r.method == "tracking"
 
 

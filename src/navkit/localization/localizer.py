@@ -57,9 +57,14 @@ from navkit.geometry import (
 )
 from navkit.geometry._validate import as_points
 from navkit.localization._settings import settings_from_dict
-from navkit.localization.correlation import KnownHeadingSettings, locate_known_heading
+from navkit.localization.correlation import (
+    KnownHeadingFix,
+    KnownHeadingSettings,
+    locate_known_heading,
+)
 from navkit.localization.field import LikelihoodField
 from navkit.localization.mapping import MapSettings, WallMap, build_map, sample_segments
+from navkit.localization.matcher import Fix as ScanMatch
 from navkit.localization.matcher import MatcherSettings, match_scan
 from navkit.localization.refine import PoseRefinement, RefineSettings, refine_pose
 from navkit.localization.visibility import ViewModel
@@ -211,6 +216,10 @@ class Fix:
     refinement : PoseRefinement or None
     seconds : float
         Wall time of :meth:`Localizer.register`.
+    match : ScanMatch or KnownHeadingFix
+        The matcher's own result (:class:`navkit.localization.matcher.Fix` or
+        :class:`~navkit.localization.correlation.KnownHeadingFix`: the ambiguity report, the
+        correlation surface, the correlation-only position ...).
     """
 
     pose: NDArray[np.float64]
@@ -227,6 +236,7 @@ class Fix:
     exact: bool
     refinement: PoseRefinement | None
     seconds: float
+    match: ScanMatch | KnownHeadingFix
 
     ok: ClassVar[bool] = True
     ambiguous: ClassVar[bool] = False
@@ -282,6 +292,8 @@ class LocalizationFailure:
     exact : bool
     refinement : PoseRefinement or None
     seconds : float
+    match : ScanMatch, KnownHeadingFix or None
+        The matcher's own result (None with too few points).
     """
 
     reason: str
@@ -298,6 +310,7 @@ class LocalizationFailure:
     exact: bool = True
     refinement: PoseRefinement | None = None
     seconds: float = 0.0
+    match: ScanMatch | KnownHeadingFix | None = None
 
     ok: ClassVar[bool] = False
     used: ClassVar[bool] = False
@@ -321,6 +334,7 @@ class _Match:
     second_score: float
     exact: bool
     refinement: PoseRefinement | None
+    raw: ScanMatch | KnownHeadingFix
 
 
 def _free_dof(reason: str, heading_known: bool) -> tuple[str, ...]:
@@ -537,6 +551,7 @@ class Localizer:
             exact=m.exact,
             refinement=rf,
             seconds=time.perf_counter() - t0,
+            match=m.raw,
         )
 
     # ------------------------------------------------------------------ stages
@@ -586,7 +601,16 @@ class Localizer:
                 pose = rf.pose
         reason = a.reason if a.ambiguous else ("" if fix.ok else "low score")
         return _Match(
-            pose, fix.score, fix.ok, reason, a.direction, a.extent, a.second_score, fix.exact, rf
+            pose,
+            fix.score,
+            fix.ok,
+            reason,
+            a.direction,
+            a.extent,
+            a.second_score,
+            fix.exact,
+            rf,
+            fix,
         )
 
     def _known_heading(self, P: NDArray[np.float64], heading: float) -> _Match:
@@ -614,6 +638,7 @@ class Localizer:
             kf.second_score,
             True,  # the FFT correlation scores every offset
             kf.refinement,
+            kf,
         )
 
     def _fail(
@@ -647,6 +672,7 @@ class Localizer:
             exact=True if m is None else m.exact,
             refinement=None if m is None else m.refinement,
             seconds=time.perf_counter() - t0,
+            match=None if m is None else m.raw,
         )
 
     def _set(self, pose: NDArray[np.float64]) -> None:
