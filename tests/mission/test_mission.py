@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from navkit.mission import mission_metrics
-from navkit.mission.obstacle_map import _distance_to_polygon, _rect
+from navkit.obstacles.evaluate import distance_to_polygon as _distance_to_polygon
+from navkit.sim.footprints import _rect
 
 
 def test_every_obstacle_larger_than_the_robot_is_found(mission_run):

@@ -2,7 +2,7 @@
 
 A simulated unicycle robot with a spinning lidar, an RGB-D camera and visual odometry is driven
 out by a scripted operator (:mod:`navkit.mission.driver`); every lidar scan's obstacles (paper 1)
-go into a global 2D obstacle map (:mod:`navkit.mission.obstacle_map`); plane-based motion
+go into a global 2D obstacle map (:class:`navkit.obstacles.ObstacleMapper`); plane-based motion
 (paper 2) corrects the VO; a room map built on the first visit gives correlation fixes later
 (paper 3); the path memory (paper 4) records the trajectory and, when the link is lost, brings the
 robot back along it, stopping if the map shows the way blocked. :func:`run_mission` runs it,
@@ -13,7 +13,6 @@ robot back along it, stopping if the map shows the way blocked. :func:`run_missi
 from navkit.mission.demo import run_demo, run_scene_file, run_to_dir
 from navkit.mission.driver import PurePursuit
 from navkit.mission.metrics import mission_metrics
-from navkit.mission.obstacle_map import Footprint, ObstacleGrid, score_obstacles, true_footprints
 from navkit.mission.run import Fix2D, MissionLog, PlaneStep, run_mission
 from navkit.mission.settings import (
     BlockSettings,
@@ -34,12 +33,10 @@ __all__ = [
     "BlockSettings",
     "CameraSettings",
     "Fix2D",
-    "Footprint",
     "FusionSettings",
     "LidarSettings",
     "MissionLog",
     "MissionSettings",
-    "ObstacleGrid",
     "ObstacleMapSettings",
     "PlaneStep",
     "PurePursuit",
@@ -54,6 +51,4 @@ __all__ = [
     "run_mission",
     "run_scene_file",
     "run_to_dir",
-    "score_obstacles",
-    "true_footprints",
 ]

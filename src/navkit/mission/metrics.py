@@ -9,8 +9,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from navkit.geometry import wrap_angle
-from navkit.mission.obstacle_map import score_obstacles, true_footprints
 from navkit.mission.run import MissionLog
+from navkit.obstacles.evaluate import score_obstacle_map
+from navkit.sim.footprints import true_footprints
 
 __all__ = ["mission_metrics", "room_truth", "timing_table"]
 
@@ -221,8 +222,8 @@ def mission_metrics(lg: MissionLog) -> dict[str, Any]:
     fps = true_footprints(lg.scene)
     grid = lg.obstacle_grid
     assert grid is not None
-    obst = score_obstacles(
-        grid,
+    obst = score_obstacle_map(
+        grid.grid(),
         fps,
         lg.seen_primitives,
         min_height=0.2,

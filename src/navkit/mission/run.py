@@ -38,11 +38,12 @@ from numpy.typing import NDArray
 from navkit.errors import ConfigError, InputError, NavkitError
 from navkit.geometry import R_BODY_FROM_OPTICAL, se3_from_rt, se3_inverse, wrap_angle
 from navkit.mission.driver import PurePursuit, polyline_arclength, polyline_point
-from navkit.mission.obstacle_map import ObstacleGrid
 from navkit.mission.settings import MissionSettings, Route
+from navkit.obstacles.mapper import MapperSettings, ObstacleMapper, scan_points_2d
 
 if TYPE_CHECKING:
     from navkit.localization.matcher import Fix
+    from navkit.path.detour import DetourFailure
 
 __all__ = ["Fix2D", "MissionLog", "PlaneStep", "run_mission"]
 
@@ -133,7 +134,7 @@ class MissionLog:
     estimate: NDArray[np.float64]
     path: Any = None
     path_summary: dict[str, Any] = field(default_factory=dict)
-    obstacle_grid: ObstacleGrid | None = None
+    obstacle_grid: ObstacleMapper | None = None
     seen_primitives: set[int] = field(default_factory=set)
     plane_steps: list[PlaneStep] = field(default_factory=list)
     plane_points: list[NDArray[np.float64]] = field(default_factory=list)
@@ -333,13 +334,10 @@ def run_mission(
     lo, hi = scene.bounds()
     pts = np.vstack([lo[:2], hi[:2], W, start[None, :2]])
     M = s.obstacle_map
-    grid = ObstacleGrid(
+    grid = ObstacleMapper(
         pts.min(0) - M.margin,
         pts.max(0) + M.margin,
-        M.resolution,
-        M.min_hits,
-        M.min_ratio,
-        M.recent_scans,
+        MapperSettings(M.resolution, M.min_hits, M.min_ratio, M.recent_scans, M.max_range),
     )
     recorder = OnlineApproximator(ApproximatorSettings(tolerance=s.path_tolerance))
 
@@ -495,15 +493,10 @@ def run_mission(
             lg.seen_primitives.update(np.unique(sim.hit_index[in_range]).tolist())
             with _Timer(T_, "obstacles_detect"):
                 det = detect_obstacles(sim.scan)
-            P = det.points
-            r2 = P[..., 0] ** 2 + P[..., 1] ** 2
-            near = det.valid & (r2 <= M.max_range**2)
-            # obstacle vertices only (vertex_obstacle also marks the shadows an obstacle owns)
-            is_obst = (det.vertex_labels == OBSTACLE_LABEL) & (det.vertex_obstacle > 0)
             # on the way back: correlation fix of this scan's obstacles in the outbound obstacle
             # map (paper 3's matching, on the map the stored path was recorded with)
             if phase == RETURN and return_field is not None and k % every_cam == 0:
-                body = P[near & is_obst][:, :2]
+                body, _ = scan_points_2d(det, np.eye(3), M.max_range)
                 if len(body) >= F.map_fix_min_points:
                     with _Timer(T_, "localize_obstacle_map"):
                         fx = match_scan(return_field, body, prior=est, settings=map_matcher)
@@ -511,10 +504,7 @@ def run_mission(
                         fx, est, truth, t, F.map_fix_gate_m, F.map_fix_weight, lg.map_fixes
                     )
             with _Timer(T_, "obstacles_fuse"):
-                Tm = _se2(est)
-                obst = P[near & is_obst][:, :2] @ Tm[:2, :2].T + Tm[:2, 2]
-                seen = P[near][:, :2] @ Tm[:2, :2].T + Tm[:2, 2]
-                grid.add_scan(obst, seen)
+                grid.add_scan(det, _se2(est))
             # the room (laser variant): map on the first visit, localization later
             if F.room_sensor == "lidar":
                 B = sim.scan.points("body")[sim.scan.valid]
@@ -731,6 +721,7 @@ class _Detouring:
     block_dist: float  # the blocked point, metres along the stored path from s_from
     s_rejoin: float
     stop_radius: float
+    ok = True
 
     def done(self, est: NDArray[np.float64]) -> bool:
         """The estimate is within the stop radius of the rejoin point."""
@@ -743,14 +734,14 @@ class _Detouring:
 
 
 def _plan_round(
-    grid: ObstacleGrid,
+    grid: ObstacleMapper,
     est: NDArray[np.float64],
     path: Any,
     s_from: float,
     block_dist: float | None,
     s: MissionSettings,
     half_width: float,
-) -> _Detouring | NavkitError:
+) -> _Detouring | DetourFailure:
     """Plan a way round the block on the obstacle map (:func:`navkit.path.detour.plan_detour`):
     the confirmed cells and those of the recent scans, inflated by the corridor half-width plus
     ``block.detour_margin``; the stored path from arc length ``s_from`` towards home is searched
@@ -772,19 +763,18 @@ def _plan_round(
         search_length=B.detour_search,
         rejoin_offset=0.5,
     )
-    try:
-        d = plan_detour(
-            grid.occupied | grid.recent_occupied,
-            grid.resolution,
-            grid.origin,
-            est[:2],
-            path.position(ss),
-            settings,
-            block_index=bi,
-        )
-    except DetourFailure as exc:
-        log.info("%s", exc)
-        return exc
+    d = plan_detour(
+        grid.occupied | grid.recent_occupied,
+        grid.resolution,
+        grid.origin,
+        est[:2],
+        path.position(ss),
+        settings,
+        block_index=bi,
+    )
+    if isinstance(d, DetourFailure):
+        log.info("%s", d)
+        return d
     stop = s.return_stop_radius
     ctrl = ReturnController(
         polyline_spline(d.points[::-1]),

@@ -50,7 +50,7 @@ def _finish(ax: Any, title: str) -> None:
 
 def figure_obstacles(lg: Any, score: dict[str, Any]) -> Any:
     """World with the true obstacles (left) and the fused obstacle map, found vs phantom (right)."""
-    from navkit.mission.obstacle_map import true_footprints
+    from navkit.sim.footprints import true_footprints
 
     plt = _plt()
     fps = true_footprints(lg.scene)
@@ -126,7 +126,7 @@ def figure_obstacles(lg: Any, score: dict[str, Any]) -> Any:
 
 def figure_trajectories(lg: Any) -> Any:
     """Truth, raw VO, corrected estimate, stored spline, and the return."""
-    from navkit.mission.obstacle_map import true_footprints
+    from navkit.sim.footprints import true_footprints
 
     plt = _plt()
     fig, ax = plt.subplots(figsize=(12, 7.5))
@@ -164,10 +164,9 @@ def figure_trajectories(lg: Any) -> Any:
             label="link lost",
         )
     if lg.dropped_obstacle is not None:
-        from navkit.mission.obstacle_map import _rect
+        from navkit.sim.footprints import footprint
 
-        b = lg.dropped_obstacle
-        poly = _rect(np.asarray(b.center), np.asarray(b.size), float(b.yaw))
+        poly = footprint(lg.dropped_obstacle).polygon  # type: ignore[union-attr]
         ax.fill(*poly.T, color="tab:blue", alpha=0.6, label="obstacle dropped on the way back")
     for i, (pts, d) in enumerate(zip(lg.detour_paths, lg.detours, strict=True)):
         # the detour as first planned (estimate frame), and where it rejoined the stored path
@@ -247,7 +246,7 @@ def figure_errors(lg: Any) -> Any:
 
 def figure_planes(lg: Any) -> Any:
     """The plane map: planes seen by the RGB-D camera, placed with the corrected estimate."""
-    from navkit.mission.obstacle_map import true_footprints
+    from navkit.sim.footprints import true_footprints
 
     plt = _plt()
     fig, ax = plt.subplots(figsize=(12, 6.5))
