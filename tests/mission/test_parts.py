@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from navkit.errors import ConfigError, FormatError
 from navkit.mission import CameraSettings, MissionSettings, PurePursuit, load_route
 from navkit.mission.driver import polyline_point
-from navkit.mission.run import blend, compose, relative
+from navkit.mission.pose2d import blend, compose, relative
 from navkit.obstacles import MapperSettings, ObstacleMapper, score_obstacle_map
 from navkit.obstacles.evaluate import distance_to_polygon as _distance_to_polygon
 from navkit.sim import true_footprints, unicycle_step
@@ -163,11 +163,11 @@ def test_settings_reject_bad_rates_and_keys(tmp_path):
 
 
 def test_detour_on_the_obstacle_map_avoids_known_and_new_obstacles():
-    """The mission's planning step (``_plan_round``) on an ObstacleMapper: the confirmed cells of
+    """The return's planning step (``Return._plan``) on an ObstacleMapper: the confirmed cells of
     the way out and the recent cells of a new box are both avoided, the rejoin lies on the
     stored path beyond the box, and the controller on the detour starts at the robot."""
-    from navkit.mission.run import _plan_round
-    from navkit.path import approximate
+    from navkit.mission.run import _return_settings
+    from navkit.path import Return, approximate
 
     s = MissionSettings()
     grid = ObstacleMapper(
@@ -182,7 +182,8 @@ def test_detour_on_the_obstacle_map_avoids_known_and_new_obstacles():
     path = approximate(np.c_[np.linspace(0.0, 12.0, 241), np.zeros(241)]).spline
     s_now = 9.0
     half = 0.5 * s.robot.width + s.block.clearance
-    got = _plan_round(grid, np.array([9.0, 0.0, np.pi]), path, s_now, 2.6, s, half)
+    ret = Return(path, _return_settings(s))
+    got = ret._plan(grid, np.array([9.0, 0.0, np.pi]), s_now, 2.6)
     assert got.ok, got
     d = got.detour
     inflation = half + s.block.detour_margin
@@ -211,5 +212,5 @@ def test_detour_on_the_obstacle_map_avoids_known_and_new_obstacles():
     # a closed way (the box grown to the wall and far south) -> the planner's reason
     south = np.c_[np.full(90, 6.0), np.linspace(-5.0, 1.3, 90)]
     grid.add_points(np.vstack([wall, box, south]), wall)
-    fail = _plan_round(grid, np.array([9.0, 0.0, np.pi]), path, s_now, 2.6, s, half)
+    fail = ret._plan(grid, np.array([9.0, 0.0, np.pi]), s_now, 2.6)
     assert not fail.ok and "no detour" in str(fail)

@@ -13,7 +13,7 @@ robot back along it, stopping if the map shows the way blocked. :func:`run_missi
 from navkit.mission.demo import run_demo, run_scene_file, run_to_dir
 from navkit.mission.driver import PurePursuit
 from navkit.mission.metrics import mission_metrics
-from navkit.mission.run import Fix2D, MissionLog, PlaneStep, run_mission
+from navkit.mission.run import Fix2D, Mission, MissionLog, PlaneStep, run_mission
 from navkit.mission.settings import (
     BlockSettings,
     CameraSettings,
@@ -35,6 +35,7 @@ __all__ = [
     "Fix2D",
     "FusionSettings",
     "LidarSettings",
+    "Mission",
     "MissionLog",
     "MissionSettings",
     "ObstacleMapSettings",

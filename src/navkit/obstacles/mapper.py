@@ -206,7 +206,7 @@ class ObstacleMapper:
             + 1
         )
         if size.shape != (2,) or (size < 1).any():
-            raise InputError(f"lo={lo}, hi={hi}", field="lo/hi", expected="hi >= lo, (2,) each")
+            raise InputError(f"lo={lo!r}, hi={hi!r}", field="lo/hi", expected="hi >= lo, (2,) each")
         self.shape = (int(size[1]), int(size[0]))  # rows = y, columns = x
         self.hits = np.zeros(self.shape, dtype=np.int32)
         self.seen = np.zeros(self.shape, dtype=np.int32)
