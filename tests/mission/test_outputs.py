@@ -12,6 +12,7 @@ import pytest
 from navkit.mission import mission_metrics
 from navkit.mission.demo import write_outputs
 from navkit.sim import scene_to_toml
+from navkit.viz.mission import write_report
 
 from .conftest import small_scene
 
@@ -20,7 +21,7 @@ from .conftest import small_scene
 def outputs(mission_run, tmp_path_factory):
     out = tmp_path_factory.mktemp("mission_out")
     metrics = mission_metrics(mission_run)
-    files = write_outputs(mission_run, metrics, out)
+    files = write_outputs(mission_run, metrics, out, report=write_report)
     return out, files, metrics
 
 

@@ -49,13 +49,20 @@ def summary_of(metrics: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def write_outputs(lg: Any, metrics: dict[str, Any], out: Path) -> list[str]:
-    """Write the report, the metrics and the maps of a run into ``out``; returns the file names."""
+ReportFn = Callable[[Any, dict[str, Any], Path], Any]
+"""``report(log, metrics, path)`` writes ``report.html`` (:func:`navkit.viz.mission.write_report`;
+the CLI passes it: the mission never imports the plotting layer)."""
+
+
+def write_outputs(
+    lg: Any, metrics: dict[str, Any], out: Path, report: ReportFn | None = None
+) -> list[str]:
+    """Write the metrics, the maps and (with ``report``) the report of a run into ``out``;
+    returns the file names."""
     from navkit.io.atomic import write_json
     from navkit.io.maps import write_occupancy_grid
     from navkit.io.pathjson import write_path_json
     from navkit.io.trajectory import Trajectory, write_tum
-    from navkit.viz.mission import write_report
 
     files = []
     write_json(out / "metrics.json", metrics)
@@ -76,32 +83,10 @@ def write_outputs(lg: Any, metrics: dict[str, Any], out: Path) -> list[str]:
     occ[g.occupied] = 100
     write_occupancy_grid(out / "obstacle_map", occ, g.resolution, g.origin)
     files += ["obstacle_map.pgm", "obstacle_map.yaml"]
-    write_report(lg, metrics, out / "report.html")
-    files.append("report.html")
+    if report is not None:
+        report(lg, metrics, out / "report.html")
+        files.append("report.html")
     return files
-
-
-def _write_run_files(out: Path, settings: dict[str, Any], summary: dict[str, Any]) -> None:
-    """``settings.toml`` and ``summary.json`` as every navkit command writes them (the mission may
-    not import the CLI layer, so this mirrors ``navkit.cli.common.write_run_files``)."""
-    import sys
-
-    import tomli_w
-
-    from navkit import __version__
-    from navkit.io.atomic import to_jsonable, write_json, write_text
-
-    def clean(value: Any) -> Any:  # TOML has no null
-        if isinstance(value, dict):
-            return {k: clean(v) for k, v in value.items() if v is not None}
-        if isinstance(value, list):
-            return [clean(v) for v in value if v is not None]
-        return value
-
-    write_text(out / "settings.toml", tomli_w.dumps(clean(to_jsonable(settings))))
-    write_json(
-        out / "summary.json", {"navkit_version": __version__, "argv": sys.argv[1:], **summary}
-    )
 
 
 def run_to_dir(
@@ -110,6 +95,7 @@ def run_to_dir(
     settings: MissionSettings,
     out: str | Path,
     progress: ProgressFn | None = None,
+    report: ReportFn | None = None,
 ) -> dict[str, Any]:
     """Run the mission and write every output into ``out``; returns the metrics."""
     from navkit.errors import InputError
@@ -126,15 +112,15 @@ def run_to_dir(
     lg = run_mission(scene, route, settings, progress)
     metrics = mission_metrics(lg)
     metrics["wall_seconds_mission"] = time.perf_counter() - t0
-    files = write_outputs(lg, metrics, out)
+    files = write_outputs(lg, metrics, out, report)
     metrics["wall_seconds"] = time.perf_counter() - t0
     # the metrics file holds the total time too (rewritten atomically with it)
-    from navkit.io.atomic import write_json
+    from navkit.io.atomic import write_json, write_run_files
 
     write_json(out / "metrics.json", metrics)
     summary = summary_of(metrics)
     summary["outputs"] = [*files, "settings.toml", "summary.json"]
-    _write_run_files(out, {"mission": settings, "route": route, "scene": scene.name}, summary)
+    write_run_files(out, {"mission": settings, "route": route, "scene": scene.name}, summary)
     return metrics
 
 
@@ -147,6 +133,7 @@ def run_scene_file(
     small: bool = False,
     start: tuple[float, float, float] | None = None,
     progress: ProgressFn | None = None,
+    report: ReportFn | None = None,
 ) -> dict[str, Any]:
     """``navkit mission run``: a scene TOML (or built-in name) and its mission file.
 
@@ -178,7 +165,7 @@ def run_scene_file(
     settings = base.with_overrides(overrides, source=str(mission))
     if seed is not None:
         settings = dataclasses.replace(settings, seed=int(seed))
-    return run_to_dir(scene, route, settings, out, progress)
+    return run_to_dir(scene, route, settings, out, progress, report)
 
 
 def run_demo(
@@ -189,6 +176,7 @@ def run_demo(
     scene: str | Path = "yard",
     small: bool = False,
     start: tuple[float, float, float] | None = None,
+    report: ReportFn | None = None,
 ) -> dict[str, Any]:
     """The built-in mission (``navkit demo``): the yard world and its route, into ``out``.
 
@@ -204,4 +192,6 @@ def run_demo(
         Another built-in or TOML world (with its mission file), reduced resolutions, another
         start pose.
     """
-    return run_scene_file(scene, out, seed=seed, small=small, start=start, progress=progress)
+    return run_scene_file(
+        scene, out, seed=seed, small=small, start=start, progress=progress, report=report
+    )
