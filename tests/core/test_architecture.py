@@ -17,9 +17,7 @@ ALLOWED = {
     **{c: CORE for c in CAPABILITIES},  # and no other capability
     "io": CORE | CAPABILITIES,
     "sim": CORE | CAPABILITIES,
-    # viz draws the mission's log and takes its truth helpers (metrics.room_truth); mission
-    # never imports viz (the CLI joins them), so there is no cycle
-    "viz": CORE | CAPABILITIES | {"io", "sim", "mission"},
+    "viz": CORE | CAPABILITIES | {"io", "sim"},
     "mission": CORE | CAPABILITIES | {"io", "sim"},
     "experiments": CORE | CAPABILITIES | {"io", "sim"},
     "runtime": CORE | CAPABILITIES | {"io", "sim", "mission"},

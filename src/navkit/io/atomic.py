@@ -20,6 +20,7 @@ __all__ = [
     "atomic_path",
     "atomic_write",
     "read_json",
+    "settings_to_toml",
     "to_jsonable",
     "write_json",
     "write_run_files",
@@ -113,15 +114,10 @@ def read_json(path: str | os.PathLike[str], *, what: str = "a JSON file") -> Any
         raise FormatError(f"not valid JSON ({exc})", source=p, expected=what) from None
 
 
-def write_run_files(out: str | os.PathLike[str], settings: Any, summary: dict[str, Any]) -> None:
-    """Write ``settings.toml`` (the resolved settings; TOML has no null, so None values are left
-    out) and ``summary.json`` (with the navkit version and the command line) into ``out``
-    atomically: what every navkit run writes next to its outputs."""
-    import sys
-
+def settings_to_toml(settings: Any) -> str:
+    """Settings (dataclasses, dicts, arrays) as TOML text; TOML has no null, so None values are
+    left out."""
     import tomli_w
-
-    from navkit import __version__
 
     def clean(value: Any) -> Any:
         if isinstance(value, dict):
@@ -130,9 +126,20 @@ def write_run_files(out: str | os.PathLike[str], settings: Any, summary: dict[st
             return [clean(v) for v in value if v is not None]
         return value
 
+    return tomli_w.dumps(clean(to_jsonable(settings)))
+
+
+def write_run_files(out: str | os.PathLike[str], settings: Any, summary: dict[str, Any]) -> None:
+    """Write ``settings.toml`` (the resolved settings; TOML has no null, so None values are left
+    out) and ``summary.json`` (with the navkit version and the command line) into ``out``
+    atomically: what every navkit run writes next to its outputs."""
+    import sys
+
+    from navkit import __version__
+
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    write_text(out / "settings.toml", tomli_w.dumps(clean(to_jsonable(settings))))
+    write_text(out / "settings.toml", settings_to_toml(settings))
     write_json(
         out / "summary.json", {"navkit_version": __version__, "argv": sys.argv[1:], **summary}
     )

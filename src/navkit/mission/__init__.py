@@ -5,7 +5,9 @@ out by a scripted operator (:mod:`navkit.mission.driver`); every lidar scan's ob
 go into a global 2D obstacle map (:class:`navkit.obstacles.ObstacleMapper`); plane-based motion
 (paper 2) corrects the VO; a room map built on the first visit gives correlation fixes later
 (paper 3); the path memory (paper 4) records the trajectory and, when the link is lost, brings the
-robot back along it, stopping if the map shows the way blocked. :func:`run_mission` runs it,
+robot back along it, round a block or stopping if there is no way round. :class:`Mission` is the
+composer (:meth:`Mission.step`: one line per capability, each an online object);
+:func:`run_mission` runs it,
 :func:`mission_metrics` scores it against the truth, :func:`run_to_dir` / :func:`run_demo` write
 ``report.html``, ``metrics.json`` and the maps.
 """

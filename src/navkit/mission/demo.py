@@ -2,7 +2,8 @@
 
 Outputs of :func:`run_to_dir` (every file written atomically):
 
-- ``report.html`` - one self-contained page (figures embedded);
+- ``report.html`` - one self-contained page (figures embedded), when a ``report`` writer is
+  given (the CLI passes :func:`navkit.viz.mission.write_report`; the mission never imports viz);
 - ``metrics.json`` - the mission's figures (:func:`navkit.mission.metrics.mission_metrics`);
 - ``settings.toml`` - the resolved settings and the route; ``summary.json`` - the key figures;
 - ``truth.tum``, ``vo.tum``, ``estimate.tum`` - trajectories (TUM format, z = 0);

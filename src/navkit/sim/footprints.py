@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Footprint", "footprint", "true_footprints"]
+__all__ = ["Footprint", "footprint", "room_walls", "true_footprints"]
 
 
 @dataclass(frozen=True)
@@ -112,4 +112,28 @@ def true_footprints(scene: Any, wall_thickness: float = 0.1) -> list[Footprint]:
         f = footprint(p, scene, index=k, wall_thickness=wall_thickness)
         if f is not None:
             out.append(f)
+    return out
+
+
+def room_walls(
+    scene: Any, room: tuple[float, float, float, float] | None, margin: float = 0.3
+) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """The true room walls: base segments ``(start, end)`` of the scene's walls inside the room."""
+    if room is None:
+        return []
+    x0, y0, x1, y1 = room
+    out = []
+    for p in scene.primitives:
+        if p.kind != "wall":
+            continue
+        o, u = np.asarray(p.origin, float)[:2], np.asarray(p.u, float)[:2]
+        a, b = o, o + u
+        if np.hypot(*u) < 1e-9:  # vertical u: the base runs along v
+            b = o + np.asarray(p.v, float)[:2]
+        inside = all(
+            x0 - margin <= q[0] <= x1 + margin and y0 - margin <= q[1] <= y1 + margin
+            for q in (a, b)
+        )
+        if inside:
+            out.append((a, b))
     return out
