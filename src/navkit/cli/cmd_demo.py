@@ -32,6 +32,12 @@ def register(app: typer.Typer) -> None:
         overwrite: bool = typer.Option(
             False, "--overwrite", help="Replace the outputs of an earlier run in --out."
         ),
+        config: Path = typer.Option(
+            None,  # type: ignore[assignment]
+            "--config",
+            help="Settings TOML: its [mission] table (as in the settings.toml a run writes) "
+            "overrides the mission's settings.",
+        ),
         seed: int = typer.Option(0, "--seed", help="Seed of the sensor noise."),
         scene: str = typer.Option(
             "yard", "--scene", help="Built-in world name or a scene TOML file."
@@ -67,7 +73,14 @@ def register(app: typer.Typer) -> None:
             settings = DemoSettings.make(scene, seed, small, pose)
             # the mission (report.html, metrics.json, maps) ...
             metrics = run_demo(
-                out, seed, progress, scene=scene, small=small, start=pose, report=write_report
+                out,
+                seed,
+                progress,
+                scene=scene,
+                small=small,
+                start=pose,
+                report=write_report,
+                config=config,
             )
             mission_summary = read_json(out / "summary.json")
             mission_settings = tomllib.loads((out / "settings.toml").read_text(encoding="utf-8"))

@@ -55,6 +55,12 @@ def register(app: typer.Typer) -> None:
             help="Mission TOML (a route table: waypoints, room; a settings table: overrides). "
             "Default: <scene>.mission.toml beside the scene.",
         ),
+        config: Path = typer.Option(
+            None,  # type: ignore[assignment]
+            "--config",
+            help="Settings TOML: its [mission] table (as in the settings.toml a run writes) "
+            "overrides the mission file's settings.",
+        ),
         seed: int = typer.Option(None, "--seed", help="Seed of every random draw."),  # type: ignore[assignment]
         small: bool = typer.Option(
             False, "--small", help="Reduced sensor resolutions (quick runs)."
@@ -80,6 +86,7 @@ def register(app: typer.Typer) -> None:
                 small=small,
                 progress=_progress(),
                 report=write_report,
+                config=config,
             )
             r = m["return"]
             typer.echo(

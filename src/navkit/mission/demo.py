@@ -22,7 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from navkit.mission.settings import MissionSettings, Route, builtin_route_path, load_route
+from navkit.mission.settings import (
+    MissionSettings,
+    Route,
+    builtin_route_path,
+    load_route,
+    read_config,
+)
 
 __all__ = ["run_demo", "run_scene_file", "run_to_dir", "summary_of", "write_outputs"]
 
@@ -135,12 +141,15 @@ def run_scene_file(
     start: tuple[float, float, float] | None = None,
     progress: ProgressFn | None = None,
     report: ReportFn | None = None,
+    config: str | Path | None = None,
 ) -> dict[str, Any]:
     """``navkit mission run``: a scene TOML (or built-in name) and its mission file.
 
     The mission file is ``mission`` if given, else ``<scene stem>.mission.toml`` beside the
     scene, else the built-in ``mission_<name>.toml`` for a built-in scene. ``start`` overrides
     the scene's start pose ``(x, y, theta)`` (the operator's place; the route is joined to it).
+    ``config``: a settings TOML whose ``[mission]`` table overrides the mission file's settings
+    (:func:`~navkit.mission.settings.read_config`); ``seed`` overrides both.
     """
     from navkit.errors import DataNotFoundError
     from navkit.sim import Scene, load_scene
@@ -164,6 +173,8 @@ def run_scene_file(
     route, overrides = load_route(mission)
     base = MissionSettings.small() if small else MissionSettings()
     settings = base.with_overrides(overrides, source=str(mission))
+    if config is not None:
+        settings = settings.with_overrides(read_config(config), source=str(config))
     if seed is not None:
         settings = dataclasses.replace(settings, seed=int(seed))
     return run_to_dir(scene, route, settings, out, progress, report)
@@ -178,6 +189,7 @@ def run_demo(
     small: bool = False,
     start: tuple[float, float, float] | None = None,
     report: ReportFn | None = None,
+    config: str | Path | None = None,
 ) -> dict[str, Any]:
     """The built-in mission (``navkit demo``): the yard world and its route, into ``out``.
 
@@ -192,7 +204,16 @@ def run_demo(
     scene, small, start
         Another built-in or TOML world (with its mission file), reduced resolutions, another
         start pose.
+    report, config
+        See :func:`run_scene_file`.
     """
     return run_scene_file(
-        scene, out, seed=seed, small=small, start=start, progress=progress, report=report
+        scene,
+        out,
+        seed=seed,
+        small=small,
+        start=start,
+        progress=progress,
+        report=report,
+        config=config,
     )

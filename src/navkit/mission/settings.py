@@ -47,6 +47,7 @@ __all__ = [
     "VOSettings",
     "builtin_route_path",
     "load_route",
+    "read_config",
 ]
 
 
@@ -446,6 +447,24 @@ def _replace(obj: Any, data: dict[str, Any], source: str, prefix: str) -> Any:
                     expected=f"a {type(cur).__name__}",
                 ) from None
     return dataclasses.replace(obj, **changes)
+
+
+def read_config(path: str | Path) -> dict[str, Any]:
+    """The ``[mission]`` table of a settings TOML (``--config``; the table a run writes into its
+    ``settings.toml``), as overrides for :meth:`MissionSettings.with_overrides`. Other tables
+    (``route``, ``scene``, the demo's sensors) are ignored: the route comes from the mission file.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise DataNotFoundError(f"{p}: no such settings file (--config)")
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise FormatError(f"not valid TOML ({exc})", source=p, expected="a settings TOML") from None
+    table = data.get("mission", {})
+    if not isinstance(table, dict):
+        raise ConfigError(f"is {table!r}", source=str(p), field="mission", expected="a table")
+    return table
 
 
 def builtin_route_path(scene_name: str) -> Path:
