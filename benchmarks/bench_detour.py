@@ -177,8 +177,7 @@ def _mission_rows() -> list[Row]:
         run_mission,
     )
     from navkit.obstacles.evaluate import distance_to_polygon as _distance_to_polygon
-    from navkit.sim import load_scene
-    from navkit.sim.footprints import _rect
+    from navkit.sim import footprint, load_scene
 
     route, overrides = load_route(builtin_route_path("yard"))
     route = dataclasses.replace(route, block_at=5.0)
@@ -188,7 +187,7 @@ def _mission_rows() -> list[Row]:
         lg = run_mission(load_scene("yard"), route, s)
         m = mission_metrics(lg)["return"]
         box = lg.dropped_obstacle
-        poly = _rect(np.asarray(box.center), np.asarray(box.size), float(box.yaw))
+        poly = footprint(box).polygon
         d_box = float(_distance_to_polygon(lg.truth[lg.phase == 1, :2], poly).min())
         rows.append(
             Row(

@@ -7,7 +7,7 @@ import pytest
 
 from navkit.mission import mission_metrics
 from navkit.obstacles.evaluate import distance_to_polygon as _distance_to_polygon
-from navkit.sim.footprints import _rect
+from navkit.sim import footprint
 
 
 def test_every_obstacle_larger_than_the_robot_is_found(mission_run):
@@ -95,7 +95,7 @@ def test_room_map_and_fixes(mission_run):
 
 
 def _box_outline(box) -> np.ndarray:
-    return _rect(np.asarray(box.center), np.asarray(box.size), float(box.yaw))
+    return footprint(box).polygon
 
 
 def _check_block_is_the_box(run, point_xy, t_block) -> None:
