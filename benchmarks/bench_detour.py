@@ -106,7 +106,7 @@ def _way_round_disc(a: np.ndarray, b: np.ndarray, c: np.ndarray, rho: float) -> 
 
 
 def _planner_rows() -> list[Row]:
-    from navkit.path.detour import DetourSettings, clearance_map, plan_detour
+    from navkit.path.detour import DetourFailure, DetourSettings, clearance_map, plan_detour
 
     rows = []
     cfg = DetourSettings(robot_radius=0.3, margin=0.2, search_length=12.0)
@@ -114,6 +114,8 @@ def _planner_rows() -> list[Row]:
         occ, origin, path = _world(clutter)
         start = np.array([0.0, 0.0])
         d = plan_detour(occ, RES, origin, start, path, cfg)
+        if isinstance(d, DetourFailure):
+            raise RuntimeError(f"benchmark world has no detour: {d}")
         allowed = clearance_map(occ, RES) >= cfg.inflation
         s_cell = tuple(int(v) for v in np.floor((start - origin) / RES).astype(int)[::-1])
         g_cell = tuple(int(v) for v in np.floor((d.rejoin - origin) / RES).astype(int)[::-1])
@@ -174,8 +176,8 @@ def _mission_rows() -> list[Row]:
         mission_metrics,
         run_mission,
     )
-    from navkit.mission.obstacle_map import _distance_to_polygon, _rect
-    from navkit.sim import load_scene
+    from navkit.obstacles.evaluate import distance_to_polygon as _distance_to_polygon
+    from navkit.sim import footprint, load_scene
 
     route, overrides = load_route(builtin_route_path("yard"))
     route = dataclasses.replace(route, block_at=5.0)
@@ -185,7 +187,7 @@ def _mission_rows() -> list[Row]:
         lg = run_mission(load_scene("yard"), route, s)
         m = mission_metrics(lg)["return"]
         box = lg.dropped_obstacle
-        poly = _rect(np.asarray(box.center), np.asarray(box.size), float(box.yaw))
+        poly = footprint(box).polygon
         d_box = float(_distance_to_polygon(lg.truth[lg.phase == 1, :2], poly).min())
         rows.append(
             Row(

@@ -12,6 +12,7 @@ import pytest
 from navkit.mission import mission_metrics
 from navkit.mission.demo import write_outputs
 from navkit.sim import scene_to_toml
+from navkit.viz.mission import write_report
 
 from .conftest import small_scene
 
@@ -20,7 +21,7 @@ from .conftest import small_scene
 def outputs(mission_run, tmp_path_factory):
     out = tmp_path_factory.mktemp("mission_out")
     metrics = mission_metrics(mission_run)
-    files = write_outputs(mission_run, metrics, out)
+    files = write_outputs(mission_run, metrics, out, report=write_report)
     return out, files, metrics
 
 
@@ -110,7 +111,9 @@ def test_cli_mission_run_on_a_users_scene(cli, tmp_path):
         "[settings.lidar]\nn_beams = 16\nn_columns = 360\n"
     )
     out = tmp_path / "out"
-    res = cli("mission", "run", scene_file, "--out", out, "--small")
+    config = tmp_path / "config.toml"  # --config: the [mission] table of a settings.toml
+    config.write_text("[mission.obstacle_map]\nmatch_tolerance = 0.55\n[route]\nignored = 1\n")
+    res = cli("mission", "run", scene_file, "--out", out, "--small", "--config", config)
     assert res.exit_code == 0, res.output
     assert "from the operator" in res.output
     summary = json.loads((out / "summary.json").read_text())
@@ -121,7 +124,13 @@ def test_cli_mission_run_on_a_users_scene(cli, tmp_path):
     )
     settings = (out / "settings.toml").read_text()
     assert "seed = 5" in settings and "n_beams = 16" in settings
+    assert "match_tolerance = 0.55" in settings
     assert (out / "report.html").is_file()
+    # the outputs of a run are not overwritten silently
+    before = (out / "summary.json").read_text()
+    res = cli("mission", "run", scene_file, "--out", out, "--small")
+    assert res.exit_code == 2 and "earlier run" in res.output and "--overwrite" in res.output
+    assert (out / "summary.json").read_text() == before
 
 
 def test_cli_mission_run_without_a_route_is_a_clear_error(cli, tmp_path):

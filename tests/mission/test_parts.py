@@ -8,19 +8,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from navkit.errors import ConfigError, FormatError
-from navkit.mission import (
-    CameraSettings,
-    MissionSettings,
-    ObstacleGrid,
-    PurePursuit,
-    load_route,
-    score_obstacles,
-    true_footprints,
-)
+from navkit.mission import CameraSettings, MissionSettings, PurePursuit, load_route
 from navkit.mission.driver import polyline_point
-from navkit.mission.obstacle_map import _distance_to_polygon
-from navkit.mission.run import blend, compose, relative
-from navkit.sim import unicycle_step
+from navkit.mission.pose2d import blend, compose, relative
+from navkit.obstacles import MapperSettings, ObstacleMapper, score_obstacle_map
+from navkit.obstacles.evaluate import distance_to_polygon as _distance_to_polygon
+from navkit.sim import true_footprints, unicycle_step
 
 from .conftest import small_scene
 
@@ -76,15 +69,15 @@ def test_obstacle_grid_confirms_repeated_obstacles_and_scores_them():
     scene = small_scene()
     fps = true_footprints(scene)
     crate = next(f for f in fps if f.name == "crate")
-    grid = ObstacleGrid((-2, -5), (15, 5), 0.1, min_hits=2, min_ratio=0.3)
+    grid = ObstacleMapper((-2, -5), (15, 5), MapperSettings(0.1, min_hits=2, min_ratio=0.3))
     ground = np.random.default_rng(0).uniform([-2, -5], [8, 5], (4000, 2))
     crate_pts = _box_cells(np.array([3.0, 1.6]), 0.45)
     for k in range(3):
         extra = np.array([[0.0, -3.0]]) if k == 0 else np.zeros((0, 2))  # one-scan noise
         phantom = np.array([[1.0, 3.5]]) if k >= 1 else np.zeros((0, 2))  # seen twice: a phantom
-        grid.add_scan(np.vstack([crate_pts, extra, phantom]), ground)
+        grid.add_points(np.vstack([crate_pts, extra, phantom]), ground)
     seen = {crate.index}
-    sc = score_obstacles(grid, fps, seen, min_height=0.2, robot_width=0.5, tolerance=0.3)
+    sc = score_obstacle_map(grid.grid(), fps, seen, min_height=0.2, robot_width=0.5, tolerance=0.3)
     assert sc["seen_obstacles"] == 1 and sc["recall"] == 1.0
     assert sc["phantoms"] == 1 and sc["components"] == 2
     assert sc["precision"] == 0.5
@@ -93,9 +86,11 @@ def test_obstacle_grid_confirms_repeated_obstacles_and_scores_them():
 
 
 def test_blocked_corridor_matches_brute_force(np_rng):
-    grid = ObstacleGrid((0, 0), (10, 10), 0.1, min_hits=1, min_ratio=0.0, recent_scans=1)
+    grid = ObstacleMapper(
+        (0, 0), (10, 10), MapperSettings(0.1, min_hits=1, min_ratio=0.0, recent_scans=1)
+    )
     pts = np_rng.uniform(0, 10, (40, 2))
-    grid.add_scan(pts, pts)
+    grid.add_points(pts, pts)
     path = np.c_[np.linspace(0.5, 9.5, 50), np.linspace(5, 6, 50)]
     got = grid.blocked(path, 0.4)
     rows, cols = np.nonzero(grid.recent_occupied)
@@ -111,13 +106,15 @@ def test_blocked_corridor_matches_brute_force(np_rng):
 
 
 def test_known_obstacles_do_not_block_the_way_back_new_ones_do():
-    grid = ObstacleGrid((0, 0), (10, 10), 0.1, min_hits=1, min_ratio=0.0, recent_scans=1)
+    grid = ObstacleMapper(
+        (0, 0), (10, 10), MapperSettings(0.1, min_hits=1, min_ratio=0.0, recent_scans=1)
+    )
     jamb = np.c_[np.full(20, 5.0), np.linspace(5.6, 7.5, 20)]  # a door jamb 0.6 m from the path
-    grid.add_scan(jamb, jamb)
+    grid.add_points(jamb, jamb)
     grid.freeze_known(0.6)
     path = np.c_[np.linspace(4.0, 6.0, 21), np.full(21, 5.0)]
     # seen again on the way back with the estimate 0.35 m off: the jamb now touches the corridor
-    grid.add_scan(jamb - [0.0, 0.35], jamb)
+    grid.add_points(jamb - [0.0, 0.35], jamb)
     assert not grid.blocked(path, 0.3).any()
     # without the memory of the way out, the same cells would stop the robot
     known, grid.known = grid.known, None
@@ -125,7 +122,7 @@ def test_known_obstacles_do_not_block_the_way_back_new_ones_do():
     grid.known = known
     # a new box on the path blocks
     box = np.c_[np.full(5, 6.0), np.linspace(4.6, 5.0, 5)]  # 1 m from the jamb
-    grid.add_scan(np.vstack([jamb - [0.0, 0.35], box]), jamb)
+    grid.add_points(np.vstack([jamb - [0.0, 0.35], box]), jamb)
     hit = grid.blocked(path, 0.3)
     assert hit.any() and np.all(np.abs(path[hit, 0] - 6.0) <= 0.3 + 0.08)
 
@@ -166,25 +163,28 @@ def test_settings_reject_bad_rates_and_keys(tmp_path):
 
 
 def test_detour_on_the_obstacle_map_avoids_known_and_new_obstacles():
-    """The mission's planning step (``_plan_round``) on an ObstacleGrid: the confirmed cells of
+    """The return's planning step (``Return._plan``) on an ObstacleMapper: the confirmed cells of
     the way out and the recent cells of a new box are both avoided, the rejoin lies on the
     stored path beyond the box, and the controller on the detour starts at the robot."""
-    from navkit.mission.run import _plan_round
-    from navkit.path import approximate
+    from navkit.mission.run import _return_settings
+    from navkit.path import Return, approximate
 
     s = MissionSettings()
-    grid = ObstacleGrid((-2, -5), (14, 5), 0.1, min_hits=1, min_ratio=0.0, recent_scans=2)
+    grid = ObstacleMapper(
+        (-2, -5), (14, 5), MapperSettings(0.1, min_hits=1, min_ratio=0.0, recent_scans=2)
+    )
     wall = np.c_[np.linspace(0.0, 12.0, 121), np.full(121, 1.3)]  # mapped on the way out
-    grid.add_scan(wall, wall)
+    grid.add_points(wall, wall)
     xx, yy = np.meshgrid(np.arange(5.6, 6.45, 0.05), np.arange(-0.4, 0.45, 0.05))
     box = np.c_[xx.ravel(), yy.ravel()]  # a new 0.8 m box on the path, seen on the way back
-    grid.add_scan(np.vstack([wall, box]), wall)
+    grid.add_points(np.vstack([wall, box]), wall)
     # the stored path: recorded from the operator at x = 0 to x = 12 (the robot is at x = 9)
     path = approximate(np.c_[np.linspace(0.0, 12.0, 241), np.zeros(241)]).spline
     s_now = 9.0
     half = 0.5 * s.robot.width + s.block.clearance
-    got = _plan_round(grid, np.array([9.0, 0.0, np.pi]), path, s_now, 2.6, s, half)
-    assert not isinstance(got, Exception), got
+    ret = Return(path, _return_settings(s))
+    got = ret._plan(grid, np.array([9.0, 0.0, np.pi]), s_now, 2.6)
+    assert got.ok, got
     d = got.detour
     inflation = half + s.block.detour_margin
     rows, cols = np.nonzero(grid.occupied | grid.recent_occupied)
@@ -211,6 +211,6 @@ def test_detour_on_the_obstacle_map_avoids_known_and_new_obstacles():
     )
     # a closed way (the box grown to the wall and far south) -> the planner's reason
     south = np.c_[np.full(90, 6.0), np.linspace(-5.0, 1.3, 90)]
-    grid.add_scan(np.vstack([wall, box, south]), wall)
-    fail = _plan_round(grid, np.array([9.0, 0.0, np.pi]), path, s_now, 2.6, s, half)
-    assert isinstance(fail, Exception) and "no detour" in str(fail)
+    grid.add_points(np.vstack([wall, box, south]), wall)
+    fail = ret._plan(grid, np.array([9.0, 0.0, np.pi]), s_now, 2.6)
+    assert not fail.ok and "no detour" in str(fail)

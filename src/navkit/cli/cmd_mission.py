@@ -7,6 +7,24 @@ from pathlib import Path
 import typer
 
 
+def check_out_dir(out: Path, overwrite: bool) -> None:
+    """Refuse an existing file, or a folder holding an earlier run (its ``summary.json``) unless
+    ``overwrite``. (Stands in for ``navkit.cli.common.check_out_dir``, built on another branch.)"""
+    from navkit.errors import InputError
+
+    if out.exists() and not out.is_dir():
+        raise InputError(
+            "exists and is not a folder", source=out, field="--out", expected="an output folder"
+        )
+    if not overwrite and (out / "summary.json").exists():
+        raise InputError(
+            "holds the outputs of an earlier run",
+            source=out,
+            field="--out",
+            expected="an empty or new folder, or --overwrite",
+        )
+
+
 def _progress():  # type: ignore[no-untyped-def]
     from navkit.cli.common import progress
 
@@ -27,12 +45,21 @@ def register(app: typer.Typer) -> None:
         scene: str = typer.Argument(
             ..., help="Scene TOML file (or a built-in scene name, e.g. yard)."
         ),
-        out: Path = typer.Option(Path("out/mission"), "--out", help="Output folder."),
+        out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
+        overwrite: bool = typer.Option(
+            False, "--overwrite", help="Replace the outputs of an earlier run in --out."
+        ),
         mission: Path = typer.Option(
             None,
             "--mission",  # type: ignore[assignment]
             help="Mission TOML (a route table: waypoints, room; a settings table: overrides). "
             "Default: <scene>.mission.toml beside the scene.",
+        ),
+        config: Path = typer.Option(
+            None,  # type: ignore[assignment]
+            "--config",
+            help="Settings TOML: its [mission] table (as in the settings.toml a run writes) "
+            "overrides the mission file's settings.",
         ),
         seed: int = typer.Option(None, "--seed", help="Seed of every random draw."),  # type: ignore[assignment]
         small: bool = typer.Option(
@@ -40,14 +67,26 @@ def register(app: typer.Typer) -> None:
         ),
     ) -> None:
         """Drive the robot out along the route, map, localize, lose the link, come back; write
-        report.html, metrics.json, trajectories (TUM), path.json and the obstacle map (PGM+YAML)."""
+        report.html, metrics.json, trajectories (TUM), path.json and the obstacle map (PGM+YAML).
+
+        Example: navkit mission run yard --out out/mission --small
+        """
         from navkit.cli.common import cli_errors
 
         with cli_errors():
             from navkit.mission.demo import run_scene_file
+            from navkit.viz.mission import write_report
 
+            check_out_dir(out, overwrite)  # -> navkit.cli.common.check_out_dir once merged
             m = run_scene_file(
-                scene, out, mission=mission, seed=seed, small=small, progress=_progress()
+                scene,
+                out,
+                mission=mission,
+                seed=seed,
+                small=small,
+                progress=_progress(),
+                report=write_report,
+                config=config,
             )
             r = m["return"]
             typer.echo(

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import sys
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -146,13 +145,4 @@ def settings_to_toml(settings: Any) -> str:
     return tomli_w.dumps(clean(to_jsonable(settings)))
 
 
-def write_run_files(out: Path, settings: Any, summary: dict[str, Any]) -> None:
-    """Write ``settings.toml`` and ``summary.json`` into ``out`` (atomically)."""
-    from navkit import __version__
-    from navkit.io.atomic import write_json, write_text
-
-    out.mkdir(parents=True, exist_ok=True)
-    write_text(out / "settings.toml", settings_to_toml(settings))
-    write_json(
-        out / "summary.json", {"navkit_version": __version__, "argv": sys.argv[1:], **summary}
-    )
+from navkit.io.atomic import write_run_files  # noqa: E402  (one writer, in navkit.io)

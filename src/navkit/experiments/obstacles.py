@@ -107,23 +107,23 @@ def scanners() -> dict[str, tuple[Any, float]]:
 
 
 def footprint(prim: Any) -> tuple[str, NDArray[np.float64]]:
-    """True footprint of a primitive on the ground: ``("polygon", (4, 2))`` or ``("circle", (3,))``."""
+    """True footprint of a primitive on the ground: ``("polygon", (4, 2))`` or ``("circle", (3,))``
+    (from :func:`navkit.sim.footprint`, the one home of primitive footprints)."""
+    from navkit.sim.footprints import footprint as sim_footprint
+
     kind = type(prim).__name__
-    if kind in ("Box", "Prism"):
-        c = np.asarray(prim.center)
-        sx, sy = prim.size[0] / 2, prim.size[1] / 2
-        loc = np.array([[-sx, -sy], [sx, -sy], [sx, sy], [-sx, sy]])
-        cy, sy_ = math.cos(prim.yaw), math.sin(prim.yaw)
-        R = np.array([[cy, -sy_], [sy_, cy]])
-        return "polygon", loc @ R.T + c[:2]
-    if kind in ("Hemisphere", "Sphere", "Cylinder"):
-        c = np.asarray(prim.center)
-        return "circle", np.array([c[0], c[1], prim.radius])
-    raise InputError(
-        f"has no footprint (type {kind})",
-        field="prim",
-        expected="a Box, Prism, Hemisphere, Sphere or Cylinder",
+    fp = (
+        sim_footprint(prim)
+        if kind in ("Box", "Prism", "Hemisphere", "Sphere", "Cylinder")
+        else None
     )
+    if fp is None:
+        raise InputError(
+            f"has no footprint (type {kind})",
+            field="prim",
+            expected="a Box, Prism, Hemisphere, Sphere or Cylinder",
+        )
+    return ("circle", fp.circle) if fp.circle is not None else ("polygon", fp.polygon)
 
 
 def footprint_distance(

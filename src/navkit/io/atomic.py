@@ -16,7 +16,16 @@ from typing import IO, Any
 
 import numpy as np
 
-__all__ = ["atomic_path", "atomic_write", "to_jsonable", "write_json", "write_text"]
+__all__ = [
+    "atomic_path",
+    "atomic_write",
+    "read_json",
+    "settings_to_toml",
+    "to_jsonable",
+    "write_json",
+    "write_run_files",
+    "write_text",
+]
 
 
 @contextmanager
@@ -80,3 +89,57 @@ def write_text(path: str | os.PathLike[str], text: str) -> None:
     """Write text atomically."""
     with atomic_write(path) as fh:
         fh.write(text)
+
+
+def read_json(path: str | os.PathLike[str], *, what: str = "a JSON file") -> Any:
+    """Read a JSON file (the one JSON reader of navkit).
+
+    Raises
+    ------
+    DataNotFoundError
+        The file does not exist.
+    FormatError
+        It is not UTF-8 JSON (the message names the file and ``what`` was expected).
+    """
+    import json
+
+    from navkit.errors import DataNotFoundError, FormatError
+
+    p = Path(path)
+    if not p.is_file():
+        raise DataNotFoundError(f"{p}: no such file ({what})")
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise FormatError(f"not valid JSON ({exc})", source=p, expected=what) from None
+
+
+def settings_to_toml(settings: Any) -> str:
+    """Settings (dataclasses, dicts, arrays) as TOML text; TOML has no null, so None values are
+    left out."""
+    import tomli_w
+
+    def clean(value: Any) -> Any:
+        if isinstance(value, dict):
+            return {k: clean(v) for k, v in value.items() if v is not None}
+        if isinstance(value, list):
+            return [clean(v) for v in value if v is not None]
+        return value
+
+    return tomli_w.dumps(clean(to_jsonable(settings)))
+
+
+def write_run_files(out: str | os.PathLike[str], settings: Any, summary: dict[str, Any]) -> None:
+    """Write ``settings.toml`` (the resolved settings; TOML has no null, so None values are left
+    out) and ``summary.json`` (with the navkit version and the command line) into ``out``
+    atomically: what every navkit run writes next to its outputs."""
+    import sys
+
+    from navkit import __version__
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_text(out / "settings.toml", settings_to_toml(settings))
+    write_json(
+        out / "summary.json", {"navkit_version": __version__, "argv": sys.argv[1:], **summary}
+    )

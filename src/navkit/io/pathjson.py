@@ -12,12 +12,10 @@ segments in path order (after loop removal). Written atomically, read with every
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
-from navkit.errors import DataNotFoundError, FormatError
-from navkit.io.atomic import write_json
+from navkit.io.atomic import read_json, write_json
 from navkit.path.spline import PathSpline
 
 __all__ = ["read_path_json", "write_path_json"]
@@ -40,12 +38,5 @@ def read_path_json(path: str | os.PathLike[str]) -> PathSpline:
         If it is not JSON or a field is missing / malformed (the message names the field).
     """
     p = Path(path)
-    if not p.is_file():
-        raise DataNotFoundError(f"{p}: no such path file")
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise FormatError(
-            f"not valid JSON ({exc})", source=p, expected="a path.json written by navkit"
-        ) from None
+    data = read_json(p, what="a path.json written by navkit")
     return PathSpline.from_dict(data, source=str(p))

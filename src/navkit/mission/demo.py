@@ -2,7 +2,8 @@
 
 Outputs of :func:`run_to_dir` (every file written atomically):
 
-- ``report.html`` - one self-contained page (figures embedded);
+- ``report.html`` - one self-contained page (figures embedded), when a ``report`` writer is
+  given (the CLI passes :func:`navkit.viz.mission.write_report`; the mission never imports viz);
 - ``metrics.json`` - the mission's figures (:func:`navkit.mission.metrics.mission_metrics`);
 - ``settings.toml`` - the resolved settings and the route; ``summary.json`` - the key figures;
 - ``truth.tum``, ``vo.tum``, ``estimate.tum`` - trajectories (TUM format, z = 0);
@@ -21,7 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from navkit.mission.settings import MissionSettings, Route, builtin_route_path, load_route
+from navkit.mission.settings import (
+    MissionSettings,
+    Route,
+    builtin_route_path,
+    load_route,
+    read_config,
+)
 
 __all__ = ["run_demo", "run_scene_file", "run_to_dir", "summary_of", "write_outputs"]
 
@@ -49,13 +56,20 @@ def summary_of(metrics: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def write_outputs(lg: Any, metrics: dict[str, Any], out: Path) -> list[str]:
-    """Write the report, the metrics and the maps of a run into ``out``; returns the file names."""
+ReportFn = Callable[[Any, dict[str, Any], Path], Any]
+"""``report(log, metrics, path)`` writes ``report.html`` (:func:`navkit.viz.mission.write_report`;
+the CLI passes it: the mission never imports the plotting layer)."""
+
+
+def write_outputs(
+    lg: Any, metrics: dict[str, Any], out: Path, report: ReportFn | None = None
+) -> list[str]:
+    """Write the metrics, the maps and (with ``report``) the report of a run into ``out``;
+    returns the file names."""
     from navkit.io.atomic import write_json
     from navkit.io.maps import write_occupancy_grid
     from navkit.io.pathjson import write_path_json
     from navkit.io.trajectory import Trajectory, write_tum
-    from navkit.viz.mission import write_report
 
     files = []
     write_json(out / "metrics.json", metrics)
@@ -76,32 +90,10 @@ def write_outputs(lg: Any, metrics: dict[str, Any], out: Path) -> list[str]:
     occ[g.occupied] = 100
     write_occupancy_grid(out / "obstacle_map", occ, g.resolution, g.origin)
     files += ["obstacle_map.pgm", "obstacle_map.yaml"]
-    write_report(lg, metrics, out / "report.html")
-    files.append("report.html")
+    if report is not None:
+        report(lg, metrics, out / "report.html")
+        files.append("report.html")
     return files
-
-
-def _write_run_files(out: Path, settings: dict[str, Any], summary: dict[str, Any]) -> None:
-    """``settings.toml`` and ``summary.json`` as every navkit command writes them (the mission may
-    not import the CLI layer, so this mirrors ``navkit.cli.common.write_run_files``)."""
-    import sys
-
-    import tomli_w
-
-    from navkit import __version__
-    from navkit.io.atomic import to_jsonable, write_json, write_text
-
-    def clean(value: Any) -> Any:  # TOML has no null
-        if isinstance(value, dict):
-            return {k: clean(v) for k, v in value.items() if v is not None}
-        if isinstance(value, list):
-            return [clean(v) for v in value if v is not None]
-        return value
-
-    write_text(out / "settings.toml", tomli_w.dumps(clean(to_jsonable(settings))))
-    write_json(
-        out / "summary.json", {"navkit_version": __version__, "argv": sys.argv[1:], **summary}
-    )
 
 
 def run_to_dir(
@@ -110,6 +102,7 @@ def run_to_dir(
     settings: MissionSettings,
     out: str | Path,
     progress: ProgressFn | None = None,
+    report: ReportFn | None = None,
 ) -> dict[str, Any]:
     """Run the mission and write every output into ``out``; returns the metrics."""
     from navkit.errors import InputError
@@ -126,15 +119,15 @@ def run_to_dir(
     lg = run_mission(scene, route, settings, progress)
     metrics = mission_metrics(lg)
     metrics["wall_seconds_mission"] = time.perf_counter() - t0
-    files = write_outputs(lg, metrics, out)
+    files = write_outputs(lg, metrics, out, report)
     metrics["wall_seconds"] = time.perf_counter() - t0
     # the metrics file holds the total time too (rewritten atomically with it)
-    from navkit.io.atomic import write_json
+    from navkit.io.atomic import write_json, write_run_files
 
     write_json(out / "metrics.json", metrics)
     summary = summary_of(metrics)
     summary["outputs"] = [*files, "settings.toml", "summary.json"]
-    _write_run_files(out, {"mission": settings, "route": route, "scene": scene.name}, summary)
+    write_run_files(out, {"mission": settings, "route": route, "scene": scene.name}, summary)
     return metrics
 
 
@@ -147,12 +140,16 @@ def run_scene_file(
     small: bool = False,
     start: tuple[float, float, float] | None = None,
     progress: ProgressFn | None = None,
+    report: ReportFn | None = None,
+    config: str | Path | None = None,
 ) -> dict[str, Any]:
     """``navkit mission run``: a scene TOML (or built-in name) and its mission file.
 
     The mission file is ``mission`` if given, else ``<scene stem>.mission.toml`` beside the
     scene, else the built-in ``mission_<name>.toml`` for a built-in scene. ``start`` overrides
     the scene's start pose ``(x, y, theta)`` (the operator's place; the route is joined to it).
+    ``config``: a settings TOML whose ``[mission]`` table overrides the mission file's settings
+    (:func:`~navkit.mission.settings.read_config`); ``seed`` overrides both.
     """
     from navkit.errors import DataNotFoundError
     from navkit.sim import Scene, load_scene
@@ -176,9 +173,11 @@ def run_scene_file(
     route, overrides = load_route(mission)
     base = MissionSettings.small() if small else MissionSettings()
     settings = base.with_overrides(overrides, source=str(mission))
+    if config is not None:
+        settings = settings.with_overrides(read_config(config), source=str(config))
     if seed is not None:
         settings = dataclasses.replace(settings, seed=int(seed))
-    return run_to_dir(scene, route, settings, out, progress)
+    return run_to_dir(scene, route, settings, out, progress, report)
 
 
 def run_demo(
@@ -189,6 +188,8 @@ def run_demo(
     scene: str | Path = "yard",
     small: bool = False,
     start: tuple[float, float, float] | None = None,
+    report: ReportFn | None = None,
+    config: str | Path | None = None,
 ) -> dict[str, Any]:
     """The built-in mission (``navkit demo``): the yard world and its route, into ``out``.
 
@@ -203,5 +204,16 @@ def run_demo(
     scene, small, start
         Another built-in or TOML world (with its mission file), reduced resolutions, another
         start pose.
+    report, config
+        See :func:`run_scene_file`.
     """
-    return run_scene_file(scene, out, seed=seed, small=small, start=start, progress=progress)
+    return run_scene_file(
+        scene,
+        out,
+        seed=seed,
+        small=small,
+        start=start,
+        progress=progress,
+        report=report,
+        config=config,
+    )

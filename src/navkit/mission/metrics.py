@@ -9,32 +9,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from navkit.geometry import wrap_angle
-from navkit.mission.obstacle_map import score_obstacles, true_footprints
 from navkit.mission.run import MissionLog
+from navkit.obstacles.evaluate import score_obstacle_map
+from navkit.sim.footprints import room_walls as room_truth
+from navkit.sim.footprints import true_footprints
 
 __all__ = ["mission_metrics", "room_truth", "timing_table"]
 
 log = logging.getLogger(__name__)
-
-CAPABILITY_NAMES = {
-    "obstacles_detect": "obstacles: detection per scan (paper 1)",
-    "obstacles_fuse": "obstacles: fusion into the 2D map",
-    "planes_extract": "planes: extraction per RGB-D frame (paper 2)",
-    "planes_motion": "planes: motion between frames (paper 2)",
-    "room_map": "room map: build on the first visit (paper 3)",
-    "localize": "localization: correlation fix in the room map (paper 3)",
-    "localize_obstacle_map": "localization: correlation fix in the obstacle map (return)",
-    "obstacle_map_field": "localization: obstacle map -> likelihood field (once)",
-    "sim_stereo": "simulator: render a stereo pair",
-    "stereo_points": "stereo: disparity -> wall points (paper 3)",
-    "path_record": "path memory: add one point (paper 4)",
-    "path_finish": "path memory: finish",
-    "return_control": "return: one control cycle (paper 4)",
-    "block_check": "return: check the map ahead",
-    "detour_plan": "return: plan a way round a block (detour)",
-    "sim_lidar": "simulator: render a lidar scan",
-    "sim_camera": "simulator: render an RGB-D frame",
-}
 
 
 def _err_stats(err: NDArray[np.float64]) -> dict[str, float]:
@@ -66,30 +48,6 @@ def timing_table(lg: MissionLog) -> dict[str, dict[str, float]]:
             "max_ms": float(1e3 * a.max()),
             "total_s": float(a.sum()),
         }
-    return out
-
-
-def room_truth(
-    scene: Any, room: tuple[float, float, float, float] | None, margin: float = 0.3
-) -> list[tuple[NDArray[np.float64], NDArray[np.float64]]]:
-    """The true room walls: base segments ``(start, end)`` of the scene's walls inside the room."""
-    if room is None:
-        return []
-    x0, y0, x1, y1 = room
-    out = []
-    for p in scene.primitives:
-        if p.kind != "wall":
-            continue
-        o, u = np.asarray(p.origin, float)[:2], np.asarray(p.u, float)[:2]
-        a, b = o, o + u
-        if np.hypot(*u) < 1e-9:  # vertical u: the base runs along v
-            b = o + np.asarray(p.v, float)[:2]
-        inside = all(
-            x0 - margin <= q[0] <= x1 + margin and y0 - margin <= q[1] <= y1 + margin
-            for q in (a, b)
-        )
-        if inside:
-            out.append((a, b))
     return out
 
 
@@ -221,8 +179,8 @@ def mission_metrics(lg: MissionLog) -> dict[str, Any]:
     fps = true_footprints(lg.scene)
     grid = lg.obstacle_grid
     assert grid is not None
-    obst = score_obstacles(
-        grid,
+    obst = score_obstacle_map(
+        grid.grid(),
         fps,
         lg.seen_primitives,
         min_height=0.2,

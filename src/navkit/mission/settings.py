@@ -17,6 +17,13 @@ from typing import Any
 import numpy as np
 
 from navkit.errors import ConfigError, DataNotFoundError, FormatError
+from navkit.sim.scanners import (
+    LIDAR_ABSOLUTE_SIGMA,
+    LIDAR_ELEVATION_MAX_DEG,
+    LIDAR_ELEVATION_MIN_DEG,
+    LIDAR_HEIGHT,
+    LIDAR_RELATIVE_SIGMA,
+)
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -25,17 +32,22 @@ else:  # pragma: no cover - Python 3.10
 
 __all__ = [
     "BlockSettings",
+    "CameraMount",
     "CameraSettings",
+    "DemoSettings",
     "FusionSettings",
+    "LidarMount",
     "LidarSettings",
     "MissionSettings",
     "ObstacleMapSettings",
     "RobotSettings",
     "Route",
+    "ScannerMount",
     "StereoSettings",
     "VOSettings",
     "builtin_route_path",
     "load_route",
+    "read_config",
 ]
 
 
@@ -89,14 +101,14 @@ class LidarSettings:
     """The spinning 3D lidar (reduced resolution so the demo runs in about a minute)."""
 
     rate_hz: float = 2.0
-    height: float = 1.2
+    height: float = LIDAR_HEIGHT
     n_beams: int = 32
     n_columns: int = 512
-    elevation_min_deg: float = -24.8
-    elevation_max_deg: float = 2.0
+    elevation_min_deg: float = LIDAR_ELEVATION_MIN_DEG
+    elevation_max_deg: float = LIDAR_ELEVATION_MAX_DEG
     max_range: float = 40.0
-    relative_sigma: float = 0.002
-    absolute_sigma: float = 0.01
+    relative_sigma: float = LIDAR_RELATIVE_SIGMA
+    absolute_sigma: float = LIDAR_ABSOLUTE_SIGMA
     dropout: float = 0.01
 
 
@@ -437,6 +449,24 @@ def _replace(obj: Any, data: dict[str, Any], source: str, prefix: str) -> Any:
     return dataclasses.replace(obj, **changes)
 
 
+def read_config(path: str | Path) -> dict[str, Any]:
+    """The ``[mission]`` table of a settings TOML (``--config``; the table a run writes into its
+    ``settings.toml``), as overrides for :meth:`MissionSettings.with_overrides`. Other tables
+    (``route``, ``scene``, the demo's sensors) are ignored: the route comes from the mission file.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise DataNotFoundError(f"{p}: no such settings file (--config)")
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise FormatError(f"not valid TOML ({exc})", source=p, expected="a settings TOML") from None
+    table = data.get("mission", {})
+    if not isinstance(table, dict):
+        raise ConfigError(f"is {table!r}", source=str(p), field="mission", expected="a table")
+    return table
+
+
 def builtin_route_path(scene_name: str) -> Path:
     """The route file shipped for a built-in scene (``navkit/data/mission_<name>.toml``)."""
     return Path(__file__).resolve().parent.parent / "data" / f"mission_{scene_name}.toml"
@@ -490,3 +520,79 @@ def load_route(path: str | Path) -> tuple[Route, dict[str, Any]]:
     except ConfigError as exc:
         raise ConfigError(exc.message, source=p, field=exc.field, expected=exc.expected) from None
     return route, data.get("settings", {}) or {}
+
+
+# --- the demo's sensor pictures (navkit demo) --------------------------------------------------
+@dataclass(frozen=True)
+class LidarMount:
+    """A spinning lidar on the robot: height above the ground (m), beams x columns."""
+
+    height: float = LIDAR_HEIGHT
+    n_beams: int = 64
+    n_columns: int = 2048
+    elevation_min_deg: float = LIDAR_ELEVATION_MIN_DEG
+    elevation_max_deg: float = LIDAR_ELEVATION_MAX_DEG
+    max_range: float = 80.0
+    relative_sigma: float = LIDAR_RELATIVE_SIGMA
+    absolute_sigma: float = LIDAR_ABSOLUTE_SIGMA
+    dropout: float = 0.02
+
+
+@dataclass(frozen=True)
+class ScannerMount:
+    """A SICK LMS 200-like scanner tilted in elevation; its height (m) and angle grid (deg)."""
+
+    height: float = 0.8
+    azimuth_step_deg: float = 0.5
+    elevation_min_deg: float = -30.0
+    elevation_max_deg: float = 0.0
+    elevation_step_deg: float = 0.5
+    max_range: float = 30.0
+    relative_sigma: float = 0.0
+    absolute_sigma: float = 0.01
+    dropout: float = 0.0
+
+
+@dataclass(frozen=True)
+class CameraMount:
+    """A forward camera: height (m), pitch down (deg), image size (px), horizontal FOV (deg)."""
+
+    height: float = 1.0
+    pitch_down_deg: float = 8.0
+    width: int = 640
+    height_px: int = 480
+    hfov_deg: float = 70.0
+    depth_relative_sigma: float = 0.005
+    max_depth: float = 10.0
+    stereo_baseline: float = 0.12
+    stereo_pixel_noise: float = 2.0
+
+
+@dataclass(frozen=True)
+class DemoSettings:
+    """What ``navkit demo`` renders at the start pose besides the mission: one picture per
+    simulated sensor (written to ``settings.toml`` with the mission's settings)."""
+
+    scene: str = "yard"
+    seed: int = 0
+    small: bool = False
+    robot_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    lidar: LidarMount = field(default_factory=LidarMount)
+    scanner: ScannerMount = field(default_factory=ScannerMount)
+    camera: CameraMount = field(default_factory=CameraMount)
+
+    @classmethod
+    def make(
+        cls, scene: str, seed: int, small: bool, pose: tuple[float, float, float]
+    ) -> DemoSettings:
+        if not small:
+            return cls(scene, seed, small, pose)
+        return cls(
+            scene,
+            seed,
+            small,
+            pose,
+            lidar=LidarMount(n_beams=16, n_columns=512),
+            scanner=ScannerMount(azimuth_step_deg=2.0, elevation_step_deg=2.0),
+            camera=CameraMount(width=160, height_px=120),
+        )

@@ -7,6 +7,7 @@ The eight stages (Pavlovsky 2016), vectorised over the scan grid::
                  shadow behind -4 (5) -> separate obstacles, shadows to their owner (6)
               -> boundary vertices (7) -> bounding shapes A1-A7 on the 2D map (8)
 
+The online object: :class:`ObstacleMapper` fuses detections into a 2D obstacle map.
 Entry points: :func:`detect_obstacles` (a :class:`~navkit.sensors.RangeScan`),
 :func:`detect_obstacles_grid` (an organised grid of body-frame points),
 :func:`detect_obstacles_in_grid` (a :class:`ScanGrid` recovered by :func:`cloud_to_grid` from a
@@ -40,8 +41,14 @@ from navkit.obstacles.detector import (
     detect_obstacles_in_grid,
     unsort_vertex_array,
 )
-from navkit.obstacles.evaluate import GroundScores, ground_scores, shape_contains
+from navkit.obstacles.evaluate import (
+    GroundScores,
+    ground_scores,
+    score_obstacle_map,
+    shape_contains,
+)
 from navkit.obstacles.grids import ScanGrid, cloud_to_grid, depth_to_grid, organized_to_grid
+from navkit.obstacles.mapper import MappedObstacle, MapperSettings, ObstacleGrid, ObstacleMapper
 from navkit.obstacles.mounting import Mounting, level_rotation_from_gravity
 from navkit.obstacles.rules import GROUND, OBSTACLE, SHADOW_BEHIND, SIDE_SHADOW, UNRELIABLE
 from navkit.obstacles.settings import DEFAULT_SHAPES, ObstacleSettings
@@ -57,9 +64,13 @@ __all__ = [
     "Circle",
     "Ellipse",
     "GroundScores",
+    "MappedObstacle",
+    "MapperSettings",
     "Mounting",
     "Obstacle",
     "ObstacleDetection",
+    "ObstacleGrid",
+    "ObstacleMapper",
     "ObstacleSettings",
     "Rectangle",
     "ScanGrid",
@@ -82,6 +93,7 @@ __all__ = [
     "organized_to_grid",
     "rect_a1",
     "register_shape",
+    "score_obstacle_map",
     "shape_contains",
     "unsort_vertex_array",
 ]

@@ -3,7 +3,8 @@
 Mode 1 (recording): :class:`OnlineApproximator` / :func:`approximate` turn positions arriving one
 at a time into a :class:`PathSpline` (cubic segments over arc length) within a tolerance, cutting
 loops out as they close. Mode 2 (return): :class:`ReturnController` steers a robot back along the
-stored path to its start. Everything works on NumPy arrays; file formats live at the edge
+stored path to its start; :class:`Return` is the online object of the whole way back (round a
+blocked stretch on an obstacle map, or a :class:`ReturnFailure`). Everything works on NumPy arrays; file formats live at the edge
 (``path.json`` in :mod:`navkit.io.pathjson`, trajectories in ``navkit.io.trajectory``).
 """
 
@@ -15,6 +16,7 @@ from navkit.path.approximator import (
 )
 from navkit.path.fitting import VARIANTS
 from navkit.path.loops import Crossing, LoopCut, LoopFreeChain, find_crossings, remove_loops
+from navkit.path.returning import Return, ReturnFailure, ReturnStep, ReturnTripSettings
 from navkit.path.spline import PathSpline
 
 __all__ = [
@@ -26,6 +28,10 @@ __all__ = [
     "LoopFreeChain",
     "OnlineApproximator",
     "PathSpline",
+    "Return",
+    "ReturnFailure",
+    "ReturnStep",
+    "ReturnTripSettings",
     "approximate",
     "find_crossings",
     "remove_loops",

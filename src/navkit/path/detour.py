@@ -22,7 +22,7 @@ the detour and then resume the stored path. The stages of :func:`plan_detour`:
 5. **shortcut smoothing**: from each kept vertex, jump to the farthest later vertex in line of
    sight (the straight segment, sampled every quarter cell, stays on traversable cells).
 
-Nothing is found -> :class:`DetourFailure` (an exception) saying why: the way is closed, the
+Nothing is found -> a returned :class:`DetourFailure` saying why: the way is closed, the
 robot is enclosed, or nothing beyond the block is free within the searched length.
 
 Decisions (the paper is silent, the issue says "go round"):
@@ -47,7 +47,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from navkit.errors import ConfigError, InputError, NavkitError
+from navkit.errors import ConfigError, InputError
 from navkit.path.spline import PathSpline
 
 __all__ = [
@@ -65,20 +65,27 @@ log = logging.getLogger(__name__)
 _SQRT2 = float(np.sqrt(2.0))
 
 
-class DetourFailure(NavkitError):
-    """No collision-free way round the blocked stretch exists on the grid.
+@dataclass(frozen=True)
+class DetourFailure:
+    """No collision-free way round the blocked stretch exists on the grid (a returned value,
+    like :class:`navkit.planes.MotionFailure`, not an exception).
 
     Attributes
     ----------
     reason : str
         ``"start enclosed"``, ``"no free path point beyond the block"``, ``"no path to the
         rejoin"`` (the way is closed) or ``"path not blocked"``.
+    detail : str
+        The numbers behind the reason.
     """
 
-    def __init__(self, reason: str, detail: str = "") -> None:
-        self.reason = reason
-        self.detail = detail
-        super().__init__(f"no detour: {reason}" + (f" ({detail})" if detail else ""))
+    reason: str
+    detail: str = ""
+
+    ok = False
+
+    def __str__(self) -> str:
+        return f"no detour: {self.reason}" + (f" ({self.detail})" if self.detail else "")
 
 
 @dataclass(frozen=True)
@@ -294,7 +301,7 @@ def plan_detour(
     settings: DetourSettings | None = None,
     *,
     block_index: int | None = None,
-) -> Detour:
+) -> Detour | DetourFailure:
     """Plan a collision-free way from ``start`` round the blocked stretch of ``path_xy``.
 
     Parameters
@@ -319,13 +326,12 @@ def plan_detour(
 
     Returns
     -------
-    Detour
-        Smoothed polyline from ``start`` to the rejoin point on ``path_xy``.
+    Detour or DetourFailure
+        Smoothed polyline from ``start`` to the rejoin point on ``path_xy``, or why there is no
+        way round within the searched area (see :class:`DetourFailure` for the reasons).
 
     Raises
     ------
-    DetourFailure
-        No way round within the searched area (see :class:`DetourFailure` for the reasons).
     InputError
         Arrays of the wrong shape.
     """
@@ -359,7 +365,7 @@ def plan_detour(
     c0, r0 = np.clip(np.floor((lo - org) / res).astype(int), 0, [W0, H0])
     c1, r1 = np.clip(np.ceil((hi - org) / res).astype(int) + 1, 0, [W0, H0])
     if c1 - c0 < 2 or r1 - r0 < 2:
-        raise DetourFailure("start enclosed", "the robot and the path lie outside the grid")
+        return DetourFailure("start enclosed", "the robot and the path lie outside the grid")
     sub = occ[r0:r1, c0:c1]
     o = org + res * np.array([c0, r0])
     H, W = sub.shape
@@ -379,7 +385,7 @@ def plan_detour(
     c_path = np.where(oks, clear[rs, cs], 0.0)
     rr, cc, oka = cell(a)
     if not oka[0]:
-        raise DetourFailure("start enclosed", "the robot lies outside the grid")
+        return DetourFailure("start enclosed", "the robot lies outside the grid")
     start_rc = (int(rr[0]), int(cc[0]))
     # 4. the blocked stretch: a collision sample and the inflated-zone run around it
     if block_index is not None:
@@ -389,17 +395,17 @@ def plan_detour(
             # the caller's blocked point: take the nearest sample in the inflated zone after it
             later = np.nonzero(c_path[k0:] < st.inflation)[0]
             if len(later) == 0:
-                raise DetourFailure("path not blocked", "no path sample within the inflated zone")
+                return DetourFailure("path not blocked", "no path sample within the inflated zone")
             k0 += int(later[0])
     else:
         hard = np.nonzero(c_path < st.robot_radius)[0]
         if len(hard) == 0:
-            raise DetourFailure("path not blocked", "no path sample closer than the robot radius")
+            return DetourFailure("path not blocked", "no path sample closer than the robot radius")
         k0 = int(hard[0])
     free_path = c_path >= st.inflation
     after = np.nonzero(free_path[k0:])[0]
     if len(after) == 0:
-        raise DetourFailure(
+        return DetourFailure(
             "no free path point beyond the block",
             f"the path stays blocked over the {s_end:.1f} m searched",
         )
@@ -426,8 +432,8 @@ def plan_detour(
     reach = np.isfinite(dist[rs[cand], cs[cand]])
     if not reach.any():
         if np.isfinite(dist).sum() <= 1:
-            raise DetourFailure("start enclosed", "no free cell around the robot")
-        raise DetourFailure(
+            return DetourFailure("start enclosed", "no free cell around the robot")
+        return DetourFailure(
             "no path to the rejoin",
             f"the way past the block ({s[k0]:.1f} m ahead) is closed within the searched area",
         )

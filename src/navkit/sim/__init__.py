@@ -12,6 +12,7 @@ Frames: world z up; ``T_a_b`` maps frame b to frame a; scanners x forward, y lef
 OpenCV optical (x right, y down, z forward).
 """
 
+from navkit.sim.footprints import Footprint, footprint, true_footprints
 from navkit.sim.primitives import (
     T_MIN,
     Box,
@@ -51,6 +52,7 @@ __all__ = [
     "T_MIN",
     "Box",
     "Cylinder",
+    "Footprint",
     "Ground",
     "Hemisphere",
     "Primitive",
@@ -69,6 +71,7 @@ __all__ = [
     "body_pose_under",
     "builtin_scene_path",
     "builtin_scenes",
+    "footprint",
     "load_scene",
     "render_rgbd",
     "render_scan",
@@ -78,5 +81,6 @@ __all__ = [
     "scene_to_toml",
     "shade",
     "simulate_unicycle",
+    "true_footprints",
     "unicycle_step",
 ]

@@ -64,6 +64,20 @@ class TiltingScanner:
         )
 
 
+LIDAR_ELEVATION_MIN_DEG = -24.8
+"""Lowest beam of the simulated spinning lidar (Velodyne HDL-64E-like), degrees."""
+LIDAR_ELEVATION_MAX_DEG = 2.0
+"""Highest beam, degrees."""
+LIDAR_HEIGHT = 1.2
+"""Mounting height of the lidar on the simulated robot, metres."""
+LIDAR_RELATIVE_SIGMA = 0.002
+"""Range noise proportional to the range (:class:`RangeNoise`)."""
+LIDAR_ABSOLUTE_SIGMA = 0.01
+"""Constant range noise, metres."""
+# the one home of the simulated lidar's defaults: navkit.mission.settings.LidarSettings and
+# the demo's LidarMount take these; each use picks its own resolution, range and dropout
+
+
 @dataclass(frozen=True)
 class SpinningLidar:
     """A spinning multi-beam lidar (Velodyne HDL-64E-like by default).
@@ -74,8 +88,8 @@ class SpinningLidar:
 
     n_beams: int = 64
     n_columns: int = 2048
-    elevation_min_deg: float = -24.8
-    elevation_max_deg: float = 2.0
+    elevation_min_deg: float = LIDAR_ELEVATION_MIN_DEG
+    elevation_max_deg: float = LIDAR_ELEVATION_MAX_DEG
 
     def __post_init__(self) -> None:
         if int(self.n_beams) < 1 or int(self.n_columns) < 1:

@@ -24,6 +24,28 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
+CAPABILITY_NAMES = {
+    # the report's labels of the mission's timing keys
+    "obstacles_detect": "obstacles: detection per scan (paper 1)",
+    "obstacles_fuse": "obstacles: fusion into the 2D map",
+    "planes_extract": "planes: extraction per RGB-D frame (paper 2)",
+    "planes_motion": "planes: motion between frames (paper 2)",
+    "room_map": "room map: build on the first visit (paper 3)",
+    "localize": "localization: correlation fix in the room map (paper 3)",
+    "localize_obstacle_map": "localization: correlation fix in the obstacle map (return)",
+    "obstacle_map_field": "localization: obstacle map -> likelihood field (once)",
+    "sim_stereo": "simulator: render a stereo pair",
+    "stereo_points": "stereo: disparity -> wall points (paper 3)",
+    "path_record": "path memory: add one point (paper 4)",
+    "path_finish": "path memory: finish",
+    "return_control": "return: one control cycle (paper 4)",
+    "block_check": "return: check the map ahead",
+    "detour_plan": "return: plan a way round a block (detour)",
+    "sim_lidar": "simulator: render a lidar scan",
+    "sim_camera": "simulator: render an RGB-D frame",
+}
+
+
 def _plt() -> Any:
     import matplotlib
 
@@ -50,7 +72,7 @@ def _finish(ax: Any, title: str) -> None:
 
 def figure_obstacles(lg: Any, score: dict[str, Any]) -> Any:
     """World with the true obstacles (left) and the fused obstacle map, found vs phantom (right)."""
-    from navkit.mission.obstacle_map import true_footprints
+    from navkit.sim.footprints import true_footprints
 
     plt = _plt()
     fps = true_footprints(lg.scene)
@@ -126,7 +148,7 @@ def figure_obstacles(lg: Any, score: dict[str, Any]) -> Any:
 
 def figure_trajectories(lg: Any) -> Any:
     """Truth, raw VO, corrected estimate, stored spline, and the return."""
-    from navkit.mission.obstacle_map import true_footprints
+    from navkit.sim.footprints import true_footprints
 
     plt = _plt()
     fig, ax = plt.subplots(figsize=(12, 7.5))
@@ -164,10 +186,9 @@ def figure_trajectories(lg: Any) -> Any:
             label="link lost",
         )
     if lg.dropped_obstacle is not None:
-        from navkit.mission.obstacle_map import _rect
+        from navkit.sim.footprints import footprint
 
-        b = lg.dropped_obstacle
-        poly = _rect(np.asarray(b.center), np.asarray(b.size), float(b.yaw))
+        poly = footprint(lg.dropped_obstacle).polygon  # type: ignore[union-attr]
         ax.fill(*poly.T, color="tab:blue", alpha=0.6, label="obstacle dropped on the way back")
     for i, (pts, d) in enumerate(zip(lg.detour_paths, lg.detours, strict=True)):
         # the detour as first planned (estimate frame), and where it rejoined the stored path
@@ -247,7 +268,7 @@ def figure_errors(lg: Any) -> Any:
 
 def figure_planes(lg: Any) -> Any:
     """The plane map: planes seen by the RGB-D camera, placed with the corrected estimate."""
-    from navkit.mission.obstacle_map import true_footprints
+    from navkit.sim.footprints import true_footprints
 
     plt = _plt()
     fig, ax = plt.subplots(figsize=(12, 6.5))
@@ -277,11 +298,11 @@ def figure_planes(lg: Any) -> Any:
 
 def figure_room(lg: Any) -> Any:
     """The room map from the first visit (walls, corners) against the truth, and the fixes."""
-    from navkit.mission.metrics import room_truth
+    from navkit.sim.footprints import room_walls
 
     plt = _plt()
     fig, ax = plt.subplots(figsize=(9, 8))
-    for a, b in room_truth(lg.scene, lg.route.room):
+    for a, b in room_walls(lg.scene, lg.route.room):
         ax.plot([a[0], b[0]], [a[1], b[1]], color="k", lw=3, alpha=0.5)
     ax.plot([], [], color="k", lw=3, alpha=0.5, label="true walls")
     wm = lg.room_map
@@ -320,7 +341,6 @@ def _fmt(v: Any) -> Any:
 
 def write_report(lg: Any, metrics: dict[str, Any], path: str | Path) -> Path:
     """Write ``report.html``: the figures above and the table of the mission's figures."""
-    from navkit.mission.metrics import CAPABILITY_NAMES
     from navkit.viz.report import Report
 
     m = metrics

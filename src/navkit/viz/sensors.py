@@ -77,17 +77,16 @@ def _cmap(name: str, bad: tuple[float, float, float]) -> Any:
 
 
 def _footprint(p: Any) -> NDArray[np.float64] | None:
-    """Closed polygon ``(K, 2)`` of a primitive's footprint, or None for circles / the ground."""
-    kind = p.kind
-    if kind in ("box", "prism"):
-        hx, hy = 0.5 * p.size[0], 0.5 * p.size[1]
-        c, s = np.cos(p.yaw), np.sin(p.yaw)
-        corners = np.array([[-hx, -hy], [hx, -hy], [hx, hy], [-hx, hy], [-hx, -hy]])
-        return corners @ np.array([[c, s], [-s, c]]) + np.asarray(p.center[:2])
-    if kind == "wall":
-        o, u = np.asarray(p.origin), np.asarray(p.u)
-        return np.array([o[:2], (o + u)[:2]])
-    return None
+    """Closed polygon ``(K, 2)`` of a primitive's footprint (a wall: its base line), or None for
+    circles / the ground (from :func:`navkit.sim.footprint`)."""
+    from navkit.sim.footprints import footprint
+
+    fp = footprint(p)
+    if fp is None or fp.circle is not None:
+        return None
+    if p.kind == "wall":  # the thickened base segment -> its centre line
+        return np.array([fp.polygon[[0, 3]].mean(0), fp.polygon[[1, 2]].mean(0)])
+    return np.vstack([fp.polygon, fp.polygon[:1]])
 
 
 def draw_scene_top(ax: Axes, scene: Scene, *, labels: bool = True, alpha: float = 1.0) -> None:

@@ -1,0 +1,345 @@
+"""The global 2D obstacle map: paper 1's per-scan obstacles fused over time (online).
+
+:class:`ObstacleMapper` is the online object of paper 1 (kiss-icp shaped): built from frozen
+:class:`MapperSettings` and the mapped area, it takes one detection at a time
+(:meth:`ObstacleMapper.add_scan`, an :class:`~navkit.obstacles.ObstacleDetection` and the
+sensor's pose in the map frame) and keeps the evidence grid.
+
+Fusion: every scan's obstacle vertices (class ``OBSTACLE`` with ``vertex_obstacle > 0``, i.e.
+the obstacle's own vertices, not the shadows it owns) and all its valid points within
+``max_range`` of the sensor are moved into the map frame and counted per cell, once per scan:
+``hits`` (an obstacle was seen in the cell) and ``seen`` (anything was seen there). A cell is an
+obstacle when ``hits >= min_hits`` and ``hits / seen >= min_ratio`` - one-scan noise and cells
+that later scans see as ground are dropped. Obstacles are the 8-connected components of those
+cells (with a one-cell closing so a face seen in stripes stays one obstacle).
+
+The map frame is 2D: ``T_world_sensor`` may be a planar ``(3, 3)`` transform (the points' x, y
+are moved with it, z is ignored) or a ``(4, 4)`` one (the points are moved in 3D, then
+projected). Decision: the grid covers a fixed area given at construction (the mission knows its
+world's bounds); points outside it are dropped, not an error.
+
+Scoring the map against true footprints is evaluation, not mapping:
+:func:`navkit.obstacles.evaluate.score_obstacle_map`.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+from scipy.spatial import cKDTree
+
+from navkit.errors import ConfigError, InputError
+from navkit.obstacles.detector import ObstacleDetection
+from navkit.obstacles.rules import OBSTACLE
+
+__all__ = ["MappedObstacle", "MapperSettings", "ObstacleGrid", "ObstacleMapper"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class MapperSettings:
+    """Settings of :class:`ObstacleMapper` (SI units).
+
+    Attributes
+    ----------
+    resolution : float
+        Cell size, metres.
+    min_hits : int
+        Scans that must see an obstacle in a cell before it counts.
+    min_ratio : float
+        ... and the fraction of the scans that saw the cell at all that saw an obstacle there.
+    recent_scans : int
+        Length of the short memory used to check the way ahead (:meth:`ObstacleMapper.blocked`).
+    max_range : float
+        Points farther than this from the sensor (horizontally) are not fused, metres.
+    """
+
+    resolution: float = 0.1
+    min_hits: int = 2
+    min_ratio: float = 0.3
+    recent_scans: int = 4
+    max_range: float = 15.0
+
+    def __post_init__(self) -> None:
+        for name in ("resolution", "max_range"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ConfigError(f"is {v}", field=name, expected="a positive number (SI units)")
+        if int(self.min_hits) < 1 or int(self.recent_scans) < 1:
+            raise ConfigError(
+                f"min_hits={self.min_hits}, recent_scans={self.recent_scans}",
+                field="min_hits/recent_scans",
+                expected="integers >= 1",
+            )
+        if not 0 <= self.min_ratio <= 1:
+            raise ConfigError(f"is {self.min_ratio}", field="min_ratio", expected="in [0, 1]")
+
+
+@dataclass(frozen=True)
+class MappedObstacle:
+    """One obstacle of the map: a connected component of obstacle cells.
+
+    Attributes
+    ----------
+    id : int
+        Component label (1..n) in :meth:`ObstacleGrid.components`.
+    cells : int
+    centre : (2,) array
+        Mean of the cell centres, metres.
+    area_m2 : float
+    """
+
+    id: int
+    cells: int
+    centre: NDArray[np.float64]
+    area_m2: float
+
+
+@dataclass(frozen=True)
+class ObstacleGrid:
+    """A snapshot of the evidence grid (rows = y, columns = x).
+
+    Attributes
+    ----------
+    origin : (2,) array
+        World position of the lower-left corner of cell ``(0, 0)``, metres.
+    resolution : float
+        Cell size, metres.
+    hits, seen : (H, W) int32 arrays
+        Scans that saw an obstacle / anything in each cell.
+    occupied : (H, W) bool array
+        Confirmed obstacle cells.
+    """
+
+    origin: NDArray[np.float64]
+    resolution: float
+    hits: NDArray[np.int32]
+    seen: NDArray[np.int32]
+    occupied: NDArray[np.bool_]
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (int(self.hits.shape[0]), int(self.hits.shape[1]))
+
+    def centres(self, rows: ArrayLike, cols: ArrayLike) -> NDArray[np.float64]:
+        """World centres ``(N, 2)`` of cells."""
+        return _centres(self.origin, self.resolution, rows, cols)
+
+    def components(self) -> tuple[NDArray[np.int32], int]:
+        """Labels ``(H, W)`` (0 = free) of the obstacles and their number."""
+        return _components(self.occupied)
+
+
+def _centres(
+    origin: NDArray[np.float64], resolution: float, rows: ArrayLike, cols: ArrayLike
+) -> NDArray[np.float64]:
+    return origin + (np.c_[cols, rows] + 0.5) * resolution
+
+
+def _components(occ: NDArray[np.bool_]) -> tuple[NDArray[np.int32], int]:
+    closed = ndimage.binary_closing(occ, structure=np.ones((3, 3), bool)) | occ
+    labels, _ = ndimage.label(closed, structure=np.ones((3, 3), bool))
+    labels = np.where(occ, labels, 0).astype(np.int32)
+    present = np.unique(labels[labels > 0])
+    remap = np.zeros(int(labels.max()) + 1, dtype=np.int32)
+    remap[present] = np.arange(1, len(present) + 1, dtype=np.int32)
+    return remap[labels], len(present)
+
+
+def scan_points_2d(
+    detection: ObstacleDetection, T_world_sensor: ArrayLike, max_range: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The obstacle points and all valid points of one detection within ``max_range``, in the
+    map frame: two ``(N, 2)`` arrays (see the module docstring for the transform)."""
+    P = detection.points
+    r2 = P[..., 0] ** 2 + P[..., 1] ** 2
+    near = detection.valid & (r2 <= max_range**2)
+    # obstacle vertices only (vertex_obstacle also marks the shadows an obstacle owns)
+    is_obst = (detection.vertex_labels == OBSTACLE) & (detection.vertex_obstacle > 0)
+    T = np.asarray(T_world_sensor, dtype=np.float64)
+    if T.shape == (3, 3):
+        R, t = T[:2, :2], T[:2, 2]
+        obst = P[near & is_obst][:, :2] @ R.T + t
+        seen = P[near][:, :2] @ R.T + t
+    elif T.shape == (4, 4):
+        R3, t3 = T[:3, :3], T[:3, 3]
+        obst = (P[near & is_obst] @ R3.T + t3)[:, :2]
+        seen = (P[near] @ R3.T + t3)[:, :2]
+    else:
+        raise InputError(
+            f"has shape {T.shape}",
+            field="T_world_sensor",
+            expected="a (3, 3) planar or (4, 4) rigid transform",
+        )
+    return obst, seen
+
+
+class ObstacleMapper:
+    """Fuses obstacle detections into a 2D evidence grid (the online object of paper 1).
+
+    Parameters
+    ----------
+    lo, hi : (2,) arrays
+        Corners of the mapped area, metres.
+    settings : MapperSettings, optional
+
+    Examples
+    --------
+    >>> mapper = ObstacleMapper([-10, -10], [10, 10])            # doctest: +SKIP
+    >>> for scan, T in stream:                                    # doctest: +SKIP
+    ...     mapper.add_scan(detect_obstacles(scan), T)
+    >>> grid, obstacles = mapper.grid(), mapper.obstacles()       # doctest: +SKIP
+    """
+
+    def __init__(self, lo: ArrayLike, hi: ArrayLike, settings: MapperSettings | None = None):
+        self.settings = st = settings or MapperSettings()
+        self.origin = np.asarray(lo, dtype=np.float64)
+        self.resolution = float(st.resolution)
+        size = (
+            np.ceil((np.asarray(hi, dtype=np.float64) - self.origin) / self.resolution).astype(int)
+            + 1
+        )
+        if size.shape != (2,) or (size < 1).any():
+            raise InputError(f"lo={lo!r}, hi={hi!r}", field="lo/hi", expected="hi >= lo, (2,) each")
+        self.shape = (int(size[1]), int(size[0]))  # rows = y, columns = x
+        self.hits = np.zeros(self.shape, dtype=np.int32)
+        self.seen = np.zeros(self.shape, dtype=np.int32)
+        self.n_scans = 0
+        self.recent: deque[NDArray[np.intp]] = deque(maxlen=int(st.recent_scans))
+        self.known: NDArray[np.bool_] | None = None
+
+    # --- the online interface ------------------------------------------------------------------
+    def add_scan(self, detection: ObstacleDetection, T_world_sensor: ArrayLike) -> None:
+        """Fuse one detection seen from ``T_world_sensor`` (``(3, 3)`` or ``(4, 4)``)."""
+        obst, seen = scan_points_2d(detection, T_world_sensor, self.settings.max_range)
+        self.add_points(obst, seen)
+
+    def grid(self) -> ObstacleGrid:
+        """A snapshot of the grid (copies: later scans do not change it)."""
+        return ObstacleGrid(
+            self.origin.copy(), self.resolution, self.hits.copy(), self.seen.copy(), self.occupied
+        )
+
+    def obstacles(self) -> list[MappedObstacle]:
+        """The obstacles of the map (connected components of the confirmed cells)."""
+        labels, n = self.components()
+        rows, cols = np.nonzero(labels)
+        lab = labels[rows, cols]
+        C = self.centres(rows, cols)
+        out = []
+        for k in range(1, n + 1):
+            m = lab == k
+            out.append(
+                MappedObstacle(
+                    k, int(m.sum()), C[m].mean(axis=0), float(m.sum() * self.resolution**2)
+                )
+            )
+        return out
+
+    # --- the grid ------------------------------------------------------------------------------
+    def add_points(self, obstacle_xy: ArrayLike, seen_xy: ArrayLike) -> None:
+        """Count one scan given as map-frame points: obstacle points and all valid points, both
+        ``(N, 2)``."""
+        obstacle_xy = np.asarray(obstacle_xy, dtype=np.float64).reshape(-1, 2)
+        seen_xy = np.asarray(seen_xy, dtype=np.float64).reshape(-1, 2)
+        self.recent.append(self._count(self.hits, obstacle_xy))
+        self._count(self.seen, np.vstack([seen_xy, obstacle_xy]))
+        self.n_scans += 1
+
+    def cells(
+        self, xy: NDArray[np.float64]
+    ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
+        """Row, column and in-grid flag of points ``(N, 2)``."""
+        ij = np.floor((xy - self.origin) / self.resolution).astype(np.intp)
+        ok = (
+            (ij[:, 0] >= 0)
+            & (ij[:, 1] >= 0)
+            & (ij[:, 0] < self.shape[1])
+            & (ij[:, 1] < self.shape[0])
+        )
+        return ij[:, 1], ij[:, 0], ok
+
+    def centres(self, rows: ArrayLike, cols: ArrayLike) -> NDArray[np.float64]:
+        """World centres ``(N, 2)`` of cells."""
+        return _centres(self.origin, self.resolution, rows, cols)
+
+    def _count(self, grid: NDArray[np.int32], xy: NDArray[np.float64]) -> NDArray[np.intp]:
+        r, c, ok = self.cells(xy)
+        flat = np.unique(r[ok] * self.shape[1] + c[ok])  # once per scan
+        grid.reshape(-1)[flat] += 1
+        return flat
+
+    @property
+    def occupied(self) -> NDArray[np.bool_]:
+        """Confirmed obstacle cells ``(H, W)``."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ratio = self.hits / np.maximum(self.seen, 1)
+        return (self.hits >= self.settings.min_hits) & (ratio >= self.settings.min_ratio)
+
+    @property
+    def recent_occupied(self) -> NDArray[np.bool_]:
+        """Cells ``(H, W)`` that at least ``min_hits`` of the recent scans saw as obstacle."""
+        count = np.zeros(self.shape[0] * self.shape[1], dtype=np.int32)
+        for flat in self.recent:
+            count[flat] += 1
+        need = min(self.settings.min_hits, max(len(self.recent), 1))
+        return (count >= need).reshape(self.shape)
+
+    def components(self) -> tuple[NDArray[np.int32], int]:
+        """Labels ``(H, W)`` (0 = free) of the obstacles and their number."""
+        return _components(self.occupied)
+
+    # --- what the return needs -----------------------------------------------------------------
+    def freeze_known(self, margin: float) -> None:
+        """Remember the obstacles mapped so far, grown by ``margin`` metres, as *known*.
+
+        Called when the link is lost: the robot drove the stored path on the way out, so what
+        was mapped then did not block it. During the return the same structure, seen again with
+        a drifted estimate, can land within the corridor (a doorway's jambs); cells within
+        ``margin`` (about the estimate's inconsistency between the two passes) of a known
+        obstacle are then not a reason to stop - a *new* obstacle is.
+        """
+        r = int(np.ceil(margin / self.resolution))
+        yy, xx = np.mgrid[-r : r + 1, -r : r + 1]
+        disk = xx**2 + yy**2 <= r**2
+        self.known = ndimage.binary_dilation(self.occupied, structure=disk)
+
+    def planning_grid(self) -> NDArray[np.bool_]:
+        """Cells ``(H, W)`` a detour must avoid: the confirmed ones and those of the recent scans."""
+        return self.occupied | self.recent_occupied
+
+    def blocked(
+        self, path_xy: NDArray[np.float64], half_width: float, recent: bool = True
+    ) -> NDArray[np.bool_]:
+        """Which path points ``(M, 2)`` have an obstacle cell within ``half_width``.
+
+        With ``recent`` (the default) the cells are those of the last scans
+        (:attr:`recent_occupied`): they were placed with the *current* pose estimate, the frame
+        in which the robot will actually follow the path ahead - older cells carry the estimate's
+        error of their own time and would block or clear the way in the wrong place. After
+        :meth:`freeze_known`, cells near obstacles known from the way out do not count.
+        """
+        cells = self.recent_occupied if recent else self.occupied
+        if self.known is not None:
+            cells = cells & ~self.known
+        rows, cols = np.nonzero(cells)
+        if len(rows) == 0 or len(path_xy) == 0:
+            return np.zeros(len(path_xy), dtype=bool)
+        C = self.centres(rows, cols)
+        lo, hi = (
+            path_xy.min(0) - half_width - self.resolution,
+            path_xy.max(0) + half_width + self.resolution,
+        )
+        near = np.all((C >= lo) & (C <= hi), axis=1)
+        if not near.any():
+            return np.zeros(len(path_xy), dtype=bool)
+        d, _ = cKDTree(C[near]).query(path_xy, k=1)
+        # a cell counts when any part of it is within the corridor: centre distance minus half a
+        # cell diagonal
+        return d - 0.5 * np.sqrt(2.0) * self.resolution <= half_width
