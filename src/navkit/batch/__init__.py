@@ -17,6 +17,7 @@ from navkit.batch.engine import (
     run_batch,
     settings_hash,
 )
+from navkit.batch.jobs import mission_sweep_tasks, parse_seeds
 from navkit.batch.summary import Rate, summarize, wilson_interval
 
 __all__ = [
@@ -30,6 +31,8 @@ __all__ = [
     "is_complete",
     "iter_batch",
     "local_cluster",
+    "mission_sweep_tasks",
+    "parse_seeds",
     "run_batch",
     "settings_hash",
     "summarize",

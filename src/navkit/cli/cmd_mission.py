@@ -6,6 +6,8 @@ from pathlib import Path
 
 import typer
 
+from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
+
 
 def check_out_dir(out: Path, overwrite: bool) -> None:
     """Refuse an existing file, or a folder holding an earlier run (its ``summary.json``) unless
@@ -93,3 +95,56 @@ def register(app: typer.Typer) -> None:
                 f"{r['outcome']}: {r['final_distance_to_operator_m']:.2f} m from the operator; "
                 f"report in {out / 'report.html'}"
             )
+
+    @mission_app.command("sweep")
+    def sweep(
+        scene: str = typer.Argument(
+            ..., help="Scene TOML file (or a built-in scene name, e.g. yard)."
+        ),
+        seeds: str = typer.Option(
+            "0:10", "--seeds", help="Seeds: START:STOP (STOP excluded) or a list 1,5,9."
+        ),
+        out: Path = typer.Option(..., "--out", "-o", help="Output folder (one folder per seed)."),
+        mission: Path = typer.Option(
+            None,  # type: ignore[assignment]
+            "--mission",
+            help="Mission TOML. Default: <scene>.mission.toml beside the scene.",
+        ),
+        config: Path = typer.Option(
+            None,  # type: ignore[assignment]
+            "--config",
+            help="Settings TOML whose mission table overrides the mission file's settings.",
+        ),
+        small: bool = typer.Option(
+            False, "--small", help="Reduced sensor resolutions (quick runs)."
+        ),
+        workers: int = WORKERS,
+        scheduler: str = SCHEDULER,
+        resume: bool = RESUME,
+    ) -> None:
+        """Run the mission once per seed and summarise the outcomes with 95 % intervals
+        (batch.jsonl, batch_summary.json; each seed's metrics.json under seed-N/).
+
+        Example: navkit mission sweep yard --seeds 0:20 --small --workers 2 --out out/sweep
+        """
+        from navkit.cli.common import cli_errors
+
+        with cli_errors():
+            from navkit.batch import mission_sweep_tasks, parse_seeds
+
+            tasks = mission_sweep_tasks(
+                scene,
+                parse_seeds(seeds),
+                mission=mission,
+                small=small,
+                config=config,
+            )
+            summary = run_inputs(
+                tasks,
+                out,
+                workers=workers,
+                scheduler=scheduler,
+                resume=resume,
+                description="missions",
+            )
+        exit_if_failed(summary)
