@@ -4,6 +4,7 @@ and an example, progress as log lines off a terminal, outputs never replaced sil
 from __future__ import annotations
 
 import io
+import json
 import logging
 import re
 
@@ -133,3 +134,17 @@ def test_check_out_dir(tmp_path):
     assert (out / "summary.json").read_text() == "{}"  # nothing deleted
     with pytest.raises(InputError, match="is a file"):
         check_out_dir(out / "summary.json", overwrite=True)
+
+
+def test_summary_says_what_its_figures_are_measured_against(tmp_path, cli):
+    from navkit.cli.common import write_run_files
+
+    write_run_files(tmp_path / "a", {"x": 1}, {"success_rate": 1.0}, reference="simulator truth")
+    s = json.loads((tmp_path / "a" / "summary.json").read_text())
+    assert list(s)[:3] == ["navkit_version", "argv", "reference"]
+    assert s["reference"] == "simulator truth" and s["success_rate"] == 1.0
+    # the path commands' headline figures name their reference
+    r = cli("path", "simulate", "-o", tmp_path / "sim", "--legs", "3")
+    assert r.exit_code == 0, r.output
+    s = json.loads((tmp_path / "sim" / "summary.json").read_text())
+    assert s["reference"].startswith("simulator ground truth")

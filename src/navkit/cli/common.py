@@ -1,7 +1,8 @@
 """Conventions every ``navkit`` command follows.
 
 - Outputs go to ``--out DIR``; each run writes its resolved settings (``settings.toml``) and a
-  ``summary.json`` of its key figures there (:func:`write_run_files`).
+  ``summary.json`` of its key figures there (:func:`write_run_files`), with a ``"reference"``
+  field saying what its headline figures are measured against.
 - Bad input exits with code 2 and one line ``error: ...`` naming the file / field and what was
   expected; the traceback only with ``navkit --debug`` (:func:`cli_errors`).
 - Existing outputs are never replaced silently: a command calls :func:`check_out_dir` once,
@@ -256,13 +257,31 @@ def settings_to_toml(settings: Any) -> str:
     return tomli_w.dumps(clean(to_jsonable(settings)))
 
 
-def write_run_files(out: Path, settings: Any, summary: dict[str, Any]) -> None:
-    """Write ``settings.toml`` and ``summary.json`` into ``out`` (atomically)."""
+def write_run_files(
+    out: Path, settings: Any, summary: dict[str, Any], *, reference: str | None = None
+) -> None:
+    """Write ``settings.toml`` and ``summary.json`` into ``out`` (atomically).
+
+    Parameters
+    ----------
+    reference : str, optional
+        What the summary's headline figures (errors, success rates, scores) are measured
+        against, written as the ``"reference"`` field right after the version and the command
+        line - e.g. ``"simulator ground truth"``, ``"SemanticKITTI labels"``, or, for a map
+        located with the same log it was built from, ``"self-consistency: the map was built from
+        this log's poses; not an accuracy figure"``. Every command whose summary holds such a
+        figure sets it (and says the same when it prints the figure); a ``"reference"`` key in
+        ``summary`` is taken when the keyword is not given.
+    """
     from navkit import __version__
     from navkit.io.atomic import write_json, write_text
 
     out.mkdir(parents=True, exist_ok=True)
     write_text(out / "settings.toml", settings_to_toml(settings))
+    head: dict[str, Any] = {"navkit_version": __version__, "argv": sys.argv[1:]}
+    ref = reference if reference is not None else summary.get("reference")
+    if ref is not None:
+        head["reference"] = ref
     write_json(
-        out / "summary.json", {"navkit_version": __version__, "argv": sys.argv[1:], **summary}
+        out / "summary.json", {**head, **{k: v for k, v in summary.items() if k != "reference"}}
     )
