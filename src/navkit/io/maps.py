@@ -585,6 +585,6 @@ def write_geojson(
         "properties": {**frame, **to_jsonable(dict(properties or {}))},
         "features": out,
     }
+    text = json.dumps(coll, separators=(",", ":"), allow_nan=False)  # C encoder; dump() is not
     with atomic_write(path) as fh:
-        json.dump(coll, fh, separators=(",", ":"), allow_nan=False)
-        fh.write("\n")
+        fh.write(text + "\n")

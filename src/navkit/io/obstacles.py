@@ -14,6 +14,7 @@ Formats (see ``docs/formats.md``):
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -45,14 +46,33 @@ BODY_FRAME = "body (x forward, y left, z up, origin on the ground under the sens
 
 
 def _rounded(value: Any, decimals: int) -> Any:
-    """JSON-ready ``value`` with every float rounded to ``decimals``."""
+    """Plain JSON of ``value`` with every float rounded to ``decimals`` and NaN / inf -> None
+    (like :func:`~navkit.io.atomic.to_jsonable`, in one pass; float arrays rounded by NumPy)."""
     if isinstance(value, float):
-        return round(value, decimals)
+        return round(value, decimals) if math.isfinite(value) else None
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
     if isinstance(value, dict):
-        return {k: _rounded(v, decimals) for k, v in value.items()}
-    if isinstance(value, list):
+        return {str(k): _rounded(v, decimals) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        if value and isinstance(value[0], (list, tuple)) and value[0]:
+            try:  # a polygon / point list: round all at once
+                arr = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):  # ragged, or not numbers
+                arr = None
+            if arr is not None and arr.ndim == 2 and isinstance(value[0][0], float):
+                return _rounded(arr, decimals)
         return [_rounded(v, decimals) for v in value]
-    return value
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind == "f":
+            r = np.round(value.astype(np.float64), decimals)
+            if np.all(np.isfinite(r)):
+                return r.tolist()
+            return [_rounded(v, decimals) for v in r.tolist()]
+        return _rounded(value.tolist(), decimals)
+    if isinstance(value, np.generic):
+        return _rounded(value.item(), decimals)
+    return _rounded(to_jsonable(value), decimals)
 
 
 def write_labels(path: str | Path, labels: NDArray[Any]) -> None:
@@ -87,9 +107,9 @@ def write_obstacles_json(
         **(extra or {}),
         "obstacles": [ob.to_dict() for ob in detection.obstacles],
     }
-    with atomic_write(path) as fh:
-        json.dump(_rounded(to_jsonable(data), decimals), fh, separators=(",", ":"), allow_nan=False)
-        fh.write("\n")
+    text = json.dumps(_rounded(data, decimals), separators=(",", ":"), allow_nan=False)
+    with atomic_write(path) as fh:  # dumps (C encoder) then one write: dump() is pure Python
+        fh.write(text + "\n")
 
 
 def obstacle_features(
