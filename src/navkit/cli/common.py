@@ -84,6 +84,14 @@ _CONSOLE: Any = None
 _HANDLER_TAG = "_navkit_cli_handler"
 
 
+class _StderrHandler(logging.StreamHandler):  # type: ignore[type-arg]
+    """Writes to whatever ``sys.stderr`` is at each record (test runners swap and close it)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.stream = sys.stderr
+        super().emit(record)
+
+
 def configure_logging(level: int) -> None:
     """Send log records to stderr: rich's handler on the progress bar's console in a terminal
     (so a log line prints above the bar, not over it), plain ``LEVEL name: message`` lines
@@ -100,7 +108,7 @@ def configure_logging(level: int) -> None:
         handler = RichHandler(console=console, show_path=False, show_time=False)
         handler.setFormatter(logging.Formatter("%(name)s: %(message)s"))
     else:
-        handler = logging.StreamHandler()  # sys.stderr at the time of the call
+        handler = _StderrHandler()
         handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
     setattr(handler, _HANDLER_TAG, True)
     root.addHandler(handler)
