@@ -204,3 +204,38 @@ def test_geojson_needs_an_origin_and_presets_fill_the_layout(cli, data_path, tmp
     assert abs(summary["sensor_height"]["m"] - 1.73) < 0.05
     res = cli("obstacles", "detect", src, "-o", tmp_path / "c", "--sensor", "hdl-65")
     assert res.exit_code == 2 and "vlp16" in res.output
+
+
+def test_a_failed_frame_is_reported_and_the_sequence_goes_on(cli, tmp_path, four_npz):
+    src = tmp_path / "seq"
+    src.mkdir()
+    (src / "a.npz").write_bytes(four_npz[0].read_bytes())
+    np.savez(src / "b.npz", ranges=np.ones((3, 4)), azimuth=np.zeros(2), elevation=np.zeros(4))
+    (src / "c.npz").write_bytes(four_npz[0].read_bytes())
+    out = tmp_path / "out"
+    res = cli("obstacles", "detect", src, "-o", out)
+    assert res.exit_code == 0, res.output
+    assert "1 failed" in res.stdout
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["a", "c"]  # nothing for b
+    rows = (out / "frames.csv").read_text().splitlines()
+    assert rows[0] == "frame,input,status,n_obstacles,reason"
+    assert rows[1].startswith("a,") and rows[1].split(",")[2:4] == ["ok", "4"]
+    assert rows[2].startswith("b,") and ",failed,," in rows[2] and "ranges" in rows[2]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["n_frames"] == 2 and [f["input"] for f in summary["failed"]] == [
+        str(src / "b.npz")
+    ]
+    assert summary["reference"].startswith("none")
+
+
+def test_settings_toml_of_a_run_reproduces_it(cli, tmp_path, four_npz):
+    out1, out2 = tmp_path / "one", tmp_path / "two"
+    args = ("--resolution", "0.2", "--outputs", "labels,grid", "--c0-deg", "15")
+    assert cli("obstacles", "detect", four_npz[0], "-o", out1, *args).exit_code == 0
+    res = cli("obstacles", "detect", four_npz[0], "-o", out2, "--config", out1 / "settings.toml")
+    assert res.exit_code == 0, res.output
+    assert (out2 / "settings.toml").read_text() == (out1 / "settings.toml").read_text()
+    assert (out2 / "four" / "map.pgm").read_bytes() == (out1 / "four" / "map.pgm").read_bytes()
+    assert np.array_equal(
+        np.load(out2 / "four" / "labels.npy"), np.load(out1 / "four" / "labels.npy")
+    )

@@ -320,7 +320,12 @@ def detect(
 ) -> None:
     """Detect obstacles in every input; by default write labels.npy and obstacles.json per frame.
 
-    Example: navkit obstacles detect "$NAVKIT_DATA/lidar/semantickitti-seq00" --sensor hdl64e-kitti -o out/kitti
+    A frame that fails is reported (log, frames.csv, summary.json) and the others go on.
+
+    \b
+    Example:
+      navkit obstacles detect "$NAVKIT_DATA/lidar/semantickitti-seq00" \\
+          --sensor hdl64e-kitti -o out/kitti
     """
     with cli_errors():
         from navkit.geometry.shapes import SHAPES
@@ -345,23 +350,37 @@ def detect(
             if option_of.get(key, key) in given or key not in merged:
                 merged[key] = val
         opts, _ = _with_preset(InputOptions(**merged))
-        chosen = _names(outputs, OUTPUTS, "--outputs")
         geo = (
             _parse_floats(origin, 3, "--origin")
             if origin and origin.count(",") == 2
             else (_parse_floats(origin, 2, "--origin") if origin else None)
         )
-        chosen = _check_geo(chosen, geo, "outputs" in given)
-        mopts = MapOptions(
-            outputs=chosen, resolution_m=resolution, extent_m=extent,
-            png_shapes=_names(plot_shapes, SHAPES, "--plot-shapes"), origin=geo,
-        )  # fmt: skip
+        cli_map: dict[str, Any] = {
+            "outputs": _names(outputs, OUTPUTS, "--outputs"), "resolution_m": resolution,
+            "extent_m": extent, "png_shapes": _names(plot_shapes, SHAPES, "--plot-shapes"),
+            "origin": geo,
+        }  # fmt: skip
+        map_option = {
+            "resolution_m": "resolution",
+            "extent_m": "extent",
+            "png_shapes": "plot_shapes",
+        }
+        mcfg: dict[str, Any] = dict(cfg["map"])
+        for key, val in cli_map.items():
+            if map_option.get(key, key) in given or key not in mcfg:
+                mcfg[key] = val
+        mcfg = {k: tuple(v) if isinstance(v, list) else v for k, v in mcfg.items()}
+        mcfg["outputs"] = _check_geo(
+            _names(",".join(mcfg["outputs"]), OUTPUTS, "outputs"),
+            mcfg.get("origin"),
+            "outputs" in given or "outputs" in cfg["map"],
+        )
+        mopts = MapOptions(**mcfg)
         files = expand_inputs(inputs, _suffixes())
         check_out_dir(out, overwrite)
-        frames, height = [], None
-        for path, name in progress(_frame_names(files), "obstacles"):
-            frame, height = process_frame(path, out / name, settings, opts, mopts, height)
-            frames.append(frame)
+        frames, failed, height, first_error = _run_frames(files, out, settings, opts, mopts)
+        if first_error is not None and not frames:
+            raise first_error  # nothing worked: the one-line error, exit code 2, no run files
         run = RunSettings(detector=asdict(settings), inputs=opts, map=mopts)
         write_run_files(
             out,
@@ -369,16 +388,48 @@ def detect(
             {
                 "frames": frames,
                 "n_frames": len(frames),
+                "failed": failed,
                 "sensor_height": height.to_dict() if height is not None else None,
-                "outputs": list(chosen),
-                "reference": "none: detections are not compared with any ground truth",
+                "outputs": list(mopts.outputs),
             },
+            reference="none: the detections are not compared with any ground truth",
         )
         if height is not None and height.source != "given":
             log.info("sensor height %.3f m (%s)", height.height_m, height.source)
         typer.echo(
-            f"{len(frames)} frame(s), {sum(f['n_obstacles'] for f in frames)} obstacles -> {out}"
+            f"{len(frames)} frame(s), {sum(f['n_obstacles'] for f in frames)} obstacles"
+            + (f", {len(failed)} failed (see frames.csv)" if failed else "")
+            + f" -> {out}"
         )
+
+
+def _run_frames(
+    files: list[Path], out: Path, settings: Any, opts: InputOptions, mopts: MapOptions
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]], Any, Exception | None]:
+    """Every frame in turn; a frame that fails is reported (log, ``frames.csv``, the summary's
+    ``failed``) and gets no outputs, and the others go on. ``frames.csv``: one row per input,
+    ``frame,input,status,n_obstacles,reason``."""
+    from navkit.errors import DegenerateGeometryError, InputError
+    from navkit.io.obstacles import write_frame_status
+
+    frames: list[dict[str, Any]] = []
+    failed: list[dict[str, Any]] = []
+    rows: list[tuple[str, str, str, int | None, str]] = []
+    height, first_error = None, None
+    for path, name in progress(_frame_names(files), "obstacles"):
+        try:
+            frame, height = process_frame(path, out / name, settings, opts, mopts, height)
+        except (InputError, DegenerateGeometryError) as exc:
+            log.error("%s: failed, no outputs written: %s", path, exc)
+            first_error = first_error or exc
+            failed.append({"input": str(path), "reason": str(exc)})
+            rows.append((name, str(path), "failed", None, str(exc)))
+            continue
+        frames.append(frame)
+        rows.append((name, str(path), "ok", frame["n_obstacles"], ""))
+    if frames:
+        write_frame_status(out / "frames.csv", rows)
+    return frames, failed, height, first_error
 
 
 def _given(ctx: typer.Context, name: str) -> bool:

@@ -28,6 +28,7 @@ __all__ = [
     "BODY_FRAME",
     "CLASS_NAMES",
     "obstacle_features",
+    "write_frame_status",
     "write_labels",
     "write_obstacle_geojson",
     "write_obstacles_json",
@@ -73,6 +74,21 @@ def _rounded(value: Any, decimals: int) -> Any:
     if isinstance(value, np.generic):
         return _rounded(value.item(), decimals)
     return _rounded(to_jsonable(value), decimals)
+
+
+def write_frame_status(path: str | Path, rows: list[tuple[str, str, str, int | None, str]]) -> None:
+    """Write the per-frame status CSV ``frame,input,status,n_obstacles,reason`` (atomically);
+    ``status`` is ``ok`` or ``failed`` (then ``n_obstacles`` is empty and ``reason`` says why)."""
+    import csv
+    import io
+
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["frame", "input", "status", "n_obstacles", "reason"])
+    for frame, source, status, n, reason in rows:
+        w.writerow([frame, source, status, "" if n is None else n, reason])
+    with atomic_write(path) as fh:
+        fh.write(buf.getvalue())
 
 
 def write_labels(path: str | Path, labels: NDArray[Any]) -> None:
