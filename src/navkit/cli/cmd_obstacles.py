@@ -420,7 +420,7 @@ def _run_frames(
         try:
             frame, height = process_frame(path, out / name, settings, opts, mopts, height)
         except (InputError, DegenerateGeometryError) as exc:
-            log.error("%s: failed, no outputs written: %s", path, exc)
+            log.error("frame failed, no outputs written: %s", exc)  # exc names the file
             first_error = first_error or exc
             failed.append({"input": str(path), "reason": str(exc)})
             rows.append((name, str(path), "failed", None, str(exc)))
