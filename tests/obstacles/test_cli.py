@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -30,11 +31,15 @@ def test_detect_on_a_grid_writes_every_output(cli, four_npz, tmp_path):
 
     path, r = four_npz
     out = tmp_path / "out"
-    res = cli("obstacles", "detect", path, "--out", out, "--resolution", "0.1", "--extent", "20")
+    res = cli(
+        "obstacles", "detect", path, "--out", out, "--resolution", "0.1", "--extent", "20",
+        "--outputs", "labels,obstacles,grid,png,geojson", "--origin", "48.8584,2.2945,90",
+    )  # fmt: skip
     assert res.exit_code == 0, res.output
     frame = out / "four"
-    for name in ("labels.npy", "obstacles.json", "map.pgm", "map.yaml", "map.geojson", "map.png"):
-        assert (frame / name).is_file(), name
+    assert sorted(p.name for p in frame.iterdir()) == sorted(
+        ["labels.npy", "obstacles.json", "map.pgm", "map.yaml", "map.geojson", "map.png"]
+    )
     labels = np.load(frame / "labels.npy")
     assert labels.dtype == np.int8 and labels.shape == r.sim.scan.shape
     # the same classes as the library on the same scan (the .npz is in the scan's own order)
@@ -66,7 +71,17 @@ def test_detect_on_a_grid_writes_every_output(cli, four_npz, tmp_path):
     assert cell(-3.0, 0.0) == -1  # behind the scanner: never seen
     gj = json.loads((frame / "map.geojson").read_text())
     kinds = {f["properties"].get("shape") for f in gj["features"]}
-    assert {"A1", "A6", "MVEE", "A7:A1"} <= kinds
+    assert {"A1", "A6"} <= kinds  # the --plot-shapes, georeferenced
+    assert gj["properties"]["coordinates"].startswith("WGS84")
+    # x points east (heading 90): the box near x = 6 m lies east of the origin, within 20 m
+    box = next(o for o in obs if np.mean(np.array(o["boundary_polygon"])[:, 0]) > 4)
+    poly = next(
+        f for f in gj["features"] if f["properties"].get("obstacle") == box["id"]
+        and f["properties"]["kind"] == "boundary"
+    )  # fmt: skip
+    lon, lat = np.array(poly["geometry"]["coordinates"][0]).mean(axis=0)
+    assert 2.2945 + 4 / 73_000 < lon < 2.2945 + 20 / 73_000  # 1 deg of longitude ~ 73 km here
+    assert abs(lat - 48.8584) < 10 / 111_000
     summary = json.loads((out / "summary.json").read_text())
     t = summary["frames"][0]["timings_s"]
     assert {"points", "mesh", "classes", "split", "boundaries", "map"} <= set(t)
@@ -107,7 +122,7 @@ def test_bad_inputs_give_clear_errors_and_no_partial_outputs(cli, tmp_path, four
 
     cv2.imwrite(str(depth), np.full((4, 4), 1000, np.uint16))
     res = cli("obstacles", "detect", depth, "--out", out)
-    assert res.exit_code == 2 and "--camera" in res.output
+    assert res.exit_code == 2 and "--intrinsics" in res.output
     res = cli("obstacles", "detect", four_npz[0], "--out", out, "--shapes", "A1,B2")
     assert res.exit_code == 2 and "shapes" in res.output
 
@@ -141,3 +156,86 @@ def test_detect_on_an_organised_pcd(cli, tmp_path, four_npz):
     assert len(json.loads((out / "four" / "obstacles.json").read_text())["obstacles"]) == 4
     # NaN points (no return) of the organised cloud are outside the grid
     assert np.all(labels[~np.all(np.isfinite(image.reshape(-1, 3)), axis=1)] == -1)
+
+
+KITTI_GROUND = (40, 44, 48)  # SemanticKITTI road, parking, sidewalk
+KITTI_SOLID = (10, 50, 51, 70, 71, 80, 81)  # car, building, fence, vegetation, trunk, pole, sign
+
+
+def test_kitti_sequence_with_the_default_outputs(cli, data_path, tmp_path):
+    """Three KITTI frames, nothing but defaults: small per-frame outputs, the height measured
+    from the ground, the labels right against SemanticKITTI's, reruns refused."""
+    from navkit.io.pointcloud import read_kitti_labels
+
+    folder = data_path("lidar/semantickitti-seq00/000000.bin").parent
+    out = tmp_path / "kitti"
+    res = cli("obstacles", "detect", folder, "-o", out)
+    assert res.exit_code == 0, res.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["n_frames"] == 3 and summary["outputs"] == ["labels", "obstacles"]
+    h = summary["sensor_height"]
+    assert h["source"] == "estimated from the ground" and h["estimate"]["plausible"]
+    assert abs(h["m"] - 1.73) < 0.05
+    for f in summary["frames"]:
+        frame = Path(f["output"])
+        assert sorted(p.name for p in frame.iterdir()) == ["labels.npy", "obstacles.json"]
+        written = sum(p.stat().st_size for p in frame.iterdir())
+        assert written == f["bytes_written"] and written < 300_000  # measured ~210 kB (was 4.9 MB)
+        labels = np.load(frame / "labels.npy")
+        sk = read_kitti_labels(folder / (frame.name + ".label"))[0]
+        assert labels.shape == sk.shape
+        assert (labels[np.isin(sk, KITTI_GROUND)] == 0).mean() > 0.98  # measured 0.995-0.996
+        assert (labels[np.isin(sk, KITTI_SOLID)] == -2).mean() > 0.90  # measured 0.93-0.94
+        used = json.loads((frame / "obstacles.json").read_text())["sensor_height"]["m"]
+        assert used == pytest.approx(h["m"], abs=5e-4)  # obstacles.json rounds to 1 mm
+    again = cli("obstacles", "detect", folder, "-o", out)
+    assert again.exit_code == 2 and "--overwrite" in again.output and str(out) in again.output
+    assert cli("obstacles", "detect", folder, "-o", out, "--overwrite", "-q").exit_code == 0
+
+
+def test_geojson_needs_an_origin_and_presets_fill_the_layout(cli, data_path, tmp_path):
+    src = data_path("lidar/semantickitti-seq00/000000.bin")
+    res = cli("obstacles", "detect", src, "-o", tmp_path / "a", "--outputs", "labels,geojson")
+    assert res.exit_code == 2 and "--origin" in res.output
+    res = cli("obstacles", "detect", src, "-o", tmp_path / "b", "--sensor", "hdl64e-kitti")
+    assert res.exit_code == 0, res.output
+    summary = json.loads((tmp_path / "b" / "summary.json").read_text())
+    assert summary["frames"][0]["grid_shape"][1] == 64  # the preset's 64 beams
+    assert abs(summary["sensor_height"]["m"] - 1.73) < 0.05
+    res = cli("obstacles", "detect", src, "-o", tmp_path / "c", "--sensor", "hdl-65")
+    assert res.exit_code == 2 and "vlp16" in res.output
+
+
+def test_a_failed_frame_is_reported_and_the_sequence_goes_on(cli, tmp_path, four_npz):
+    src = tmp_path / "seq"
+    src.mkdir()
+    (src / "a.npz").write_bytes(four_npz[0].read_bytes())
+    np.savez(src / "b.npz", ranges=np.ones((3, 4)), azimuth=np.zeros(2), elevation=np.zeros(4))
+    (src / "c.npz").write_bytes(four_npz[0].read_bytes())
+    out = tmp_path / "out"
+    res = cli("obstacles", "detect", src, "-o", out)
+    assert res.exit_code == 0, res.output
+    assert "1 failed" in res.stdout
+    assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["a", "c"]  # nothing for b
+    rows = (out / "frames.csv").read_text().splitlines()
+    assert rows[0] == "frame,input,status,n_obstacles,reason"
+    assert rows[1].startswith("a,") and rows[1].split(",")[2:4] == ["ok", "4"]
+    assert rows[2].startswith("b,") and ",failed,," in rows[2] and "ranges" in rows[2]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["n_frames"] == 2 and [f["input"] for f in summary["failed"]] == [
+        str(src / "b.npz")
+    ]
+    assert summary["reference"].startswith("none")
+
+
+def test_settings_toml_of_a_run_reproduces_it(cli, tmp_path, four_npz):
+    out1, out2 = tmp_path / "one", tmp_path / "two"
+    args = ("--resolution", "0.2", "--outputs", "labels,grid", "--c0-deg", "15")
+    assert cli("obstacles", "detect", four_npz[0], "-o", out1, *args).exit_code == 0
+    res = cli("obstacles", "detect", four_npz[0], "-o", out2, "--config", out1 / "settings.toml")
+    assert res.exit_code == 0, res.output
+    assert (out2 / "settings.toml").read_text() == (out1 / "settings.toml").read_text()
+    assert (out2 / "four" / "map.pgm").read_bytes() == (out1 / "four" / "map.pgm").read_bytes()
+    assert np.array_equal(
+        np.load(out2 / "four" / "labels.npy"), np.load(out1 / "four" / "labels.npy")
+    )

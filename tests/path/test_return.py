@@ -66,9 +66,11 @@ def test_final_error_grows_with_vo_noise(staircase):
     # 40 runs per level, noise x4 between levels: the mean error must increase (the gap between
     # levels is several standard errors of the mean)
     assert errs[0] < errs[1] < errs[2]
-    # the paper's bound: below 16 % of the path length with its VO; ours at the default noise is
-    # far lower (level 2.0 ~ the default VisualOdometryNoise)
-    assert errs[1] / staircase.total_length < 0.16
+    # navkit's own figure at level 2.0 (~ the default VisualOdometryNoise), not the paper's loose
+    # 16 % bound: measured 1.93 % of the path length (seeds 1-3: 1.87-2.00 %), standard error of
+    # the 40-run mean 0.18-0.24 %; the band is about +-4 standard errors, so a return that ignored
+    # the VO noise (~0.5 %) or drifted twice as much fails
+    assert 0.011 < errs[1] / staircase.total_length < 0.028
 
 
 def test_corrupt_step_is_exact_without_noise(rng):

@@ -90,7 +90,6 @@ def test_disparity_on_middlebury_with_ground_truth(cli, data_path, tmp_path):
 
 
 def test_simulate_build_and_locate_a_stereo_room(cli, tmp_path):
-    pytest.importorskip("navkit.sim")
     survey = tmp_path / "survey"
     res = cli("stereo", "simulate", "rectangle", "--out", survey, "--width", "240")
     assert res.exit_code == 0, res.stderr
@@ -160,7 +159,6 @@ def test_locate_refines_stereo_fixes_against_the_walls(cli, tmp_path):
     0.6-0.7 cm and a 95th percentile of 1.0-1.9 cm; this 240 px rig is a third coarser in
     disparity, so 2 cm bounds the median of four fixes.
     """
-    pytest.importorskip("navkit.sim")
     for args in (("--out", tmp_path / "survey"), ("--out", tmp_path / "test", "--random", "4")):
         extra = ("--turn", "4", "--seed", "3") if "--random" in args else ()
         res = cli("stereo", "simulate", "lshape", "--width", "240", *args, *extra)
@@ -195,7 +193,6 @@ def test_locate_with_known_heading_never_gives_a_false_confident_fix(cli, tmp_pa
     fix must be right (within 0.3 m), at least one view must be confident, and every view that
     is not confident must say why.
     """
-    pytest.importorskip("navkit.sim")
     res = cli("stereo", "simulate", "lshape", "--width", "240", "--out", tmp_path / "survey")
     assert res.exit_code == 0, res.stderr
     res = cli("map", "build", tmp_path / "survey", "--out", tmp_path / "map")

@@ -7,7 +7,6 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-import pytest
 
 from navkit.viz.report import Report
 
@@ -37,7 +36,8 @@ def test_report_is_self_contained_and_escaped(tmp_path):
 
 
 def test_report_renders_in_headless_chromium(tmp_path):
-    cv2 = pytest.importorskip("cv2")
+    import cv2
+
     page = _report().write(tmp_path / "report.html")
     result = open_page(page, tmp_path / "shot.png", size=(1000, 900))
     assert result.console_errors == []

@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import typer
 
-from navkit.cli.common import cli_errors, expand_inputs, progress, write_run_files
+from navkit.cli.common import check_out_dir, cli_errors, expand_inputs, progress, write_run_files
 
 log = logging.getLogger(__name__)
 
@@ -20,13 +20,18 @@ obstacles_app = typer.Typer(
     no_args_is_help=True,
 )
 
-SUFFIXES = (".npz", ".bin", ".pcd", ".ply", ".npy", ".png", ".pgm", ".tif", ".tiff")
+OUTPUTS = ("labels", "obstacles", "grid", "png", "geojson")
+"""What ``--outputs`` may choose, per frame: ``labels.npy``, ``obstacles.json``, the map_server
+occupancy grid ``map.pgm`` + ``map.yaml``, the figure ``map.png``, ``map.geojson`` (WGS84,
+needs ``--origin``)."""
+DEFAULT_OUTPUTS = "labels,obstacles"
 
 
 @dataclass(frozen=True)
 class InputOptions:
-    """How inputs are read and mounted (written to ``settings.toml``)."""
+    """How inputs are read and mounted (the ``[inputs]`` table of ``settings.toml``)."""
 
+    sensor: str | None = None
     sensor_height_m: float | None = None
     roll_deg: float = 0.0
     pitch_deg: float = 0.0
@@ -34,17 +39,19 @@ class InputOptions:
     rings: int | None = None
     columns: int | None = None
     ring_method: str = "auto"
-    camera: tuple[float, float, float, float] | None = None
+    intrinsics: tuple[float, float, float, float] | None = None
     depth_scale: float = 1000.0
 
 
 @dataclass(frozen=True)
 class MapOptions:
-    """The 2D map exports."""
+    """What is written per frame (the ``[map]`` table of ``settings.toml``)."""
 
+    outputs: tuple[str, ...] = ("labels", "obstacles")
     resolution_m: float = 0.1
     extent_m: float | None = 40.0
     png_shapes: tuple[str, ...] = ("A1", "A6")
+    origin: tuple[float, ...] | None = None
 
 
 @dataclass(frozen=True)
@@ -72,266 +79,138 @@ def _parse_floats(text: str | None, n: int, name: str) -> tuple[float, ...] | No
     return vals
 
 
-def load_grid(path: Path, opts: InputOptions) -> tuple[Any, Any, str]:
-    """Read one input as a :class:`~navkit.obstacles.ScanGrid`, its mounting and a kind string.
+def _names(text: str, allowed: Any, option: str) -> tuple[str, ...]:
+    from navkit.errors import ConfigError
 
-    ``.npz``: ``ranges (n_az, n_el)``, ``azimuth``, ``elevation`` (rad), ``sensor_height`` (m),
-    optionally ``R_body_sensor (3, 3)`` and ``max_range``; ``.bin``: KITTI float32 x4;
-    ``.pcd`` / ``.ply``: organised clouds keep their grid, others are spinning-lidar clouds;
-    ``.npy``: an organised ``(H, W, >=3)`` cloud or an ``(N, >=3)`` cloud; images: depth with
-    ``--camera fx,fy,cx,cy`` and ``--depth-scale``.
-    """
-    import numpy as np
-
-    from navkit.errors import ConfigError, FormatError, InputError
-    from navkit.obstacles import Mounting, cloud_to_grid, depth_to_grid, organized_to_grid
-    from navkit.obstacles.grids import ScanGrid
-
-    suffix = path.suffix.lower()
-    height = opts.sensor_height_m
-    R_file = None
-    if suffix == ".npz":
-        from navkit.sensors import RangeScan
-
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as exc:
-            raise FormatError(f"cannot be read as .npz: {exc}", source=path) from exc
-        for key in ("ranges", "azimuth", "elevation"):
-            if key not in data:
-                raise FormatError(
-                    f"has no array {key!r} (it has {sorted(data)})",
-                    source=path,
-                    field=key,
-                    expected="ranges (n_azimuth, n_elevation), azimuth, elevation (rad), sensor_height (m)",
-                )
-        for key in ("ranges", "azimuth", "elevation"):
-            if data[key].dtype.kind not in "fiu":
-                raise FormatError(
-                    f"has dtype {data[key].dtype}", source=path, field=key, expected="numbers"
-                )
-        try:
-            scan = RangeScan(
-                data["ranges"],
-                data["azimuth"],
-                data["elevation"],
-                sensor_height=float(data.get("sensor_height", 0.0)),
-                R_body_sensor=data.get("R_body_sensor", np.eye(3)),
-                max_range=float(data.get("max_range", np.inf)),
-            )
-        except InputError as exc:
-            raise FormatError(
-                exc.message, source=path, field=exc.field, expected=exc.expected
-            ) from exc
-        if height is None:
-            height = scan.sensor_height
-        R_file = scan.R_body_sensor
-        ia = np.argsort(scan.azimuth, kind="stable")
-        ie = np.argsort(scan.elevation, kind="stable")
-        pts = scan.points("sensor")[ia][:, ie]
-        n_az, n_el = scan.shape
-        cell = np.empty((n_az, n_el), dtype=np.int64)
-        cell[np.ix_(ia, ie)] = np.arange(n_az * n_el).reshape(
-            n_az, n_el
-        )  # input (a, e) -> grid cell
-        cell_of_point = cell.ravel().copy()
-        cell_of_point[~scan.valid.ravel()] = -1
-        az = scan.azimuth[ia]
-        step = float(np.median(np.diff(az))) if len(az) > 2 else 0.0
-        wraps = bool(len(az) > 2 and np.ptp(az) + 1.5 * step >= 2 * np.pi)
-        grid = ScanGrid(pts, cell_of_point, az, wraps, "npz")
-        kind = "grid"
-    elif suffix == ".bin":
-        from navkit.io.pointcloud import read_kitti_bin
-
-        grid = cloud_to_grid(
-            read_kitti_bin(path),
-            n_rings=opts.rings,
-            n_columns=opts.columns,
-            ring_method=opts.ring_method,
-            source=str(path),
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    unknown = [n for n in names if n not in allowed]
+    if unknown:
+        raise ConfigError(
+            f"unknown {unknown}", field=option, expected=f"names from {list(allowed)}"
         )
-        kind = "cloud"
-    elif suffix in (".pcd", ".ply"):
-        from navkit.io.pointcloud import read_pcd, read_ply
+    return names
 
-        cloud = read_pcd(path) if suffix == ".pcd" else read_ply(path)
-        if cloud.height > 1:
-            grid = organized_to_grid(cloud.grid(), source=str(path))
-            kind = "organized"
-        else:
-            grid = cloud_to_grid(
-                cloud.points,
-                n_rings=opts.rings,
-                n_columns=opts.columns,
-                ring_method=opts.ring_method,
-                source=str(path),
-            )
-            kind = "cloud"
-    elif suffix == ".npy":
-        try:
-            arr = np.load(path, allow_pickle=False)
-        except (OSError, ValueError) as exc:
-            raise FormatError(f"cannot be read as .npy: {exc}", source=path) from exc
-        if arr.ndim == 3:
-            grid = organized_to_grid(arr[..., :3], source=str(path))
-            kind = "organized"
-        elif arr.ndim == 2:
-            grid = cloud_to_grid(
-                arr,
-                n_rings=opts.rings,
-                n_columns=opts.columns,
-                ring_method=opts.ring_method,
-                source=str(path),
-            )
-            kind = "cloud"
-        else:
-            raise FormatError(
-                f"has shape {arr.shape}",
-                source=path,
-                expected="(H, W, >=3) organised or (N, >=3) cloud",
-            )
-    else:
-        from navkit.io.images import read_depth
-        from navkit.sensors import PinholeCamera
 
-        if opts.camera is None:
-            raise ConfigError(
-                "a depth image needs the camera intrinsics",
-                source=path,
-                field="--camera",
-                expected="--camera fx,fy,cx,cy",
-            )
-        depth = read_depth(path, opts.depth_scale)
-        fx, fy, cx, cy = opts.camera
-        cam = PinholeCamera(fx, fy, cx, cy, depth.shape[1], depth.shape[0])
-        grid = depth_to_grid(depth, cam, source=str(path))
-        kind = "depth"
-    use_file_R = (
-        R_file is not None and opts.gravity is None and opts.roll_deg == 0 and opts.pitch_deg == 0
+def _with_preset(opts: InputOptions) -> tuple[InputOptions, Any]:
+    """Fill options the user left at their defaults from the ``--sensor`` preset."""
+    if opts.sensor is None:
+        return opts, None
+    from navkit.sensors.presets import get_preset
+
+    p = get_preset(opts.sensor)
+    return (
+        replace(
+            opts,
+            rings=opts.rings if opts.rings is not None else p.rings,
+            columns=opts.columns if opts.columns is not None else p.columns,
+            ring_method=opts.ring_method if opts.ring_method != "auto" else p.ring_method,
+            intrinsics=opts.intrinsics or p.intrinsics,
+            depth_scale=p.depth_scale
+            if (p.depth_scale and opts.depth_scale == 1000.0)
+            else opts.depth_scale,
+        ),
+        p,
     )
-    mounting = Mounting(
-        height_m=float(height or 0.0),
-        roll_deg=opts.roll_deg,
-        pitch_deg=opts.pitch_deg,
-        gravity=opts.gravity,
-        rotation=tuple(tuple(float(v) for v in row) for row in R_file)  # type: ignore[misc]
-        if use_file_R and R_file is not None
-        else None,
-    )
-    return grid, mounting, kind
-
-
-def geojson_features(detection: Any) -> list[tuple[dict[str, Any], dict[str, Any]]]:
-    """GeoJSON features: every obstacle's boundary polygon and every shape (circles and ellipses
-    as 72-gons), with the shape parameters as properties."""
-    from navkit.io.maps import point_geometry, polygon_geometry
-
-    feats: list[tuple[dict[str, Any], dict[str, Any]]] = []
-    s = detection.sensor_origin
-    feats.append((point_geometry(s[:2]), {"kind": "sensor"}))
-    for ob in detection.obstacles:
-        feats.append(
-            (
-                polygon_geometry(ob.polygon_xy),
-                {
-                    "kind": "boundary",
-                    "obstacle": ob.id,
-                    "height": ob.height,
-                    "n_points": ob.n_points,
-                    "shadow_area": ob.shadow_area,
-                },
-            )
-        )
-        for name, shp in ob.shapes.items():
-            feats.append(
-                (
-                    polygon_geometry(shp.outline(72)),
-                    {"kind": "shape", "shape": name, "obstacle": ob.id, **shp.params()},
-                )
-            )
-        for name, shp in ob.guaranteed.items():
-            feats.append(
-                (
-                    polygon_geometry(shp.outline(72)),
-                    {"kind": "shape", "shape": f"A7:{name}", "obstacle": ob.id, **shp.params()},
-                )
-            )
-    return feats
 
 
 def process_frame(
-    path: Path, out: Path, settings: Any, opts: InputOptions, mopts: MapOptions
-) -> dict[str, Any]:
-    """Detect obstacles in one input and write every per-frame output into ``out``."""
-    import numpy as np
+    path: Path, out: Path, settings: Any, opts: InputOptions, mopts: MapOptions, height: Any
+) -> tuple[dict[str, Any], Any]:
+    """Read one input, detect its obstacles and write the chosen outputs into ``out``.
 
-    from navkit.io.atomic import atomic_path, write_json
-    from navkit.io.maps import write_geojson, write_occupancy_grid
-    from navkit.obstacles import detect_obstacles_in_grid
+    ``height`` is the run's :class:`~navkit.obstacles.mounting.SensorHeight` (None: resolve it
+    on this frame). Returns the frame's summary and the height used.
+    """
+    from navkit.io.maps import GeoOrigin, write_occupancy_grid
+    from navkit.io.obstacles import write_labels, write_obstacle_geojson, write_obstacles_json
+    from navkit.io.scans import read_scan_grid
+    from navkit.obstacles import Mounting, detect_obstacles_in_grid
+    from navkit.obstacles.mounting import choose_sensor_height
     from navkit.obstacles.occupancy import occupancy_grid
-    from navkit.viz.obstacles import save_obstacle_map
 
     t0 = time.perf_counter()
-    grid, mounting, kind = load_grid(path, opts)
+    scan = read_scan_grid(
+        path,
+        rings=opts.rings,
+        columns=opts.columns,
+        ring_method=opts.ring_method,
+        intrinsics=opts.intrinsics,
+        depth_scale=opts.depth_scale,
+    )
+    use_file_R = scan.R_body_sensor is not None and opts.gravity is None
+    use_file_R = use_file_R and opts.roll_deg == 0 and opts.pitch_deg == 0
+    R_file = scan.R_body_sensor if use_file_R else None
+    mounting = Mounting(0.0, opts.roll_deg, opts.pitch_deg, opts.gravity, R_file)  # type: ignore[arg-type]
     t1 = time.perf_counter()
-    det = detect_obstacles_in_grid(grid, mounting, settings, source=str(path))
+    if height is None or (scan.sensor_height_m is not None and opts.sensor_height_m is None):
+        from navkit.sensors.presets import get_preset
+
+        preset = get_preset(opts.sensor) if opts.sensor else None
+        given = opts.sensor_height_m if opts.sensor_height_m is not None else scan.sensor_height_m
+        height = choose_sensor_height(
+            scan.grid.points,
+            mounting.R_body_sensor,
+            given_m=given,
+            typical_m=preset.typical_height_m if preset else None,
+            plausible_m=preset.height_range_m if preset else (0.05, 4.0),
+            source=str(path),
+        )
+    mounting = replace(mounting, height_m=height.height_m)
     t2 = time.perf_counter()
-    labels = grid.per_point(det.vertex_labels).astype(np.int8)
-    if kind == "grid":
-        n_az, n_el = det.vertex_labels.shape
-        labels = labels.reshape(n_az, n_el)
-    out.mkdir(parents=True, exist_ok=True)
-    with atomic_path(out / "labels.npy") as tmp:
-        np.save(tmp, labels)
-    write_json(
-        out / "obstacles.json",
-        {
-            "input": str(path),
-            "frame": "body (x forward, y left, z up, origin on the ground under the sensor)",
-            "sensor": det.sensor_origin,
-            "classes": {
-                "0": "ground",
-                "-1": "unreliable",
-                "-2": "obstacle",
-                "-3": "side shadow",
-                "-4": "shadow behind",
-            },
-            "obstacles": [ob.to_dict() for ob in det.obstacles],
-        },
-    )
-    occ = occupancy_grid(det, mopts.resolution_m, mopts.extent_m)
-    write_occupancy_grid(out / "map", occ.occupancy, occ.resolution, occ.origin_xy)
-    write_geojson(
-        out / "map.geojson",
-        geojson_features(det),
-        properties={"frame": "body", "units": "m", "input": str(path)},
-    )
-    save_obstacle_map(
-        out / "map.png",
-        det,
-        shapes=mopts.png_shapes,
-        extent_m=min(mopts.extent_m or 40.0, 40.0),
-        title=f"{path.name}: {len(det.obstacles)} obstacles",
-    )
+    det = detect_obstacles_in_grid(scan.grid, mounting, settings, source=str(path))
     t3 = time.perf_counter()
-    return {
+    out.mkdir(parents=True, exist_ok=True)
+    chosen = set(mopts.outputs)
+    if "labels" in chosen:
+        labels = scan.grid.per_point(det.vertex_labels)
+        write_labels(
+            out / "labels.npy",
+            labels.reshape(det.vertex_labels.shape) if scan.kind == "grid" else labels,
+        )
+    if "obstacles" in chosen:
+        write_obstacles_json(
+            out / "obstacles.json", det, source=str(path), extra={"sensor_height": height.to_dict()}
+        )
+    if "grid" in chosen:
+        occ = occupancy_grid(det, mopts.resolution_m, mopts.extent_m)
+        write_occupancy_grid(out / "map", occ.occupancy, occ.resolution, occ.origin_xy)
+    if "geojson" in chosen and mopts.origin is not None:
+        origin = GeoOrigin(*mopts.origin)
+        write_obstacle_geojson(
+            out / "map.geojson", det, origin, shapes=mopts.png_shapes, source=str(path)
+        )
+    if "png" in chosen:
+        from navkit.viz.obstacles import save_obstacle_map
+
+        save_obstacle_map(
+            out / "map.png",
+            det,
+            shapes=mopts.png_shapes,
+            extent_m=min(mopts.extent_m or 40.0, 40.0),
+            title=f"{path.name}: {len(det.obstacles)} obstacles",
+        )
+    t4 = time.perf_counter()
+    frame = {
         "input": str(path),
         "output": str(out),
-        "kind": kind,
-        "grid_method": grid.method,
+        "kind": scan.kind,
+        "grid_method": scan.grid.method,
         "grid_shape": list(det.vertex_labels.shape),
-        "n_points": int(labels.size),
+        "n_points": int(scan.grid.cell_of_point.size),
         "n_obstacles": len(det.obstacles),
+        "sensor_height_m": height.height_m,
         "triangles": det.counts,
+        "bytes_written": sum(f.stat().st_size for f in out.iterdir() if f.is_file()),
         "timings_s": {
             "read_and_grid": t1 - t0,
+            "sensor_height": t2 - t1,
             **det.timings,
-            "detect_total": t2 - t1,
-            "write_outputs": t3 - t2,
+            "detect_total": t3 - t2,
+            "write_outputs": t4 - t3,
+            "frame_total": t4 - t0,
         },
     }
+    return frame, height
 
 
 def register(app: typer.Typer) -> None:
@@ -339,117 +218,258 @@ def register(app: typer.Typer) -> None:
     app.add_typer(obstacles_app)
 
 
+def _load_config(config: Path | None, ctx: typer.Context) -> dict[str, dict[str, Any]]:
+    """The ``[detector]``, ``[inputs]`` and ``[map]`` tables of ``--config`` (a ``settings.toml``
+    of an earlier run works), without the keys given on the command line."""
+    if config is None:
+        return {"detector": {}, "inputs": {}, "map": {}}
+    try:
+        import tomllib
+    except ModuleNotFoundError:  # Python 3.10
+        import tomli as tomllib  # type: ignore[no-redef]
+    from navkit.errors import ConfigError
+
+    try:
+        data = tomllib.loads(config.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"is not valid TOML: {exc}", source=config) from exc
+    tables = {"detector", "inputs", "map"}
+    if not tables & set(data):  # a bare table of detector settings
+        data = {"detector": data}
+    for name in ("inputs", "map"):
+        known = {f for f in (InputOptions if name == "inputs" else MapOptions).__dataclass_fields__}
+        extra = set(data.get(name, {})) - known
+        if extra:
+            raise ConfigError(
+                f"unknown keys {sorted(extra)}",
+                source=config,
+                field=name,
+                expected=f"keys of {sorted(known)}",
+            )
+    return {k: dict(data.get(k, {})) for k in tables}
+
+
 @obstacles_app.command("detect")
 def detect(
+    ctx: typer.Context,
     inputs: list[str] = typer.Argument(
         ..., help="Files, folders or globs: .npz grids, KITTI .bin, PCD/PLY, .npy, depth images."
     ),
     out: Path = typer.Option(
         ..., "--out", "-o", help="Output folder (one sub-folder per input, named after its stem)."
     ),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace outputs already in --out."),
+    outputs: str = typer.Option(
+        DEFAULT_OUTPUTS,
+        "--outputs",
+        help="What to write per frame, comma-separated: labels, obstacles, grid (map_server "
+        "PGM + YAML), png (figure), geojson (WGS84; needs --origin, which adds it).",
+    ),
     config: Path | None = typer.Option(
-        None, "--config", help="TOML with detector settings (keys of ObstacleSettings)."
+        None, "--config", help="TOML with [detector], [inputs] and [map] tables (as settings.toml)."
+    ),
+    sensor: str | None = typer.Option(
+        None,
+        "--sensor",
+        help="Sensor preset: hdl64e-kitti, vlp16, os1-64, os1-128, livox-mid360, kinect-v1-tum, "
+        "realsense-d435 (beam layout, intrinsics, plausible height).",
     ),
     sensor_height: float | None = typer.Option(
         None,
         "--sensor-height",
-        help="Sensor height above the ground, m (default: the .npz's, else 0).",
+        help="Sensor height above the ground (m). Default: the .npz's, else measured from the "
+        "ground in the first frame and reported in summary.json.",
     ),
-    roll_deg: float = typer.Option(0.0, "--roll-deg", help="Sensor roll in the level frame, deg."),
+    roll_deg: float = typer.Option(0.0, "--roll-deg", help="Sensor roll in the level frame (deg)."),
     pitch_deg: float = typer.Option(
-        0.0, "--pitch-deg", help="Sensor pitch (positive = looking down), deg."
+        0.0, "--pitch-deg", help="Sensor pitch, positive looking down (deg)."
     ),
     gravity: str | None = typer.Option(
-        None, "--gravity", help="Gravity in the sensor frame 'gx,gy,gz' (overrides roll/pitch)."
+        None, "--gravity", help="Gravity in the sensor frame GX,GY,GZ (overrides roll and pitch)."
     ),
-    c0_deg: float | None = typer.Option(
-        None, "--c0-deg", help="Largest traversable slope c0, deg."
-    ),
+    c0_deg: float | None = typer.Option(None, "--c0-deg", help="Largest traversable slope (deg)."),
     shapes: str | None = typer.Option(
-        None, "--shapes", help="Comma-separated shapes (A1..A6, MEC, MVEE)."
+        None, "--shapes", help="Shapes to compute, comma-separated (A1..A6, MEC, MVEE)."
     ),
     rings: int | None = typer.Option(
-        None, "--rings", help="Beam count of a lidar cloud (default: recovered)."
+        None, "--rings", help="Beams of a lidar cloud (default: recovered)."
     ),
     columns: int | None = typer.Option(
         None, "--columns", help="Azimuth columns of a lidar cloud (default: recovered)."
     ),
-    ring_method: str = typer.Option("auto", "--ring-method", help="auto | order | elevation."),
-    camera: str | None = typer.Option(
-        None, "--camera", help="Depth images: 'fx,fy,cx,cy' in pixels."
+    ring_method: str = typer.Option("auto", "--ring-method", help="auto, order or elevation."),
+    intrinsics: str | None = typer.Option(
+        None, "--intrinsics", help="Depth images: FX,FY,CX,CY (pixels)."
     ),
     depth_scale: float = typer.Option(
         1000.0, "--depth-scale", help="Depth images: raw units per metre."
     ),
-    resolution: float = typer.Option(0.1, "--resolution", help="Occupancy grid cell, m."),
+    resolution: float = typer.Option(0.1, "--resolution", help="Occupancy grid cell (m)."),
     extent: float = typer.Option(
-        40.0, "--extent", help="Half-width of the maps around the sensor, m."
+        40.0, "--extent", help="Half-width of the maps around the sensor (m)."
     ),
     plot_shapes: str = typer.Option(
-        "A1,A6",
-        "--plot-shapes",
-        help="Shapes drawn in map.png, comma-separated (A1..A6, MEC, MVEE); all are in obstacles.json.",
+        "A1,A6", "--plot-shapes", help="Shapes in map.png and map.geojson, comma-separated."
+    ),
+    origin: str | None = typer.Option(
+        None,
+        "--origin",
+        help="Georeference LAT,LON[,HEADING] (deg; heading of x, clockwise from north): "
+        "writes map.geojson in WGS84.",
     ),
 ) -> None:
-    """Detect obstacles in every input; write labels, obstacles, occupancy map, GeoJSON and PNG."""
+    """Detect obstacles in every input; by default write labels.npy and obstacles.json per frame.
+
+    A frame that fails is reported (log, frames.csv, summary.json) and the others go on.
+
+    \b
+    Example:
+      navkit obstacles detect "$NAVKIT_DATA/lidar/semantickitti-seq00" \\
+          --sensor hdl64e-kitti -o out/kitti
+    """
     with cli_errors():
-        import dataclasses
-
-        try:
-            import tomllib
-        except ModuleNotFoundError:  # Python 3.10
-            import tomli as tomllib  # type: ignore[no-redef]
-
-        from navkit.errors import ConfigError
+        from navkit.geometry.shapes import SHAPES
         from navkit.obstacles import ObstacleSettings
 
-        data: dict[str, Any] = {}
-        if config is not None:
-            try:
-                data = tomllib.loads(config.read_text(encoding="utf-8"))
-            except tomllib.TOMLDecodeError as exc:
-                raise ConfigError(f"is not valid TOML: {exc}", source=config) from exc
-            data = data.get("detector", data)
+        cfg = _load_config(config, ctx)
+        given = {k for k in ctx.params if _given(ctx, k)}
         if c0_deg is not None:
-            data["c0_deg"] = c0_deg
+            cfg["detector"]["c0_deg"] = c0_deg
         if shapes is not None:
-            data["shapes"] = tuple(s.strip() for s in shapes.split(",") if s.strip())
-        settings = ObstacleSettings.from_dict(data, source=str(config or "options"))
-        g = _parse_floats(gravity, 3, "--gravity")
-        cam = _parse_floats(camera, 4, "--camera")
-        opts = InputOptions(
-            sensor_height,
-            roll_deg,
-            pitch_deg,
-            g,  # type: ignore[arg-type]
-            rings,
-            columns,
-            ring_method,
-            cam,  # type: ignore[arg-type]
-            depth_scale,
+            cfg["detector"]["shapes"] = _names(shapes, SHAPES, "--shapes")
+        settings = ObstacleSettings.from_dict(cfg["detector"], source=str(config or "options"))
+        cli_inputs = {
+            "sensor": sensor, "sensor_height_m": sensor_height, "roll_deg": roll_deg,
+            "pitch_deg": pitch_deg, "gravity": _parse_floats(gravity, 3, "--gravity"),
+            "rings": rings, "columns": columns, "ring_method": ring_method,
+            "intrinsics": _parse_floats(intrinsics, 4, "--intrinsics"), "depth_scale": depth_scale,
+        }  # fmt: skip
+        option_of = {"sensor_height_m": "sensor_height", "intrinsics": "intrinsics"}
+        merged = {**cfg["inputs"]}
+        for key, val in cli_inputs.items():
+            if option_of.get(key, key) in given or key not in merged:
+                merged[key] = val
+        opts, _ = _with_preset(InputOptions(**merged))
+        geo = (
+            _parse_floats(origin, 3, "--origin")
+            if origin and origin.count(",") == 2
+            else (_parse_floats(origin, 2, "--origin") if origin else None)
         )
-        drawn = tuple(n.strip() for n in plot_shapes.split(",") if n.strip())
-        from navkit.errors import ConfigError
-        from navkit.geometry.shapes import SHAPES
-
-        unknown = [n for n in drawn if n not in SHAPES]
-        if unknown:
-            raise ConfigError(
-                f"unknown shapes {unknown}",
-                field="--plot-shapes",
-                expected=f"names from {sorted(SHAPES)}",
-            )
-        mopts = MapOptions(resolution_m=resolution, extent_m=extent, png_shapes=drawn)
-        files = expand_inputs(inputs, SUFFIXES)
-        frames = []
-        used: dict[str, int] = {}
-        for path in progress(files, "obstacles"):
-            stem = path.stem
-            used[stem] = used.get(stem, 0) + 1
-            name = stem if used[stem] == 1 else f"{stem}_{used[stem]}"
-            frames.append(process_frame(path, out / name, settings, opts, mopts))
-        run = RunSettings(detector=dataclasses.asdict(settings), inputs=opts, map=mopts)
-        write_run_files(out, asdict(run), {"frames": frames, "n_frames": len(frames)})
+        cli_map: dict[str, Any] = {
+            "outputs": _names(outputs, OUTPUTS, "--outputs"), "resolution_m": resolution,
+            "extent_m": extent, "png_shapes": _names(plot_shapes, SHAPES, "--plot-shapes"),
+            "origin": geo,
+        }  # fmt: skip
+        map_option = {
+            "resolution_m": "resolution",
+            "extent_m": "extent",
+            "png_shapes": "plot_shapes",
+        }
+        mcfg: dict[str, Any] = dict(cfg["map"])
+        for key, val in cli_map.items():
+            if map_option.get(key, key) in given or key not in mcfg:
+                mcfg[key] = val
+        mcfg = {k: tuple(v) if isinstance(v, list) else v for k, v in mcfg.items()}
+        mcfg["outputs"] = _check_geo(
+            _names(",".join(mcfg["outputs"]), OUTPUTS, "outputs"),
+            mcfg.get("origin"),
+            "outputs" in given or "outputs" in cfg["map"],
+        )
+        mopts = MapOptions(**mcfg)
+        files = expand_inputs(inputs, _suffixes())
+        check_out_dir(out, overwrite)
+        frames, failed, height, first_error = _run_frames(files, out, settings, opts, mopts)
+        if first_error is not None and not frames:
+            raise first_error  # nothing worked: the one-line error, exit code 2, no run files
+        run = RunSettings(detector=asdict(settings), inputs=opts, map=mopts)
+        write_run_files(
+            out,
+            asdict(run),
+            {
+                "frames": frames,
+                "n_frames": len(frames),
+                "failed": failed,
+                "sensor_height": height.to_dict() if height is not None else None,
+                "outputs": list(mopts.outputs),
+            },
+            reference="none: the detections are not compared with any ground truth",
+        )
+        if height is not None and height.source != "given":
+            log.info("sensor height %.3f m (%s)", height.height_m, height.source)
         typer.echo(
-            f"{len(frames)} frame(s), {sum(f['n_obstacles'] for f in frames)} obstacles -> {out}"
+            f"{len(frames)} frame(s), {sum(f['n_obstacles'] for f in frames)} obstacles"
+            + (f", {len(failed)} failed (see frames.csv)" if failed else "")
+            + f" -> {out}"
         )
+
+
+def _run_frames(
+    files: list[Path], out: Path, settings: Any, opts: InputOptions, mopts: MapOptions
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]], Any, Exception | None]:
+    """Every frame in turn; a frame that fails is reported (log, ``frames.csv``, the summary's
+    ``failed``) and gets no outputs, and the others go on. ``frames.csv``: one row per input,
+    ``frame,input,status,n_obstacles,reason``."""
+    from navkit.errors import DegenerateGeometryError, InputError
+    from navkit.io.obstacles import write_frame_status
+
+    frames: list[dict[str, Any]] = []
+    failed: list[dict[str, Any]] = []
+    rows: list[tuple[str, str, str, int | None, str]] = []
+    height, first_error = None, None
+    for path, name in progress(_frame_names(files), "obstacles"):
+        try:
+            frame, height = process_frame(path, out / name, settings, opts, mopts, height)
+        except (InputError, DegenerateGeometryError) as exc:
+            log.error("frame failed, no outputs written: %s", exc)  # exc names the file
+            first_error = first_error or exc
+            failed.append({"input": str(path), "reason": str(exc)})
+            rows.append((name, str(path), "failed", None, str(exc)))
+            continue
+        frames.append(frame)
+        rows.append((name, str(path), "ok", frame["n_obstacles"], ""))
+    if frames:
+        write_frame_status(out / "frames.csv", rows)
+    return frames, failed, height, first_error
+
+
+def _given(ctx: typer.Context, name: str) -> bool:
+    """Whether option ``name`` was written on the command line (or in the environment)."""
+    source = ctx.get_parameter_source(name)
+    return source is not None and source.name in ("COMMANDLINE", "ENVIRONMENT", "PROMPT")
+
+
+def _suffixes() -> tuple[str, ...]:
+    from navkit.io.scans import SCAN_SUFFIXES
+
+    return SCAN_SUFFIXES
+
+
+def _frame_names(files: list[Path]) -> list[tuple[Path, str]]:
+    """One output sub-folder per input, named after its stem (``_2``, ... for repeated stems)."""
+    used: dict[str, int] = {}
+    named = []
+    for path in files:
+        used[path.stem] = used.get(path.stem, 0) + 1
+        k = used[path.stem]
+        named.append((path, path.stem if k == 1 else f"{path.stem}_{k}"))
+    return named
+
+
+def _check_geo(chosen: tuple[str, ...], origin: Any, explicit: bool) -> tuple[str, ...]:
+    """GeoJSON only when georeferenced: refuse ``geojson`` without ``--origin``; ``--origin``
+    adds it to the default outputs."""
+    from navkit.errors import ConfigError
+    from navkit.io.maps import GeoOrigin
+
+    if origin is not None:
+        GeoOrigin(*origin)  # validates the ranges
+        if "geojson" not in chosen and not explicit:
+            chosen = (*chosen, "geojson")
+    elif "geojson" in chosen:
+        raise ConfigError(
+            "GeoJSON (RFC 7946) is WGS84 longitude / latitude and this map is in local metres",
+            field="--outputs geojson",
+            expected="--origin LAT,LON[,HEADING] to georeference it, or the map_server grid "
+            "(--outputs grid) and obstacles.json",
+        )
+    return chosen

@@ -21,7 +21,7 @@ from typing import Any
 
 import typer
 
-from navkit.cli.common import cli_errors, progress, write_run_files
+from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
 
 log = logging.getLogger(__name__)
 
@@ -61,13 +61,8 @@ class RecordInput:
     plane: str
 
 
-def _check_out(out: Path) -> None:
-    from navkit.errors import ConfigError
-
-    if out.exists() and not out.is_dir():
-        raise ConfigError(
-            "exists and is not a folder", source=out, field="--out", expected="a folder path"
-        )
+OUT_HELP = "Output folder (refused if it holds files, unless --overwrite)."
+OVERWRITE_HELP = "Replace outputs already in --out."
 
 
 def _looks_like_odometry(path: Path) -> bool:
@@ -123,7 +118,8 @@ def record(
     tolerance: float = typer.Option(
         0.05, "--tolerance", "-e", help="eps: max distance of a point from the spline (m)."
     ),
-    out: Path = typer.Option(Path("out/path"), "--out", "-o", help="Output folder."),
+    out: Path = typer.Option(..., "--out", "-o", help=OUT_HELP),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     format: TrajFormat = typer.Option(TrajFormat.auto, "--format", help="Input format."),
     plane: PlaneChoice = typer.Option(
         PlaneChoice.auto,
@@ -138,14 +134,20 @@ def record(
     ),
     precision: float = typer.Option(1e-4, "--precision", help="Loop search precision (m)."),
 ) -> None:
-    """Record a trajectory point by point as a cubic spline over arc length (mode 1)."""
+    """Record a trajectory point by point as a cubic spline over arc length (mode 1).
+
+    \b
+    Example:
+      navkit path record "$NAVKIT_DATA/trajectories/KITTI_00_gt.txt" \\
+          --tolerance 0.5 -o out/kitti-path
+    """
     with cli_errors():
         from navkit.errors import InputError
         from navkit.io.pathjson import write_path_json
         from navkit.path import ApproximatorSettings, approximate
         from navkit.viz.path import plot_record
 
-        _check_out(out)
+        check_out_dir(out, overwrite)
         settings = ApproximatorSettings(
             tolerance=tolerance,
             variant=variant.value,
@@ -166,7 +168,6 @@ def record(
                 field="positions",
                 expected="at least two distinct positions",
             )
-        out.mkdir(parents=True, exist_ok=True)
         write_path_json(out / "path.json", result.spline)
         plot_record(
             result,
@@ -174,7 +175,13 @@ def record(
             raw_points=xy,
             title=f"{trajectory.name}: eps = {tolerance:g} m",
         )
-        summary = {"input": str(trajectory), "format": used, **result.summary()}
+        summary = {
+            "input": str(trajectory),
+            "format": used,
+            **result.summary(),
+            "reference": "the input trajectory itself: deviations are of the spline from the "
+            "recorded points, not from the true path",
+        }
         write_run_files(
             out,
             {
@@ -194,7 +201,8 @@ def record(
 def return_(
     path_json: Path = typer.Argument(..., help="A path.json written by 'navkit path record'."),
     runs: int = typer.Option(40, "--runs", help="Number of simulated returns (paper: 40)."),
-    out: Path = typer.Option(Path("out/path-return"), "--out", "-o", help="Output folder."),
+    out: Path = typer.Option(..., "--out", "-o", help=OUT_HELP),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     seed: int = typer.Option(0, "--seed", help="Random seed."),
     vo_rate_hz: float = typer.Option(10.0, "--vo-rate-hz", help="VO (and control) rate (Hz)."),
     vo_scale_sigma: float = typer.Option(
@@ -213,7 +221,12 @@ def return_(
         0.05, "--stop-radius", help="Stop radius around the start (m)."
     ),
 ) -> None:
-    """Simulate returns from the end of a stored path to its start (mode 2, paper fig. 4)."""
+    """Simulate returns from the end of a stored path to its start (mode 2, paper fig. 4).
+
+    \b
+    Example:
+      navkit path return out/kitti-path/path.json --runs 40 -o out/kitti-return
+    """
     with cli_errors():
         import numpy as np
 
@@ -225,7 +238,6 @@ def return_(
         from navkit.sim.return_sim import simulate_returns
         from navkit.viz.path import plot_returns
 
-        _check_out(out)
         if runs < 1:
             raise ConfigError(f"is {runs}", field="--runs", expected="at least 1")
         spline = read_path_json(path_json)
@@ -248,7 +260,7 @@ def return_(
             spline, runs=runs, settings=ctrl, vo=vo, rng=np.random.default_rng(seed)
         )
         summary = sim.summary()
-        out.mkdir(parents=True, exist_ok=True)
+        check_out_dir(out, overwrite)
         write_json(
             out / "returns.json",
             {
@@ -272,7 +284,12 @@ def return_(
         write_run_files(
             out,
             {"path": str(path_json), "runs": runs, "seed": seed, "vo": vo, "controller": ctrl},
-            {"input": str(path_json), **summary},
+            {
+                "input": str(path_json),
+                **summary,
+                "reference": "simulator ground truth: the true final position of each simulated "
+                "return against the path's start",
+            },
         )
         typer.echo(
             f"{runs} returns over L = {summary['path_length_m']:.3f} m: final error mean "
@@ -283,7 +300,8 @@ def return_(
 
 @path_app.command("simulate")
 def simulate(
-    out: Path = typer.Option(Path("out/path-sim"), "--out", "-o", help="Output folder."),
+    out: Path = typer.Option(..., "--out", "-o", help=OUT_HELP),
+    overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     legs: int = typer.Option(7, "--legs", help="Number of straight legs."),
     leg_length: float = typer.Option(0.5, "--leg-length", help="Leg length (m) (paper: 0.5)."),
     turn_deg: float = typer.Option(90.0, "--turn-deg", help="Turn between legs (deg) (paper: 90)."),
@@ -298,7 +316,12 @@ def simulate(
         0.2, "--vo-heading-sigma-deg", help="VO per-step heading noise (deg)."
     ),
 ) -> None:
-    """Drive a simulated robot (legs and turns, like the paper's experiment): true.tum and vo.tum."""
+    """Drive a simulated robot (legs and turns, like the paper's experiment): true.tum and vo.tum.
+
+    \b
+    Example:
+      navkit path simulate --legs 7 -o out/path-sim
+    """
     with cli_errors():
         import numpy as np
 
@@ -308,7 +331,6 @@ def simulate(
         from navkit.sensors import VisualOdometryNoise
         from navkit.sim.return_sim import leg_drive
 
-        _check_out(out)
         if legs < 1 or not leg_length > 0:
             raise ConfigError(
                 f"legs={legs}, leg_length={leg_length}",
@@ -324,6 +346,7 @@ def simulate(
         )
         est = vo.corrupt(true, rng)
         t = np.arange(len(true)) / vo.rate_hz
+        check_out_dir(out, overwrite)
 
         def traj(p: Any) -> Any:
             c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
@@ -331,7 +354,6 @@ def simulate(
             R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -s, s, c, 1.0
             return Trajectory(t, se3_from_rt(R, np.c_[p[:, :2], np.zeros(len(p))]))
 
-        out.mkdir(parents=True, exist_ok=True)
         write_tum(out / "true.tum", traj(true))
         write_tum(out / "vo.tum", traj(est))
         length = float(np.hypot(*np.diff(true[:, :2], axis=0).T).sum())
@@ -349,6 +371,7 @@ def simulate(
                 "poses": len(true),
                 "length_m": length,
                 "vo_end_error_m": float(np.hypot(*(est[-1, :2] - true[-1, :2]))),
+                "reference": "simulator ground truth (true.tum)",
             },
         )
         typer.echo(f"{len(true)} poses, {length:.2f} m -> {out / 'true.tum'}, {out / 'vo.tum'}")

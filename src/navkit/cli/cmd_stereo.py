@@ -17,7 +17,7 @@ from pathlib import Path
 
 import typer
 
-from navkit.cli.common import cli_errors, progress, write_run_files
+from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
 
 log = logging.getLogger(__name__)
 
@@ -59,7 +59,10 @@ def disparity_cmd(
     calib: Path = typer.Option(
         ..., "--calib", help="Middlebury calib.txt, KITTI calib (P2/P3) or YAML (K, baseline)."
     ),
-    out: Path = typer.Option(..., "--out", help="Output folder."),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Output folder (refused if it holds files, unless --overwrite)."
+    ),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace outputs already in --out."),
     matcher: MatcherChoice = typer.Option(MatcherChoice.sgbm, help="OpenCV matcher."),
     num_disparities: int = typer.Option(
         0, help="Search range (multiple of 16); 0 = from the calibration's ndisp, else 128."
@@ -70,7 +73,7 @@ def disparity_cmd(
         FillChoice.background, help="Fill rejected pixels from the background."
     ),
     max_depth: float = typer.Option(
-        50.0, help="Metres; farther points are left out of points.ply."
+        50.0, help="Points farther than this (m) are left out of points.ply."
     ),
     gt: Path | None = typer.Option(
         None, "--gt", help="Ground-truth disparity (PFM) to score bad-2.0 / bad-4.0."
@@ -79,7 +82,14 @@ def disparity_cmd(
         None, "--mask", help="Middlebury mask (255 = scored, e.g. mask0nocc.png)."
     ),
 ) -> None:
-    """Dense disparity (PFM + coloured PNG) and 3D points (PLY) of a rectified stereo pair."""
+    """Dense disparity (PFM + coloured PNG) and 3D points (PLY) of a rectified stereo pair.
+
+    \b
+    Example:
+      D="$NAVKIT_DATA/stereo/middlebury2014-motorcycle-q"
+      navkit stereo disparity $D/im0.png $D/im1.png --calib $D/calib.txt \\
+          --gt $D/disp0GT.pfm --mask $D/mask0nocc.png -o out/motorcycle
+    """
     with cli_errors():
         import numpy as np
 
@@ -121,8 +131,8 @@ def disparity_cmd(
             lr_check=lr_check,
             fill=fill.value,
         )
+        check_out_dir(out, overwrite)
         res = compute_disparity(L, R, settings)
-        out.mkdir(parents=True, exist_ok=True)
         write_pfm(
             out / "disparity.pfm",
             np.where(np.isfinite(res.disparity), res.disparity, np.inf).astype(np.float32),
@@ -170,14 +180,17 @@ def disparity_cmd(
 @stereo_app.command("simulate")
 def simulate_cmd(
     room: RoomChoice = typer.Argument(..., help="Which test room."),
-    out: Path = typer.Option(..., "--out", help="Output folder (a stereo frame folder)."),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Output folder, a stereo frame folder (refused if it holds files)."
+    ),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace outputs already in --out."),
     random_poses: int = typer.Option(
         0, "--random", help="Render N random poses instead of the survey."
     ),
-    width: int = typer.Option(320, help="Image width (height = 3/4), pixels."),
-    hfov_deg: float = typer.Option(90.0, help="Horizontal field of view, degrees."),
-    baseline: float = typer.Option(0.2, help="Metres."),
-    height: float = typer.Option(1.2, help="Camera height, metres."),
+    width: int = typer.Option(320, help="Image width (pixels); the height is 3/4 of it."),
+    hfov_deg: float = typer.Option(90.0, help="Horizontal field of view (deg)."),
+    baseline: float = typer.Option(0.2, help="Stereo baseline (m)."),
+    height: float = typer.Option(1.2, help="Camera height above the floor (m)."),
     turn: int = typer.Option(
         1,
         "--turn",
@@ -185,9 +198,14 @@ def simulate_cmd(
         help="Frames per place: the camera turns through N headings (use with map locate --group N).",
     ),
     seed: int = typer.Option(0, help="Seed of the random poses and the image noise."),
-    pixel_noise: float = typer.Option(1.0, help="Image noise, grey levels."),
+    pixel_noise: float = typer.Option(1.0, help="Image noise (grey levels)."),
 ) -> None:
-    """Render a textured test room with a stereo rig (survey or random poses) into a frame folder."""
+    """Render a textured test room with a stereo rig (survey or random poses) into a frame folder.
+
+    \b
+    Example:
+      navkit stereo simulate lshape --turn 4 -o out/lshape
+    """
     with cli_errors():
         import numpy as np
 
@@ -199,6 +217,7 @@ def simulate_cmd(
         from navkit.stereo.rooms import room as make_room
         from navkit.stereo.rooms import sample_poses
 
+        check_out_dir(out, overwrite)
         truth = make_room(room.value)
         scene = scene_from_dict(truth.scene)
         rig = StereoRig(PinholeCamera.from_fov(width, width * 3 // 4, hfov_deg), baseline)

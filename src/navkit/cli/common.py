@@ -1,10 +1,17 @@
 """Conventions every ``navkit`` command follows.
 
 - Outputs go to ``--out DIR``; each run writes its resolved settings (``settings.toml``) and a
-  ``summary.json`` of its key figures there (:func:`write_run_files`).
+  ``summary.json`` of its key figures there (:func:`write_run_files`), with a ``"reference"``
+  field saying what its headline figures are measured against.
 - Bad input exits with code 2 and one line ``error: ...`` naming the file / field and what was
   expected; the traceback only with ``navkit --debug`` (:func:`cli_errors`).
-- Long work shows a progress bar (:func:`progress`), on stderr, hidden when not a terminal.
+- Existing outputs are never replaced silently: a command calls :func:`check_out_dir` once,
+  which refuses a non-empty ``--out`` folder unless ``--overwrite`` is given.
+- Long work shows a progress bar (:func:`progress`) on stderr in a terminal, and periodic log
+  lines (``INFO``) when stderr is not a terminal (a log file, CI); log lines go through rich's
+  handler on the same console, so they print above the bar instead of over it
+  (:func:`configure_logging`).
+- ``-q`` / ``--quiet`` and ``--debug`` may stand anywhere on the command line.
 - Heavy imports happen inside the command functions, so ``navkit --help`` stays fast.
 """
 
@@ -12,6 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import sys
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
@@ -23,7 +31,9 @@ from navkit.errors import InputError, NavkitError
 
 __all__ = [
     "STATE",
+    "check_out_dir",
     "cli_errors",
+    "configure_logging",
     "expand_inputs",
     "progress",
     "settings_to_toml",
@@ -60,11 +70,86 @@ def cli_errors() -> Iterator[None]:
         raise typer.Exit(code=2) from None
 
 
+def _console() -> Any:
+    """The one rich console on stderr shared by the progress bar and the log handler."""
+    global _CONSOLE
+    if _CONSOLE is None:
+        from rich.console import Console
+
+        _CONSOLE = Console(stderr=True)
+    return _CONSOLE
+
+
+_CONSOLE: Any = None
+_HANDLER_TAG = "_navkit_cli_handler"
+
+
+class _StderrHandler(logging.StreamHandler):  # type: ignore[type-arg]
+    """Writes to whatever ``sys.stderr`` is at each record (test runners swap and close it)."""
+
+    def emit(self, record: logging.LogRecord) -> None:
+        self.stream = sys.stderr
+        super().emit(record)
+
+
+def configure_logging(level: int) -> None:
+    """Send log records to stderr: rich's handler on the progress bar's console in a terminal
+    (so a log line prints above the bar, not over it), plain ``LEVEL name: message`` lines
+    otherwise. Replaces the handler an earlier call installed; other handlers are left alone."""
+    root = logging.getLogger()
+    for h in list(root.handlers):
+        if getattr(h, _HANDLER_TAG, False):
+            root.removeHandler(h)
+    console = _console()
+    handler: logging.Handler
+    if console.is_terminal:
+        from rich.logging import RichHandler
+
+        handler = RichHandler(console=console, show_path=False, show_time=False)
+        handler.setFormatter(logging.Formatter("%(name)s: %(message)s"))
+    else:
+        handler = _StderrHandler()
+        handler.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    setattr(handler, _HANDLER_TAG, True)
+    root.addHandler(handler)
+    root.setLevel(level)
+
+
 def progress(
-    items: Sequence[T] | Iterable[T], description: str, total: int | None = None
+    items: Sequence[T] | Iterable[T],
+    description: str,
+    total: int | None = None,
+    *,
+    log_every_s: float = 5.0,
 ) -> Iterator[T]:
-    """Iterate with a rich progress bar on stderr (silent when stderr is not a terminal)."""
-    from rich.console import Console
+    """Iterate with progress reports on stderr.
+
+    In a terminal: a rich progress bar. Otherwise (a log file, CI): an ``INFO`` log line
+    ``description: k/n done (p %), t s elapsed, about r s left`` at most every ``log_every_s``
+    seconds and one when the work is done. Nothing with ``-q``.
+    """
+    import time
+
+    if total is None and hasattr(items, "__len__"):
+        total = len(items)  # type: ignore[arg-type]
+    console = _console()
+    if STATE.quiet:
+        yield from items
+        return
+    if not console.is_terminal:
+        plog = logging.getLogger("navkit.progress")
+        t0 = last = time.perf_counter()
+        done = 0
+        for item in items:
+            yield item
+            done += 1
+            now = time.perf_counter()
+            if now - last >= log_every_s or (total is not None and done == total):
+                last = now
+                plog.info("%s", _progress_line(description, done, total, now - t0))
+        if total is None or done != total:
+            plog.info("%s", _progress_line(description, done, done, time.perf_counter() - t0))
+        return
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -74,10 +159,6 @@ def progress(
         TimeRemainingColumn,
     )
 
-    if total is None and hasattr(items, "__len__"):
-        total = len(items)  # type: ignore[arg-type]
-    console = Console(stderr=True)
-    disable = STATE.quiet or not console.is_terminal
     with Progress(
         TextColumn("[bold]{task.description}"),
         BarColumn(),
@@ -85,13 +166,52 @@ def progress(
         TimeElapsedColumn(),
         TimeRemainingColumn(),
         console=console,
-        disable=disable,
         transient=False,
     ) as bar:
         task = bar.add_task(description, total=total)
         for item in items:
             yield item
             bar.advance(task)
+
+
+def _progress_line(description: str, done: int, total: int | None, elapsed_s: float) -> str:
+    if not total:
+        return f"{description}: {done} done, {elapsed_s:.1f} s elapsed"
+    left = elapsed_s / done * (total - done) if done else float("nan")
+    return (
+        f"{description}: {done}/{total} done ({100.0 * done / total:.0f} %), "
+        f"{elapsed_s:.1f} s elapsed, about {left:.0f} s left"
+    )
+
+
+def check_out_dir(out: Path, overwrite: bool) -> Path:
+    """Make ``out`` ready for a command's outputs; refuse to replace earlier ones silently.
+
+    A missing folder is created; an empty one is used as is. A folder that already holds
+    anything is refused with an :class:`~navkit.errors.InputError` naming it and a few of its
+    entries, unless ``overwrite`` is true; then files of the same names are replaced as they are
+    written and other files in it are left alone (nothing is deleted).
+
+    Raises
+    ------
+    InputError
+        ``out`` is a file, or a non-empty folder and ``overwrite`` is false.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError("is a file", source=out, field="--out", expected="a folder (new or empty)")
+    if out.is_dir() and not overwrite:
+        entries = sorted(p.name for p in out.iterdir())
+        if entries:
+            shown = ", ".join(entries[:5]) + (", ..." if len(entries) > 5 else "")
+            raise InputError(
+                f"already holds outputs ({shown})",
+                source=out,
+                field="--out",
+                expected="a new or empty folder, or --overwrite to replace them",
+            )
+    out.mkdir(parents=True, exist_ok=True)
+    return out
 
 
 def expand_inputs(inputs: Sequence[str], suffixes: Sequence[str]) -> list[Path]:
@@ -129,20 +249,5 @@ def expand_inputs(inputs: Sequence[str], suffixes: Sequence[str]) -> list[Path]:
     return found
 
 
-def settings_to_toml(settings: Any) -> str:
-    """TOML text of a settings dataclass (or a dict of them), nested tables for nested dataclasses."""
-    import tomli_w
-
-    from navkit.io.atomic import to_jsonable
-
-    def clean(value: Any) -> Any:
-        if isinstance(value, dict):
-            return {k: clean(v) for k, v in value.items() if v is not None}
-        if isinstance(value, list):
-            return [clean(v) for v in value if v is not None]
-        return value
-
-    return tomli_w.dumps(clean(to_jsonable(settings)))
-
-
-from navkit.io.atomic import write_run_files  # noqa: E402  (one writer, in navkit.io)
+# one home for the run files and their TOML, in navkit.io
+from navkit.io.atomic import settings_to_toml, write_run_files  # noqa: E402

@@ -10,20 +10,38 @@ from __future__ import annotations
 import importlib
 import logging
 import pkgutil
-from typing import Optional
+from typing import Any, Optional
 
 import typer
+from typer.core import TyperGroup
 
 import navkit.cli
 from navkit import __version__
-from navkit.cli.common import STATE
+from navkit.cli.common import STATE, configure_logging
+
+GLOBAL_FLAGS = ("-q", "--quiet", "--debug")
+"""Options of the ``navkit`` command itself that may also be written after the sub-command."""
+
+
+class _GlobalFlagsAnywhere(TyperGroup):
+    """The root group: moves ``-q`` / ``--quiet`` / ``--debug`` from anywhere on the line
+    (up to a ``--``) to before the sub-command, so ``navkit obstacles detect ... -q`` works."""
+
+    def parse_args(self, ctx: Any, args: list[str]) -> list[str]:  # typer's own click Context
+        end = args.index("--") if "--" in args else len(args)
+        flags = [a for a in args[:end] if a in GLOBAL_FLAGS]
+        rest = [a for a in args[:end] if a not in GLOBAL_FLAGS]
+        return super().parse_args(ctx, flags + rest + args[end:])
+
 
 app = typer.Typer(
+    cls=_GlobalFlagsAnywhere,
     name="navkit",
     help="See, map, localize and come home without satellite navigation.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    rich_markup_mode=None,
 )
 
 
@@ -41,10 +59,14 @@ def main(
     debug: bool = typer.Option(False, "--debug", help="Show tracebacks and debug logging."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bars, warnings only."),
 ) -> None:
-    """navkit: obstacles, planes, stereo room maps, localization and path memory for robots."""
+    """navkit: obstacles, planes, stereo room maps, localization and path memory for robots.
+
+    -q / --quiet and --debug may be given anywhere on the line. Every command writes into
+    --out DIR and refuses to replace earlier outputs there unless --overwrite is given.
+    """
     STATE.debug, STATE.quiet = debug, quiet
     level = logging.DEBUG if debug else (logging.WARNING if quiet else logging.INFO)
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
+    configure_logging(level)
 
 
 def _register_commands() -> None:

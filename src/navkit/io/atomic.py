@@ -129,10 +129,27 @@ def settings_to_toml(settings: Any) -> str:
     return tomli_w.dumps(clean(to_jsonable(settings)))
 
 
-def write_run_files(out: str | os.PathLike[str], settings: Any, summary: dict[str, Any]) -> None:
+def write_run_files(
+    out: str | os.PathLike[str],
+    settings: Any,
+    summary: dict[str, Any],
+    *,
+    reference: str | None = None,
+) -> None:
     """Write ``settings.toml`` (the resolved settings; TOML has no null, so None values are left
     out) and ``summary.json`` (with the navkit version and the command line) into ``out``
-    atomically: what every navkit run writes next to its outputs."""
+    atomically: what every navkit run writes next to its outputs.
+
+    Parameters
+    ----------
+    reference : str, optional
+        What the summary's headline figures (errors, success rates, scores) are measured
+        against, written as the ``"reference"`` field right after the version and the command
+        line - e.g. ``"simulator ground truth"``, ``"SemanticKITTI labels"``, or, for a map
+        located with the same log it was built from, ``"self-consistency: the map was built from
+        this log's poses; not an accuracy figure"``. A ``"reference"`` key in ``summary`` is
+        taken when the keyword is not given.
+    """
     import sys
 
     from navkit import __version__
@@ -140,6 +157,10 @@ def write_run_files(out: str | os.PathLike[str], settings: Any, summary: dict[st
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     write_text(out / "settings.toml", settings_to_toml(settings))
+    head: dict[str, Any] = {"navkit_version": __version__, "argv": sys.argv[1:]}
+    ref = reference if reference is not None else summary.get("reference")
+    if ref is not None:
+        head["reference"] = ref
     write_json(
-        out / "summary.json", {"navkit_version": __version__, "argv": sys.argv[1:], **summary}
+        out / "summary.json", {**head, **{k: v for k, v in summary.items() if k != "reference"}}
     )

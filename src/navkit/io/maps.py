@@ -14,10 +14,17 @@ occupied_thresh 0.65, free_thresh 0.196``. Reading applies map_server's trinary 
 
 GeoJSON
 -------
-:func:`write_geojson` writes a ``FeatureCollection`` (RFC 7946 structure). navkit's coordinates
-are local metres in the map frame, not WGS84 longitude / latitude; the collection says so in its
-``properties``. Polygon rings must be closed (first position == last) with at least 4 positions;
-:func:`polygon_geometry` builds closed, counter-clockwise rings from ``(N, 2)`` vertices.
+:func:`write_geojson` writes a ``FeatureCollection``. RFC 7946 GeoJSON means WGS84 longitude /
+latitude, so a map in local metres is georeferenced first: given a :class:`GeoOrigin` (the
+latitude and longitude of the local frame's origin and the compass heading of its x axis),
+every position is converted exactly (:func:`local_to_wgs84`: local x, y -> east, north on the
+tangent plane at the origin -> ECEF -> geodetic latitude / longitude on the WGS84 ellipsoid,
+heights on the ellipsoid dropped) and written as ``[lon, lat]`` with 8 decimals (about 1 mm).
+Without an origin the coordinates stay local metres, which RFC 7946 does not allow; the
+collection says so in its ``properties`` (commands write GeoJSON only when georeferenced, and
+keep local maps as map_server grids and JSON). Polygon rings must be closed (first position ==
+last) with at least 4 positions; :func:`polygon_geometry` builds closed, counter-clockwise rings
+from ``(N, 2)`` vertices.
 """
 
 from __future__ import annotations
@@ -38,8 +45,13 @@ from navkit.errors import DataNotFoundError, FormatError, InputError
 from navkit.io.atomic import atomic_write, to_jsonable, write_text
 
 __all__ = [
+    "WGS84_A",
+    "WGS84_F",
+    "GeoOrigin",
     "OccupancyGrid",
     "line_geometry",
+    "local_to_wgs84",
+    "parse_origin",
     "point_geometry",
     "polygon_geometry",
     "read_occupancy_grid",
@@ -54,6 +66,124 @@ PathLike = str | os.PathLike[str]
 OCCUPIED_THRESH = 0.65
 FREE_THRESH = 0.196
 PIXEL_OCCUPIED, PIXEL_FREE, PIXEL_UNKNOWN = 0, 254, 205
+
+
+WGS84_A = 6378137.0
+"""WGS84 semi-major axis (m)."""
+WGS84_F = 1.0 / 298.257223563
+"""WGS84 flattening."""
+_E2 = WGS84_F * (2.0 - WGS84_F)
+
+
+@dataclass(frozen=True)
+class GeoOrigin:
+    """Where a local map frame sits on the Earth.
+
+    Attributes
+    ----------
+    lat_deg, lon_deg : float
+        WGS84 latitude and longitude of the local origin (deg).
+    heading_deg : float
+        Compass bearing of the local x axis (deg clockwise from true north): 0 = x points north,
+        90 = x points east. The local y axis is 90 deg counter-clockwise from x (to its left).
+    """
+
+    lat_deg: float
+    lon_deg: float
+    heading_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.lat_deg) and -90.0 < self.lat_deg < 90.0):
+            raise InputError(
+                f"latitude {self.lat_deg!r}", field="origin", expected="-90 < LAT < 90 (deg)"
+            )
+        if not (math.isfinite(self.lon_deg) and -180.0 <= self.lon_deg <= 180.0):
+            raise InputError(
+                f"longitude {self.lon_deg!r}", field="origin", expected="-180 <= LON <= 180 (deg)"
+            )
+        if not math.isfinite(self.heading_deg):
+            raise InputError(
+                f"heading {self.heading_deg!r}", field="origin", expected="finite degrees"
+            )
+
+
+def parse_origin(text: str, source: str = "--origin") -> GeoOrigin:
+    """``"LAT,LON"`` or ``"LAT,LON,HEADING"`` (deg) -> :class:`GeoOrigin`.
+
+    Raises
+    ------
+    InputError
+        Naming ``source`` and the expected form.
+    """
+    parts = [p for p in text.replace(" ", "").split(",") if p]
+    try:
+        vals = [float(p) for p in parts]
+    except ValueError:
+        vals = []
+    if len(vals) not in (2, 3):
+        raise InputError(
+            f"= {text!r}", source=source, expected="LAT,LON or LAT,LON,HEADING in degrees"
+        )
+    return GeoOrigin(*vals)
+
+
+def local_to_wgs84(xy: ArrayLike, origin: GeoOrigin) -> NDArray[np.float64]:
+    """Local metres ``(N, 2)`` -> WGS84 ``(N, 2)`` longitude, latitude (deg), exactly.
+
+    The local frame is the tangent plane of the WGS84 ellipsoid at ``origin``, its x axis at
+    compass bearing ``origin.heading_deg``. Each point goes local -> east, north (``e = x sin h
+    - y cos h``, ``n = x cos h + y sin h``) -> ECEF (origin + ENU axes) -> geodetic latitude and
+    longitude (Bowring's closed form, refined by two fixed-point steps: below 1e-9 deg within
+    hundreds of kilometres). Points on the tangent plane sit slightly above the ellipsoid away
+    from the origin (x^2 / 2R: 8 cm at 1 km); the height is dropped, the horizontal position
+    kept.
+    """
+    p = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    h = math.radians(origin.heading_deg)
+    e = p[:, 0] * math.sin(h) - p[:, 1] * math.cos(h)
+    n = p[:, 0] * math.cos(h) + p[:, 1] * math.sin(h)
+    lat0, lon0 = math.radians(origin.lat_deg), math.radians(origin.lon_deg)
+    sl, cl, so, co = math.sin(lat0), math.cos(lat0), math.sin(lon0), math.cos(lon0)
+    N0 = WGS84_A / math.sqrt(1.0 - _E2 * sl * sl)
+    x0, y0, z0 = N0 * cl * co, N0 * cl * so, N0 * (1.0 - _E2) * sl
+    # ENU -> ECEF (up component 0: the point lies on the tangent plane)
+    X = x0 - so * e - sl * co * n
+    Y = y0 + co * e - sl * so * n
+    Z = z0 + cl * n
+    lon = np.arctan2(Y, X)
+    r = np.hypot(X, Y)
+    b = WGS84_A * (1.0 - WGS84_F)
+    ep2 = (WGS84_A**2 - b**2) / b**2
+    beta = np.arctan2(WGS84_A * Z, b * r)
+    lat = np.arctan2(Z + ep2 * b * np.sin(beta) ** 3, r - _E2 * WGS84_A * np.cos(beta) ** 3)
+    for _ in range(2):  # fixed-point refinement of the geodetic latitude
+        sin_lat = np.sin(lat)
+        Nl = WGS84_A / np.sqrt(1.0 - _E2 * sin_lat**2)
+        hgt = r / np.cos(lat) - Nl
+        lat = np.arctan2(Z, r * (1.0 - _E2 * Nl / (Nl + hgt)))
+    return np.column_stack([np.degrees(lon), np.degrees(lat)])
+
+
+def _georeference(geom: Any, origin: GeoOrigin, decimals: int) -> Any:
+    """A geometry with every position converted to rounded ``[lon, lat]``."""
+    if geom is None:
+        return None
+    if geom["type"] == "GeometryCollection":
+        return {
+            **geom,
+            "geometries": [_georeference(g, origin, decimals) for g in geom["geometries"]],
+        }
+    depth = _GEOMETRY_DEPTH[geom["type"]]
+
+    def conv(c: Any, d: int) -> Any:
+        if d == 2:  # a list of positions: one vectorised call
+            ll = np.round(local_to_wgs84(np.asarray(c, dtype=np.float64)[:, :2], origin), decimals)
+            return ll.tolist()
+        return [conv(x, d - 1) for x in c]
+
+    if depth == 1:
+        return {**geom, "coordinates": conv([geom["coordinates"]], 2)[0]}
+    return {**geom, "coordinates": conv(geom["coordinates"], depth)}
 
 
 @dataclass(frozen=True, eq=False)
@@ -370,8 +500,10 @@ def write_geojson(
     features: Iterable[Mapping[str, Any] | tuple[Mapping[str, Any], Mapping[str, Any] | None]],
     *,
     properties: Mapping[str, Any] | None = None,
+    origin: GeoOrigin | None = None,
+    decimals: int = 8,
 ) -> None:
-    """Write a GeoJSON FeatureCollection atomically.
+    """Write a GeoJSON FeatureCollection atomically (compact: no indentation).
 
     Parameters
     ----------
@@ -382,6 +514,12 @@ def write_geojson(
         geometry dict, or a ``(geometry, properties)`` pair. NumPy values are converted.
     properties : dict, optional
         Extra members of the collection's ``properties`` (e.g. the frame name).
+    origin : GeoOrigin, optional
+        Georeference: positions are local metres and are written as WGS84 ``[lon, lat]``
+        (:func:`local_to_wgs84`), as RFC 7946 requires. Without it they are written as they
+        are (local metres, flagged in the collection's ``properties``: not RFC 7946).
+    decimals : int
+        Decimals of the written longitudes / latitudes (8: about 1 mm).
 
     Raises
     ------
@@ -425,15 +563,28 @@ def write_geojson(
             raise InputError(
                 exc.message, source=path, field=exc.field, expected=exc.expected
             ) from None
+        if origin is not None:
+            feat["geometry"] = _georeference(feat["geometry"], origin, decimals)
         out.append(feat)
+    if origin is None:
+        frame: dict[str, Any] = {
+            "coordinates": "local metres in the map frame (x east/forward, y north/left), "
+            "not WGS84: not RFC 7946 GeoJSON"
+        }
+    else:
+        frame = {
+            "coordinates": "WGS84 longitude, latitude (deg), RFC 7946",
+            "origin": {
+                "lat_deg": origin.lat_deg,
+                "lon_deg": origin.lon_deg,
+                "heading_deg": origin.heading_deg,
+            },
+        }
     coll = {
         "type": "FeatureCollection",
-        "properties": {
-            "coordinates": "local metres in the map frame (x east/forward, y north/left)",
-            **to_jsonable(dict(properties or {})),
-        },
+        "properties": {**frame, **to_jsonable(dict(properties or {}))},
         "features": out,
     }
+    text = json.dumps(coll, separators=(",", ":"), allow_nan=False)  # C encoder; dump() is not
     with atomic_write(path) as fh:
-        json.dump(coll, fh, indent=1, allow_nan=False)
-        fh.write("\n")
+        fh.write(text + "\n")
