@@ -105,6 +105,9 @@ def register(app: typer.Typer) -> None:
             "0:10", "--seeds", help="Seeds: START:STOP (STOP excluded) or a list 1,5,9."
         ),
         out: Path = typer.Option(..., "--out", "-o", help="Output folder (one folder per seed)."),
+        overwrite: bool = typer.Option(
+            False, "--overwrite", help="Replace the outputs of an earlier sweep in --out."
+        ),
         mission: Path = typer.Option(
             None,  # type: ignore[assignment]
             "--mission",
@@ -131,6 +134,7 @@ def register(app: typer.Typer) -> None:
 
         with cli_errors():
             from navkit.batch import mission_sweep_tasks, parse_seeds
+            from navkit.cli.common import check_out_dir
 
             tasks = mission_sweep_tasks(
                 scene,
@@ -139,6 +143,7 @@ def register(app: typer.Typer) -> None:
                 small=small,
                 config=config,
             )
+            check_out_dir(out, overwrite or resume)  # --resume continues in the same folder
             summary = run_inputs(
                 tasks,
                 out,
