@@ -1,7 +1,8 @@
 """The dependency rule of /work/shared/ARCHITECTURE.md and docs/architecture.md, checked on the
 source: every import anywhere in a module (top level or inside a function, absolute or relative)
 counts. Layers, bottom up: core (errors, geometry, sensors, ...) <- capabilities <- io, sim <- viz
-<- mission, experiments <- runtime, batch <- cli. No cycles between packages."""
+<- mission, experiments <- runtime, batch <- cli; the mission never imports viz (the CLI joins
+them), the runtime and batch layers may (their sinks write figures and views). No cycles between packages."""
 
 import ast
 from pathlib import Path
@@ -20,8 +21,9 @@ ALLOWED = {
     "viz": CORE | CAPABILITIES | {"io", "sim"},
     "mission": CORE | CAPABILITIES | {"io", "sim"},
     "experiments": CORE | CAPABILITIES | {"io", "sim"},
-    "runtime": CORE | CAPABILITIES | {"io", "sim", "mission"},
-    "batch": CORE | CAPABILITIES | {"io", "sim", "mission", "runtime"},
+    # the runtime and the batch layer write their outputs and views through io and viz (sinks)
+    "runtime": CORE | CAPABILITIES | {"io", "sim", "viz", "mission"},
+    "batch": CORE | CAPABILITIES | {"io", "sim", "viz", "mission", "runtime"},
 }
 
 

@@ -290,6 +290,9 @@ def _run_dask(
     todo: Sequence[BatchTask], out: Path, settings: BatchSettings
 ) -> Iterator[dict[str, Any]]:
     distributed = require_module("distributed", "cluster", "running a batch on Dask")
+    # Dask's own INFO lines (scheduler start/stop) are noise on a command line
+    quiet = logging.getLogger("distributed")
+    quiet.setLevel(max(quiet.getEffectiveLevel(), logging.WARNING))
     cluster = None
     if settings.scheduler is not None:
         client = distributed.Client(settings.scheduler)

@@ -3,13 +3,20 @@
 from __future__ import annotations
 
 import logging
-import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
 import typer
 
+from navkit.batch.obstacle_frames import (
+    OUTPUTS,
+    InputOptions,
+    MapOptions,
+    RunSettings,
+    process_frame,
+)
+from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
 from navkit.cli.common import check_out_dir, cli_errors, expand_inputs, progress, write_run_files
 
 log = logging.getLogger(__name__)
@@ -20,47 +27,7 @@ obstacles_app = typer.Typer(
     no_args_is_help=True,
 )
 
-OUTPUTS = ("labels", "obstacles", "grid", "png", "geojson")
-"""What ``--outputs`` may choose, per frame: ``labels.npy``, ``obstacles.json``, the map_server
-occupancy grid ``map.pgm`` + ``map.yaml``, the figure ``map.png``, ``map.geojson`` (WGS84,
-needs ``--origin``)."""
 DEFAULT_OUTPUTS = "labels,obstacles"
-
-
-@dataclass(frozen=True)
-class InputOptions:
-    """How inputs are read and mounted (the ``[inputs]`` table of ``settings.toml``)."""
-
-    sensor: str | None = None
-    sensor_height_m: float | None = None
-    roll_deg: float = 0.0
-    pitch_deg: float = 0.0
-    gravity: tuple[float, float, float] | None = None
-    rings: int | None = None
-    columns: int | None = None
-    ring_method: str = "auto"
-    intrinsics: tuple[float, float, float, float] | None = None
-    depth_scale: float = 1000.0
-
-
-@dataclass(frozen=True)
-class MapOptions:
-    """What is written per frame (the ``[map]`` table of ``settings.toml``)."""
-
-    outputs: tuple[str, ...] = ("labels", "obstacles")
-    resolution_m: float = 0.1
-    extent_m: float | None = 40.0
-    png_shapes: tuple[str, ...] = ("A1", "A6")
-    origin: tuple[float, ...] | None = None
-
-
-@dataclass(frozen=True)
-class RunSettings:
-    """Everything a ``navkit obstacles detect`` run used."""
-
-    detector: Any
-    inputs: InputOptions = field(default_factory=InputOptions)
-    map: MapOptions = field(default_factory=MapOptions)
 
 
 def _parse_floats(text: str | None, n: int, name: str) -> tuple[float, ...] | None:
@@ -111,106 +78,6 @@ def _with_preset(opts: InputOptions) -> tuple[InputOptions, Any]:
         ),
         p,
     )
-
-
-def process_frame(
-    path: Path, out: Path, settings: Any, opts: InputOptions, mopts: MapOptions, height: Any
-) -> tuple[dict[str, Any], Any]:
-    """Read one input, detect its obstacles and write the chosen outputs into ``out``.
-
-    ``height`` is the run's :class:`~navkit.obstacles.mounting.SensorHeight` (None: resolve it
-    on this frame). Returns the frame's summary and the height used.
-    """
-    from navkit.io.maps import GeoOrigin, write_occupancy_grid
-    from navkit.io.obstacles import write_labels, write_obstacle_geojson, write_obstacles_json
-    from navkit.io.scans import read_scan_grid
-    from navkit.obstacles import Mounting, detect_obstacles_in_grid
-    from navkit.obstacles.mounting import choose_sensor_height
-    from navkit.obstacles.occupancy import occupancy_grid
-
-    t0 = time.perf_counter()
-    scan = read_scan_grid(
-        path,
-        rings=opts.rings,
-        columns=opts.columns,
-        ring_method=opts.ring_method,
-        intrinsics=opts.intrinsics,
-        depth_scale=opts.depth_scale,
-    )
-    use_file_R = scan.R_body_sensor is not None and opts.gravity is None
-    use_file_R = use_file_R and opts.roll_deg == 0 and opts.pitch_deg == 0
-    R_file = scan.R_body_sensor if use_file_R else None
-    mounting = Mounting(0.0, opts.roll_deg, opts.pitch_deg, opts.gravity, R_file)  # type: ignore[arg-type]
-    t1 = time.perf_counter()
-    if height is None or (scan.sensor_height_m is not None and opts.sensor_height_m is None):
-        from navkit.sensors.presets import get_preset
-
-        preset = get_preset(opts.sensor) if opts.sensor else None
-        given = opts.sensor_height_m if opts.sensor_height_m is not None else scan.sensor_height_m
-        height = choose_sensor_height(
-            scan.grid.points,
-            mounting.R_body_sensor,
-            given_m=given,
-            typical_m=preset.typical_height_m if preset else None,
-            plausible_m=preset.height_range_m if preset else (0.05, 4.0),
-            source=str(path),
-        )
-    mounting = replace(mounting, height_m=height.height_m)
-    t2 = time.perf_counter()
-    det = detect_obstacles_in_grid(scan.grid, mounting, settings, source=str(path))
-    t3 = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
-    chosen = set(mopts.outputs)
-    if "labels" in chosen:
-        labels = scan.grid.per_point(det.vertex_labels)
-        write_labels(
-            out / "labels.npy",
-            labels.reshape(det.vertex_labels.shape) if scan.kind == "grid" else labels,
-        )
-    if "obstacles" in chosen:
-        write_obstacles_json(
-            out / "obstacles.json", det, source=str(path), extra={"sensor_height": height.to_dict()}
-        )
-    if "grid" in chosen:
-        occ = occupancy_grid(det, mopts.resolution_m, mopts.extent_m)
-        write_occupancy_grid(out / "map", occ.occupancy, occ.resolution, occ.origin_xy)
-    if "geojson" in chosen and mopts.origin is not None:
-        origin = GeoOrigin(*mopts.origin)
-        write_obstacle_geojson(
-            out / "map.geojson", det, origin, shapes=mopts.png_shapes, source=str(path)
-        )
-    if "png" in chosen:
-        from navkit.viz.obstacles import save_obstacle_map
-
-        save_obstacle_map(
-            out / "map.png",
-            det,
-            shapes=mopts.png_shapes,
-            extent_m=min(mopts.extent_m or 40.0, 40.0),
-            title=f"{path.name}: {len(det.obstacles)} obstacles",
-        )
-    t4 = time.perf_counter()
-    frame = {
-        "input": str(path),
-        "output": str(out),
-        "kind": scan.kind,
-        "grid_method": scan.grid.method,
-        "grid_shape": list(det.vertex_labels.shape),
-        "n_points": int(scan.grid.cell_of_point.size),
-        "n_obstacles": len(det.obstacles),
-        "sensor_height_m": height.height_m,
-        "triangles": det.counts,
-        "bytes_written": sum(f.stat().st_size for f in out.iterdir() if f.is_file()),
-        "timings_s": {
-            "read_and_grid": t1 - t0,
-            "sensor_height": t2 - t1,
-            **det.timings,
-            "detect_total": t3 - t2,
-            "write_outputs": t4 - t3,
-            "frame_total": t4 - t0,
-        },
-    }
-    return frame, height
 
 
 def register(app: typer.Typer) -> None:
@@ -317,6 +184,9 @@ def detect(
         help="Georeference LAT,LON[,HEADING] (deg; heading of x, clockwise from north): "
         "writes map.geojson in WGS84.",
     ),
+    workers: int | None = WORKERS,
+    scheduler: str | None = SCHEDULER,
+    resume: bool = RESUME,
 ) -> None:
     """Detect obstacles in every input; by default write labels.npy and obstacles.json per frame.
 
@@ -377,8 +247,14 @@ def detect(
         )
         mopts = MapOptions(**mcfg)
         files = expand_inputs(inputs, _suffixes())
-        check_out_dir(out, overwrite)
-        frames, failed, height, first_error = _run_frames(files, out, settings, opts, mopts)
+        check_out_dir(out, overwrite or resume)
+        if workers or scheduler or resume:
+            frames, failed, height = _run_batch(
+                files, out, settings, opts, mopts, workers, scheduler, resume
+            )
+            first_error = None
+        else:
+            frames, failed, height, first_error = _run_frames(files, out, settings, opts, mopts)
         if first_error is not None and not frames:
             raise first_error  # nothing worked: the one-line error, exit code 2, no run files
         run = RunSettings(detector=asdict(settings), inputs=opts, map=mopts)
@@ -401,6 +277,8 @@ def detect(
             + (f", {len(failed)} failed (see frames.csv)" if failed else "")
             + f" -> {out}"
         )
+    if failed and (workers or scheduler or resume):
+        exit_if_failed({"failed": len(failed)})
 
 
 def _run_frames(
@@ -430,6 +308,56 @@ def _run_frames(
     if frames:
         write_frame_status(out / "frames.csv", rows)
     return frames, failed, height, first_error
+
+
+def _run_batch(
+    files: list[Path],
+    out: Path,
+    settings: Any,
+    opts: InputOptions,
+    mopts: MapOptions,
+    workers: int | None,
+    scheduler: str | None,
+    resume: bool,
+) -> tuple[list[dict[str, Any]], list[dict[str, Any]], Any]:
+    """The frames as a batch (``navkit.batch``): the sensor height is resolved once, on the first
+    readable frame, here; then every frame is one task with that height, on Dask or in process."""
+    import json
+
+    from navkit.batch import BatchTask, settings_hash
+    from navkit.batch.obstacle_frames import obstacles_frame_job, read_mounted, resolve_height
+    from navkit.errors import DegenerateGeometryError, InputError
+
+    named = _frame_names(files)
+    height, first_error = None, None
+    for path, _ in named:  # the first frame that reads; the unreadable ones fail as tasks
+        try:
+            scan, mounting = read_mounted(path, opts)
+            height = resolve_height(scan, mounting, opts, path)
+            break
+        except (InputError, DegenerateGeometryError) as exc:
+            first_error = first_error or exc
+    if height is None:
+        assert first_error is not None
+        raise first_error
+    tasks = [
+        BatchTask(
+            name,
+            obstacles_frame_job,
+            {"path": str(p), "settings": settings, "opts": opts, "mopts": mopts, "height": height},
+            settings_hash(p, settings, opts, mopts, height.height_m),
+        )
+        for p, name in named
+    ]
+    run_inputs(
+        tasks, out, workers=workers, scheduler=scheduler, resume=resume, description="obstacles"
+    )
+    rows = [json.loads(line) for line in (out / "batch.jsonl").read_text().splitlines()]
+    frames = [
+        {**r["figures"], "output": str(out / r["key"])} for r in rows if r["status"] != "failed"
+    ]
+    failed = [{"input": r["key"], "reason": r["error"]} for r in rows if r["status"] == "failed"]
+    return frames, failed, height
 
 
 def _given(ctx: typer.Context, name: str) -> bool:

@@ -1,0 +1,194 @@
+"""One frame of ``navkit obstacles detect``: read, detect, write the chosen outputs.
+
+The per-input function of the command's in-process loop and of its batch runs
+(``--workers`` / ``--scheduler`` / ``--resume``, :mod:`navkit.batch`): the same code writes the
+same files either way.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+__all__ = [
+    "OUTPUTS",
+    "InputOptions",
+    "MapOptions",
+    "RunSettings",
+    "obstacles_frame_job",
+    "process_frame",
+    "read_mounted",
+    "resolve_height",
+]
+
+OUTPUTS = ("labels", "obstacles", "grid", "png", "geojson")
+"""What ``--outputs`` may choose, per frame: ``labels.npy``, ``obstacles.json``, the map_server
+occupancy grid ``map.pgm`` + ``map.yaml``, the figure ``map.png``, ``map.geojson`` (WGS84,
+needs ``--origin``)."""
+
+
+@dataclass(frozen=True)
+class InputOptions:
+    """How inputs are read and mounted (the ``[inputs]`` table of ``settings.toml``)."""
+
+    sensor: str | None = None
+    sensor_height_m: float | None = None
+    roll_deg: float = 0.0
+    pitch_deg: float = 0.0
+    gravity: tuple[float, float, float] | None = None
+    rings: int | None = None
+    columns: int | None = None
+    ring_method: str = "auto"
+    intrinsics: tuple[float, float, float, float] | None = None
+    depth_scale: float = 1000.0
+
+
+@dataclass(frozen=True)
+class MapOptions:
+    """What is written per frame (the ``[map]`` table of ``settings.toml``)."""
+
+    outputs: tuple[str, ...] = ("labels", "obstacles")
+    resolution_m: float = 0.1
+    extent_m: float | None = 40.0
+    png_shapes: tuple[str, ...] = ("A1", "A6")
+    origin: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """Everything a ``navkit obstacles detect`` run used."""
+
+    detector: Any
+    inputs: InputOptions = field(default_factory=InputOptions)
+    map: MapOptions = field(default_factory=MapOptions)
+
+
+def read_mounted(path: Path, opts: InputOptions) -> tuple[Any, Any]:
+    """Read one input as a scan grid and its mounting (height still 0: see
+    :func:`resolve_height`)."""
+    from navkit.io.scans import read_scan_grid
+    from navkit.obstacles import Mounting
+
+    scan = read_scan_grid(
+        path,
+        rings=opts.rings,
+        columns=opts.columns,
+        ring_method=opts.ring_method,
+        intrinsics=opts.intrinsics,
+        depth_scale=opts.depth_scale,
+    )
+    use_file_R = scan.R_body_sensor is not None and opts.gravity is None
+    use_file_R = use_file_R and opts.roll_deg == 0 and opts.pitch_deg == 0
+    R_file = scan.R_body_sensor if use_file_R else None
+    mounting = Mounting(0.0, opts.roll_deg, opts.pitch_deg, opts.gravity, R_file)  # type: ignore[arg-type]
+    return scan, mounting
+
+
+def resolve_height(scan: Any, mounting: Any, opts: InputOptions, path: Path) -> Any:
+    """The sensor height of a run: given, from the file, or measured on this frame's ground
+    (:func:`~navkit.obstacles.mounting.choose_sensor_height`)."""
+    from navkit.obstacles.mounting import choose_sensor_height
+    from navkit.sensors.presets import get_preset
+
+    preset = get_preset(opts.sensor) if opts.sensor else None
+    given = opts.sensor_height_m if opts.sensor_height_m is not None else scan.sensor_height_m
+    return choose_sensor_height(
+        scan.grid.points,
+        mounting.R_body_sensor,
+        given_m=given,
+        typical_m=preset.typical_height_m if preset else None,
+        plausible_m=preset.height_range_m if preset else (0.05, 4.0),
+        source=str(path),
+    )
+
+
+def process_frame(
+    path: Path, out: Path, settings: Any, opts: InputOptions, mopts: MapOptions, height: Any
+) -> tuple[dict[str, Any], Any]:
+    """Read one input, detect its obstacles and write the chosen outputs into ``out``.
+
+    ``height`` is the run's :class:`~navkit.obstacles.mounting.SensorHeight` (None: resolve it
+    on this frame). Returns the frame's summary and the height used.
+    """
+    from navkit.io.maps import GeoOrigin, write_occupancy_grid
+    from navkit.io.obstacles import write_labels, write_obstacle_geojson, write_obstacles_json
+    from navkit.obstacles import detect_obstacles_in_grid
+    from navkit.obstacles.occupancy import occupancy_grid
+
+    t0 = time.perf_counter()
+    scan, mounting = read_mounted(path, opts)
+    t1 = time.perf_counter()
+    if height is None or (scan.sensor_height_m is not None and opts.sensor_height_m is None):
+        height = resolve_height(scan, mounting, opts, path)
+    mounting = replace(mounting, height_m=height.height_m)
+    t2 = time.perf_counter()
+    det = detect_obstacles_in_grid(scan.grid, mounting, settings, source=str(path))
+    t3 = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    chosen = set(mopts.outputs)
+    if "labels" in chosen:
+        labels = scan.grid.per_point(det.vertex_labels)
+        write_labels(
+            out / "labels.npy",
+            labels.reshape(det.vertex_labels.shape) if scan.kind == "grid" else labels,
+        )
+    if "obstacles" in chosen:
+        write_obstacles_json(
+            out / "obstacles.json", det, source=str(path), extra={"sensor_height": height.to_dict()}
+        )
+    if "grid" in chosen:
+        occ = occupancy_grid(det, mopts.resolution_m, mopts.extent_m)
+        write_occupancy_grid(out / "map", occ.occupancy, occ.resolution, occ.origin_xy)
+    if "geojson" in chosen and mopts.origin is not None:
+        origin = GeoOrigin(*mopts.origin)
+        write_obstacle_geojson(
+            out / "map.geojson", det, origin, shapes=mopts.png_shapes, source=str(path)
+        )
+    if "png" in chosen:
+        from navkit.viz.obstacles import save_obstacle_map
+
+        save_obstacle_map(
+            out / "map.png",
+            det,
+            shapes=mopts.png_shapes,
+            extent_m=min(mopts.extent_m or 40.0, 40.0),
+            title=f"{path.name}: {len(det.obstacles)} obstacles",
+        )
+    t4 = time.perf_counter()
+    frame = {
+        "input": str(path),
+        "output": str(out),
+        "kind": scan.kind,
+        "grid_method": scan.grid.method,
+        "grid_shape": list(det.vertex_labels.shape),
+        "n_points": int(scan.grid.cell_of_point.size),
+        "n_obstacles": len(det.obstacles),
+        "sensor_height_m": height.height_m,
+        "triangles": det.counts,
+        "bytes_written": sum(f.stat().st_size for f in out.iterdir() if f.is_file()),
+        "timings_s": {
+            "read_and_grid": t1 - t0,
+            "sensor_height": t2 - t1,
+            **det.timings,
+            "detect_total": t3 - t2,
+            "write_outputs": t4 - t3,
+            "frame_total": t4 - t0,
+        },
+    }
+    return frame, height
+
+
+def obstacles_frame_job(
+    out_dir: Path,
+    *,
+    path: str,
+    settings: Any,
+    opts: InputOptions,
+    mopts: MapOptions,
+    height: Any,
+) -> dict[str, Any]:
+    """:func:`process_frame` as a batch task: the frame's figures without its timings."""
+    frame, _ = process_frame(Path(path), out_dir, settings, opts, mopts, height)
+    return {k: v for k, v in frame.items() if k not in ("timings_s", "output")}
