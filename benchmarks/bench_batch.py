@@ -22,7 +22,8 @@ def _noop(out_dir: Path) -> dict:
 def _tasks(quick: bool):  # type: ignore[no-untyped-def]
     from navkit import datasets
     from navkit.batch import BatchTask, settings_hash
-    from navkit.batch.jobs import path_record_job
+    from navkit.batch.path_record import record_path_job
+    from navkit.path import ApproximatorSettings
 
     names = ("freiburg1_xyz-groundtruth.txt", "fr2_desk_ORB.txt", "KITTI_00_gt.txt")
     tols = (0.05, 0.1) if quick else (0.02, 0.05, 0.1, 0.2)
@@ -33,8 +34,8 @@ def _tasks(quick: bool):  # type: ignore[no-untyped-def]
             tasks.append(
                 BatchTask(
                     f"{p.stem}-{tol:g}",
-                    path_record_job,
-                    {"trajectory": str(p), "tolerance": tol},
+                    record_path_job,
+                    {"trajectory": str(p), "settings": ApproximatorSettings(tolerance=tol)},
                     settings_hash(p, tol),
                 )
             )

@@ -33,7 +33,7 @@ TOLERANCES = (0.01, 0.05, 0.1, 0.5)
 
 def _load(relative: str) -> np.ndarray:
     from navkit import datasets
-    from navkit.cli.cmd_path import load_planar_track
+    from navkit.io.trajectory import load_planar_track
 
     _, xy, _, _ = load_planar_track(Path(datasets.find(relative)))
     return xy

@@ -18,8 +18,9 @@ from navkit.batch import (
     summarize,
     wilson_interval,
 )
-from navkit.batch.jobs import path_record_job
+from navkit.batch.path_record import record_path_job
 from navkit.errors import ConfigError
+from navkit.path import ApproximatorSettings
 
 TRAJECTORIES = ("freiburg1_xyz-groundtruth.txt", "fr2_desk_ORB.txt", "KITTI_00_gt.txt")
 
@@ -31,7 +32,12 @@ def real_tasks(data_path, tmp_path):
     bad.write_text("1.0 2.0 three four\n", encoding="utf-8")
     paths.insert(1, bad)
     return [
-        BatchTask(p.stem, path_record_job, {"trajectory": str(p)}, settings_hash(p, 0.05))
+        BatchTask(
+            p.stem,
+            record_path_job,
+            {"trajectory": str(p), "settings": ApproximatorSettings(tolerance=0.05)},
+            settings_hash(p, 0.05),
+        )
         for p in paths
     ]
 
@@ -143,6 +149,6 @@ def test_settings_are_checked():
     with pytest.raises(ConfigError, match="workers"):
         BatchSettings(workers=0)
     with pytest.raises(ConfigError, match="key"):
-        BatchTask("../escape", path_record_job)
+        BatchTask("../escape", record_path_job)
     with pytest.raises(ConfigError, match="output names"):
-        run_batch([BatchTask("a", path_record_job)] * 2, "/nonexistent-never-created")
+        run_batch([BatchTask("a", record_path_job)] * 2, "/nonexistent-never-created")

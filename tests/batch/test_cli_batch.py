@@ -21,13 +21,13 @@ def kitti(data_path, tmp_path):
 
 
 def _rows(out):
-    return {
-        r["key"]: r for r in map(json.loads, (out / "batch.jsonl").read_text().splitlines())
-    }
+    return {r["key"]: r for r in map(json.loads, (out / "batch.jsonl").read_text().splitlines())}
 
 
 def test_obstacles_on_two_workers_write_the_serial_files(cli, kitti, tmp_path):
-    pytest.importorskip("distributed", reason="the cluster extra (dask.distributed) is not installed")
+    pytest.importorskip(
+        "distributed", reason="the cluster extra (dask.distributed) is not installed"
+    )
     a, b = tmp_path / "serial", tmp_path / "dask"
     common = ("--sensor", "hdl64e-kitti", "--outputs", "labels,obstacles,grid")
     assert cli("obstacles", "detect", kitti, "-o", a, *common).exit_code == 0
@@ -63,3 +63,20 @@ def test_a_bad_frame_is_a_failed_row_and_resume_redoes_only_the_missing(cli, kit
         "000002": "skipped",
     }
     assert (out / "000001" / "labels.npy").is_file()
+
+
+def test_path_record_many_trajectories_in_one_batch(cli, data_path, tmp_path):
+    tum = data_path("trajectories/freiburg1_xyz-groundtruth.txt")
+    kitti = data_path("trajectories/KITTI_00_gt.txt")
+    alone = tmp_path / "alone"
+    assert cli("path", "record", tum, "-o", alone).exit_code == 0
+    out = tmp_path / "many"
+    r = cli("path", "record", tum, kitti, "-o", out)
+    assert r.exit_code == 0, r.output
+    # the batch writes each input's path.json exactly as the single-input command does
+    assert (out / tum.stem / "path.json").read_bytes() == (alone / "path.json").read_bytes()
+    rows = _rows(out)
+    assert {k: r["status"] for k, r in rows.items()} == {tum.stem: "ok", kitti.stem: "ok"}
+    assert all(r["figures"]["max_deviation_m"] <= 0.05 + 1e-12 for r in rows.values())
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["rates"]["within_tolerance"]["successes"] == 2

@@ -74,5 +74,5 @@ def run_inputs(
 
 def exit_if_failed(summary: dict[str, Any]) -> None:
     """Exit with code 3 when any input of the batch failed."""
-    if summary["failed"]:
+    if summary.get("failed"):
         raise typer.Exit(code=EXIT_SOME_FAILED)

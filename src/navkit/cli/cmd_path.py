@@ -21,6 +21,7 @@ from typing import Any
 
 import typer
 
+from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
 from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
 
 log = logging.getLogger(__name__)
@@ -65,55 +66,12 @@ OUT_HELP = "Output folder (refused if it holds files, unless --overwrite)."
 OVERWRITE_HELP = "Replace outputs already in --out."
 
 
-def _looks_like_odometry(path: Path) -> bool:
-    """True if the first data line has 3 columns (``time v omega``)."""
-    try:
-        with open(path, encoding="utf-8", errors="replace") as fh:
-            for line in fh:
-                s = line.strip()
-                if s and not s.startswith("#"):
-                    return len(s.replace(",", " ").split()) == 3
-    except OSError:
-        return False
-    return False
-
-
-def load_planar_track(
-    path: Path, fmt: str = "auto", plane: str = "auto"
-) -> tuple[Any, Any, dict[str, Any], str]:
-    """Read a trajectory file and map it to the ground plane.
-
-    Returns ``(timestamps (N,), xy (N, 2), frame dict, format used)``.
-    """
-    import numpy as np
-
-    from navkit.errors import DataNotFoundError
-    from navkit.io.trajectory import read_odometry_log, read_trajectory
-    from navkit.path.track import clean_track, ground_plane, integrate_odometry, to_plane
-
-    if not path.is_file():
-        raise DataNotFoundError(f"{path}: no such trajectory file")
-    if fmt == "odometry" or (fmt == "auto" and _looks_like_odometry(path)):
-        t_raw, v, w = read_odometry_log(path)
-        t_odo, vw = clean_track(t_raw, np.c_[v, w], source=str(path))
-        poses = integrate_odometry(t_raw if t_odo is None else t_odo, vw[:, 0], vw[:, 1])
-        frame = {
-            "kind": "odometry",
-            "source": str(path),
-            "note": "dead-reckoned from time v omega, start pose (0, 0, 0)",
-        }
-        return t_odo, poses[:, :2], frame, "odometry"
-    traj = read_trajectory(path, fmt)  # type: ignore[arg-type]
-    t_traj, P = clean_track(traj.timestamps, traj.positions, source=str(path))
-    gp = ground_plane(P, plane)
-    frame = {**gp.to_dict(), "source": str(path)}
-    return t_traj, to_plane(P, gp), frame, (fmt if fmt != "auto" else "detected")
-
-
 @path_app.command("record")
 def record(
-    trajectory: Path = typer.Argument(
-        ..., help="Trajectory file: TUM, KITTI, EuRoC or a 'time v omega' log."
+    trajectories: list[Path] = typer.Argument(
+        ...,
+        help="Trajectory file(s): TUM, KITTI, EuRoC or a 'time v omega' log. "
+        "Several files: one output folder each, named after the file.",
     ),
     tolerance: float = typer.Option(
         0.05, "--tolerance", "-e", help="eps: max distance of a point from the spline (m)."
@@ -133,6 +91,9 @@ def record(
         False, "--keep-loops", help="Store the path without loop removal."
     ),
     precision: float = typer.Option(1e-4, "--precision", help="Loop search precision (m)."),
+    workers: int | None = WORKERS,
+    scheduler: str | None = SCHEDULER,
+    resume: bool = RESUME,
 ) -> None:
     """Record a trajectory point by point as a cubic spline over arc length (mode 1).
 
@@ -142,59 +103,75 @@ def record(
           --tolerance 0.5 -o out/kitti-path
     """
     with cli_errors():
-        from navkit.errors import InputError
-        from navkit.io.pathjson import write_path_json
-        from navkit.path import ApproximatorSettings, approximate
-        from navkit.viz.path import plot_record
+        from navkit.batch.path_record import record_path
+        from navkit.path import ApproximatorSettings
 
-        check_out_dir(out, overwrite)
         settings = ApproximatorSettings(
             tolerance=tolerance,
             variant=variant.value,
             remove_loops=not keep_loops,
             loop_precision=precision,
         )
-        _, xy, frame, used = load_planar_track(trajectory, format.value, plane.value)
-        result = approximate(
-            xy,
-            settings,
-            frame=frame,
-            iterate=lambda items: progress(items, "recording", total=len(xy)),
-        )
-        if result.spline.n_segments == 0 or result.spline.total_length <= 0:
-            raise InputError(
-                f"{len(result.points)} distinct point(s): the path has zero length",
-                source=trajectory,
-                field="positions",
-                expected="at least two distinct positions",
+        check_out_dir(out, overwrite or resume)
+        if len(trajectories) > 1 or workers or scheduler or resume:
+            summary = _record_batch(
+                trajectories, out, settings, format.value, plane.value, workers, scheduler, resume
             )
-        write_path_json(out / "path.json", result.spline)
-        plot_record(
-            result,
-            out / "path.png",
-            raw_points=xy,
-            title=f"{trajectory.name}: eps = {tolerance:g} m",
-        )
-        summary = {
-            "input": str(trajectory),
-            "format": used,
-            **result.summary(),
-            "reference": "the input trajectory itself: deviations are of the spline from the "
-            "recorded points, not from the true path",
-        }
+        else:
+            trajectory = trajectories[0]
+            result, summary = record_path(
+                out,
+                trajectory,
+                settings,
+                format.value,
+                plane.value,
+                iterate=lambda items, n: progress(items, "recording", total=n),
+            )
+            typer.echo(
+                f"{result.spline.n_segments} segments, {len(result.loops)} loops removed, "
+                f"L = {result.spline.total_length:.3f} m, max deviation "
+                f"{result.max_deviation:.4g} m, {summary['mean_us_per_point']:.1f} us/point mean"
+                f" -> {out / 'path.json'}"
+            )
+        inputs = [RecordInput(str(t), format.value, plane.value) for t in trajectories]
         write_run_files(
             out,
-            {
-                "input": RecordInput(str(trajectory), format.value, plane.value),
-                "approximator": settings,
-            },
+            {"input": inputs[0] if len(inputs) == 1 else inputs, "approximator": settings},
             summary,
+            reference="the input trajectory itself: deviations are of the spline from the "
+            "recorded points, not from the true path",
         )
-        typer.echo(
-            f"{result.spline.n_segments} segments, {len(result.loops)} loops removed, "
-            f"L = {result.spline.total_length:.3f} m, max deviation {result.max_deviation:.4g} m, "
-            f"{summary['mean_us_per_point']:.1f} us/point mean -> {out / 'path.json'}"
+    exit_if_failed(summary)
+
+
+def _record_batch(
+    trajectories: list[Path],
+    out: Path,
+    settings: Any,
+    fmt: str,
+    plane: str,
+    workers: int | None,
+    scheduler: str | None,
+    resume: bool,
+) -> dict[str, Any]:
+    """Every trajectory as one task of a batch (``out/<file stem>/path.json``, ``path.png``)."""
+    from navkit.batch import BatchTask, settings_hash
+    from navkit.batch.path_record import record_path_job
+
+    keys = [t.stem for t in trajectories]
+    keys = [k if keys.count(k) == 1 else f"{k}_{i}" for i, k in enumerate(keys)]
+    tasks = [
+        BatchTask(
+            key,
+            record_path_job,
+            {"trajectory": str(t), "settings": settings, "fmt": fmt, "plane": plane},
+            settings_hash(t, settings, fmt, plane),
         )
+        for key, t in zip(keys, trajectories, strict=True)
+    ]
+    return run_inputs(
+        tasks, out, workers=workers, scheduler=scheduler, resume=resume, description="paths"
+    )
 
 
 @path_app.command("return")

@@ -29,6 +29,8 @@ from navkit.io.atomic import atomic_write
 
 __all__ = [
     "Trajectory",
+    "load_planar_track",
+    "looks_like_odometry",
     "read_euroc",
     "read_kitti_poses",
     "read_odometry_log",
@@ -460,3 +462,46 @@ def read_odometry_log(
     v = tab.values
     keep = _check_times(p, v[:, 0], tab.lines, duplicates)
     return v[keep, 0].copy(), v[keep, 1].copy(), v[keep, 2].copy()
+
+
+def looks_like_odometry(path: Path) -> bool:
+    """True if the first data line has 3 columns (``time v omega``)."""
+    try:
+        with open(path, encoding="utf-8", errors="replace") as fh:
+            for line in fh:
+                s = line.strip()
+                if s and not s.startswith("#"):
+                    return len(s.replace(",", " ").split()) == 3
+    except OSError:
+        return False
+    return False
+
+
+def load_planar_track(
+    path: str | os.PathLike[str], fmt: str = "auto", plane: str = "auto"
+) -> tuple[Any, Any, dict[str, Any], str]:
+    """Read a trajectory file (TUM, KITTI, EuRoC or a ``time v omega`` odometry log) and map it to
+    the ground plane: what ``navkit path record`` stores.
+
+    Returns ``(timestamps (N,), xy (N, 2), frame dict, format used)``.
+    """
+    from navkit.path.track import clean_track, ground_plane, integrate_odometry, to_plane
+
+    path = Path(path)
+    if not path.is_file():
+        raise DataNotFoundError(f"{path}: no such trajectory file")
+    if fmt == "odometry" or (fmt == "auto" and looks_like_odometry(path)):
+        t_raw, v, w = read_odometry_log(path)
+        t_odo, vw = clean_track(t_raw, np.c_[v, w], source=str(path))
+        poses = integrate_odometry(t_raw if t_odo is None else t_odo, vw[:, 0], vw[:, 1])
+        frame = {
+            "kind": "odometry",
+            "source": str(path),
+            "note": "dead-reckoned from time v omega, start pose (0, 0, 0)",
+        }
+        return t_odo, poses[:, :2], frame, "odometry"
+    traj = read_trajectory(path, fmt)  # type: ignore[arg-type]
+    t_traj, P = clean_track(traj.timestamps, traj.positions, source=str(path))
+    gp = ground_plane(P, plane)
+    frame = {**gp.to_dict(), "source": str(path)}
+    return t_traj, to_plane(P, gp), frame, (fmt if fmt != "auto" else "detected")
