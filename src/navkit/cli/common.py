@@ -15,7 +15,7 @@ import logging
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import TypeVar
 
 import typer
 
@@ -26,7 +26,6 @@ __all__ = [
     "cli_errors",
     "expand_inputs",
     "progress",
-    "settings_to_toml",
     "write_run_files",
 ]
 
@@ -127,22 +126,6 @@ def expand_inputs(inputs: Sequence[str], suffixes: Sequence[str]) -> list[Path]:
             expected=f"files ending in {', '.join(suffixes)}",
         )
     return found
-
-
-def settings_to_toml(settings: Any) -> str:
-    """TOML text of a settings dataclass (or a dict of them), nested tables for nested dataclasses."""
-    import tomli_w
-
-    from navkit.io.atomic import to_jsonable
-
-    def clean(value: Any) -> Any:
-        if isinstance(value, dict):
-            return {k: clean(v) for k, v in value.items() if v is not None}
-        if isinstance(value, list):
-            return [clean(v) for v in value if v is not None]
-        return value
-
-    return tomli_w.dumps(clean(to_jsonable(settings)))
 
 
 from navkit.io.atomic import write_run_files  # noqa: E402  (one writer, in navkit.io)

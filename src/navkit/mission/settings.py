@@ -12,7 +12,7 @@ import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -24,6 +24,9 @@ from navkit.sim.scanners import (
     LIDAR_HEIGHT,
     LIDAR_RELATIVE_SIGMA,
 )
+
+if TYPE_CHECKING:
+    from navkit.localization import LocalizerSettings
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -215,6 +218,45 @@ class FusionSettings:
     map_fix_weight: float = 0.5
     map_fix_gate_m: float = 0.8
     map_fix_min_points: int = 40
+
+    def room_localizer(self) -> LocalizerSettings | None:
+        """:class:`~navkit.localization.LocalizerSettings` of the room fixes: a 5 cm field of
+        width 0.1 m (stereo wall points), a +-``fix_gate_m``, +-10 deg window around the
+        estimate, blended by ``fix_weight`` within ``fix_gate_m``; a rejected fix leaves the
+        estimate. None when ``fix_weight`` is 0 (room fixes off)."""
+        from navkit.localization import LocalizerSettings, MatcherSettings
+
+        if self.fix_weight == 0:
+            return None
+        return LocalizerSettings(
+            sigma=0.1,
+            resolution=0.05,
+            matcher=MatcherSettings(linear_window=self.fix_gate_m, angular_window_deg=10.0),
+            fix_weight=self.fix_weight,
+            gate_m=self.fix_gate_m,
+            recentre_on_rejected=False,
+        )
+
+    def map_localizer(self, resolution: float) -> LocalizerSettings | None:
+        """:class:`~navkit.localization.LocalizerSettings` of the way back's fixes in the
+        outbound obstacle map (cells of ``resolution`` metres, field width 0.15 m, a
+        +-``map_fix_gate_m``, +-8 deg window, points every 0.2 m). None when
+        ``map_fix_weight`` is 0 (off)."""
+        from navkit.localization import LocalizerSettings, MatcherSettings
+
+        if self.map_fix_weight == 0:
+            return None
+        window = MatcherSettings(
+            linear_window=self.map_fix_gate_m, angular_window_deg=8.0, point_spacing=0.2
+        )
+        return LocalizerSettings(
+            sigma=0.15,
+            resolution=resolution,
+            matcher=window,
+            fix_weight=self.map_fix_weight,
+            gate_m=self.map_fix_gate_m,
+            recentre_on_rejected=False,
+        )
 
 
 @dataclass(frozen=True)
