@@ -60,6 +60,8 @@ class _Shoot:
     T_scanner: Any
     T_cam: Any
     camera: Any
+    T_stereo: Any
+    stereo_camera: Any
     summary: dict[str, Any]
 
 
@@ -74,9 +76,11 @@ def _setup(out: Path, settings: Any) -> _Shoot:
     scene = load_scene(settings.scene)
     x, y, th = settings.robot_pose
     gz = float(scene.ground_height(x, y))
-    L, S, C = settings.lidar, settings.scanner, settings.camera
+    L, S, C, St = settings.lidar, settings.scanner, settings.camera, settings.stereo
     T_cam = _pose_matrix(x, y, gz + C.height, th, np.radians(C.pitch_down_deg))
     T_cam[:3, :3] = T_cam[:3, :3] @ R_BODY_FROM_OPTICAL  # body axes -> OpenCV optical axes
+    T_stereo = _pose_matrix(x, y, gz + St.height, th)  # level, the pan drive at 0
+    T_stereo[:3, :3] = T_stereo[:3, :3] @ R_BODY_FROM_OPTICAL
     summary: dict[str, Any] = {
         "scene": scene.name,
         "primitives": len(scene),
@@ -93,7 +97,9 @@ def _setup(out: Path, settings: Any) -> _Shoot:
         _pose_matrix(x, y, gz + L.height, th),
         _pose_matrix(x, y, gz + S.height, th),
         T_cam,
-        PinholeCamera.from_fov(C.width, C.height_px, C.hfov_deg),
+        PinholeCamera.from_fov(C.width_px, C.height_px, C.hfov_deg),
+        T_stereo,
+        PinholeCamera.from_fov(St.width_px, St.height_px, St.hfov_deg),
         summary,
     )
 
@@ -174,7 +180,7 @@ def _rgbd(r: _Shoot) -> str:
     )
     d = sim.frame.depth
     r.summary["sensors"]["rgbd"] = {
-        "size": [C.width, C.height_px],
+        "size": [C.width_px, C.height_px],
         "valid_depth": int(np.isfinite(d).sum()),
         "depth_range_m": [float(np.nanmin(d)), float(np.nanmax(d))],
         "render_seconds": round(time.perf_counter() - t0, 3),
@@ -193,14 +199,14 @@ def _stereo(r: _Shoot) -> str:
     from navkit.sim import render_stereo
     from navkit.viz import sensors as viz
 
-    C = r.settings.camera
+    St = r.settings.stereo
     t0 = time.perf_counter()
-    rig = StereoRig(r.camera, C.stereo_baseline)
-    sim = render_stereo(r.scene, rig, r.T_cam, r.rng, pixel_noise=C.stereo_pixel_noise)
+    rig = StereoRig(r.stereo_camera, St.baseline)
+    sim = render_stereo(r.scene, rig, r.T_stereo, r.rng, pixel_noise=St.pixel_noise)
     disp = sim.disparity
     r.summary["sensors"]["stereo"] = {
-        "size": [C.width, C.height_px],
-        "baseline_m": C.stereo_baseline,
+        "size": [St.width_px, St.height_px],
+        "baseline_m": St.baseline,
         "disparity_px": [float(np.nanmin(disp)), float(np.nanmax(disp))],
         "render_seconds": round(time.perf_counter() - t0, 3),
     }
