@@ -214,3 +214,51 @@ def test_detour_on_the_obstacle_map_avoids_known_and_new_obstacles():
     grid.add_points(np.vstack([wall, box, south]), wall)
     fail = ret._plan(grid, np.array([9.0, 0.0, np.pi]), s_now, 2.6)
     assert not fail.ok and "no detour" in str(fail)
+
+
+def _wall_view(pose, walls, max_range=6.0, step=0.05):
+    """Body-frame points of the wall segments ``[(x0, y0, x1, y1)]`` seen from ``pose``."""
+    pts = []
+    for x0, y0, x1, y1 in walls:
+        n = int(np.hypot(x1 - x0, y1 - y0) / step) + 1
+        s = np.linspace(0.0, 1.0, n)[:, None]
+        pts.append(np.array([x0, y0]) + s * np.array([x1 - x0, y1 - y0]))
+    W = np.vstack(pts) - pose[:2]
+    c, s_ = np.cos(pose[2]), np.sin(pose[2])
+    B = W @ np.array([[c, -s_], [s_, c]])  # world offsets -> body frame
+    return B[np.hypot(B[:, 0], B[:, 1]) <= max_range]
+
+
+def test_mission_localizer_fixes_through_the_localizer():
+    """The room's Localizer (built from first-visit views at true poses) pulls a wrong estimate
+    by the fix weight towards the truth; a view of one straight wall is refused (elongated peak)
+    and leaves the estimate."""
+    from navkit.mission.localize import MissionLocalizer, RoomRecord
+    from navkit.mission.settings import FusionSettings, Route
+
+    room = [(0.0, 0.0, 6.0, 0.0), (6.0, 0.0, 6.0, 4.0), (6.0, 4.0, 0.0, 4.0), (0.0, 4.0, 0.0, 0.0)]
+    route = Route(waypoints=((0.0, 0.0), (6.0, 4.0)), room=(0.0, 0.0, 6.0, 4.0))
+    F = FusionSettings(room_map_views=4)
+    rec = RoomRecord()
+    loc = MissionLocalizer(route, F, 0.1, rec)
+    for x in (1.5, 2.5, 3.5, 4.5):  # the first visit: views at the true poses
+        p = np.array([x, 2.0, 0.3 * x])
+        est = loc.room_view(_wall_view(p, room), p, p, 0.0, outbound=True, may_fix=True)
+        np.testing.assert_array_equal(est, p)  # collecting, no fix yet
+    loc.finish_room()
+    assert rec.room_map is not None and len(rec.room_map.walls) >= 4
+    truth = np.array([3.0, 1.8, 0.5])
+    wrong = truth + np.array([0.2, -0.15, np.radians(3.0)])
+    est = loc.room_view(_wall_view(truth, room), wrong, truth, 1.0, outbound=False, may_fix=True)
+    fx = rec.fixes[-1]
+    assert fx.ok and fx.used and fx.reason == ""
+    assert np.hypot(*(fx.pose[:2] - truth[:2])) < 0.05 and abs(fx.pose[2] - truth[2]) < 0.02
+    # blended by fix_weight: the estimate moved 70 % of the way to the fix
+    np.testing.assert_allclose(est, wrong + F.fix_weight * (fx.pose - wrong), atol=1e-12)
+    # one straight wall only: slides along it -> refused, the estimate stays
+    loc2 = MissionLocalizer(route, FusionSettings(room_map_views=4, fragment_views=1), 0.1, rec)
+    loc2.room, loc2.done = loc.room, True
+    one_wall = _wall_view(truth, room[:1], max_range=2.5)
+    est2 = loc2.room_view(one_wall, wrong, truth, 2.0, outbound=False, may_fix=True)
+    assert not rec.fixes[-1].ok and "elongated peak" in rec.fixes[-1].reason
+    np.testing.assert_array_equal(est2, wrong)

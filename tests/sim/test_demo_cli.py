@@ -43,15 +43,20 @@ def test_demo_writes_pictures_settings_and_summary(cli, tmp_path):
     # the robot at the yard's start sees crate_1 and the west building with the lidar
     assert lid["returns_per_primitive"].get("crate_1", 0) > 0
     assert lid["returns_per_primitive"].get("building_west", 0) > 0
-    # stereo truth: the bottom image row sees the ground nearest. Camera 1.0 m high, pitched
-    # 8 deg down, 160 x 120 px with a 70 deg horizontal FOV: f = 80 / tan(35 deg); the bottom row
-    # centre is 59.5 px below the axis, so its rays dip 8 deg + atan(59.5 / f) below the horizon
-    # and (no roll) every pixel of that row has depth z = cos(atan(59.5 / f)) / sin(dip).
-    f = 80.0 / np.tan(np.radians(35.0))
+    # stereo truth: the bottom image row sees the ground nearest. The mission's stereo pair
+    # (StereoSettings: 1.0 m high, level, 80 deg horizontal FOV, 0.3 m baseline) at 160 x 120 px:
+    # f = 80 / tan(40 deg); the bottom row centre is 59.5 px below the axis, so its rays dip
+    # atan(59.5 / f) below the horizon and (no roll) every pixel of that row has depth
+    # z = h cos(dip) / sin(dip) on the flat ground under the start pose.
+    from navkit.mission.settings import StereoSettings
+
+    st = StereoSettings()
+    assert (st.height, st.hfov_deg, st.baseline) == (1.0, 80.0, 0.3)
+    f = 80.0 / np.tan(np.radians(40.0))
     a = np.arctan(59.5 / f)
-    z = np.cos(a) / np.sin(np.radians(8.0) + a)
+    z = st.height * np.cos(a) / np.sin(a)
     lo, hi = summary["sensors"]["stereo"]["disparity_px"]
-    np.testing.assert_allclose(hi, 0.12 * f / z, rtol=1e-9)
+    np.testing.assert_allclose(hi, 0.3 * f / z, rtol=1e-9)
     assert 0 < lo < hi
     # the data in standard formats agree with the summary
     from navkit.io.images import read_depth, read_pfm

@@ -36,7 +36,6 @@ __all__ = [
     "configure_logging",
     "expand_inputs",
     "progress",
-    "settings_to_toml",
     "write_run_files",
 ]
 
@@ -249,5 +248,4 @@ def expand_inputs(inputs: Sequence[str], suffixes: Sequence[str]) -> list[Path]:
     return found
 
 
-# one home for the run files and their TOML, in navkit.io
-from navkit.io.atomic import settings_to_toml, write_run_files  # noqa: E402
+from navkit.io.atomic import write_run_files  # noqa: E402  (one writer, in navkit.io)

@@ -1,21 +1,32 @@
-"""Paper 3 in the mission, behind one object: :class:`MissionLocalizer`.
+"""Paper 3 in the mission, behind one object: :class:`MissionLocalizer`, over two
+:class:`navkit.localization.Localizer` s - the same object ``navkit map locate`` and the
+benchmarks use.
 
-Two sources of fixes, both by correlative matching (:func:`navkit.localization.matcher.match_scan`):
+Two sources of fixes, both by correlative matching around the mission's estimate (the fused
+estimate is the Localizer's ``prior``):
 
 - **the room**: views (2D wall points in the robot frame, with the pose estimate) are collected
-  while the robot is in the room on its way out, up to ``room_map_views``; the map is built from
-  them (wall segments, corners: :func:`navkit.localization.mapping.build_map`) when enough views
-  are in, when the robot leaves the room, or when the link is lost. Every later view (with the
-  previous ``fragment_views`` ones, brought into the current frame with the estimate's own
-  relative motion) is located in that map around the estimate;
+  while the robot is in the room on its way out, up to ``room_map_views``; the room's Localizer
+  is built from them (:meth:`Localizer.from_views`: wall segments and corners, or the views'
+  points when fewer than two walls are found) when enough views are in, when the robot leaves
+  the room, or when the link is lost. Every later view (with the previous ``fragment_views``
+  ones, brought into the current frame with the estimate's own relative motion) is located in
+  that map (settings: :meth:`FusionSettings.room_localizer`);
 - **the obstacle map on the way back**: the scan's obstacle points located in the outbound
-  obstacle map (the map the stored path was recorded with), as a likelihood field.
+  obstacle map (the map the stored path was recorded with), a Localizer on its occupied cells
+  (:meth:`Localizer.from_points`, settings: :meth:`FusionSettings.map_localizer`).
 
-A fix that the matcher trusts (score, no ambiguity) and that lies within the gate of the estimate
-pulls the estimate (:func:`take_fix`). Every attempt is logged as a :class:`Fix2D`.
+A fix the matcher trusts (score, no ambiguity) within the gate of the estimate pulls the
+estimate by the fix weight (the Localizer's blend); every attempt is logged as a
+:class:`Fix2D` (:func:`take_fix`).
 
-This is the one place the mission localizes: the integrator swaps it for
-``navkit.localization.Localizer`` here.
+Decisions: a rejected fix leaves the estimate (``recentre_on_rejected=False``: the mission's
+estimate is fused, not the matcher's). The fragment is stacked with the mission's own pose
+algebra (:func:`navkit.mission.pose2d.relative`), not
+:func:`navkit.localization.stack_views`: the two differ by ~1e-15 m, which the closed loop of
+gates and thresholds amplifies into different runs; this keeps the mission's figures those of
+the published runs. A fix weight of 0 turns that source of fixes off (no Localizer is built,
+no attempt is logged).
 """
 
 from __future__ import annotations
@@ -23,18 +34,15 @@ from __future__ import annotations
 import logging
 from collections import deque
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.errors import NavkitError
 from navkit.geometry import se2_from_xytheta
-from navkit.mission.pose2d import blend, relative
+from navkit.localization import Fix, LocalizationFailure, Localizer
+from navkit.mission.pose2d import relative
 from navkit.timing import Timings, timed
-
-if TYPE_CHECKING:
-    from navkit.localization.matcher import Fix
 
 __all__ = ["Fix2D", "MissionLocalizer", "RoomRecord", "take_fix"]
 
@@ -82,24 +90,28 @@ class RoomRecord:
 
 
 def take_fix(
-    fx: Fix,
+    res: Fix | LocalizationFailure,
     est: NDArray[np.float64],
     truth: NDArray[np.float64],
     t: float,
-    gate_m: float,
-    weight: float,
     log: list[Fix2D],
 ) -> NDArray[np.float64]:
-    """Log a correlation fix and blend it into the estimate when it is confident (``fx.ok``)
-    and within ``gate_m`` of the estimate; returns the (possibly corrected) estimate."""
-    used = bool(fx.ok and float(np.hypot(*(fx.pose[:2] - est[:2]))) <= gate_m)
-    reason = fx.ambiguity.reason if fx.ambiguity.ambiguous else ("" if fx.ok else "low score")
+    """Log a Localizer's answer for the estimate ``est`` and return the estimate after it (the
+    fix blended in when confident and within the gate; ``est`` otherwise)."""
+    pose = res.pose if isinstance(res, Fix) else res.candidate
     log.append(
         Fix2D(
-            t, fx.pose.copy(), float(fx.score), bool(fx.ok), used, est.copy(), truth.copy(), reason
+            t,
+            np.array(pose, dtype=np.float64),
+            float(res.score),
+            bool(res.ok),
+            bool(res.used),
+            est.copy(),
+            truth.copy(),
+            res.reason,
         )
     )
-    return blend(est, fx.pose, weight) if used else est
+    return res.estimate
 
 
 class MissionLocalizer:
@@ -125,16 +137,10 @@ class MissionLocalizer:
         record: RoomRecord,
         timings: Timings | None = None,
     ) -> None:
-        from navkit.localization.matcher import MatcherSettings
-
         self.route, self.F, self.rec, self.timings = route, fusion, record, timings
         self.map_resolution = map_resolution
-        self.matcher = MatcherSettings(linear_window=fusion.fix_gate_m, angular_window_deg=10.0)
-        self.map_matcher = MatcherSettings(
-            linear_window=fusion.map_fix_gate_m, angular_window_deg=8.0, point_spacing=0.2
-        )
-        self.field: Any = None
-        self.return_field: Any = None  # the outbound obstacle map as a likelihood field
+        self.room: Localizer | None = None  # the room map, once built
+        self.return_map: Localizer | None = None  # the outbound obstacle map, on the way back
         self.done = False
         self.recent: deque[tuple[NDArray[np.float64], NDArray[np.float64]]] = deque(
             maxlen=fusion.fragment_views
@@ -155,8 +161,6 @@ class MissionLocalizer:
         may_fix: bool,
     ) -> NDArray[np.float64]:
         """Use one room view (``(N, 2)`` wall points, robot frame); returns the estimate."""
-        from navkit.localization.matcher import match_scan
-
         rec, F = self.rec, self.F
         inside = self.route.in_room(est[:2])
         if not self.done:
@@ -167,41 +171,43 @@ class MissionLocalizer:
             if rec.room_views:
                 self.finish_room()
             return est
-        # the fragment: this view and the previous ones, brought into the current frame with the
-        # estimate's own relative motion (accurate over a few seconds) - a wider fragment than one
-        # 80 deg view, so fewer fixes are ambiguous along a single wall
+        # the fragment: this view and the previous ones - a wider fragment than one 80 deg
+        # view, so fewer fixes are ambiguous along a single wall
         self.recent.append((wall2d, est.copy()))
-        if self.field is None or not inside or not may_fix:
+        if self.room is None or not inside or not may_fix:
             return est
-        parts = []
-        for v, p in self.recent:
-            r = relative(est, p)
-            parts.append(v @ se2_from_xytheta(*r)[:2, :2].T + r[:2])
-        frag = np.vstack(parts)
+        frag = fragment(self.recent, est)
         if len(frag) < 20:
             return est
         with timed(self.timings, "localize"):
-            fx = match_scan(self.field, frag, prior=est, settings=self.matcher)
-        return take_fix(fx, est, truth, t, F.fix_gate_m, F.fix_weight, rec.fixes)
+            res = self.room.register(frag, prior=est)
+        return take_fix(res, est, truth, t, rec.fixes)
 
     def finish_room(self) -> None:
-        """Build the room map from the views collected (once)."""
+        """Build the room map and its Localizer from the views collected (once)."""
         if self.done or not self.rec.room_views:
             return
         self.done = True
+        settings = self.F.room_localizer()
+        if settings is None:
+            return
+        from navkit.localization import MapSettings
+
+        views, poses = zip(*self.rec.room_views, strict=True)
+        # stereo wall points scatter by their depth error (the floor-plan front end keeps it
+        # below 0.25 m): walls closer than that are one wall
+        mapping = MapSettings(merge_distance=0.25, merge_angle_deg=8.0)
         with timed(self.timings, "room_map"):
-            self.field = self._build_room_field()
+            self.room = Localizer.from_views(list(views), np.array(poses), settings, mapping)
+        self.rec.room_map = self.room.map
 
     def link_lost(self, occupied_centres: NDArray[np.float64]) -> None:
-        """The way back starts: the room map is finished and the outbound obstacle map (its
-        occupied cell centres ``(N, 2)``) becomes a likelihood field for the return's fixes."""
-        from navkit.localization.field import LikelihoodField
-
-        if self.F.map_fix_weight > 0 and len(occupied_centres) >= 10:
+        """The way back starts: the outbound obstacle map (its occupied cell centres ``(N, 2)``)
+        becomes the Localizer of the return's fixes."""
+        settings = self.F.map_localizer(self.map_resolution)
+        if settings is not None and len(occupied_centres) >= 10:
             with timed(self.timings, "obstacle_map_field"):
-                self.return_field = LikelihoodField.from_points(
-                    occupied_centres, resolution=self.map_resolution, sigma=0.15
-                )
+                self.return_map = Localizer.from_points(occupied_centres, settings)
 
     def map_fix(
         self,
@@ -212,35 +218,21 @@ class MissionLocalizer:
     ) -> NDArray[np.float64]:
         """Locate a scan's obstacle points ``(N, 2)`` (robot frame) in the outbound obstacle map;
         returns the (possibly corrected) estimate."""
-        from navkit.localization.matcher import match_scan
-
-        F = self.F
-        if self.return_field is None or len(obstacle_xy) < F.map_fix_min_points:
+        if self.return_map is None or len(obstacle_xy) < self.F.map_fix_min_points:
             return est
         with timed(self.timings, "localize_obstacle_map"):
-            fx = match_scan(self.return_field, obstacle_xy, prior=est, settings=self.map_matcher)
-        return take_fix(fx, est, truth, t, F.map_fix_gate_m, F.map_fix_weight, self.rec.map_fixes)
+            res = self.return_map.register(obstacle_xy, prior=est)
+        return take_fix(res, est, truth, t, self.rec.map_fixes)
 
-    def _build_room_field(self) -> Any:
-        """Room wall map from the first-visit views (paper 3) and its likelihood field."""
-        from navkit.localization.field import LikelihoodField
-        from navkit.localization.mapping import MapSettings, build_map, sample_segments
 
-        views = [v for v, _ in self.rec.room_views]
-        poses = np.array([p for _, p in self.rec.room_views]).reshape(-1, 3)
-        try:
-            # stereo wall points scatter by their depth error (the floor-plan front end keeps it
-            # below 0.25 m): walls closer than that are one wall
-            wm = build_map(
-                views, poses, MapSettings(merge_distance=0.25, merge_angle_deg=8.0), ordered=False
-            )
-        except NavkitError as exc:
-            log.warning("room map failed: %s", exc)
-            wm = None
-        self.rec.room_map = wm
-        if wm is not None and len(wm.walls) >= 2:
-            pts = sample_segments(wm.walls, 0.05)
-        else:
-            T = se2_from_xytheta(poses[:, 0], poses[:, 1], poses[:, 2])
-            pts = np.vstack([v @ Tp[:2, :2].T + Tp[:2, 2] for v, Tp in zip(views, T, strict=True)])
-        return LikelihoodField.from_points(pts, resolution=0.05, sigma=0.1)
+def fragment(
+    views: Any,
+    est: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """The views ``(wall points (N_i, 2), pose (3,))`` brought into the body frame at ``est``
+    with the estimate's own relative motion (accurate over a few seconds), stacked."""
+    parts = []
+    for v, p in views:
+        r = relative(est, p)
+        parts.append(v @ se2_from_xytheta(*r)[:2, :2].T + r[:2])
+    return np.vstack(parts)

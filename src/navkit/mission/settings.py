@@ -12,18 +12,32 @@ import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from navkit.errors import ConfigError, DataNotFoundError, FormatError
+from navkit.sim.render import (
+    CAMERA_HEIGHT,
+    CAMERA_HFOV_DEG,
+    CAMERA_PITCH_DOWN_DEG,
+    DEPTH_MAX,
+    DEPTH_RELATIVE_SIGMA,
+    STEREO_BASELINE,
+    STEREO_PIXEL_NOISE,
+)
 from navkit.sim.scanners import (
     LIDAR_ABSOLUTE_SIGMA,
+    LIDAR_DROPOUT,
     LIDAR_ELEVATION_MAX_DEG,
     LIDAR_ELEVATION_MIN_DEG,
     LIDAR_HEIGHT,
+    LIDAR_MAX_RANGE,
     LIDAR_RELATIVE_SIGMA,
 )
+
+if TYPE_CHECKING:
+    from navkit.localization import LocalizerSettings
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -32,11 +46,9 @@ else:  # pragma: no cover - Python 3.10
 
 __all__ = [
     "BlockSettings",
-    "CameraMount",
     "CameraSettings",
     "DemoSettings",
     "FusionSettings",
-    "LidarMount",
     "LidarSettings",
     "MissionSettings",
     "ObstacleMapSettings",
@@ -98,7 +110,8 @@ class VOSettings:
 
 @dataclass(frozen=True)
 class LidarSettings:
-    """The spinning 3D lidar (reduced resolution so the demo runs in about a minute)."""
+    """The spinning 3D lidar (reduced resolution so the demo runs in about a minute; the
+    defaults of the simulated sensor are :mod:`navkit.sim.scanners`' ``LIDAR_*``)."""
 
     rate_hz: float = 2.0
     height: float = LIDAR_HEIGHT
@@ -106,10 +119,10 @@ class LidarSettings:
     n_columns: int = 512
     elevation_min_deg: float = LIDAR_ELEVATION_MIN_DEG
     elevation_max_deg: float = LIDAR_ELEVATION_MAX_DEG
-    max_range: float = 40.0
+    max_range: float = LIDAR_MAX_RANGE
     relative_sigma: float = LIDAR_RELATIVE_SIGMA
     absolute_sigma: float = LIDAR_ABSOLUTE_SIGMA
-    dropout: float = 0.01
+    dropout: float = LIDAR_DROPOUT
 
 
 @dataclass(frozen=True)
@@ -119,17 +132,18 @@ class CameraSettings:
     ``max_depth`` is the sensor's range: structured-light and active-stereo RGB-D cameras
     return no depth beyond about 4-10 m (Kinect v2 4.5 m, RealSense D435 about 10 m). Without
     it the simulated camera would see the ground out to the horizon, a "plane" whose gentle
-    hills fit only to tens of centimetres.
+    hills fit only to tens of centimetres. Defaults: :mod:`navkit.sim.render`'s ``CAMERA_*``,
+    ``DEPTH_*``.
     """
 
     rate_hz: float = 1.0
-    height: float = 1.0
-    pitch_down_deg: float = 12.0
+    height: float = CAMERA_HEIGHT
+    pitch_down_deg: float = CAMERA_PITCH_DOWN_DEG
     width_px: int = 200
     height_px: int = 150
-    hfov_deg: float = 80.0
-    depth_relative_sigma: float = 0.003
-    max_depth: float = 10.0
+    hfov_deg: float = CAMERA_HFOV_DEG
+    depth_relative_sigma: float = DEPTH_RELATIVE_SIGMA
+    max_depth: float = DEPTH_MAX
 
 
 @dataclass(frozen=True)
@@ -144,12 +158,12 @@ class StereoSettings:
     per frame, so a few frames survey the whole room.
     """
 
-    height: float = 1.0
+    height: float = CAMERA_HEIGHT
     width_px: int = 320
     height_px: int = 240
-    hfov_deg: float = 80.0
-    baseline: float = 0.3
-    pixel_noise: float = 2.0
+    hfov_deg: float = CAMERA_HFOV_DEG
+    baseline: float = STEREO_BASELINE
+    pixel_noise: float = STEREO_PIXEL_NOISE
     supersample: int = 1
     pan_deg: tuple[float, ...] = (0.0, 90.0, 180.0, -90.0)
 
@@ -215,6 +229,45 @@ class FusionSettings:
     map_fix_weight: float = 0.5
     map_fix_gate_m: float = 0.8
     map_fix_min_points: int = 40
+
+    def room_localizer(self) -> LocalizerSettings | None:
+        """:class:`~navkit.localization.LocalizerSettings` of the room fixes: a 5 cm field of
+        width 0.1 m (stereo wall points), a +-``fix_gate_m``, +-10 deg window around the
+        estimate, blended by ``fix_weight`` within ``fix_gate_m``; a rejected fix leaves the
+        estimate. None when ``fix_weight`` is 0 (room fixes off)."""
+        from navkit.localization import LocalizerSettings, MatcherSettings
+
+        if self.fix_weight == 0:
+            return None
+        return LocalizerSettings(
+            sigma=0.1,
+            resolution=0.05,
+            matcher=MatcherSettings(linear_window=self.fix_gate_m, angular_window_deg=10.0),
+            fix_weight=self.fix_weight,
+            gate_m=self.fix_gate_m,
+            recentre_on_rejected=False,
+        )
+
+    def map_localizer(self, resolution: float) -> LocalizerSettings | None:
+        """:class:`~navkit.localization.LocalizerSettings` of the way back's fixes in the
+        outbound obstacle map (cells of ``resolution`` metres, field width 0.15 m, a
+        +-``map_fix_gate_m``, +-8 deg window, points every 0.2 m). None when
+        ``map_fix_weight`` is 0 (off)."""
+        from navkit.localization import LocalizerSettings, MatcherSettings
+
+        if self.map_fix_weight == 0:
+            return None
+        window = MatcherSettings(
+            linear_window=self.map_fix_gate_m, angular_window_deg=8.0, point_spacing=0.2
+        )
+        return LocalizerSettings(
+            sigma=0.15,
+            resolution=resolution,
+            matcher=window,
+            fix_weight=self.map_fix_weight,
+            gate_m=self.map_fix_gate_m,
+            recentre_on_rejected=False,
+        )
 
 
 @dataclass(frozen=True)
@@ -524,21 +577,6 @@ def load_route(path: str | Path) -> tuple[Route, dict[str, Any]]:
 
 # --- the demo's sensor pictures (navkit demo) --------------------------------------------------
 @dataclass(frozen=True)
-class LidarMount:
-    """A spinning lidar on the robot: height above the ground (m), beams x columns."""
-
-    height: float = LIDAR_HEIGHT
-    n_beams: int = 64
-    n_columns: int = 2048
-    elevation_min_deg: float = LIDAR_ELEVATION_MIN_DEG
-    elevation_max_deg: float = LIDAR_ELEVATION_MAX_DEG
-    max_range: float = 80.0
-    relative_sigma: float = LIDAR_RELATIVE_SIGMA
-    absolute_sigma: float = LIDAR_ABSOLUTE_SIGMA
-    dropout: float = 0.02
-
-
-@dataclass(frozen=True)
 class ScannerMount:
     """A SICK LMS 200-like scanner tilted in elevation; its height (m) and angle grid (deg)."""
 
@@ -554,32 +592,26 @@ class ScannerMount:
 
 
 @dataclass(frozen=True)
-class CameraMount:
-    """A forward camera: height (m), pitch down (deg), image size (px), horizontal FOV (deg)."""
-
-    height: float = 1.0
-    pitch_down_deg: float = 8.0
-    width: int = 640
-    height_px: int = 480
-    hfov_deg: float = 70.0
-    depth_relative_sigma: float = 0.005
-    max_depth: float = 10.0
-    stereo_baseline: float = 0.12
-    stereo_pixel_noise: float = 2.0
-
-
-@dataclass(frozen=True)
 class DemoSettings:
     """What ``navkit demo`` renders at the start pose besides the mission: one picture per
-    simulated sensor (written to ``settings.toml`` with the mission's settings)."""
+    simulated sensor (written to ``settings.toml`` with the mission's settings).
+
+    The lidar, the RGB-D camera and the stereo pair are the mission's (:class:`LidarSettings`,
+    :class:`CameraSettings`, :class:`StereoSettings`: one set of sensor defaults) at a finer
+    resolution; the tilting scanner is the demo's own."""
 
     scene: str = "yard"
     seed: int = 0
     small: bool = False
     robot_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    lidar: LidarMount = field(default_factory=LidarMount)
+    lidar: LidarSettings = field(default_factory=lambda: LidarSettings(n_beams=64, n_columns=2048))
     scanner: ScannerMount = field(default_factory=ScannerMount)
-    camera: CameraMount = field(default_factory=CameraMount)
+    camera: CameraSettings = field(
+        default_factory=lambda: CameraSettings(width_px=640, height_px=480)
+    )
+    stereo: StereoSettings = field(
+        default_factory=lambda: StereoSettings(width_px=640, height_px=480)
+    )
 
     @classmethod
     def make(
@@ -592,7 +624,8 @@ class DemoSettings:
             seed,
             small,
             pose,
-            lidar=LidarMount(n_beams=16, n_columns=512),
+            lidar=LidarSettings(n_beams=16, n_columns=512),
             scanner=ScannerMount(azimuth_step_deg=2.0, elevation_step_deg=2.0),
-            camera=CameraMount(width=160, height_px=120),
+            camera=CameraSettings(width_px=160, height_px=120),
+            stereo=StereoSettings(width_px=160, height_px=120),
         )

@@ -23,7 +23,14 @@ from navkit.sim.scanners import RangeNoise, SpinningLidar, TiltingScanner
 from navkit.sim.scene import RayHits, Scene
 
 __all__ = [
+    "CAMERA_HEIGHT",
+    "CAMERA_HFOV_DEG",
+    "CAMERA_PITCH_DOWN_DEG",
+    "DEPTH_MAX",
+    "DEPTH_RELATIVE_SIGMA",
     "SKY_COLOR",
+    "STEREO_BASELINE",
+    "STEREO_PIXEL_NOISE",
     "SUN_DIRECTION",
     "SimRGBD",
     "SimScan",
@@ -45,6 +52,24 @@ SKY_COLOR = np.array([0.70, 0.80, 0.92])
 """RGB of rays that hit nothing."""
 AMBIENT = 0.45
 """Share of the light that does not depend on the surface orientation."""
+
+# the one home of the simulated cameras' defaults: navkit.mission.settings.CameraSettings and
+# StereoSettings (the mission's and the demo's cameras) take these; each use picks only its
+# image size
+CAMERA_HEIGHT = 1.0
+"""Height of the simulated robot's cameras (RGB-D and stereo) above the ground, metres."""
+CAMERA_PITCH_DOWN_DEG = 12.0
+"""Downward pitch of the forward RGB-D camera, degrees (the stereo pair is level)."""
+CAMERA_HFOV_DEG = 80.0
+"""Horizontal field of view of the simulated cameras, degrees."""
+DEPTH_RELATIVE_SIGMA = 0.003
+"""RGB-D depth noise proportional to the depth."""
+DEPTH_MAX = 10.0
+"""RGB-D range, metres: no depth beyond (a RealSense D435 returns about 10 m)."""
+STEREO_BASELINE = 0.3
+"""Baseline of the simulated stereo pair, metres."""
+STEREO_PIXEL_NOISE = 2.0
+"""Image noise of the simulated stereo pair, grey levels (1-sigma)."""
 
 
 def _rng(rng: np.random.Generator | int | None) -> np.random.Generator:

@@ -74,8 +74,12 @@ LIDAR_RELATIVE_SIGMA = 0.002
 """Range noise proportional to the range (:class:`RangeNoise`)."""
 LIDAR_ABSOLUTE_SIGMA = 0.01
 """Constant range noise, metres."""
-# the one home of the simulated lidar's defaults: navkit.mission.settings.LidarSettings and
-# the demo's LidarMount take these; each use picks its own resolution, range and dropout
+LIDAR_MAX_RANGE = 40.0
+"""Range beyond which the simulated lidar reports no return, metres."""
+LIDAR_DROPOUT = 0.01
+"""Probability that a return is missing (:class:`RangeNoise`)."""
+# the one home of the simulated lidar's defaults: navkit.mission.settings.LidarSettings (the
+# mission's and the demo's lidar) takes these; each use picks only its resolution
 
 
 @dataclass(frozen=True)
