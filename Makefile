@@ -23,7 +23,7 @@ $(VENV)/.bench-installed: $(STAMP)
 	@touch $@
 
 demo: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/navkit demo --out out/demo
+	MPLBACKEND=Agg $(BIN)/navkit demo --out out/demo --overwrite
 
 test: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m pytest -q -p no:cacheprovider

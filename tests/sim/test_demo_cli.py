@@ -94,5 +94,5 @@ def test_demo_out_must_be_a_folder(cli, tmp_path):
     target = tmp_path / "a_file"
     target.write_text("x")
     res = cli("demo", "--out", target, "--small")
-    assert res.exit_code == 2 and "not a folder" in res.output
+    assert res.exit_code == 2 and "is a file" in res.output and "--out" in res.output
     assert target.read_text() == "x"

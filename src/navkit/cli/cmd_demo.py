@@ -55,7 +55,7 @@ def register(app: typer.Typer) -> None:
         with cli_errors():
             import math
 
-            from navkit.cli.cmd_mission import check_out_dir
+            from navkit.cli.common import check_out_dir
             from navkit.io.atomic import read_json
             from navkit.mission import run_demo
             from navkit.mission.settings import DemoSettings, tomllib
@@ -63,7 +63,7 @@ def register(app: typer.Typer) -> None:
             from navkit.viz.demo import render_sensor_pictures
             from navkit.viz.mission import write_report
 
-            check_out_dir(out, overwrite)  # -> navkit.cli.common.check_out_dir once merged
+            check_out_dir(out, overwrite)
             start = load_scene(scene).start
             pose = (
                 start[0] if x is None else x,

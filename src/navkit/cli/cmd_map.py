@@ -30,7 +30,7 @@ from typing import Any
 
 import typer
 
-from navkit.cli.common import cli_errors, progress, write_run_files
+from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
 
 log = logging.getLogger(__name__)
 
@@ -64,19 +64,6 @@ class LocateInput:
     success_m: float
     success_deg: float
     known_heading: bool
-
-
-def _check_out(out: Path, overwrite: bool) -> None:
-    """Refuse to overwrite a previous run's outputs (swap for ``cli.common.check_out_dir``)."""
-    from navkit.errors import InputError
-
-    if not overwrite and out.is_dir() and any(out.iterdir()):
-        raise InputError(
-            "holds earlier outputs",
-            source=out,
-            field="--out",
-            expected="a new or empty folder, or --overwrite",
-        )
 
 
 def _localizer_settings(
@@ -138,7 +125,7 @@ def build_cmd(
         from navkit.localization import MapSettings, build_map, build_map_from_scans, evaluate_map
         from navkit.viz.maps import plot_map
 
-        _check_out(out, overwrite)
+        check_out_dir(out, overwrite)
         table = dict(_read_toml(config).get("map", {})) if config is not None else {}
         table.update({"resolution": resolution} if resolution is not None else {})
         settings = MapSettings.from_dict(table, source=str(config or "options"))
@@ -255,7 +242,7 @@ def locate_cmd(
         from navkit.localization import Localizer, evaluate_fixes, reported_poses
         from navkit.viz.maps import plot_map
 
-        _check_out(out, overwrite)
+        check_out_dir(out, overwrite)
         wall_map = read_wall_map(map_json)
         seq = read_scan_sequence(input, every=every, group=group, max_range=max_range)
         settings = _localizer_settings(config, sigma, refine, seq)

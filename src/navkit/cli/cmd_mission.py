@@ -9,24 +9,6 @@ import typer
 from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
 
 
-def check_out_dir(out: Path, overwrite: bool) -> None:
-    """Refuse an existing file, or a folder holding an earlier run (its ``summary.json``) unless
-    ``overwrite``. (Stands in for ``navkit.cli.common.check_out_dir``, built on another branch.)"""
-    from navkit.errors import InputError
-
-    if out.exists() and not out.is_dir():
-        raise InputError(
-            "exists and is not a folder", source=out, field="--out", expected="an output folder"
-        )
-    if not overwrite and (out / "summary.json").exists():
-        raise InputError(
-            "holds the outputs of an earlier run",
-            source=out,
-            field="--out",
-            expected="an empty or new folder, or --overwrite",
-        )
-
-
 def _progress():  # type: ignore[no-untyped-def]
     from navkit.cli.common import progress
 
@@ -73,13 +55,13 @@ def register(app: typer.Typer) -> None:
 
         Example: navkit mission run yard --out out/mission --small
         """
-        from navkit.cli.common import cli_errors
+        from navkit.cli.common import check_out_dir, cli_errors
 
         with cli_errors():
             from navkit.mission.demo import run_scene_file
             from navkit.viz.mission import write_report
 
-            check_out_dir(out, overwrite)  # -> navkit.cli.common.check_out_dir once merged
+            check_out_dir(out, overwrite)
             m = run_scene_file(
                 scene,
                 out,
@@ -130,11 +112,10 @@ def register(app: typer.Typer) -> None:
 
         Example: navkit mission sweep yard --seeds 0:20 --small --workers 2 --out out/sweep
         """
-        from navkit.cli.common import cli_errors
+        from navkit.cli.common import check_out_dir, cli_errors
 
         with cli_errors():
             from navkit.batch import mission_sweep_tasks, parse_seeds
-            from navkit.cli.common import check_out_dir
 
             tasks = mission_sweep_tasks(
                 scene,
