@@ -277,6 +277,7 @@ def detect_obstacles_grid(
         jump_range_fraction=settings.jump_range_fraction,
         jump_range_ratio=settings.jump_range_ratio,
         steep_cos=math.cos(settings.c1_rad),
+        backend=settings.backend,
     )
     clock.lap("mesh")
 
@@ -292,8 +293,11 @@ def detect_obstacles_grid(
             jump_height_m=settings.jump_height_m,
             jump_range_fraction=settings.jump_range_fraction,
             jump_range_ratio=settings.jump_range_ratio,
+            backend=settings.backend,
         )
-    labels, _rules = classify(mesh, settings, wrap=wrap, robust_cells=robust)
+    labels, _rules = classify(
+        mesh, settings, wrap=wrap, robust_cells=robust, backend=settings.backend
+    )
     clock.lap("classes")
 
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
