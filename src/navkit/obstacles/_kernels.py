@@ -445,3 +445,528 @@ def grid_fill_kernel(Q, rh, cell, n_cells):  # type: ignore[no-untyped-def]
             out[c, 1] = Q[w, 1]
             out[c, 2] = Q[w, 2]
     return out
+
+
+# ------------------------------------------------------------------------------------------
+# stage 6: components (union-find), filters, merging, shadow owners (twin: detector + segment)
+
+
+@njit(cache=True, inline="always")
+def _find(parent, a):  # type: ignore[no-untyped-def]
+    """Root of ``a`` with path halving."""
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@njit(cache=True, inline="always")
+def _union(parent, a, b):  # type: ignore[no-untyped-def]
+    """Join the sets of ``a`` and ``b``; the smaller root stays the root."""
+    ra = _find(parent, a)
+    rb = _find(parent, b)
+    if ra < rb:
+        parent[rb] = ra
+    elif rb < ra:
+        parent[ra] = rb
+
+
+@njit(cache=True)
+def _mesh_roots(mask, wrap):  # type: ignore[no-untyped-def]
+    """Union-find over the mesh neighbourhood (``segment.MESH_STRUCTURE``, rows cyclic with
+    ``wrap``): the flat index of each masked triangle's root (the component's first triangle
+    in raster order), -1 elsewhere."""
+    R, C = mask.shape
+    parent = np.arange(R * C).astype(np.int64)
+    seam = wrap and R > 1
+    for i in range(R):
+        for j in range(C):
+            if not mask[i, j]:
+                continue
+            f = i * C + j
+            if j > 0 and mask[i, j - 1]:
+                _union(parent, f, f - 1)
+            if i > 0 and j + 1 < C and mask[i - 1, j + 1]:
+                _union(parent, f, f - C + 1)
+            if seam and i == R - 1 and j > 0 and mask[0, j - 1]:
+                _union(parent, f, j - 1)
+    root = np.full(R * C, -1, np.int64)
+    for i in range(R):
+        for j in range(C):
+            if mask[i, j]:
+                f = i * C + j
+                root[f] = _find(parent, f)
+    return root
+
+
+@njit(cache=True)
+def components_kernel(mask, wrap):  # type: ignore[no-untyped-def]
+    """``segment.label_components``: labels 1..n numbered by first appearance in raster order
+    (what ``ndimage.label`` and the twin's renumbering after closing the seam give)."""
+    R, C = mask.shape
+    root = _mesh_roots(mask, wrap)
+    lab = np.zeros((R, C), np.int32)
+    new = np.zeros(R * C, np.int32)
+    n = 0
+    for f in range(R * C):
+        r = root[f]
+        if r < 0:
+            continue
+        if new[r] == 0:
+            n += 1
+            new[r] = n
+        lab[f // C, f % C] = new[r]
+    return lab, n
+
+
+_OFF_I = (0, 0, 1, -1)
+_OFF_J = (1, -1, -1, 1)
+
+
+@njit(cache=True)
+def _renumber_by_min(parent, n):  # type: ignore[no-untyped-def]
+    """``lut (n + 1,)``: labels 1..n to their merged component, numbered by smallest member."""
+    lut = np.zeros(n + 1, np.int32)
+    m = 0
+    for a in range(1, n + 1):
+        r = _find(parent, a)
+        if r == a:
+            m += 1
+            lut[a] = m
+        else:
+            lut[a] = lut[r]
+    return lut, m
+
+
+@njit(cache=True)
+def _incident(values, p, q, k, R, C, wrap, fill):  # type: ignore[no-untyped-def]
+    """Value of the k-th triangle around vertex ``(p, q)`` (``segment._incident_slices``)."""
+    if k == 0:
+        r, c, t = p, q, 0
+    elif k == 1:
+        r, c, t = p, q - 1, 0
+    elif k == 2:
+        r, c, t = p - 1, q, 0
+    elif k == 3:
+        r, c, t = p - 1, q, 1
+    elif k == 4:
+        r, c, t = p, q - 1, 1
+    else:
+        r, c, t = p - 1, q - 1, 1
+    if c < 0 or c >= C or r >= R:
+        return fill
+    if r < 0:
+        if not wrap:
+            return fill
+        r = R - 1
+    return values[r, 2 * c + t]
+
+
+@njit(cache=True)
+def boundary_kernel(obstacle_id, n_az, n_el, wrap):  # type: ignore[no-untyped-def]
+    """``segment.boundary_vertices``: obstacle id per vertex (largest incident) and boundary."""
+    R = obstacle_id.shape[0]
+    C = obstacle_id.shape[1] // 2
+    vid = np.zeros((n_az, n_el), np.int32)
+    bnd = np.zeros((n_az, n_el), np.bool_)
+    for p in range(n_az):
+        for q in range(n_el):
+            v = _incident(obstacle_id, p, q, 0, R, C, wrap, 0)
+            lo = v
+            hi = v
+            for k in range(1, 6):
+                v = _incident(obstacle_id, p, q, k, R, C, wrap, 0)
+                if v > hi:
+                    hi = v
+                if v < lo:
+                    lo = v
+            vid[p, q] = hi
+            bnd[p, q] = hi > 0 and lo != hi
+    return vid, bnd
+
+
+@njit(cache=True)
+def _merge_close(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped-def]
+    """``segment.merge_close_components`` (a union-find on the obstacle ids)."""
+    n_az, n_el = P.shape[0], P.shape[1]
+    vid, bnd = boundary_kernel(obs_lab, n_az, n_el, wrap)
+    parent = np.arange(n + 1).astype(np.int64)
+    merged = False
+    for si in range(n_az):
+        for sj in range(n_el):
+            if not bnd[si, sj]:
+                continue
+            va = vid[si, sj]
+            for di in range(0, gap + 1):
+                for dj in range(-gap, gap + 1):
+                    if di == 0 and dj <= 0:
+                        continue
+                    ti, tj = si + di, sj + dj
+                    if tj < 0 or tj >= n_el:
+                        continue
+                    if ti >= n_az:
+                        if not wrap:
+                            continue
+                        ti = ti % n_az
+                    vb = vid[ti, tj]
+                    if vb <= 0 or vb == va:
+                        continue
+                    dx = P[si, sj, 0] - P[ti, tj, 0]
+                    dy = P[si, sj, 1] - P[ti, tj, 1]
+                    dz = P[si, sj, 2] - P[ti, tj, 2]
+                    if math.sqrt(dx * dx + dy * dy + dz * dz) < distance_m:
+                        _union(parent, va, vb)
+                        merged = True
+    if not merged:
+        return obs_lab, n
+    lut, m = _renumber_by_min(parent, n)
+    out = np.empty_like(obs_lab)
+    for i in range(obs_lab.shape[0]):
+        for j in range(obs_lab.shape[1]):
+            out[i, j] = lut[obs_lab[i, j]]
+    return out, m
+
+
+@njit(cache=True)
+def _neighbour(i, j, o, R, C, wrap):  # type: ignore[no-untyped-def]
+    """Flat index of the neighbour of triangle ``(i, j)`` at offset ``o`` of ``_OFF_I/_OFF_J``
+    (-1 outside the mesh)."""
+    ti = i + _OFF_I[o]
+    tj = j + _OFF_J[o]
+    if tj < 0 or tj >= C:
+        return -1
+    if ti < 0 or ti >= R:
+        if not wrap or _OFF_I[o] == 0:
+            return -1
+        ti = ti % R
+    return ti * C + tj
+
+
+@njit(cache=True)
+def _pairs_from(sel, R, C, wrap):  # type: ignore[no-untyped-def]
+    """Mesh-adjacent pairs whose first triangle is in ``sel`` (flat indices, raster order), in
+    the twin's order (``segment._pairs``): per offset, the pairs inside the array in raster
+    order, then the ones across the seam. Returns ``(first, second)`` flat indices."""
+    fa = np.empty(4 * len(sel), np.int64)
+    fb = np.empty(4 * len(sel), np.int64)
+    m = 0
+    for o in range(4):
+        di, dj = _OFF_I[o], _OFF_J[o]
+        for seam in range(2 if (wrap and di != 0) else 1):
+            for f in sel:
+                i, j = f // C, f % C
+                tj = j + dj
+                if tj < 0 or tj >= C:
+                    continue
+                ti = i + di
+                crosses = ti < 0 or ti >= R
+                if crosses != (seam == 1):
+                    continue
+                if crosses:
+                    ti = ti % R
+                fa[m] = f
+                fb[m] = ti * C + tj
+                m += 1
+    return fa[:m], fb[:m]
+
+
+@njit(cache=True)
+def _kth(values, k):  # type: ignore[no-untyped-def]
+    """The k-th smallest of ``values`` (0-based), by a selection in place (reorders them)."""
+    lo, hi = 0, len(values) - 1
+    while lo < hi:
+        pivot = values[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while values[i] < pivot:
+                i += 1
+            while values[j] > pivot:
+                j -= 1
+            if i <= j:
+                values[i], values[j] = values[j], values[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            return values[k]
+    return values[k]
+
+
+@njit(cache=True)
+def split_kernel(  # type: ignore[no-untyped-def]
+    labels,
+    zmin,
+    zmax,
+    P,
+    wrap,
+    min_triangles,
+    min_height32,
+    half,
+    distance_m,
+    gap,
+):
+    """Stage 6 of the detector: obstacle components, the size / height / noise-patch filters,
+    merging of close components and the shadows' owners. ``labels`` is changed in place
+    (dropped components back to ground). Returns ``obs_lab, n, owner``."""
+    R, C = labels.shape
+    lab, n = components_kernel(labels == -2, wrap)
+    if n:
+        size = np.zeros(n + 1, np.int64)
+        hi = np.full(n + 1, -np.inf, np.float32)
+        lo = np.full(n + 1, np.inf, np.float32)
+        cnt = np.zeros(n + 1, np.int64)
+        sm = np.zeros(n + 1, np.float64)
+        zmid = np.empty((R, C), np.float32)
+        h = np.float32(0.5)
+        for i in range(R):
+            for j in range(C):
+                zmid[i, j] = h * (zmax[i, j] + zmin[i, j])
+        for i in range(R):
+            for j in range(C):
+                a = lab[i, j]
+                if a == 0:
+                    continue
+                size[a] += 1
+                hi[a] = _max_nan(hi[a], zmax[i, j])
+                lo[a] = _min_nan(lo[a], zmin[i, j])
+                cnt[a] += 1
+                sm[a] += np.float64(zmid[i, j])
+        # 10th / 90th percentile of the mid heights per label (a counting sort, then each run)
+        start = np.zeros(n + 2, np.int64)
+        for a in range(1, n + 1):
+            start[a + 1] = start[a] + size[a]
+        fill = start.copy()
+        zs = np.empty(start[n + 1], np.float64)
+        for i in range(R):
+            for j in range(C):
+                a = lab[i, j]
+                if a:
+                    zs[fill[a]] = np.float64(zmid[i, j])
+                    fill[a] += 1
+        spread = np.empty(n + 1, np.float64)
+        for a in range(1, n + 1):
+            k = size[a] - 1
+            spread[a] = _kth(zs[start[a] : start[a + 1]], math.floor(0.9 * k)) - _kth(
+                zs[start[a] : start[a + 1]], math.floor(0.1 * k)
+            )
+        # lift over the adjacent ground, the sums in the twin's pair order
+        cnt_g = np.zeros(n + 1, np.int64)
+        sum_g = np.zeros(n + 1, np.float64)
+        for o in range(4):
+            di, dj = _OFF_I[o], _OFF_J[o]
+            j0, j1 = max(0, -dj), C - max(0, dj)
+            for seam in range(2 if (wrap and di != 0) else 1):
+                if seam == 0:
+                    i0, i1 = max(0, -di), R - max(0, di)
+                else:
+                    i0 = R - 1 if di == 1 else 0
+                    i1 = i0 + 1
+                for i in range(i0, i1):
+                    bi = (i + di) % R
+                    for j in range(j0, j1):
+                        a = lab[i, j]
+                        if a and labels[bi, j + dj] == 0:
+                            cnt_g[a] += 1
+                            sum_g[a] += np.float64(zmid[bi, j + dj])
+        lut = np.zeros(n + 1, np.int32)
+        m2 = 0
+        for a in range(1, n + 1):
+            lift = sm[a] / max(cnt[a], 1) - sum_g[a] / cnt_g[a] if cnt_g[a] > 0 else np.inf
+            noise_patch = spread[a] < half and lift < half
+            if size[a] >= min_triangles and (hi[a] - lo[a]) >= min_height32 and not noise_patch:
+                m2 += 1
+                lut[a] = m2
+        for i in range(R):
+            for j in range(C):
+                a = lab[i, j]
+                if a:
+                    if lut[a] == 0:
+                        labels[i, j] = 0
+                    lab[i, j] = lut[a]
+        n = m2
+        if n >= 2 and gap >= 1 and distance_m > 0:
+            lab, n = _merge_close(lab, n, P, wrap, distance_m, gap)
+    owner = np.zeros((R, C), np.int32)
+    nobs = 0
+    has_shadow = False
+    for i in range(R):
+        for j in range(C):
+            if lab[i, j] > nobs:
+                nobs = lab[i, j]
+            if labels[i, j] == -3 or labels[i, j] == -4:
+                has_shadow = True
+    if not has_shadow or nobs == 0:
+        return lab, n, owner
+    sl, ns = components_kernel((labels == -3) | (labels == -4), wrap)
+    nobs += 1
+    fa, fb = _pairs_from(np.flatnonzero(sl), R, C, wrap)
+    keys = np.empty(len(fa), np.int64)
+    k = 0
+    for m in range(len(fa)):
+        z = sl[fa[m] // C, fa[m] % C]
+        b = lab[fb[m] // C, fb[m] % C]
+        if b > 0:
+            keys[k] = np.int64(z) * nobs + b
+            k += 1
+    if k == 0:
+        return lab, n, owner
+    keys = np.sort(keys[:k])
+    best = np.zeros(ns + 1, np.int32)
+    best_count = np.zeros(ns + 1, np.int64)
+    run = 1
+    for m in range(1, k + 1):
+        if m < k and keys[m] == keys[m - 1]:
+            run += 1
+            continue
+        z = keys[m - 1] // nobs
+        b = keys[m - 1] % nobs
+        if run >= best_count[z]:  # ties: the larger obstacle id (the twin's stable lexsort)
+            best_count[z] = run
+            best[z] = b
+        run = 1
+    for i in range(R):
+        for j in range(C):
+            if sl[i, j]:
+                owner[i, j] = best[sl[i, j]]
+    return lab, n, owner
+
+
+# ------------------------------------------------------------------------------------------
+# stage 7: boundaries, per-vertex classes, main ground, refinement by height above the ground
+
+
+@njit(cache=True)
+def vertex_kernel(labels, obs_lab, valid, wrap, main_share):  # type: ignore[no-untyped-def]
+    """``boundary_vertices`` + ``vertex_labels`` + ``main_ground_vertices`` in one pass over the
+    vertices. Returns ``vid, boundary, vertex labels, main ground vertices``."""
+    n_az, n_el = valid.shape
+    R = labels.shape[0]
+    C = labels.shape[1] // 2
+    vid, bnd = boundary_kernel(obs_lab, n_az, n_el, wrap)
+    # the main ground zones: component sizes of the ground triangles
+    root = _mesh_roots(labels == 0, wrap)
+    size = np.zeros(R * 2 * C, np.int64)
+    for f in range(R * 2 * C):
+        if root[f] >= 0:
+            size[root[f]] += 1
+    big = 0
+    for f in range(R * 2 * C):
+        if size[f] > big:
+            big = size[f]
+    main_tri = np.zeros((R, 2 * C), np.uint8)
+    if big > 0:
+        for f in range(R * 2 * C):
+            if root[f] >= 0 and size[root[f]] >= main_share * big:
+                main_tri[f // (2 * C), f % (2 * C)] = 1
+    vlab = np.empty((n_az, n_el), np.int8)
+    main = np.zeros((n_az, n_el), np.bool_)
+    for p in range(n_az):
+        for q in range(n_el):
+            flags = 0
+            mflag = 0
+            for k in range(6):
+                t = _incident(labels, p, q, k, R, C, wrap, 1)  # 1: no triangle
+                if t == 0:
+                    flags |= 1
+                elif t == -4:
+                    flags |= 2
+                elif t == -3:
+                    flags |= 4
+                elif t == -2:
+                    flags |= 8
+                mflag |= _incident(main_tri, p, q, k, R, C, wrap, 0)
+            main[p, q] = mflag > 0
+            if not valid[p, q]:
+                vlab[p, q] = -1
+            elif flags & 8:
+                vlab[p, q] = -2
+            elif flags & 1:
+                vlab[p, q] = 0
+            elif flags & 2:
+                vlab[p, q] = -4
+            elif flags & 4:
+                vlab[p, q] = -3
+            else:
+                vlab[p, q] = -1
+    return vid, bnd, vlab, main
+
+
+@njit(cache=True)
+def ground_cells_kernel(P, ref, cell_m, quantile):  # type: ignore[no-untyped-def]
+    """``ground.ground_height_map`` before its hole filling: the ``quantile`` of the reference
+    points' z per horizontal cell ``(nx, ny)`` (NaN: no point), and the grid's origin."""
+    n = P.shape[0]
+    m = 0
+    gx_min = np.inf
+    gy_min = np.inf
+    for p in range(n):
+        if ref[p] and math.isfinite(P[p, 0] + P[p, 1] + P[p, 2]):
+            m += 1
+            gx_min = min(gx_min, P[p, 0])
+            gy_min = min(gy_min, P[p, 1])
+    if m == 0:
+        return np.zeros((1, 1)), np.zeros(2), False
+    sel = np.empty(m, np.int64)
+    m = 0
+    for p in range(n):
+        if ref[p] and math.isfinite(P[p, 0] + P[p, 1] + P[p, 2]):
+            sel[m] = p
+            m += 1
+    ix = np.empty(m, np.int64)
+    iy = np.empty(m, np.int64)
+    nx = 0
+    ny = 0
+    for k in range(m):
+        p = sel[k]
+        ix[k] = math.floor((P[p, 0] - gx_min) / cell_m)
+        iy[k] = math.floor((P[p, 1] - gy_min) / cell_m)
+        nx = max(nx, ix[k] + 1)
+        ny = max(ny, iy[k] + 1)
+    counts = np.zeros(nx * ny + 1, np.int64)
+    for k in range(m):
+        counts[ix[k] * ny + iy[k] + 1] += 1
+    start = np.cumsum(counts)
+    fill = start.copy()
+    zs = np.empty(m, np.float64)
+    for k in range(m):
+        c = ix[k] * ny + iy[k]
+        zs[fill[c]] = P[sel[k], 2]
+        fill[c] += 1
+    heights = np.full((nx, ny), np.nan)
+    missing = False
+    for c in range(nx * ny):
+        a, b = start[c], start[c + 1]
+        if b > a:
+            heights[c // ny, c % ny] = _kth(zs[a:b], math.floor(quantile * (b - a - 1)))
+        else:
+            missing = True
+    origin = np.empty(2)
+    origin[0] = gx_min
+    origin[1] = gy_min
+    return heights, origin, missing
+
+
+@njit(cache=True)
+def refine_kernel(P, vlab, valid, grid, origin, cell_m, band_m, above_m):  # type: ignore[no-untyped-def]
+    """``ground.refine_by_ground_height`` (``envelope = 0``) per valid vertex."""
+    n = P.shape[0]
+    out = vlab.copy()
+    nx, ny = grid.shape
+    for p in range(n):
+        if not valid[p]:
+            continue
+        ix = math.floor((P[p, 0] - origin[0]) / cell_m)
+        iy = math.floor((P[p, 1] - origin[1]) / cell_m)
+        ix = min(max(ix, 0), nx - 1)
+        iy = min(max(iy, 0), ny - 1)
+        h = P[p, 2] - grid[ix, iy]
+        lab = out[p]
+        if abs(h) <= band_m:
+            lab = 0
+        if lab == 0 and h > above_m:
+            lab = -2
+        out[p] = lab
+    return out
