@@ -171,3 +171,40 @@ def test_compiled_equals_numpy_on_squeezeseg(data_path):
         grid = organized_to_grid(P, source=f.name)
         a, b = _both(lambda s, g=grid: detect_obstacles_in_grid(g, Mounting(1.73), s))
         assert_same_detection(a, b)
+
+
+def _same_grid(a, b) -> None:  # type: ignore[no-untyped-def]
+    assert (a.method, a.wraps, a.shape) == (b.method, b.wraps, b.shape)
+    np.testing.assert_array_equal(a.points, b.points)
+    np.testing.assert_array_equal(a.cell_of_point, b.cell_of_point)
+    np.testing.assert_array_equal(a.azimuth, b.azimuth)
+
+
+def test_cloud_to_grid_compiled_equals_numpy_on_kitti(data_path):
+    from navkit.io.pointcloud import read_kitti_bin
+
+    folder = data_path("lidar/semantickitti-seq00")
+    for f in sorted(folder.glob("*.bin")):
+        pts = read_kitti_bin(f)
+        a = cloud_to_grid(pts, backend="numpy")
+        b = cloud_to_grid(pts, backend="compiled")
+        assert a.method == "order"
+        _same_grid(a, b)
+        # rings by elevation (the other recovery), and a shuffled cloud that is not a sweep
+        sub = pts[::7]
+        _same_grid(
+            cloud_to_grid(sub, ring_method="elevation", n_rings=64, backend="numpy"),
+            cloud_to_grid(sub, ring_method="elevation", n_rings=64, backend="compiled"),
+        )
+
+
+def test_cloud_to_grid_compiled_equals_numpy_on_a_shuffled_cloud(rng):
+    az = np.repeat(np.linspace(-np.pi, np.pi, 720, endpoint=False), 16)
+    el = np.tile(np.radians(np.linspace(-20, 5, 16)), 720)
+    r = rng.uniform(3, 40, size=az.size)
+    P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * r[:, None]
+    P = np.concatenate([P, P[rng.integers(0, len(P), 3000)] * 1.01])[rng.permutation(len(P) + 3000)]
+    P[rng.random(len(P)) < 0.05] = 0.0  # no-returns stored as zeros
+    a = cloud_to_grid(P, backend="numpy")
+    assert a.method == "elevation"
+    _same_grid(a, cloud_to_grid(P, backend="compiled"))

@@ -970,3 +970,101 @@ def refine_kernel(P, vlab, valid, grid, origin, cell_m, band_m, above_m):  # typ
             lab = -2
         out[p] = lab
     return out
+
+
+@njit(cache=True)
+def _median(values):  # type: ignore[no-untyped-def]
+    """``np.median`` of a 1-D array (reorders a copy)."""
+    v = values.copy()
+    m = len(v)
+    h = m // 2
+    if m % 2:
+        return _kth(v, h)
+    a = _kth(v, h - 1)
+    b = _kth(v, h)
+    return (a + b) / 2
+
+
+@njit(cache=True, error_model="numpy")
+def rings_by_order_kernel(az):  # type: ignore[no-untyped-def]
+    """``grids._rings_by_order``: ``(ok, ring per point, azimuth step)``; ``ok`` False when the
+    storage order is not a sweep."""
+    n = len(az)
+    two_pi = 2 * np.pi
+    empty = np.zeros(0, np.int64)
+    if n < 100:
+        return False, empty, 0.0
+    d = np.empty(n - 1)
+    ad = np.empty(n - 1)
+    pos = 0
+    for k in range(n - 1):
+        v = az[k + 1] - az[k]
+        if v >= np.pi:
+            v -= two_pi
+        elif v < -np.pi:
+            v += two_pi
+        d[k] = v
+        ad[k] = abs(v)
+        if v > 0:
+            pos += 1
+    step = _median(ad)
+    if not step > 0:
+        return False, empty, 0.0
+    direction = 1.0 if 2 * pos > n - 1 else -1.0
+    fwd = 0
+    for k in range(n - 1):
+        if direction * d[k] > -0.5 * step:
+            fwd += 1
+    if step > two_pi / 64 or fwd / (n - 1) < 0.9:
+        return False, empty, 0.0
+    ring = np.empty(n, np.int64)
+    acc = 0.0
+    half = 0.5 * step
+    lo = np.iinfo(np.int64).max
+    hi = np.iinfo(np.int64).min
+    for k in range(n):
+        if k > 0:
+            acc += d[k - 1]
+        r = math.floor((direction * acc + half) / two_pi)
+        ring[k] = r
+        lo = min(lo, r)
+        hi = max(hi, r)
+    if hi - lo + 1 < 2 or hi - lo + 1 > 512:
+        return False, empty, 0.0
+    for k in range(n):
+        ring[k] -= lo
+    return True, ring, step
+
+
+@njit(cache=True, error_model="numpy")
+def grid_cells_kernel(Q, rh, az, ring, n_columns, phase):  # type: ignore[no-untyped-def]
+    """The rest of ``grids.cloud_to_grid`` after the rings: rings ranked by rising mean
+    elevation, azimuth columns, flat cell per point. Returns ``(cell, n_el)``."""
+    n = len(ring)
+    n_r = 0
+    for k in range(n):
+        n_r = max(n_r, ring[k] + 1)
+    counts = np.zeros(n_r, np.int64)
+    sums = np.zeros(n_r, np.float64)
+    for k in range(n):
+        counts[ring[k]] += 1
+        sums[ring[k]] += Q[k, 2] / max(rh[k], 1e-9)
+    key = np.empty(n_r)
+    n_el = 0
+    for r in range(n_r):
+        if counts[r] > 0:
+            key[r] = sums[r] / max(counts[r], 1)
+            n_el += 1
+        else:
+            key[r] = np.inf
+    rank = np.argsort(key, kind="mergesort")
+    lut = np.empty(n_r, np.int64)
+    for r in range(n_r):
+        lut[rank[r]] = r
+    cell = np.empty(n, np.int64)
+    scale = 2 * np.pi
+    for k in range(n):
+        x = (az[k] + np.pi) / scale * n_columns
+        i = math.floor(x - phase + 0.5) % n_columns
+        cell[k] = i * n_el + lut[ring[k]]
+    return cell, n_el

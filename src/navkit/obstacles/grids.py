@@ -228,7 +228,14 @@ def cloud_to_grid(
         raise InputError(
             f"= {ring_method!r}", field="ring_method", expected="'auto', 'order' or 'elevation'"
         )
-    by_order = _rings_by_order(az) if ring_method in ("auto", "order") else None
+    compiled = check_backend(backend) == "compiled"
+    if compiled and ring_method in ("auto", "order"):
+        from navkit.obstacles import _kernels
+
+        found, ring_o, step_o = _kernels.rings_by_order_kernel(az)
+        by_order = (ring_o, float(step_o)) if found else None
+    else:
+        by_order = _rings_by_order(az) if ring_method in ("auto", "order") else None
     if ring_method == "order" and by_order is None:
         raise InputError(
             "the storage order is not a lidar sweep",
@@ -244,6 +251,15 @@ def cloud_to_grid(
             ring = _rings_by_elevation(np.arctan2(Q[:, 2], rh), n_rings)
         method = "elevation"
         step = 0.0
+    if compiled and method == "order" and n_columns is None:
+        # the rings come from the order (all >= 0): columns and cells in two kernels
+        n_columns = max(3, round(2 * np.pi / step))
+        xs = (az[:: max(1, len(az) // 20000)] + np.pi) / (2 * np.pi) * n_columns
+        frac = 2 * np.pi * (xs % 1.0)
+        phase = float(np.arctan2(np.sin(frac).mean(), np.cos(frac).mean()) / (2 * np.pi))
+        cell, n_el = _kernels.grid_cells_kernel(Q, rh, az, ring, n_columns, phase)
+        grid = _kernels.grid_fill_kernel(np.ascontiguousarray(Q), rh, cell, n_columns * n_el)
+        return _finish_grid(grid, idx, cell, N, n_columns, n_el, phase, method)
     keep = ring >= 0
     if not keep.all():
         idx, Q, az, ring, rh = idx[keep], Q[keep], az[keep], ring[keep], rh[keep]
@@ -298,6 +314,19 @@ def cloud_to_grid(
         # gather with a NaN row appended for the empty cells (win = -1 picks the last row): one
         # contiguous ``take`` is ~3x cheaper than a masked fancy-indexed row assignment
         grid = np.concatenate([Q, np.full((1, 3), np.nan)]).take(win, axis=0)
+    return _finish_grid(grid, idx, cell, N, n_columns, n_el, phase, method)
+
+
+def _finish_grid(
+    grid: NDArray[np.float64],
+    idx: NDArray[np.int64],
+    cell: NDArray[np.int64],
+    N: int,
+    n_columns: int,
+    n_el: int,
+    phase: float,
+    method: str,
+) -> ScanGrid:
     cell_of_point = np.full(N, -1, dtype=np.int64)
     cell_of_point[idx] = cell
     azimuth = -np.pi + (np.arange(n_columns) + phase) * 2 * np.pi / n_columns
