@@ -242,7 +242,10 @@ def robust_normals_kernel(  # type: ignore[no-untyped-def]
     for i in range(n_az):
         for j in range(n_el):
             f = i * n_el + j
-            rh = np.float32(math.hypot(X[f] - ox32, Y[f] - oy32))
+            # float32 hypot as glibc's hypotf computes it: in double, rounded once
+            hx = np.float64(X[f] - ox32)
+            hy = np.float64(Y[f] - oy32)
+            rh = np.float32(math.sqrt(hx * hx + hy * hy))
             kf = np.rint(k_scale / rh)
             if kf != kf:
                 k = 1
