@@ -1071,3 +1071,29 @@ def grid_cells_kernel(Q, rh, az, ring, n_columns, phase):  # type: ignore[no-unt
         i = math.floor(x - phase + 0.5) % n_columns
         cell[k] = i * n_el + lut[ring[k]]
     return cell, n_el
+
+
+@njit(cache=True)
+def cloud_prep_kernel(P):  # type: ignore[no-untyped-def]
+    """The start of ``grids.cloud_to_grid``: the valid points (finite, not ``(0, 0, 0)``) of
+    ``P (N, >=3)`` as float64 rows ``Q (M, 3)``, their input indices and horizontal ranges."""
+    n = P.shape[0]
+    keep = np.empty(n, np.int64)
+    m = 0
+    for p in range(n):
+        x = np.float64(P[p, 0])
+        y = np.float64(P[p, 1])
+        z = np.float64(P[p, 2])
+        if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
+            if x != 0 or y != 0 or z != 0:
+                keep[m] = p
+                m += 1
+    Q = np.empty((m, 3), np.float64)
+    rh = np.empty(m, np.float64)
+    for k in range(m):
+        p = keep[k]
+        Q[k, 0] = np.float64(P[p, 0])
+        Q[k, 1] = np.float64(P[p, 1])
+        Q[k, 2] = np.float64(P[p, 2])
+        rh[k] = math.hypot(Q[k, 0], Q[k, 1])
+    return Q, keep[:m].copy(), rh

@@ -73,7 +73,7 @@ class ScanGrid:
         return out
 
 
-def _as_cloud(points: ArrayLike, source: str) -> NDArray[np.float64]:
+def _as_cloud(points: ArrayLike, source: str, convert: bool = True) -> NDArray[Any]:
     try:
         P = np.asarray(points)
     except (TypeError, ValueError) as exc:  # pragma: no cover - numpy rarely refuses
@@ -96,6 +96,8 @@ def _as_cloud(points: ArrayLike, source: str) -> NDArray[np.float64]:
         )
     if P.shape[0] == 0:
         raise InputError("is empty", source=source, field="points", expected="at least one point")
+    if not convert and P.dtype in (np.float32, np.float64):
+        return P  # the compiled path reads the first three columns itself
     return np.asarray(P[:, :3], dtype=np.float64)
 
 
@@ -207,13 +209,24 @@ def cloud_to_grid(
         -pi, centred on the sensor's firing azimuths (their phase is estimated); each cell keeps
         its nearest point.
     """
-    P = _as_cloud(points, source)
+    compiled = check_backend(backend) == "compiled"
+    P = _as_cloud(points, source, convert=not compiled)
     N = len(P)
-    x0, y0, z0 = P[:, 0], P[:, 1], P[:, 2]
-    # column by column: reductions along a length-3 axis are slow in NumPy
-    ok = np.isfinite(x0) & np.isfinite(y0) & np.isfinite(z0) & ((x0 != 0) | (y0 != 0) | (z0 != 0))
-    all_ok = bool(ok.all())
-    idx = np.arange(N) if all_ok else np.flatnonzero(ok)
+    if compiled:  # validity, the valid rows as float64 and their horizontal range: one pass
+        from navkit.obstacles import _kernels
+
+        Q, idx, rh = _kernels.cloud_prep_kernel(P)
+    else:
+        x0, y0, z0 = P[:, 0], P[:, 1], P[:, 2]
+        # column by column: reductions along a length-3 axis are slow in NumPy
+        ok = (
+            np.isfinite(x0)
+            & np.isfinite(y0)
+            & np.isfinite(z0)
+            & ((x0 != 0) | (y0 != 0) | (z0 != 0))
+        )
+        all_ok = bool(ok.all())
+        idx = np.arange(N) if all_ok else np.flatnonzero(ok)
     if idx.size < 4:
         raise InputError(
             f"has {idx.size} valid points",
@@ -221,17 +234,15 @@ def cloud_to_grid(
             field="points",
             expected="at least 4 points that are not NaN or (0, 0, 0)",
         )
-    Q = P if all_ok else P[idx]
-    rh = np.hypot(Q[:, 0], Q[:, 1])
+    if not compiled:
+        Q = P if all_ok else P[idx]
+        rh = np.hypot(Q[:, 0], Q[:, 1])
     az = np.arctan2(Q[:, 1], Q[:, 0])
     if ring_method not in ("auto", "order", "elevation"):
         raise InputError(
             f"= {ring_method!r}", field="ring_method", expected="'auto', 'order' or 'elevation'"
         )
-    compiled = check_backend(backend) == "compiled"
     if compiled and ring_method in ("auto", "order"):
-        from navkit.obstacles import _kernels
-
         found, ring_o, step_o = _kernels.rings_by_order_kernel(az)
         by_order = (ring_o, float(step_o)) if found else None
     else:
@@ -258,7 +269,7 @@ def cloud_to_grid(
         frac = 2 * np.pi * (xs % 1.0)
         phase = float(np.arctan2(np.sin(frac).mean(), np.cos(frac).mean()) / (2 * np.pi))
         cell, n_el = _kernels.grid_cells_kernel(Q, rh, az, ring, n_columns, phase)
-        grid = _kernels.grid_fill_kernel(np.ascontiguousarray(Q), rh, cell, n_columns * n_el)
+        grid = _kernels.grid_fill_kernel(Q, rh, cell, n_columns * n_el)
         return _finish_grid(grid, idx, cell, N, n_columns, n_el, phase, method)
     keep = ring >= 0
     if not keep.all():
@@ -301,7 +312,7 @@ def cloud_to_grid(
     if check_backend(backend) == "compiled":
         from navkit.obstacles import _kernels
 
-        grid = _kernels.grid_fill_kernel(np.ascontiguousarray(Q), rh, cell, n_columns * n_el)
+        grid = _kernels.grid_fill_kernel(Q, rh, cell, n_columns * n_el)
     else:
         r = np.sqrt(rh * rh + Q[:, 2] * Q[:, 2])
         win = np.full(n_columns * n_el, -1, dtype=np.intp)
