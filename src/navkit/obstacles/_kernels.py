@@ -1097,3 +1097,89 @@ def cloud_prep_kernel(P):  # type: ignore[no-untyped-def]
         Q[k, 2] = np.float64(P[p, 2])
         rh[k] = math.hypot(Q[k, 0], Q[k, 1])
     return Q, keep[:m].copy(), rh
+
+
+# ------------------------------------------------------------------------------------------
+# stage 8 input: per-obstacle vertex sets (twin: detector._build_obstacles' groupings)
+
+
+@njit(cache=True)
+def _stable_group(ids, n):  # type: ignore[no-untyped-def]
+    """Counting sort of ``ids`` (1..n, 0 = none): ``(start (n + 2,), order)`` with the members
+    of each id in input order (what a stable argsort gives)."""
+    start = np.zeros(n + 2, np.int64)
+    for v in ids:
+        if v > 0:
+            start[v + 1] += 1
+    for a in range(1, n + 2):
+        start[a] += start[a - 1]
+    fill = start.copy()
+    order = np.empty(start[n + 1], np.int64)
+    for k in range(len(ids)):
+        v = ids[k]
+        if v > 0:
+            order[fill[v]] = k
+            fill[v] += 1
+    return start, order
+
+
+@njit(cache=True, error_model="numpy")
+def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ignore[no-untyped-def]
+    """Boundary vertices ``(x, y)``, all vertices ``(x, y, z)`` and obstacle-plus-shadow vertex
+    sets ``(x, y)`` of obstacles 1..n (each with ``start`` offsets), the shadow areas and the
+    triangle counts, in the twin's orders."""
+    vf = vid.ravel()
+    bf = boundary.ravel()
+    bid = np.where(bf, vf, 0)
+    b_start, b_order = _stable_group(bid, n)
+    b_xy = np.empty((len(b_order), 2))
+    for k in range(len(b_order)):
+        b_xy[k, 0] = flat[b_order[k], 0]
+        b_xy[k, 1] = flat[b_order[k], 1]
+    v_start, v_order = _stable_group(vf, n)
+    v_xyz = np.empty((len(v_order), 3))
+    for k in range(len(v_order)):
+        for c in range(3):
+            v_xyz[k, c] = flat[v_order[k], c]
+    of = owner.ravel()
+    lf = obs_lab.ravel()
+    ntri = np.zeros(n + 1, np.int64)
+    for t in range(len(lf)):
+        ntri[lf[t]] += 1
+    area = np.zeros(n + 1)
+    t_start, t_order = _stable_group(of, n)
+    R2 = tri.shape[1]
+    for t in range(len(of)):  # raster order, as the twin's bincount
+        a = of[t]
+        if a > 0:
+            r, c = t // R2, t % R2
+            i0, i1, i2 = tri[r, c, 0], tri[r, c, 1], tri[r, c, 2]
+            v0x, v0y = flat[i0, 0], flat[i0, 1]
+            area[a] += 0.5 * abs(
+                (flat[i1, 0] - v0x) * (flat[i2, 1] - v0y)
+                - (flat[i2, 0] - v0x) * (flat[i1, 1] - v0y)
+            )
+    s_start = np.zeros(n + 2, np.int64)
+    verts = np.empty(3 * len(t_order), np.int64)
+    m = 0
+    for a in range(1, n + 1):
+        seg0 = m
+        for k in range(t_start[a], t_start[a + 1]):
+            t = t_order[k]
+            r, c = t // R2, t % R2
+            for q in range(3):
+                verts[m] = tri[r, c, q]
+                m += 1
+        seg = np.sort(verts[seg0:m])
+        u = seg0
+        for k in range(len(seg)):
+            if k == 0 or seg[k] != seg[k - 1]:
+                verts[u] = seg[k]
+                u += 1
+        m = u
+        s_start[a + 1] = m
+    s_xy = np.empty((m, 2))
+    for k in range(m):
+        s_xy[k, 0] = flat[verts[k], 0]
+        s_xy[k, 1] = flat[verts[k], 1]
+    return b_start, b_xy, v_start, v_xyz, s_start, s_xy, area[1:], ntri[1:]

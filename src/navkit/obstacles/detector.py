@@ -584,6 +584,16 @@ def _build_obstacles(
     if n == 0:
         return []
     flat = P.reshape(-1, 3)
+    if settings.backend == "compiled":
+        from navkit.obstacles import _kernels
+
+        b_start, b_xy, v_start, v_xyz, s_start, s_xy, shadow_area, ntri = (
+            _kernels.map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n)
+        )
+        bxy = [b_xy[b_start[k] : b_start[k + 1]] for k in range(1, n + 1)]
+        vxyz = [v_xyz[v_start[k] : v_start[k + 1]] for k in range(1, n + 1)]
+        sxy = [s_xy[s_start[k] : s_start[k + 1]] for k in range(1, n + 1)]
+        return _assemble_obstacles(bxy, vxyz, sxy, shadow_area, ntri, n, settings)
     # boundary vertices per obstacle
     bmask = boundary.ravel()
     bxy = _group(vid.ravel()[bmask].astype(np.int64), flat[bmask, :2], n)
@@ -592,8 +602,6 @@ def _build_obstacles(
     vsel = np.flatnonzero(vflat > 0)
     pid = vflat[vsel].astype(np.int64)
     vxyz = _group(pid, flat[vsel], n)  # one sort for the heights and the xy of each obstacle
-    vz = [v[:, 2] for v in vxyz]
-    vxy = [v[:, :2] for v in vxyz]
     nv = len(flat)
     # obstacle + its shadows (A7), and shadow areas
     is_sh = owner > 0
@@ -607,6 +615,21 @@ def _build_obstacles(
     )
     shadow_area = np.bincount(sh_ids, weights=area, minlength=n + 1)[1:]
     ntri = np.bincount(obs_lab.ravel(), minlength=n + 1)[1:]
+    return _assemble_obstacles(bxy, vxyz, sxy, shadow_area, ntri, n, settings)
+
+
+def _assemble_obstacles(
+    bxy: list[NDArray[np.float64]],
+    vxyz: list[NDArray[np.float64]],
+    sxy: list[NDArray[np.float64]],
+    shadow_area: NDArray[np.float64],
+    ntri: NDArray[np.int64],
+    n: int,
+    settings: ObstacleSettings,
+) -> list[Obstacle]:
+    """Hulls, shapes and the :class:`Obstacle` records from the per-obstacle vertex sets."""
+    vz = [v[:, 2] for v in vxyz]
+    vxy = [v[:, :2] for v in vxyz]
     guaranteed_sets = [np.concatenate([o, s]) for o, s in zip(vxy, sxy, strict=True)]
     # the outline written to files, and the shapes' input; A3 (one pass over the hull in its
     # stored order) depends on the starting vertex, so with A3 requested Qhull's cycle is kept
