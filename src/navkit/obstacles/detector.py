@@ -622,8 +622,8 @@ def _assemble_obstacles(
     bxy: list[NDArray[np.float64]],
     vxyz: list[NDArray[np.float64]],
     sxy: list[NDArray[np.float64]],
-    shadow_area: NDArray[np.float64],
-    ntri: NDArray[np.int64],
+    shadow_area: NDArray[Any],
+    ntri: NDArray[Any],
     n: int,
     settings: ObstacleSettings,
 ) -> list[Obstacle]:

@@ -306,17 +306,19 @@ def robust_cell_normals(
     """
     n_az, n_el = valid.shape
     compiled = check_backend(backend) == "compiled"
-    X, Y, Z = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(3))
-    if compiled:  # the horizontal range of every 4th row only (the column spacing below)
-        X4, Y4 = X[::4], Y[::4]
+    step = max(1, n_el // 8)
+    if compiled:  # only the subsamples the strides need; the kernel reads the grid itself
+        X4, Y4 = (points[::4, :, k].astype(np.float32) for k in range(2))
         rh4 = np.hypot(X4 - np.float32(sensor_origin[0]), Y4 - np.float32(sensor_origin[1]))
+        Xs, Ys = (points[:, ::step, k].astype(np.float32) for k in range(2))
     else:
+        X, Y, Z = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(3))
         rh = np.hypot(X - np.float32(sensor_origin[0]), Y - np.float32(sensor_origin[1]))
         rh4 = rh[::4]
+        Xs, Ys = X[:, ::step], Y[:, ::step]
     # azimuth step from neighbouring rows: angles, not distances (range noise moves a point
     # along its ray, which changes the distance to its neighbour but not its azimuth)
-    step = max(1, n_el // 8)
-    az = np.arctan2(Y[:, ::step] - sensor_origin[1], X[:, ::step] - sensor_origin[0])
+    az = np.arctan2(Ys - sensor_origin[1], Xs - sensor_origin[0])
     dal = np.abs((np.diff(az, axis=0) + np.pi) % (2 * np.pi) - np.pi)
     dal = dal[np.isfinite(dal) & (dal > 0)]
     dalpha = float(np.median(dal)) if dal.size else 1.0
