@@ -1189,3 +1189,26 @@ def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ign
         s_xy[k, 0] = flat[verts[k], 0]
         s_xy[k, 1] = flat[verts[k], 1]
     return b_start, b_xy, v_start, v_xyz, s_start, s_xy, area[1:], ntri[1:]
+
+
+@njit(cache=True)
+def points_kernel(P):  # type: ignore[no-untyped-def]
+    """Stage 1's validity codes C_d: ``valid`` = all three coordinates finite, and the points
+    with NaN rows where not valid (``detector.detect_obstacles_grid``)."""
+    n_az, n_el = P.shape[0], P.shape[1]
+    out = np.empty((n_az, n_el, 3), np.float64)
+    valid = np.empty((n_az, n_el), np.bool_)
+    for i in range(n_az):
+        for j in range(n_el):
+            x, y, z = P[i, j, 0], P[i, j, 1], P[i, j, 2]
+            ok = math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
+            valid[i, j] = ok
+            if ok:
+                out[i, j, 0] = x
+                out[i, j, 1] = y
+                out[i, j, 2] = z
+            else:
+                out[i, j, 0] = np.nan
+                out[i, j, 1] = np.nan
+                out[i, j, 2] = np.nan
+    return out, valid

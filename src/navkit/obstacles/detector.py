@@ -249,7 +249,12 @@ def detect_obstacles_grid(
     clock = _Clock()
     P = _check_grid(points, source)
     origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
-    valid = np.isfinite(P[..., 0]) & np.isfinite(P[..., 1]) & np.isfinite(P[..., 2])
+    if settings.backend == "compiled":
+        from navkit.obstacles import _kernels
+
+        P, valid = _kernels.points_kernel(P)
+    else:
+        valid = np.isfinite(P[..., 0]) & np.isfinite(P[..., 1]) & np.isfinite(P[..., 2])
     if not valid.any():
         raise InputError(
             "has no valid point (all NaN / no return)",
@@ -257,7 +262,8 @@ def detect_obstacles_grid(
             field="points",
             expected="at least one measured point",
         )
-    P = np.where(valid[..., None], P, np.nan)
+    if settings.backend != "compiled":
+        P = np.where(valid[..., None], P, np.nan)
     wrap = (
         settings.wrap_azimuth
         if settings.wrap_azimuth is not None
