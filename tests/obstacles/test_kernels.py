@@ -31,8 +31,8 @@ from navkit.obstacles.rules import classify
 
 pytest.importorskip("numba")
 
-# shapes are not compiled yet: the comparison covers stages 1-7 and the map's hulls and A1
-FAST = ObstacleSettings(shapes=("A1",), guaranteed_shapes=("A1",))
+# stages 1-7, the map's vertex sets and hulls, A1 and MVEE (the compiled shape)
+FAST = ObstacleSettings(shapes=("A1", "MVEE"), guaranteed_shapes=("A1",))
 
 
 def _close(a: np.ndarray, b: np.ndarray, what: str) -> None:
@@ -208,3 +208,21 @@ def test_cloud_to_grid_compiled_equals_numpy_on_a_shuffled_cloud(rng):
     a = cloud_to_grid(P, backend="numpy")
     assert a.method == "elevation"
     _same_grid(a, cloud_to_grid(P, backend="compiled"))
+
+
+def test_mvee_compiled_equals_numpy(rng):
+    from navkit.geometry.shapes import hull_points, mvee_batch
+
+    sets = []
+    for _ in range(40):
+        k = int(rng.integers(3, 300))
+        P = rng.normal(size=(k, 2)) * rng.uniform(0.05, 4.0, size=2) + rng.uniform(-30, 30, 2)
+        sets.append(hull_points(P))
+    sets.append(hull_points(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])))  # a triangle
+    for a, b in zip(
+        mvee_batch(sets, backend="numpy"), mvee_batch(sets, backend="compiled"), strict=True
+    ):
+        pa, pb = a.params(), b.params()
+        for f in pa:
+            if not isinstance(pa[f], str):
+                np.testing.assert_allclose(pa[f], pb[f], rtol=1e-9, atol=1e-12, err_msg=f)

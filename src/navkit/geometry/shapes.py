@@ -606,7 +606,11 @@ def _min_circle_welzl(H: NDArray[np.float64], seed: int = 0) -> Circle:
 
 
 def mvee_batch(
-    hulls: Sequence[NDArray[np.float64]], *, tol: float = 1e-3, max_iter: int = 2000
+    hulls: Sequence[NDArray[np.float64]],
+    *,
+    tol: float = 1e-3,
+    max_iter: int = 2000,
+    backend: str = "compiled",
 ) -> list[Ellipse]:
     """Minimum-volume enclosing ellipses of many 2D sets (Khachiyan 1996; Todd & Yildirim 2007).
 
@@ -617,7 +621,14 @@ def mvee_batch(
     points (and support points), vectorised over all sets. The ellipse ``(x - c)^T A (x - c) <= 1`` with ``c = P u``,
     ``A = (P diag(u) P^T - c c^T)^{-1} / d`` is then scaled to contain every point exactly, so it
     encloses the set and its area is within ``(1 + tol)`` (about) of the optimum.
+
+    ``backend="compiled"`` runs the iterations set by set in a Numba kernel
+    (:func:`navkit.geometry._kernels.mvee_weights_kernel`; no per-iteration NumPy overhead, the
+    same steps; the weights' moments are summed in index order, so results agree with
+    ``backend="numpy"`` to rounding); ``"numpy"``: the batched loop below.
     """
+    if backend not in ("compiled", "numpy"):
+        raise InputError(f"= {backend!r}", field="backend", expected="'compiled' or 'numpy'")
     n = len(hulls)
     if n == 0:
         return []
@@ -643,6 +654,11 @@ def mvee_batch(
     idx = np.arange(n)
     Fa, ua = F, u.copy()
     r = np.arange(n)
+    if backend == "compiled":
+        from navkit.geometry import _kernels
+
+        u = _kernels.mvee_weights_kernel(P, mask, float(tol), int(max_iter))
+        idx = np.arange(0)  # nothing left for the loop below
     with np.errstate(divide="ignore", invalid="ignore"):  # once: the loop is overhead-bound
         for _ in range(max_iter):
             if len(idx) == 0:
@@ -678,7 +694,8 @@ def mvee_batch(
                 keep = ~done
                 idx, Fa, ua = idx[keep], Fa[keep], ua[keep]
                 r = np.arange(len(idx))
-    u[idx] = ua
+    if len(idx):
+        u[idx] = ua
     c = np.einsum("nm,nmi->ni", u, P)
     S = np.einsum("nmi,nm,nmj->nij", P, u, P) - np.einsum("ni,nj->nij", c, c)
     A = np.linalg.inv(S) / d
@@ -741,11 +758,13 @@ def compute_shapes(
     names: Sequence[str] = ("A1", "A2", "A3", "A4", "A5", "A6", "MEC", "MVEE"),
     *,
     are_hulls: bool = False,
+    backend: str = "compiled",
 ) -> list[dict[str, Any]]:
     """Every requested shape for every point set: a list of ``{name: shape}`` dicts.
 
     A6 and MVEE are computed for all sets at once (vectorised); A6 starts from the set's A5.
     ``are_hulls=True`` says the sets already are :func:`hull_points` outputs (not recomputed).
+    ``backend`` selects MVEE's implementation (see :func:`mvee_batch`).
     """
     unknown = [n for n in names if n not in SHAPES]
     if unknown:
@@ -766,6 +785,6 @@ def compute_shapes(
         for res, e in zip(out, ellipses_a6_batch(hulls, starts), strict=False):
             res["A6"] = e
     if "MVEE" in names and SHAPES["MVEE"] is mvee_khachiyan:
-        for res, e in zip(out, mvee_batch(hulls), strict=False):
+        for res, e in zip(out, mvee_batch(hulls, backend=backend), strict=False):
             res["MVEE"] = e
     return [{n: res[n] for n in names} for res in out]

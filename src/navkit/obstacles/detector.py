@@ -642,12 +642,12 @@ def _assemble_obstacles(
     # and A3 stays equal to ``circle_a3(hull_points(boundary))``
     hulls = [hull_points(b) for b in bxy] if "A3" in settings.shapes else _hulls(bxy)
     shapes = (
-        compute_shapes(hulls, settings.shapes, are_hulls=True)
+        compute_shapes(hulls, settings.shapes, are_hulls=True, backend=settings.backend)
         if settings.shapes
         else [{} for _ in range(n)]
     )
     guaranteed = (
-        compute_shapes(guaranteed_sets, settings.guaranteed_shapes)
+        compute_shapes(guaranteed_sets, settings.guaranteed_shapes, backend=settings.backend)
         if settings.guaranteed_shapes
         else [{} for _ in range(n)]
     )
