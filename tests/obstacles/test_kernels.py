@@ -31,8 +31,9 @@ from navkit.obstacles.rules import classify
 
 pytest.importorskip("numba")
 
-# stages 1-7, the map's vertex sets and hulls, A1 and MVEE (the compiled shape)
-FAST = ObstacleSettings(shapes=("A1", "MVEE"), guaranteed_shapes=("A1",))
+# stages 1-7, the map's vertex sets and hulls, A1, and the compiled shapes A6 (with its A5
+# start) and MVEE
+FAST = ObstacleSettings(shapes=("A1", "A5", "A6", "MVEE"), guaranteed_shapes=("A1",))
 
 
 def _close(a: np.ndarray, b: np.ndarray, what: str) -> None:
@@ -210,8 +211,8 @@ def test_cloud_to_grid_compiled_equals_numpy_on_a_shuffled_cloud(rng):
     _same_grid(a, cloud_to_grid(P, backend="compiled"))
 
 
-def test_mvee_compiled_equals_numpy(rng):
-    from navkit.geometry.shapes import hull_points, mvee_batch
+def test_mvee_and_a6_compiled_equal_numpy(rng):
+    from navkit.geometry.shapes import ellipse_a5, ellipses_a6_batch, hull_points, mvee_batch
 
     sets = []
     for _ in range(40):
@@ -219,9 +220,17 @@ def test_mvee_compiled_equals_numpy(rng):
         P = rng.normal(size=(k, 2)) * rng.uniform(0.05, 4.0, size=2) + rng.uniform(-30, 30, 2)
         sets.append(hull_points(P))
     sets.append(hull_points(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])))  # a triangle
-    for a, b in zip(
-        mvee_batch(sets, backend="numpy"), mvee_batch(sets, backend="compiled"), strict=True
-    ):
+    starts = [ellipse_a5(h) for h in sets]
+    pairs = list(
+        zip(mvee_batch(sets, backend="numpy"), mvee_batch(sets, backend="compiled"), strict=True)
+    ) + list(
+        zip(
+            ellipses_a6_batch(sets, starts, backend="numpy"),
+            ellipses_a6_batch(sets, starts, backend="compiled"),
+            strict=True,
+        )
+    )
+    for a, b in pairs:
         pa, pb = a.params(), b.params()
         for f in pa:
             if not isinstance(pa[f], str):

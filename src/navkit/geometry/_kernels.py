@@ -93,3 +93,96 @@ def mvee_weights_kernel(P, mask, tol, max_iter):  # type: ignore[no-untyped-def]
                 if u[s, k] < 0.0:
                     u[s, k] = 0.0
     return u
+
+
+@njit(cache=True, error_model="numpy")
+def a6_search_kernel(P, counts, x0, step0, min_step, max_iter):  # type: ignore[no-untyped-def]
+    """The compass search of ``shapes._a6_batch`` set by set: the final ``(x, y, phi, log k)``
+    of every set ``(n, 4)``.
+
+    ``P (n, m, 2)`` padded sets (``counts`` real points each), ``x0``, ``step0``, ``min_step``
+    ``(n, 4)``. The 81 trials are evaluated as in the twin (u, v on the 27 (phi, x, y)
+    combinations, a^2 on 81) in the twin's order; ``cos``, ``sin`` and ``exp`` are libm's.
+    """
+    n = P.shape[0]
+    out = x0.copy()
+    three = np.array([-1.0, 0.0, 1.0])
+    vals = np.empty((3, 4))
+    cs = np.empty(3)
+    sn = np.empty(3)
+    kk = np.empty(3)
+    f = np.empty(81)
+    for s in range(n):
+        mh = counts[s]
+        cur = x0[s].copy()
+        step = step0[s].copy()
+        # f at the start (``_a6_area``)
+        k0 = np.exp(cur[3])
+        c0, s0 = np.cos(cur[2]), np.sin(cur[2])
+        a2 = 0.0
+        for q in range(mh):
+            dx = P[s, q, 0] - cur[0]
+            dy = P[s, q, 1] - cur[1]
+            u = c0 * dx + s0 * dy
+            v = -s0 * dx + c0 * dy
+            w = u * u + (v * v) / (k0 * k0)
+            if q == 0 or w > a2:
+                a2 = w
+        f_cur = np.pi * a2 * k0
+        for _ in range(max_iter):
+            for t in range(3):
+                for p in range(4):
+                    vals[t, p] = cur[p] + three[t] * step[p]
+                cs[t] = np.cos(vals[t, 2])
+                sn[t] = np.sin(vals[t, 2])
+                kk[t] = np.exp(vals[t, 3])
+            for tx in range(3):
+                for ty in range(3):
+                    for tp in range(3):
+                        a2k0 = -1.0
+                        a2k1 = -1.0
+                        a2k2 = -1.0
+                        for q in range(mh):
+                            dx = P[s, q, 0] - vals[tx, 0]
+                            dy = P[s, q, 1] - vals[ty, 1]
+                            u = cs[tp] * dx + sn[tp] * dy
+                            v = -sn[tp] * dx + cs[tp] * dy
+                            uu = u * u
+                            vv = v * v
+                            w0 = uu + vv / (kk[0] * kk[0])
+                            w1 = uu + vv / (kk[1] * kk[1])
+                            w2 = uu + vv / (kk[2] * kk[2])
+                            if q == 0 or w0 > a2k0:
+                                a2k0 = w0
+                            if q == 0 or w1 > a2k1:
+                                a2k1 = w1
+                            if q == 0 or w2 > a2k2:
+                                a2k2 = w2
+                        base = ((tx * 3 + ty) * 3 + tp) * 3
+                        f[base] = np.pi * a2k0 * kk[0]
+                        f[base + 1] = np.pi * a2k1 * kk[1]
+                        f[base + 2] = np.pi * a2k2 * kk[2]
+            best = -1
+            for t in range(81):
+                if t == 40:  # the zero move
+                    continue
+                if best < 0 or f[t] < f[best]:
+                    best = t
+            if f[best] < f_cur * (1 - 1e-12):
+                mv = best
+                for p in range(3, -1, -1):  # the move's digits: x, y, phi, log k in base 3
+                    cur[p] = cur[p] + (mv % 3 - 1) * step[p]
+                    mv //= 3
+                f_cur = f[best]
+            else:
+                for p in range(4):
+                    step[p] *= 0.5
+                if not (
+                    step[0] > min_step[s, 0]
+                    or step[1] > min_step[s, 1]
+                    or step[2] > min_step[s, 2]
+                    or step[3] > min_step[s, 3]
+                ):
+                    break
+        out[s] = cur
+    return out
