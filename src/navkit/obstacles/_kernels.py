@@ -26,14 +26,25 @@ from __future__ import annotations
 
 import math
 
-import numba
 import numpy as np
 from numba import njit
 
 __all__ = [
+    "boundary_kernel",
     "classify_kernel",
+    "cloud_prep_kernel",
+    "components_kernel",
+    "grid_cells_kernel",
+    "grid_fill_kernel",
+    "ground_cells_kernel",
+    "map_groups_kernel",
     "mesh_kernel",
+    "points_kernel",
+    "refine_kernel",
+    "rings_by_order_kernel",
     "robust_normals_kernel",
+    "split_kernel",
+    "vertex_kernel",
 ]
 
 _NAN32 = np.float32(np.nan)
@@ -419,9 +430,6 @@ def classify_kernel(  # type: ignore[no-untyped-def]
     return labels, p1a, p2a, p3a, p4a, p5a
 
 
-NUMBA_VERSION = numba.__version__
-
-
 # ------------------------------------------------------------------------------------------
 # stage 1 input: the cloud-to-grid fill (twin: the end of grids.cloud_to_grid)
 
@@ -634,21 +642,6 @@ def _merge_close(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyp
         for j in range(obs_lab.shape[1]):
             out[i, j] = lut[obs_lab[i, j]]
     return out, m
-
-
-@njit(cache=True)
-def _neighbour(i, j, o, R, C, wrap):  # type: ignore[no-untyped-def]
-    """Flat index of the neighbour of triangle ``(i, j)`` at offset ``o`` of ``_OFF_I/_OFF_J``
-    (-1 outside the mesh)."""
-    ti = i + _OFF_I[o]
-    tj = j + _OFF_J[o]
-    if tj < 0 or tj >= C:
-        return -1
-    if ti < 0 or ti >= R:
-        if not wrap or _OFF_I[o] == 0:
-            return -1
-        ti = ti % R
-    return ti * C + tj
 
 
 @njit(cache=True)
