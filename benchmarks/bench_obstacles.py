@@ -58,6 +58,150 @@ def cpu_wall_time(fn: Callable[[], Any], repeats: int = 7, warmup: int = 1) -> t
 
 
 # ------------------------------------------------------------------------------------------
+# compiled kernels against the NumPy twin and Patchwork++ (docs/kernels.md, "Obstacles")
+
+_COMPILE_SCRIPT = """
+import json, time, numpy as np
+t0 = time.perf_counter(); c0 = time.process_time()
+from navkit.obstacles import ObstacleSettings, Mounting, cloud_to_grid, detect_obstacles_in_grid
+from navkit.obstacles import _kernels  # imports numba
+t_import = time.perf_counter() - t0
+from navkit.experiments.obstacles import kitti_frame
+pts = kitti_frame("000000")[0]
+out = {"import_s": t_import}
+for tag, st in (("stages 1-7", ObstacleSettings(shapes=(), guaranteed_shapes=())),
+                ("all 8 stages", ObstacleSettings())):
+    for k in ("first", "second"):
+        c = time.process_time(); w = time.perf_counter()
+        detect_obstacles_in_grid(cloud_to_grid(pts), Mounting(1.73), st)
+        out[f"{tag} {k} call cpu s"] = time.process_time() - c
+        out[f"{tag} {k} call wall s"] = time.perf_counter() - w
+print(json.dumps(out))
+"""
+
+
+def compile_cost() -> dict[str, dict[str, float]]:
+    """First-call and warm cost of the compiled backend, in fresh processes.
+
+    Run twice with ``NUMBA_CACHE_DIR`` set to a new temporary folder: ``"empty cache"`` compiles
+    every kernel (and writes the cache), ``"warm cache"`` loads them from disk. Each process
+    times the first and the second detection on a SemanticKITTI frame.
+    """
+    import json
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    out: dict[str, dict[str, float]] = {}
+    with tempfile.TemporaryDirectory(prefix="navkit-numba-") as cache:
+        env = {**os.environ, "NUMBA_CACHE_DIR": cache}
+        for label in ("empty cache", "warm cache"):
+            res = subprocess.run(
+                [sys.executable, "-c", _COMPILE_SCRIPT],
+                env=env,
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            out[label] = json.loads(res.stdout.strip().splitlines()[-1])
+    return out
+
+
+def backend_comparison(
+    frames: list[Any], pw: Any, repeats: int = 7
+) -> list[dict[str, float | str]]:
+    """CPU ms per frame (median of ``repeats`` after a warm-up): the compiled and the NumPy
+    backend (grid recovery + stages 1-7, and all 8 stages with the default shapes) and
+    Patchwork++, frame by frame in the same run."""
+    from dataclasses import replace
+
+    from navkit.obstacles import (
+        Mounting,
+        ObstacleSettings,
+        cloud_to_grid,
+        detect_obstacles_in_grid,
+    )
+
+    def run_nav(pts: Any, st: Any) -> None:
+        grid = cloud_to_grid(pts, backend=st.backend)
+        detect_obstacles_in_grid(grid, Mounting(SENSOR_HEIGHT_KITTI), st)
+
+    nomap = ObstacleSettings(shapes=(), guaranteed_shapes=())
+    full = ObstacleSettings()
+    table: list[dict[str, float | str]] = []
+    for k, pts in enumerate(frames):
+        row: dict[str, float | str] = {"frame": KITTI_FRAMES[k]}
+        row["pw"] = 1e3 * cpu_wall_time(partial(patchwork_ground, pw, pts), repeats)[0]
+        for tag, st in (("1-7", nomap), ("all", full)):
+            for be in ("compiled", "numpy"):
+                fn = partial(run_nav, pts, replace(st, backend=be))
+                row[f"{tag} {be}"] = 1e3 * cpu_wall_time(fn, repeats)[0]
+        row["pw again"] = 1e3 * cpu_wall_time(partial(patchwork_ground, pw, pts), repeats)[0]
+        table.append(row)
+    return table
+
+
+def format_backends(table: list[dict[str, float | str]]) -> str:
+    """Markdown table of :func:`backend_comparison` (ratios = navkit / Patchwork++)."""
+    lines = [
+        "| frame | Patchwork++ | 1-7 compiled | 1-7 NumPy | all 8 compiled | all 8 NumPy "
+        "| 1-7 compiled / PW++ | all 8 compiled / PW++ | compiled speed-up 1-7 / all 8 |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in table:
+        pw = 0.5 * (float(r["pw"]) + float(r["pw again"]))
+        a, b = float(r["1-7 compiled"]), float(r["1-7 numpy"])
+        c, d = float(r["all compiled"]), float(r["all numpy"])
+        lines.append(
+            f"| {r['frame']} | {pw:.1f} | {a:.1f} | {b:.1f} | {c:.1f} | {d:.1f} "
+            f"| {a / pw:.2f}x | {c / pw:.2f}x | {b / a:.1f}x / {d / c:.1f}x |"
+        )
+    return "\n".join(lines)
+
+
+def kernel_rows(quick: bool = False) -> list[Row]:
+    """Rows of the backend comparison and the compile cost (section 4 of the docs)."""
+    from navkit.errors import require_module
+
+    frames = [kitti_frame(n)[0] for n in (KITTI_FRAMES[:1] if quick else KITTI_FRAMES)]
+    pwpp = require_module("pypatchworkpp", "bench", "the Patchwork++ comparison")
+    params = pwpp.Parameters()
+    params.verbose = False
+    params.sensor_height = SENSOR_HEIGHT_KITTI
+    pw = pwpp.patchworkpp(params)
+    rows: list[Row] = []
+    table = backend_comparison(frames, pw, 3 if quick else 7)
+    for r in table:
+        pw_ms = 0.5 * (float(r["pw"]) + float(r["pw again"]))
+        for tag in ("1-7", "all"):
+            for be in ("compiled", "numpy"):
+                ms = float(r[f"{tag} {be}"])
+                rows.append(
+                    Row(
+                        AREA,
+                        f"KITTI {r['frame']} CPU ms: {'stages 1-7' if tag == '1-7' else 'all 8 stages'}"
+                        f" ({be})",
+                        "ms",
+                        ms,
+                        pw_ms,
+                        "pypatchworkpp",
+                        time_ratio(ms, pw_ms),
+                        "grid recovery included; time.process_time, median",
+                    )
+                )
+    for label, res in compile_cost().items():
+        for key, val in res.items():
+            rows.append(Row(AREA, f"compiled backend, {label}: {key}", "s", val))
+    from pathlib import Path
+
+    from navkit.io.atomic import write_text
+
+    write_text(Path("out/bench/obstacles_backends.md"), format_backends(table) + "\n")
+    return rows
+
+
+# ------------------------------------------------------------------------------------------
 # the benchmark
 
 
@@ -235,6 +379,10 @@ def run(quick: bool = False) -> list[Row]:
                 )
             )
 
+    # 2b. compiled kernels against the NumPy twin, and the compile cost
+    if frames:
+        rows.extend(kernel_rows(quick))
+
     # 3. cars of the SqueezeSeg frames
     try:
         found, total, _ = car_recall()
@@ -258,3 +406,14 @@ def run(quick: bool = False) -> list[Row]:
 
     write_text(Path("out/bench/obstacles_noise_sweep.md"), sweep_md + "\n")
     return rows
+
+
+if __name__ == "__main__":  # only the kernel comparison: python -m benchmarks.bench_obstacles
+    import sys
+
+    for row in kernel_rows(quick="--quick" in sys.argv):
+        print(f"{row.benchmark}: {row.navkit:.4g} {row.unit}", end="")
+        print(
+            f"  (peer {row.peer:.4g}, navkit/peer {row.navkit / row.peer:.2f})" if row.peer else ""
+        )
+    print(open("out/bench/obstacles_backends.md").read())

@@ -16,7 +16,7 @@ from navkit.errors import InputError
 from navkit.geometry.shapes import compute_shapes, hull_points
 from navkit.obstacles.grids import ScanGrid
 from navkit.obstacles.ground import refine_by_ground_height
-from navkit.obstacles.mesh import build_mesh, robust_cell_normals
+from navkit.obstacles.mesh import MeshCharacteristics, build_mesh, robust_cell_normals
 from navkit.obstacles.mounting import Mounting
 from navkit.obstacles.rules import GROUND, OBSTACLE, classify
 from navkit.obstacles.segment import (
@@ -249,7 +249,12 @@ def detect_obstacles_grid(
     clock = _Clock()
     P = _check_grid(points, source)
     origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
-    valid = np.isfinite(P[..., 0]) & np.isfinite(P[..., 1]) & np.isfinite(P[..., 2])
+    if settings.backend == "compiled":
+        from navkit.obstacles import _kernels
+
+        P, valid = _kernels.points_kernel(P)
+    else:
+        valid = np.isfinite(P[..., 0]) & np.isfinite(P[..., 1]) & np.isfinite(P[..., 2])
     if not valid.any():
         raise InputError(
             "has no valid point (all NaN / no return)",
@@ -257,14 +262,14 @@ def detect_obstacles_grid(
             field="points",
             expected="at least one measured point",
         )
-    P = np.where(valid[..., None], P, np.nan)
+    if settings.backend != "compiled":
+        P = np.where(valid[..., None], P, np.nan)
     wrap = (
         settings.wrap_azimuth
         if settings.wrap_azimuth is not None
         else _auto_wrap(None if azimuth is None else np.asarray(azimuth, dtype=np.float64))
     )
     wrap = bool(wrap and P.shape[0] > 2)
-    n_az, n_el = valid.shape
     clock.lap("points")
 
     # stages 2-4: mesh, normals, characteristic parameters H_s and validity codes C_d
@@ -277,6 +282,7 @@ def detect_obstacles_grid(
         jump_range_fraction=settings.jump_range_fraction,
         jump_range_ratio=settings.jump_range_ratio,
         steep_cos=math.cos(settings.c1_rad),
+        backend=settings.backend,
     )
     clock.lap("mesh")
 
@@ -292,11 +298,63 @@ def detect_obstacles_grid(
             jump_height_m=settings.jump_height_m,
             jump_range_fraction=settings.jump_range_fraction,
             jump_range_ratio=settings.jump_range_ratio,
+            backend=settings.backend,
         )
-    labels, _rules = classify(mesh, settings, wrap=wrap, robust_cells=robust)
+    labels, _rules = classify(
+        mesh, settings, wrap=wrap, robust_cells=robust, backend=settings.backend
+    )
     clock.lap("classes")
 
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
+    compiled = settings.backend == "compiled"
+    if compiled:
+        obs_lab, n, owner = _compiled_split(labels, mesh, P, wrap, settings)
+    else:
+        obs_lab, n, owner = _split(labels, mesh, P, wrap, settings)
+    tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
+    clock.lap("split")
+
+    # stage 7: boundary vertices, per-vertex classes
+    if compiled:
+        vid, boundary, vlab = _compiled_vertices(labels, obs_lab, P, valid, wrap, settings)
+    else:
+        vid, boundary, vlab = _vertices(labels, obs_lab, P, valid, wrap, settings)
+    clock.lap("boundaries")
+
+    # stage 8: the 2D map - bounding shapes of every obstacle
+    obstacles = _build_obstacles(
+        P, mesh.triangles, labels, obs_lab, owner, vid, boundary, n, settings
+    )
+    clock.lap("map")
+    log.debug("obstacle detection: %d obstacles, timings %s", len(obstacles), clock.wall)
+    return ObstacleDetection(
+        points=P,
+        valid=valid,
+        sensor_origin=origin,
+        wrap=wrap,
+        triangles=mesh.triangles,
+        normals=mesh.normal,
+        jump=mesh.jump,
+        triangle_labels=labels,
+        triangle_obstacle=tri_obstacle,
+        vertex_labels=vlab,
+        vertex_obstacle=vid,
+        boundary=boundary,
+        obstacles=tuple(obstacles),
+        timings=clock.wall,
+        cpu_timings=clock.cpu,
+    )
+
+
+def _split(
+    labels: NDArray[np.int8],
+    mesh: MeshCharacteristics,
+    P: NDArray[np.float64],
+    wrap: bool,
+    settings: ObstacleSettings,
+) -> tuple[NDArray[np.int32], int, NDArray[np.int32]]:
+    """Stage 6 (NumPy reference): obstacle components, filters, merging, shadow owners.
+    ``labels`` is changed in place (dropped components back to ground)."""
     obs_lab, n = label_components(labels == OBSTACLE, wrap)
     if n:
         size = np.bincount(obs_lab.ravel(), minlength=n + 1)[1:]
@@ -325,10 +383,44 @@ def detect_obstacles_grid(
             obs_lab, n, P, wrap, settings.merge_distance_m, settings.merge_gap_cells
         )
     owner = assign_shadows(labels, obs_lab, wrap)
-    tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
-    clock.lap("split")
+    return obs_lab, n, owner
 
-    # stage 7: boundary vertices, per-vertex classes
+
+def _compiled_split(
+    labels: NDArray[np.int8],
+    mesh: MeshCharacteristics,
+    P: NDArray[np.float64],
+    wrap: bool,
+    settings: ObstacleSettings,
+) -> tuple[NDArray[np.int32], int, NDArray[np.int32]]:
+    """Stage 6 in one kernel (:func:`navkit.obstacles._kernels.split_kernel`), same answers."""
+    from navkit.obstacles import _kernels
+
+    obs_lab, n, owner = _kernels.split_kernel(
+        labels,
+        mesh.z_min.astype(np.float32, copy=False),
+        mesh.z_max.astype(np.float32, copy=False),
+        np.ascontiguousarray(P),
+        bool(wrap),
+        int(settings.min_obstacle_triangles),
+        np.float32(settings.min_obstacle_height_m),
+        0.5 * settings.min_obstacle_height_m,
+        float(settings.merge_distance_m),
+        int(settings.merge_gap_cells),
+    )
+    return obs_lab, int(n), owner
+
+
+def _vertices(
+    labels: NDArray[np.int8],
+    obs_lab: NDArray[np.int32],
+    P: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    wrap: bool,
+    settings: ObstacleSettings,
+) -> tuple[NDArray[np.int32], NDArray[np.bool_], NDArray[np.int8]]:
+    """Stage 7 (NumPy reference): obstacle id per vertex, boundary, per-vertex classes."""
+    n_az, n_el = valid.shape
     vid, boundary = boundary_vertices(obs_lab, n_az, n_el, wrap)
     vlab = vertex_labels(labels, valid, wrap)
     if settings.ground_refine:  # beyond the paper: per-point height above the local ground
@@ -342,31 +434,41 @@ def detect_obstacles_grid(
             cell_m=settings.ground_cell_m,
             reference=main & (vlab == GROUND),
         )
-    clock.lap("boundaries")
+    return vid, boundary, vlab
 
-    # stage 8: the 2D map - bounding shapes of every obstacle
-    obstacles = _build_obstacles(
-        P, mesh.triangles, labels, obs_lab, owner, vid, boundary, n, settings
-    )
-    clock.lap("map")
-    log.debug("obstacle detection: %d obstacles, timings %s", len(obstacles), clock.wall)
-    return ObstacleDetection(
-        points=P,
-        valid=valid,
-        sensor_origin=origin,
-        wrap=wrap,
-        triangles=mesh.triangles,
-        normals=mesh.normal,
-        jump=mesh.jump,
-        triangle_labels=labels,
-        triangle_obstacle=tri_obstacle,
-        vertex_labels=vlab,
-        vertex_obstacle=vid,
-        boundary=boundary,
-        obstacles=tuple(obstacles),
-        timings=clock.wall,
-        cpu_timings=clock.cpu,
-    )
+
+def _compiled_vertices(
+    labels: NDArray[np.int8],
+    obs_lab: NDArray[np.int32],
+    P: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    wrap: bool,
+    settings: ObstacleSettings,
+) -> tuple[NDArray[np.int32], NDArray[np.bool_], NDArray[np.int8]]:
+    """Stage 7 with the kernels of :mod:`navkit.obstacles._kernels` (same answers)."""
+    from navkit.obstacles import _kernels
+    from navkit.obstacles.ground import fill_missing_cells
+
+    vid, boundary, vlab, main = _kernels.vertex_kernel(labels, obs_lab, valid, bool(wrap), 0.1)
+    if settings.ground_refine:
+        flat = P.reshape(-1, 3)
+        ref = (main & (vlab == GROUND)).reshape(-1)
+        grid, origin, missing = _kernels.ground_cells_kernel(
+            flat, ref, float(settings.ground_cell_m), 0.25
+        )
+        if missing:
+            grid = fill_missing_cells(grid)
+        vlab = _kernels.refine_kernel(
+            flat,
+            vlab.reshape(-1),
+            valid.reshape(-1),
+            grid,
+            origin,
+            float(settings.ground_cell_m),
+            float(settings.ground_band_m),
+            float(settings.ground_above_m),
+        ).reshape(vlab.shape)
+    return vid, boundary, vlab
 
 
 def _per_label_extrema(
@@ -488,6 +590,16 @@ def _build_obstacles(
     if n == 0:
         return []
     flat = P.reshape(-1, 3)
+    if settings.backend == "compiled":
+        from navkit.obstacles import _kernels
+
+        b_start, b_xy, v_start, v_xyz, s_start, s_xy, shadow_area, ntri = (
+            _kernels.map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n)
+        )
+        bxy = [b_xy[b_start[k] : b_start[k + 1]] for k in range(1, n + 1)]
+        vxyz = [v_xyz[v_start[k] : v_start[k + 1]] for k in range(1, n + 1)]
+        sxy = [s_xy[s_start[k] : s_start[k + 1]] for k in range(1, n + 1)]
+        return _assemble_obstacles(bxy, vxyz, sxy, shadow_area, ntri, n, settings)
     # boundary vertices per obstacle
     bmask = boundary.ravel()
     bxy = _group(vid.ravel()[bmask].astype(np.int64), flat[bmask, :2], n)
@@ -496,8 +608,6 @@ def _build_obstacles(
     vsel = np.flatnonzero(vflat > 0)
     pid = vflat[vsel].astype(np.int64)
     vxyz = _group(pid, flat[vsel], n)  # one sort for the heights and the xy of each obstacle
-    vz = [v[:, 2] for v in vxyz]
-    vxy = [v[:, :2] for v in vxyz]
     nv = len(flat)
     # obstacle + its shadows (A7), and shadow areas
     is_sh = owner > 0
@@ -511,18 +621,33 @@ def _build_obstacles(
     )
     shadow_area = np.bincount(sh_ids, weights=area, minlength=n + 1)[1:]
     ntri = np.bincount(obs_lab.ravel(), minlength=n + 1)[1:]
+    return _assemble_obstacles(bxy, vxyz, sxy, shadow_area, ntri, n, settings)
+
+
+def _assemble_obstacles(
+    bxy: list[NDArray[np.float64]],
+    vxyz: list[NDArray[np.float64]],
+    sxy: list[NDArray[np.float64]],
+    shadow_area: NDArray[Any],
+    ntri: NDArray[Any],
+    n: int,
+    settings: ObstacleSettings,
+) -> list[Obstacle]:
+    """Hulls, shapes and the :class:`Obstacle` records from the per-obstacle vertex sets."""
+    vz = [v[:, 2] for v in vxyz]
+    vxy = [v[:, :2] for v in vxyz]
     guaranteed_sets = [np.concatenate([o, s]) for o, s in zip(vxy, sxy, strict=True)]
     # the outline written to files, and the shapes' input; A3 (one pass over the hull in its
     # stored order) depends on the starting vertex, so with A3 requested Qhull's cycle is kept
     # and A3 stays equal to ``circle_a3(hull_points(boundary))``
     hulls = [hull_points(b) for b in bxy] if "A3" in settings.shapes else _hulls(bxy)
     shapes = (
-        compute_shapes(hulls, settings.shapes, are_hulls=True)
+        compute_shapes(hulls, settings.shapes, are_hulls=True, backend=settings.backend)
         if settings.shapes
         else [{} for _ in range(n)]
     )
     guaranteed = (
-        compute_shapes(guaranteed_sets, settings.guaranteed_shapes)
+        compute_shapes(guaranteed_sets, settings.guaranteed_shapes, backend=settings.backend)
         if settings.guaranteed_shapes
         else [{} for _ in range(n)]
     )

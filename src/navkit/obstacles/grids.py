@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
 from navkit.geometry import R_BODY_FROM_OPTICAL
+from navkit.obstacles.settings import check_backend
 from navkit.sensors import PinholeCamera
 
 __all__ = ["ScanGrid", "cloud_to_grid", "depth_to_grid", "organized_to_grid"]
@@ -72,7 +73,7 @@ class ScanGrid:
         return out
 
 
-def _as_cloud(points: ArrayLike, source: str) -> NDArray[np.float64]:
+def _as_cloud(points: ArrayLike, source: str, convert: bool = True) -> NDArray[Any]:
     try:
         P = np.asarray(points)
     except (TypeError, ValueError) as exc:  # pragma: no cover - numpy rarely refuses
@@ -95,6 +96,8 @@ def _as_cloud(points: ArrayLike, source: str) -> NDArray[np.float64]:
         )
     if P.shape[0] == 0:
         raise InputError("is empty", source=source, field="points", expected="at least one point")
+    if not convert and P.dtype in (np.float32, np.float64):
+        return P  # the compiled path reads the first three columns itself
     return np.asarray(P[:, :3], dtype=np.float64)
 
 
@@ -174,6 +177,7 @@ def cloud_to_grid(
     n_columns: int | None = None,
     ring_method: str = "auto",
     source: str = "points",
+    backend: str = "compiled",
 ) -> ScanGrid:
     """Recover the scan grid of a spinning-lidar cloud (any beam count, any storage order).
 
@@ -193,6 +197,10 @@ def cloud_to_grid(
         whose beams are not at a fixed elevation: the HDL-64E lasers have offset origins);
         ``"elevation"``: rings by clustering the elevation angles (any order);
         ``"auto"``: ``"order"`` when the storage order is a coherent sweep, else ``"elevation"``.
+    backend : {"compiled", "numpy"}
+        ``"compiled"``: the nearest-point fill in one pass
+        (:func:`navkit.obstacles._kernels.grid_fill_kernel`); ``"numpy"``: the vectorised
+        reference. The same grid.
 
     Returns
     -------
@@ -201,13 +209,24 @@ def cloud_to_grid(
         -pi, centred on the sensor's firing azimuths (their phase is estimated); each cell keeps
         its nearest point.
     """
-    P = _as_cloud(points, source)
+    compiled = check_backend(backend) == "compiled"
+    P = _as_cloud(points, source, convert=not compiled)
     N = len(P)
-    x0, y0, z0 = P[:, 0], P[:, 1], P[:, 2]
-    # column by column: reductions along a length-3 axis are slow in NumPy
-    ok = np.isfinite(x0) & np.isfinite(y0) & np.isfinite(z0) & ((x0 != 0) | (y0 != 0) | (z0 != 0))
-    all_ok = bool(ok.all())
-    idx = np.arange(N) if all_ok else np.flatnonzero(ok)
+    if compiled:  # validity, the valid rows as float64 and their horizontal range: one pass
+        from navkit.obstacles import _kernels
+
+        Q, idx, rh = _kernels.cloud_prep_kernel(P)
+    else:
+        x0, y0, z0 = P[:, 0], P[:, 1], P[:, 2]
+        # column by column: reductions along a length-3 axis are slow in NumPy
+        ok = (
+            np.isfinite(x0)
+            & np.isfinite(y0)
+            & np.isfinite(z0)
+            & ((x0 != 0) | (y0 != 0) | (z0 != 0))
+        )
+        all_ok = bool(ok.all())
+        idx = np.arange(N) if all_ok else np.flatnonzero(ok)
     if idx.size < 4:
         raise InputError(
             f"has {idx.size} valid points",
@@ -215,14 +234,19 @@ def cloud_to_grid(
             field="points",
             expected="at least 4 points that are not NaN or (0, 0, 0)",
         )
-    Q = P if all_ok else P[idx]
-    rh = np.hypot(Q[:, 0], Q[:, 1])
+    if not compiled:
+        Q = P if all_ok else P[idx]
+        rh = np.hypot(Q[:, 0], Q[:, 1])
     az = np.arctan2(Q[:, 1], Q[:, 0])
     if ring_method not in ("auto", "order", "elevation"):
         raise InputError(
             f"= {ring_method!r}", field="ring_method", expected="'auto', 'order' or 'elevation'"
         )
-    by_order = _rings_by_order(az) if ring_method in ("auto", "order") else None
+    if compiled and ring_method in ("auto", "order"):
+        found, ring_o, step_o = _kernels.rings_by_order_kernel(az)
+        by_order = (ring_o, float(step_o)) if found else None
+    else:
+        by_order = _rings_by_order(az) if ring_method in ("auto", "order") else None
     if ring_method == "order" and by_order is None:
         raise InputError(
             "the storage order is not a lidar sweep",
@@ -238,6 +262,15 @@ def cloud_to_grid(
             ring = _rings_by_elevation(np.arctan2(Q[:, 2], rh), n_rings)
         method = "elevation"
         step = 0.0
+    if compiled and method == "order" and n_columns is None:
+        # the rings come from the order (all >= 0): columns and cells in two kernels
+        n_columns = max(3, round(2 * np.pi / step))
+        xs = (az[:: max(1, len(az) // 20000)] + np.pi) / (2 * np.pi) * n_columns
+        frac = 2 * np.pi * (xs % 1.0)
+        phase = float(np.arctan2(np.sin(frac).mean(), np.cos(frac).mean()) / (2 * np.pi))
+        cell, n_el = _kernels.grid_cells_kernel(Q, rh, az, ring, n_columns, phase)
+        grid = _kernels.grid_fill_kernel(Q, rh, cell, n_columns * n_el)
+        return _finish_grid(grid, idx, cell, N, n_columns, n_el, phase, method)
     keep = ring >= 0
     if not keep.all():
         idx, Q, az, ring, rh = idx[keep], Q[keep], az[keep], ring[keep], rh[keep]
@@ -276,17 +309,35 @@ def cloud_to_grid(
     # the nearest point of each cell represents it: scatter every point's index, then let points
     # nearer than their cell's current winner overwrite it until none is (a few rounds: as many
     # as the largest number of points in one cell) - no sort
-    r = np.sqrt(rh * rh + Q[:, 2] * Q[:, 2])
-    win = np.full(n_columns * n_el, -1, dtype=np.intp)
-    win[cell] = np.arange(len(cell))
-    while True:
-        better = np.flatnonzero(r < r[win[cell]])
-        if better.size == 0:
-            break
-        win[cell[better]] = better
-    # gather with a NaN row appended for the empty cells (win = -1 picks the last row): one
-    # contiguous ``take`` is ~3x cheaper than a masked fancy-indexed row assignment
-    grid = np.concatenate([Q, np.full((1, 3), np.nan)]).take(win, axis=0)
+    if check_backend(backend) == "compiled":
+        from navkit.obstacles import _kernels
+
+        grid = _kernels.grid_fill_kernel(Q, rh, cell, n_columns * n_el)
+    else:
+        r = np.sqrt(rh * rh + Q[:, 2] * Q[:, 2])
+        win = np.full(n_columns * n_el, -1, dtype=np.intp)
+        win[cell] = np.arange(len(cell))
+        while True:
+            better = np.flatnonzero(r < r[win[cell]])
+            if better.size == 0:
+                break
+            win[cell[better]] = better
+        # gather with a NaN row appended for the empty cells (win = -1 picks the last row): one
+        # contiguous ``take`` is ~3x cheaper than a masked fancy-indexed row assignment
+        grid = np.concatenate([Q, np.full((1, 3), np.nan)]).take(win, axis=0)
+    return _finish_grid(grid, idx, cell, N, n_columns, n_el, phase, method)
+
+
+def _finish_grid(
+    grid: NDArray[np.float64],
+    idx: NDArray[np.int64],
+    cell: NDArray[np.int64],
+    N: int,
+    n_columns: int,
+    n_el: int,
+    phase: float,
+    method: str,
+) -> ScanGrid:
     cell_of_point = np.full(N, -1, dtype=np.int64)
     cell_of_point[idx] = cell
     azimuth = -np.pi + (np.arange(n_columns) + phase) * 2 * np.pi / n_columns

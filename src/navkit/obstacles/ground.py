@@ -23,7 +23,7 @@ from scipy import ndimage
 
 from navkit.obstacles.rules import GROUND, OBSTACLE
 
-__all__ = ["ground_height_map", "refine_by_ground_height"]
+__all__ = ["fill_missing_cells", "ground_height_map", "refine_by_ground_height"]
 
 
 def ground_height_map(
@@ -60,16 +60,22 @@ def ground_height_map(
     pick = starts[has] + np.floor(quantile * (counts[has] - 1)).astype(np.int64)
     heights = np.full(nx * ny, np.nan)
     heights[np.flatnonzero(has)] = z[order[pick]]
-    grid = heights.reshape(nx, ny)  # [x index, y index]
-    missing = ~np.isfinite(grid)
-    if missing.any():
-        _, (ix, iy) = ndimage.distance_transform_edt(missing, return_indices=True)
-        grid = grid[ix, iy]
+    grid = fill_missing_cells(heights.reshape(nx, ny))  # [x index, y index]
     if envelope > 0:
         # a lower envelope over neighbouring cells: an elevated flat surface that the rules
         # call ground (a terrace, a low wall's top) does not lift the ground estimate
         grid = ndimage.minimum_filter(grid, size=2 * envelope + 1, mode="nearest")
     return grid, lo, cell_m
+
+
+def fill_missing_cells(grid: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Cells without a height (NaN) take the value of the nearest cell that has one (Euclidean
+    distance transform)."""
+    missing = ~np.isfinite(grid)
+    if missing.any():
+        _, (ix, iy) = ndimage.distance_transform_edt(missing, return_indices=True)
+        grid = grid[ix, iy]
+    return grid
 
 
 def refine_by_ground_height(

@@ -17,6 +17,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from navkit.obstacles.settings import check_backend
+
 __all__ = [
     "MeshCharacteristics",
     "build_mesh",
@@ -126,6 +128,7 @@ def build_mesh(
     jump_range_fraction: float,
     jump_range_ratio: float = np.inf,
     steep_cos: float | None = None,
+    backend: str = "compiled",
 ) -> MeshCharacteristics:
     """Stages 2-4: mesh, normals, H_s (normal, line of sight, jump) for a grid of points.
 
@@ -153,9 +156,29 @@ def build_mesh(
         The validity codes C_d.
     sensor_origin : (3,) float
         Sensor position in the body frame.
+    backend : {"compiled", "numpy"}
+        ``"compiled"``: one fused pass (:func:`navkit.obstacles._kernels.mesh_kernel`, same
+        float32 results bit for bit); ``"numpy"``: the vectorised reference below.
     """
     n_az, n_el = valid.shape
     tri = triangle_indices(n_az, n_el, wrap)
+    if check_backend(backend) == "compiled":
+        from navkit.obstacles import _kernels
+
+        use_ratio = bool(np.isfinite(jump_range_ratio))
+        ok, normal, vray, rng, z_min, z_max, jump = _kernels.mesh_kernel(
+            np.ascontiguousarray(points, dtype=np.float64),
+            np.ascontiguousarray(valid, dtype=np.bool_),
+            np.asarray(sensor_origin, dtype=np.float32).reshape(3),
+            bool(wrap),
+            np.float32(jump_height_m),
+            np.float32(jump_range_fraction),
+            np.float32(jump_range_ratio if use_ratio else 0.0),
+            use_ratio,
+            np.float32(steep_cos if steep_cos is not None else 0.0),
+            steep_cos is not None,
+        )
+        return MeshCharacteristics(tri, ok, normal, vray, rng, z_min, z_max, jump)
     o = np.asarray(sensor_origin, dtype=np.float32)
     X, Y, Z = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(3))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -259,6 +282,7 @@ def robust_cell_normals(
     jump_height_m: float = 0.3,
     jump_range_fraction: float = 0.01,
     jump_range_ratio: float = 0.2,
+    backend: str = "compiled",
 ) -> NDArray[np.float64]:
     """Noise-robust unit normals per grid cell ``(R, C, 3)`` from a support of about ``support_m``.
 
@@ -275,23 +299,35 @@ def robust_cell_normals(
     ground with an obstacle or with the ground far behind it; what remains is a mixing over
     ``support_m / 2`` across the foot of an obstacle.
     Cells whose corners have no valid robust normal get NaN.
+
+    ``backend="compiled"`` runs the per-vertex and per-cell passes as one kernel
+    (:func:`navkit.obstacles._kernels.robust_normals_kernel`, the same float32 results bit for
+    bit); the strides' medians stay in NumPy.
     """
     n_az, n_el = valid.shape
-    X, Y, Z = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(3))
-    rh = np.hypot(X - np.float32(sensor_origin[0]), Y - np.float32(sensor_origin[1]))
+    compiled = check_backend(backend) == "compiled"
+    step = max(1, n_el // 8)
+    if compiled:  # only the subsamples the strides need; the kernel reads the grid itself
+        X4, Y4 = (points[::4, :, k].astype(np.float32) for k in range(2))
+        rh4 = np.hypot(X4 - np.float32(sensor_origin[0]), Y4 - np.float32(sensor_origin[1]))
+        Xs, Ys = (points[:, ::step, k].astype(np.float32) for k in range(2))
+    else:
+        X, Y, Z = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(3))
+        rh = np.hypot(X - np.float32(sensor_origin[0]), Y - np.float32(sensor_origin[1]))
+        rh4 = rh[::4]
+        Xs, Ys = X[:, ::step], Y[:, ::step]
     # azimuth step from neighbouring rows: angles, not distances (range noise moves a point
     # along its ray, which changes the distance to its neighbour but not its azimuth)
-    step = max(1, n_el // 8)
-    az = np.arctan2(Y[:, ::step] - sensor_origin[1], X[:, ::step] - sensor_origin[0])
+    az = np.arctan2(Ys - sensor_origin[1], Xs - sensor_origin[0])
     dal = np.abs((np.diff(az, axis=0) + np.pi) % (2 * np.pi) - np.pi)
     dal = dal[np.isfinite(dal) & (dal > 0)]
     dalpha = float(np.median(dal)) if dal.size else 1.0
+    k_scale = np.float32(support_m / (2.0 * dalpha))
     with np.errstate(invalid="ignore", divide="ignore"):
-        k = np.rint(np.float32(support_m / (2.0 * dalpha)) / rh)
         # elevation spacing per column from the medians of the horizontal range over the rows
         # (robust to range noise, which inflates the spacing measured between single points)
         cols = valid[::4].any(axis=0)
-        rh_col = _nanmedian_rows(np.where(valid[::4], rh[::4], np.nan)[:, cols])
+        rh_col = _nanmedian_rows(np.where(valid[::4], rh4, np.nan)[:, cols])
         rh_col = (
             np.interp(np.arange(n_el), np.flatnonzero(cols), rh_col)
             if rh_col.size
@@ -301,6 +337,24 @@ def robust_cell_normals(
         se_col = np.concatenate([se_col, se_col[-1:]])
         se_col = np.maximum(np.fmin(se_col, np.roll(se_col, 1)), 1e-3)
         m_col = np.clip(np.rint(support_m / (2.0 * se_col)), 1, max_stride).astype(np.intp)
+    if compiled:
+        from navkit.obstacles import _kernels
+
+        use_ratio = bool(np.isfinite(jump_range_ratio))
+        return _kernels.robust_normals_kernel(  # type: ignore[no-any-return]
+            np.ascontiguousarray(points, dtype=np.float64),
+            np.asarray(sensor_origin, dtype=np.float64).reshape(3),
+            k_scale,
+            m_col,
+            bool(wrap),
+            int(max_stride),
+            float(jump_height_m),
+            float(jump_range_fraction),
+            float(jump_range_ratio) if use_ratio else 0.0,
+            use_ratio,
+        )
+    with np.errstate(invalid="ignore", divide="ignore"):
+        k = np.rint(k_scale / rh)
     k = np.clip(np.nan_to_num(k, nan=1.0, posinf=max_stride), 1, max_stride).astype(np.intp)
     ii = np.arange(n_az)[:, None]
     jj = np.arange(n_el)[None, :]

@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from navkit.obstacles.mesh import MeshCharacteristics, smooth_normals
-from navkit.obstacles.settings import ObstacleSettings
+from navkit.obstacles.settings import ObstacleSettings, check_backend
 
 __all__ = [
     "GROUND",
@@ -55,6 +55,7 @@ def classify(
     *,
     wrap: bool,
     robust_cells: NDArray[np.float64] | None = None,
+    backend: str = "compiled",
 ) -> tuple[NDArray[np.int8], dict[str, NDArray[np.bool_]]]:
     """Labels ``m_t (R, 2C) int8`` from the production rules (paper 1, stage 5).
 
@@ -78,7 +79,34 @@ def classify(
     labels : (R, 2C) int8
     rules : dict of (R, 2C) bool
         ``P1 .. P5`` as evaluated (for inspection and tests).
+
+    ``backend="compiled"`` evaluates the five rules and the classes in one pass along each row
+    (:func:`navkit.obstacles._kernels.classify_kernel`; identical labels); with
+    ``settings.normal_support > 0`` (a box filter over the normals) the NumPy path runs.
     """
+    if check_backend(backend) == "compiled" and settings.normal_support <= 0:
+        from navkit.obstacles import _kernels
+
+        use_robust = robust_cells is not None
+        rz = (
+            np.ascontiguousarray(robust_cells[..., 2], dtype=np.float32)
+            if robust_cells is not None
+            else np.empty((1, 1), dtype=np.float32)
+        )
+        labels, p1, p2, p3, p4, p5 = _kernels.classify_kernel(
+            mesh.valid,
+            mesh.jump,
+            mesh.normal.astype(np.float32, copy=False),
+            mesh.vertex_ray.astype(np.float32, copy=False),
+            mesh.z_min.astype(np.float32, copy=False),
+            rz,
+            use_robust,
+            mesh.vertex_ray.shape[0],
+            float(settings.c2),
+            np.float32(math.cos(settings.c1_rad)),
+            float(settings.chain_min_height_m),
+        )
+        return labels, {"P1": p1, "P2": p2, "P3": p3, "P4": p4, "P5": p5}
     ok = mesh.valid
     jump = mesh.jump
     # zones matter only across a jump: evaluate them there only

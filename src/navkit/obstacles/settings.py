@@ -7,9 +7,20 @@ from dataclasses import dataclass, fields
 
 from navkit.errors import ConfigError
 
-__all__ = ["DEFAULT_SHAPES", "ObstacleSettings"]
+__all__ = ["BACKENDS", "DEFAULT_SHAPES", "ObstacleSettings", "check_backend"]
 
 DEFAULT_SHAPES = ("A1", "A2", "A3", "A4", "A5", "A6", "MEC", "MVEE")
+
+BACKENDS = ("compiled", "numpy")
+"""Implementations of stages 1-7: ``"compiled"`` (Numba kernels, :mod:`navkit.obstacles._kernels`)
+and ``"numpy"`` (the vectorised reference; the same answers, see ``docs/kernels.md``)."""
+
+
+def check_backend(backend: str) -> str:
+    """``backend`` if it is one of :data:`BACKENDS`, else :class:`~navkit.errors.ConfigError`."""
+    if backend not in BACKENDS:
+        raise ConfigError(f"= {backend!r}", field="backend", expected=f"one of {BACKENDS}")
+    return backend
 
 
 @dataclass(frozen=True)
@@ -86,6 +97,11 @@ class ObstacleSettings:
         boundary vertices (stage 8).
     guaranteed_shapes : tuple of str
         Shapes recomputed over the obstacle together with its shadows: the paper's A7.
+    backend : {"compiled", "numpy"}
+        Implementation of stages 1-7: ``"compiled"`` (default) runs the fused Numba kernels of
+        :mod:`navkit.obstacles._kernels`; ``"numpy"`` the vectorised NumPy reference. Both give
+        the same classes, ids and boundaries and floats equal to the last bit (tested); with
+        ``normal_support > 0`` stage 5 uses NumPy's filters whatever the backend.
     """
 
     c0_deg: float = 20.0
@@ -108,6 +124,7 @@ class ObstacleSettings:
     wrap_azimuth: bool | None = None
     shapes: tuple[str, ...] = DEFAULT_SHAPES
     guaranteed_shapes: tuple[str, ...] = ("A1", "MEC")
+    backend: str = "compiled"
 
     def __post_init__(self) -> None:
         def check(name: str, ok: bool, expected: str) -> None:
@@ -140,6 +157,7 @@ class ObstacleSettings:
         check("ground_above_m", self.ground_above_m > 0, "metres > 0")
         check("ground_cell_m", self.ground_cell_m > 0, "metres > 0")
         check("min_obstacle_height_m", self.min_obstacle_height_m >= 0, "metres >= 0")
+        check("backend", self.backend in BACKENDS, f"one of {BACKENDS}")
         object.__setattr__(self, "shapes", tuple(self.shapes))
         object.__setattr__(self, "guaranteed_shapes", tuple(self.guaranteed_shapes))
         from navkit.geometry.shapes import SHAPES

@@ -1,0 +1,1207 @@
+"""Compiled (Numba) kernels of paper 1's stages 1-7: one pass over the grid per stage.
+
+Each kernel computes exactly what its NumPy twin computes (the functions in
+:mod:`navkit.obstacles.mesh`, :mod:`~navkit.obstacles.rules`, :mod:`~navkit.obstacles.segment`,
+:mod:`~navkit.obstacles.ground`, :mod:`~navkit.obstacles.grids`), in the same floating-point
+types and the same order of operations, so that classes, ids and masks are identical and floats
+agree to the last bit (tested in ``tests/obstacles/test_kernels.py``). Rules kept for that:
+
+- float32 arithmetic stays float32: constants that NumPy 2 treats as *weak* Python scalars
+  (``jump_height_m`` in ``z_max - z_min > jump_height_m + ...`` on float32 arrays) are passed in
+  as ``np.float32``; square roots of float32 values are rounded back to float32;
+- NaN propagates through minima and maxima as in ``np.minimum`` / ``np.maximum``;
+- transcendental functions (``arctan2``, ``cos``) stay in NumPy (its SIMD ``arctan2`` differs
+  from libm's by an ulp on ~7 % of inputs), the kernels take their results.
+
+The kernels run on one thread: the targets are CPU time per frame (``parallel=True`` would add
+threads, not remove work) and the machine is shared. ``cache=True`` keeps the compiled code on
+disk (``NUMBA_CACHE_DIR`` or ``__pycache__``); see ``docs/kernels.md``.
+
+Selecting the backend: the detector's ``ObstacleSettings.backend`` (``"compiled"`` by default,
+``"numpy"`` for the reference implementation) and the ``backend`` keyword of
+:func:`navkit.obstacles.cloud_to_grid`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+__all__ = [
+    "boundary_kernel",
+    "classify_kernel",
+    "cloud_prep_kernel",
+    "components_kernel",
+    "grid_cells_kernel",
+    "grid_fill_kernel",
+    "ground_cells_kernel",
+    "map_groups_kernel",
+    "mesh_kernel",
+    "points_kernel",
+    "refine_kernel",
+    "rings_by_order_kernel",
+    "robust_normals_kernel",
+    "split_kernel",
+    "vertex_kernel",
+]
+
+_NAN32 = np.float32(np.nan)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _min_nan(a, b):  # type: ignore[no-untyped-def]
+    """``np.minimum``: NaN if either is NaN."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a <= b else b
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _max_nan(a, b):  # type: ignore[no-untyped-def]
+    """``np.maximum``: NaN if either is NaN."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a >= b else b
+
+
+# ------------------------------------------------------------------------------------------
+# stages 2-4: mesh, normals, H_s (twin: mesh.build_mesh)
+
+
+@njit(cache=True, error_model="numpy")
+def mesh_kernel(  # type: ignore[no-untyped-def]
+    points,
+    valid,
+    origin32,
+    wrap,
+    jump_h,
+    jump_f,
+    ratio,
+    use_ratio,
+    steep_cos,
+    use_steep,
+):
+    """One pass over the cells: normals, validity, mean range, z extrema, jump (float32).
+
+    ``points (n_az, n_el, 3) float64``, ``valid (n_az, n_el) bool``, ``origin32 (3,) float32``;
+    ``jump_h, jump_f, ratio, steep_cos`` float32. Returns ``ok, normal, vray, rng, z_min, z_max,
+    jump`` as :class:`~navkit.obstacles.mesh.MeshCharacteristics` holds them.
+    """
+    n_az, n_el = valid.shape
+    R = n_az if wrap else n_az - 1
+    C = n_el - 1
+    X = np.empty((n_az, n_el), np.float32)
+    Y = np.empty((n_az, n_el), np.float32)
+    Z = np.empty((n_az, n_el), np.float32)
+    D = np.empty((n_az, n_el), np.float32)
+    vray = np.empty((n_az, n_el, 3), np.float32)
+    for i in range(n_az):
+        for j in range(n_el):
+            x = np.float32(points[i, j, 0])
+            y = np.float32(points[i, j, 1])
+            z = np.float32(points[i, j, 2])
+            X[i, j] = x
+            Y[i, j] = y
+            Z[i, j] = z
+            rx = x - origin32[0]
+            ry = y - origin32[1]
+            rz = z - origin32[2]
+            d = np.float32(math.sqrt(rx * rx + ry * ry + rz * rz))
+            D[i, j] = d
+            vray[i, j, 0] = rx / d
+            vray[i, j, 1] = ry / d
+            vray[i, j, 2] = rz / d
+    ok = np.zeros((R, 2 * C), np.bool_)
+    normal = np.empty((R, 2 * C, 3), np.float32)
+    rng = np.empty((R, 2 * C), np.float32)
+    zmin = np.empty((R, 2 * C), np.float32)
+    zmax = np.empty((R, 2 * C), np.float32)
+    jump = np.zeros((R, 2 * C), np.bool_)
+    third = np.float32(1.0 / 3.0)
+    one = np.float32(1.0)
+    for r in range(R):
+        r1 = r + 1
+        if r1 == n_az:
+            r1 = 0
+        for c in range(C):
+            x00, x01, x10, x11 = X[r, c], X[r, c + 1], X[r1, c], X[r1, c + 1]
+            y00, y01, y10, y11 = Y[r, c], Y[r, c + 1], Y[r1, c], Y[r1, c + 1]
+            z00, z01, z10, z11 = Z[r, c], Z[r, c + 1], Z[r1, c], Z[r1, c + 1]
+            d00, d01, d10, d11 = D[r, c], D[r, c + 1], D[r1, c], D[r1, c + 1]
+            v00, v01, v10, v11 = valid[r, c], valid[r, c + 1], valid[r1, c], valid[r1, c + 1]
+            ex, ey, ez = x01 - x10, y01 - y10, z01 - z10
+            ax, ay, az = x00 - x10, y00 - y10, z00 - z10
+            bx, by, bz = x11 - x10, y11 - y10, z11 - z10
+            dsh = d01 + d10
+            zmn = _min_nan(z01, z10)
+            zmx = _max_nan(z01, z10)
+            for t in range(2):
+                k = 2 * c + t
+                if t == 0:
+                    nx = ay * ez - az * ey
+                    ny = az * ex - ax * ez
+                    nz = ax * ey - ay * ex
+                    vt = v00 and v01 and v10
+                    rg = (dsh + d00) * third
+                    lo = _min_nan(zmn, z00)
+                    hi = _max_nan(zmx, z00)
+                else:
+                    nx = ey * bz - ez * by
+                    ny = ez * bx - ex * bz
+                    nz = ex * by - ey * bx
+                    vt = v10 and v01 and v11
+                    rg = (dsh + d11) * third
+                    lo = _min_nan(zmn, z11)
+                    hi = _max_nan(zmx, z11)
+                nrm = np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
+                good = vt and nrm > 0
+                if good:
+                    s = one / nrm
+                    if nz < 0:
+                        s = -s
+                else:
+                    s = _NAN32
+                nzz = nz * s
+                normal[r, k, 0] = nx * s
+                normal[r, k, 1] = ny * s
+                normal[r, k, 2] = nzz
+                rng[r, k] = rg
+                zmin[r, k] = lo
+                zmax[r, k] = hi
+                ok[r, k] = good
+                if not good:
+                    continue
+                jp = hi - lo > jump_h + jump_f * rg
+                if use_ratio:
+                    if t == 0:
+                        jp = jp or abs(d00 - d10) > ratio * min(d00, d10)
+                    else:
+                        jp = jp or abs(d01 - d11) > ratio * min(d01, d11)
+                    if use_steep and not jp:
+                        if t == 0:
+                            e = abs(d00 - d01) > ratio * min(d00, d01)
+                        else:
+                            e = abs(d01 - d11) > ratio * min(d01, d11)
+                        jp = e and (abs(nzz) < steep_cos or lo > jump_h)
+                jump[r, k] = jp
+    return ok, normal, vray, rng, zmin, zmax, jump
+
+
+# ------------------------------------------------------------------------------------------
+# stage 5 input: robust normals (twin: mesh.robust_cell_normals)
+
+
+@njit(cache=True, error_model="numpy")
+def robust_normals_kernel(  # type: ignore[no-untyped-def]
+    points,
+    origin,
+    k_scale,
+    m_col,
+    wrap,
+    max_stride,
+    jump_h,
+    jump_f,
+    ratio,
+    use_ratio,
+):
+    """Per-vertex tangents by strided central differences, then per-cell normals ``(R, C, 3)``.
+
+    ``k_scale`` float32: ``support_m / (2 dalpha)`` (the azimuth stride is
+    ``rint(k_scale / r_h)`` with ``r_h`` the horizontal range, clipped to ``[1, max_stride]``);
+    ``m_col (n_el,) intp`` the elevation strides; ``origin (3,) float64``; ``jump_h, jump_f,
+    ratio`` float64 (the end-point tests run in float64 like the twin's).
+    """
+    n_az, n_el = points.shape[0], points.shape[1]
+    ox32 = np.float32(origin[0])
+    oy32 = np.float32(origin[1])
+    X = np.empty(n_az * n_el, np.float32)
+    Y = np.empty(n_az * n_el, np.float32)
+    Z = np.empty(n_az * n_el, np.float32)
+    Df = np.empty(n_az * n_el, np.float64)
+    for i in range(n_az):
+        for j in range(n_el):
+            f = i * n_el + j
+            x = np.float32(points[i, j, 0])
+            y = np.float32(points[i, j, 1])
+            z = np.float32(points[i, j, 2])
+            X[f] = x
+            Y[f] = y
+            Z[f] = z
+            dx = np.float64(x) - origin[0]
+            dy = np.float64(y) - origin[1]
+            dz = np.float64(z) - origin[2]
+            Df[f] = math.sqrt(dx * dx + dy * dy + dz * dz)
+    vn = np.empty((n_az, n_el, 3), np.float32)
+    for i in range(n_az):
+        for j in range(n_el):
+            f = i * n_el + j
+            # float32 hypot as glibc's hypotf computes it: in double, rounded once
+            hx = np.float64(X[f] - ox32)
+            hy = np.float64(Y[f] - oy32)
+            rh = np.float32(math.sqrt(hx * hx + hy * hy))
+            kf = np.rint(k_scale / rh)
+            if kf != kf:
+                k = 1
+            elif kf > max_stride:
+                k = max_stride
+            elif kf < 1:
+                k = 1
+            else:
+                k = int(kf)
+            if wrap:
+                ip = (i + k) % n_az
+                im = (i - k) % n_az
+            else:
+                ip = min(i + k, n_az - 1)
+                im = max(i - k, 0)
+            m = m_col[j]
+            jp = min(j + m, n_el - 1)
+            jm = max(j - m, 0)
+            zc = Z[f]
+            dc = Df[f]
+            lim = jump_h + jump_f * dc
+            # an end point across a discontinuity is replaced by the centre (a NaN anywhere
+            # fails the tests, as in the twin); written out: ~1.5x faster than a helper
+            e0 = ip * n_el + j
+            d0 = Df[e0]
+            if not (
+                np.float64(abs(Z[e0] - zc)) <= lim
+                and (not use_ratio or abs(d0 - dc) <= ratio * min(d0, dc))
+            ):
+                e0 = f
+            e1 = im * n_el + j
+            d1 = Df[e1]
+            if not (
+                np.float64(abs(Z[e1] - zc)) <= lim
+                and (not use_ratio or abs(d1 - dc) <= ratio * min(d1, dc))
+            ):
+                e1 = f
+            e2 = i * n_el + jp
+            if not np.float64(abs(Z[e2] - zc)) <= lim:
+                e2 = f
+            e3 = i * n_el + jm
+            if not np.float64(abs(Z[e3] - zc)) <= lim:
+                e3 = f
+            tax = X[e0] - X[e1]
+            tay = Y[e0] - Y[e1]
+            taz = Z[e0] - Z[e1]
+            tex = X[e2] - X[e3]
+            tey = Y[e2] - Y[e3]
+            tez = Z[e2] - Z[e3]
+            nx = tay * tez - taz * tey
+            ny = taz * tex - tax * tez
+            nz = tax * tey - tay * tex
+            sgn = np.float32(-1.0) if nz < 0 else np.float32(1.0)
+            inv = sgn / np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
+            cx, cy, cz = nx * inv, ny * inv, nz * inv
+            vn[i, j, 0] = cx if math.isfinite(cx) else np.float32(0.0)
+            vn[i, j, 1] = cy if math.isfinite(cy) else np.float32(0.0)
+            vn[i, j, 2] = cz if math.isfinite(cz) else np.float32(0.0)
+    R = n_az if wrap else n_az - 1
+    C = n_el - 1
+    out = np.empty((R, C, 3), np.float32)
+    for r in range(R):
+        r1 = r + 1
+        if r1 == n_az:
+            r1 = 0
+        for c in range(C):
+            sx = vn[r, c, 0] + vn[r, c + 1, 0] + vn[r1, c, 0] + vn[r1, c + 1, 0]
+            sy = vn[r, c, 1] + vn[r, c + 1, 1] + vn[r1, c, 1] + vn[r1, c + 1, 1]
+            sz = vn[r, c, 2] + vn[r, c + 1, 2] + vn[r1, c, 2] + vn[r1, c + 1, 2]
+            nrm = np.float32(math.sqrt(sx * sx + sy * sy + sz * sz))
+            if nrm == 0:
+                nrm = _NAN32
+            out[r, c, 0] = sx / nrm
+            out[r, c, 1] = sy / nrm
+            out[r, c, 2] = sz / nrm
+    return out
+
+
+# ------------------------------------------------------------------------------------------
+# stage 5: rules P1-P5 (twin: rules.classify with normal_support = 0)
+
+
+@njit(cache=True, error_model="numpy")
+def classify_kernel(  # type: ignore[no-untyped-def]
+    ok,
+    jump,
+    normal,
+    vray,
+    zmin,
+    robust_z,
+    use_robust,
+    n_az,
+    c2,
+    cos_c1,
+    chain_min,
+):
+    """Labels and rules P1-P5 in one pass along each row (the rising rays).
+
+    ``robust_z (R, C) float32`` is the vertical component of the robust cell normals (ignored
+    unless ``use_robust``); ``cos_c1`` float32, ``c2`` and ``chain_min`` float64.
+    """
+    R, C2 = ok.shape
+    labels = np.empty((R, C2), np.int8)
+    p1a = np.zeros((R, C2), np.bool_)
+    p2a = np.zeros((R, C2), np.bool_)
+    p3a = np.zeros((R, C2), np.bool_)
+    p4a = np.zeros((R, C2), np.bool_)
+    p5a = np.zeros((R, C2), np.bool_)
+    huge = 1.0e6
+    seg_w = 1.0e7
+    tiny = np.float32(1e-9)
+    for r in range(R):
+        seg = 0
+        run_min = huge
+        for k in range(C2):
+            good = ok[r, k]
+            jp = jump[r, k]
+            p2 = False
+            p3 = False
+            if jp:
+                # zone cosine (twin: rules.zone_cosine) with the first vertex's line of sight
+                c = k // 2
+                if k % 2 == 0:
+                    vi, vj = r, c
+                else:
+                    vi = r + 1
+                    if vi == n_az:
+                        vi = 0
+                    vj = c
+                n0, n1 = normal[r, k, 0], normal[r, k, 1]
+                q0, q1 = vray[vi, vj, 0], vray[vi, vj, 1]
+                num = n0 * q0 + n1 * q1
+                den = np.float32(math.sqrt(n0 * n0 + n1 * n1)) * np.float32(
+                    math.sqrt(q0 * q0 + q1 * q1)
+                )
+                if den > tiny:
+                    cosz = np.float64(num / den)
+                else:
+                    cosz = 0.0
+                p2 = cosz > c2
+                p3 = cosz < -c2
+            p4 = good and not jp
+            behind = good and p2 and not p4
+            side = good and not p2 and not p3 and not p4
+            shadow = behind or side
+            if jp or not use_robust:
+                nz = normal[r, k, 2]
+            else:
+                nz = robust_z[r, k // 2]
+                if not math.isfinite(nz):
+                    nz = normal[r, k, 2]
+            p1 = good and not shadow and nz < cos_c1
+            breaker = (not good) or shadow
+            if breaker:  # a new run: the twin's segmented running minimum restarts here
+                seg += 1
+                run_min = huge
+            elif p1:
+                v = np.float64(zmin[r, k])  # finite: the triangle is reliable
+                if v < run_min:
+                    run_min = v
+            p5 = False
+            if not breaker:
+                s = seg * seg_w
+                base = (run_min - s) + s
+                p5 = base < huge / 2 and np.float64(zmin[r, k]) - base >= chain_min
+            obstacle = good and not shadow and (p1 or p5)
+            if not good:
+                lab = -1
+            elif behind:
+                lab = -4
+            elif side:
+                lab = -3
+            elif obstacle:
+                lab = -2
+            else:
+                lab = 0
+            labels[r, k] = lab
+            p1a[r, k] = p1
+            p2a[r, k] = p2
+            p3a[r, k] = p3
+            p4a[r, k] = p4
+            p5a[r, k] = p5
+    return labels, p1a, p2a, p3a, p4a, p5a
+
+
+# ------------------------------------------------------------------------------------------
+# stage 1 input: the cloud-to-grid fill (twin: the end of grids.cloud_to_grid)
+
+
+@njit(cache=True, error_model="numpy")
+def grid_fill_kernel(Q, rh, cell, n_cells):  # type: ignore[no-untyped-def]
+    """The nearest point of each cell: ``(n_cells, 3)`` rows of ``Q (N, 3)`` (NaN rows if empty).
+
+    The range is ``sqrt(rh^2 + z^2)`` as in the twin; among points at exactly the same range the
+    last one in input order wins, which is where the twin's overwrite rounds converge.
+    """
+    win = np.full(n_cells, -1, np.int64)
+    r = np.empty(len(cell), np.float64)
+    for p in range(len(cell)):
+        z = Q[p, 2]
+        r[p] = math.sqrt(rh[p] * rh[p] + z * z)
+        c = cell[p]
+        w = win[c]
+        if w < 0 or r[p] <= r[w]:
+            win[c] = p
+    out = np.empty((n_cells, 3), np.float64)
+    for c in range(n_cells):
+        w = win[c]
+        if w < 0:
+            out[c, 0] = np.nan
+            out[c, 1] = np.nan
+            out[c, 2] = np.nan
+        else:
+            out[c, 0] = Q[w, 0]
+            out[c, 1] = Q[w, 1]
+            out[c, 2] = Q[w, 2]
+    return out
+
+
+# ------------------------------------------------------------------------------------------
+# stage 6: components (union-find), filters, merging, shadow owners (twin: detector + segment)
+
+
+@njit(cache=True, inline="always")
+def _find(parent, a):  # type: ignore[no-untyped-def]
+    """Root of ``a`` with path halving."""
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@njit(cache=True, inline="always")
+def _union(parent, a, b):  # type: ignore[no-untyped-def]
+    """Join the sets of ``a`` and ``b``; the smaller root stays the root."""
+    ra = _find(parent, a)
+    rb = _find(parent, b)
+    if ra < rb:
+        parent[rb] = ra
+    elif rb < ra:
+        parent[ra] = rb
+
+
+@njit(cache=True)
+def _mesh_roots(mask, wrap):  # type: ignore[no-untyped-def]
+    """Union-find over the mesh neighbourhood (``segment.MESH_STRUCTURE``, rows cyclic with
+    ``wrap``): the flat index of each masked triangle's root (the component's first triangle
+    in raster order), -1 elsewhere."""
+    R, C = mask.shape
+    parent = np.arange(R * C, dtype=np.int32)
+    seam = wrap and R > 1
+    for i in range(R):
+        for j in range(C):
+            if not mask[i, j]:
+                continue
+            f = i * C + j
+            if j > 0 and mask[i, j - 1]:
+                _union(parent, f, f - 1)
+            if i > 0 and j + 1 < C and mask[i - 1, j + 1]:
+                _union(parent, f, f - C + 1)
+            if seam and i == R - 1 and j > 0 and mask[0, j - 1]:
+                _union(parent, f, j - 1)
+    root = np.full(R * C, -1, np.int32)
+    for i in range(R):
+        for j in range(C):
+            if mask[i, j]:
+                f = i * C + j
+                root[f] = _find(parent, f)
+    return root
+
+
+@njit(cache=True)
+def components_kernel(mask, wrap):  # type: ignore[no-untyped-def]
+    """``segment.label_components``: labels 1..n numbered by first appearance in raster order
+    (what ``ndimage.label`` and the twin's renumbering after closing the seam give)."""
+    R, C = mask.shape
+    root = _mesh_roots(mask, wrap)
+    lab = np.zeros((R, C), np.int32)
+    new = np.zeros(R * C, np.int32)
+    n = 0
+    for f in range(R * C):
+        r = root[f]
+        if r < 0:
+            continue
+        if new[r] == 0:
+            n += 1
+            new[r] = n
+        lab[f // C, f % C] = new[r]
+    return lab, n
+
+
+_OFF_I = (0, 0, 1, -1)
+_OFF_J = (1, -1, -1, 1)
+
+
+@njit(cache=True)
+def _renumber_by_min(parent, n):  # type: ignore[no-untyped-def]
+    """``lut (n + 1,)``: labels 1..n to their merged component, numbered by smallest member."""
+    lut = np.zeros(n + 1, np.int32)
+    m = 0
+    for a in range(1, n + 1):
+        r = _find(parent, a)
+        if r == a:
+            m += 1
+            lut[a] = m
+        else:
+            lut[a] = lut[r]
+    return lut, m
+
+
+@njit(cache=True)
+def _incident(values, p, q, k, R, C, wrap, fill):  # type: ignore[no-untyped-def]
+    """Value of the k-th triangle around vertex ``(p, q)`` (``segment._incident_slices``)."""
+    if k == 0:
+        r, c, t = p, q, 0
+    elif k == 1:
+        r, c, t = p, q - 1, 0
+    elif k == 2:
+        r, c, t = p - 1, q, 0
+    elif k == 3:
+        r, c, t = p - 1, q, 1
+    elif k == 4:
+        r, c, t = p, q - 1, 1
+    else:
+        r, c, t = p - 1, q - 1, 1
+    if c < 0 or c >= C or r >= R:
+        return fill
+    if r < 0:
+        if not wrap:
+            return fill
+        r = R - 1
+    return values[r, 2 * c + t]
+
+
+@njit(cache=True)
+def boundary_kernel(obstacle_id, n_az, n_el, wrap):  # type: ignore[no-untyped-def]
+    """``segment.boundary_vertices``: obstacle id per vertex (largest incident) and boundary."""
+    R = obstacle_id.shape[0]
+    C = obstacle_id.shape[1] // 2
+    vid = np.zeros((n_az, n_el), np.int32)
+    bnd = np.zeros((n_az, n_el), np.bool_)
+    for p in range(n_az):
+        for q in range(n_el):
+            v = _incident(obstacle_id, p, q, 0, R, C, wrap, 0)
+            lo = v
+            hi = v
+            for k in range(1, 6):
+                v = _incident(obstacle_id, p, q, k, R, C, wrap, 0)
+                if v > hi:
+                    hi = v
+                if v < lo:
+                    lo = v
+            vid[p, q] = hi
+            bnd[p, q] = hi > 0 and lo != hi
+    return vid, bnd
+
+
+@njit(cache=True)
+def _merge_close(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped-def]
+    """``segment.merge_close_components`` (a union-find on the obstacle ids)."""
+    n_az, n_el = P.shape[0], P.shape[1]
+    vid, bnd = boundary_kernel(obs_lab, n_az, n_el, wrap)
+    parent = np.arange(n + 1).astype(np.int64)
+    merged = False
+    for si in range(n_az):
+        for sj in range(n_el):
+            if not bnd[si, sj]:
+                continue
+            va = vid[si, sj]
+            for di in range(0, gap + 1):
+                for dj in range(-gap, gap + 1):
+                    if di == 0 and dj <= 0:
+                        continue
+                    ti, tj = si + di, sj + dj
+                    if tj < 0 or tj >= n_el:
+                        continue
+                    if ti >= n_az:
+                        if not wrap:
+                            continue
+                        ti = ti % n_az
+                    vb = vid[ti, tj]
+                    if vb <= 0 or vb == va:
+                        continue
+                    dx = P[si, sj, 0] - P[ti, tj, 0]
+                    dy = P[si, sj, 1] - P[ti, tj, 1]
+                    dz = P[si, sj, 2] - P[ti, tj, 2]
+                    if math.sqrt(dx * dx + dy * dy + dz * dz) < distance_m:
+                        _union(parent, va, vb)
+                        merged = True
+    if not merged:
+        return obs_lab, n
+    lut, m = _renumber_by_min(parent, n)
+    out = np.empty_like(obs_lab)
+    for i in range(obs_lab.shape[0]):
+        for j in range(obs_lab.shape[1]):
+            out[i, j] = lut[obs_lab[i, j]]
+    return out, m
+
+
+@njit(cache=True)
+def _pairs_from(sel, R, C, wrap):  # type: ignore[no-untyped-def]
+    """Mesh-adjacent pairs whose first triangle is in ``sel`` (flat indices, raster order), in
+    the twin's order (``segment._pairs``): per offset, the pairs inside the array in raster
+    order, then the ones across the seam. Returns ``(first, second)`` flat indices."""
+    fa = np.empty(4 * len(sel), np.int64)
+    fb = np.empty(4 * len(sel), np.int64)
+    m = 0
+    for o in range(4):
+        di, dj = _OFF_I[o], _OFF_J[o]
+        for seam in range(2 if (wrap and di != 0) else 1):
+            for f in sel:
+                i, j = f // C, f % C
+                tj = j + dj
+                if tj < 0 or tj >= C:
+                    continue
+                ti = i + di
+                crosses = ti < 0 or ti >= R
+                if crosses != (seam == 1):
+                    continue
+                if crosses:
+                    ti = ti % R
+                fa[m] = f
+                fb[m] = ti * C + tj
+                m += 1
+    return fa[:m], fb[:m]
+
+
+@njit(cache=True)
+def _kth(values, k):  # type: ignore[no-untyped-def]
+    """The k-th smallest of ``values`` (0-based), by a selection in place (reorders them)."""
+    lo, hi = 0, len(values) - 1
+    while lo < hi:
+        pivot = values[(lo + hi) // 2]
+        i, j = lo, hi
+        while i <= j:
+            while values[i] < pivot:
+                i += 1
+            while values[j] > pivot:
+                j -= 1
+            if i <= j:
+                values[i], values[j] = values[j], values[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            return values[k]
+    return values[k]
+
+
+@njit(cache=True)
+def split_kernel(  # type: ignore[no-untyped-def]
+    labels,
+    zmin,
+    zmax,
+    P,
+    wrap,
+    min_triangles,
+    min_height32,
+    half,
+    distance_m,
+    gap,
+):
+    """Stage 6 of the detector: obstacle components, the size / height / noise-patch filters,
+    merging of close components and the shadows' owners. ``labels`` is changed in place
+    (dropped components back to ground). Returns ``obs_lab, n, owner``."""
+    R, C = labels.shape
+    lab, n = components_kernel(labels == -2, wrap)
+    if n:
+        size = np.zeros(n + 1, np.int64)
+        hi = np.full(n + 1, -np.inf, np.float32)
+        lo = np.full(n + 1, np.inf, np.float32)
+        cnt = np.zeros(n + 1, np.int64)
+        sm = np.zeros(n + 1, np.float64)
+        zmid = np.empty((R, C), np.float32)
+        h = np.float32(0.5)
+        for i in range(R):
+            for j in range(C):
+                zmid[i, j] = h * (zmax[i, j] + zmin[i, j])
+        for i in range(R):
+            for j in range(C):
+                a = lab[i, j]
+                if a == 0:
+                    continue
+                size[a] += 1
+                hi[a] = _max_nan(hi[a], zmax[i, j])
+                lo[a] = _min_nan(lo[a], zmin[i, j])
+                cnt[a] += 1
+                sm[a] += np.float64(zmid[i, j])
+        # 10th / 90th percentile of the mid heights per label (a counting sort, then each run)
+        start = np.zeros(n + 2, np.int64)
+        for a in range(1, n + 1):
+            start[a + 1] = start[a] + size[a]
+        fill = start.copy()
+        zs = np.empty(start[n + 1], np.float64)
+        for i in range(R):
+            for j in range(C):
+                a = lab[i, j]
+                if a:
+                    zs[fill[a]] = np.float64(zmid[i, j])
+                    fill[a] += 1
+        spread = np.empty(n + 1, np.float64)
+        for a in range(1, n + 1):
+            k = size[a] - 1
+            spread[a] = _kth(zs[start[a] : start[a + 1]], math.floor(0.9 * k)) - _kth(
+                zs[start[a] : start[a + 1]], math.floor(0.1 * k)
+            )
+        # lift over the adjacent ground, the sums in the twin's pair order
+        cnt_g = np.zeros(n + 1, np.int64)
+        sum_g = np.zeros(n + 1, np.float64)
+        for o in range(4):
+            di, dj = _OFF_I[o], _OFF_J[o]
+            j0, j1 = max(0, -dj), C - max(0, dj)
+            for seam in range(2 if (wrap and di != 0) else 1):
+                if seam == 0:
+                    i0, i1 = max(0, -di), R - max(0, di)
+                else:
+                    i0 = R - 1 if di == 1 else 0
+                    i1 = i0 + 1
+                for i in range(i0, i1):
+                    bi = (i + di) % R
+                    for j in range(j0, j1):
+                        a = lab[i, j]
+                        if a and labels[bi, j + dj] == 0:
+                            cnt_g[a] += 1
+                            sum_g[a] += np.float64(zmid[bi, j + dj])
+        lut = np.zeros(n + 1, np.int32)
+        m2 = 0
+        for a in range(1, n + 1):
+            lift = sm[a] / max(cnt[a], 1) - sum_g[a] / cnt_g[a] if cnt_g[a] > 0 else np.inf
+            noise_patch = spread[a] < half and lift < half
+            if size[a] >= min_triangles and (hi[a] - lo[a]) >= min_height32 and not noise_patch:
+                m2 += 1
+                lut[a] = m2
+        for i in range(R):
+            for j in range(C):
+                a = lab[i, j]
+                if a:
+                    if lut[a] == 0:
+                        labels[i, j] = 0
+                    lab[i, j] = lut[a]
+        n = m2
+        if n >= 2 and gap >= 1 and distance_m > 0:
+            lab, n = _merge_close(lab, n, P, wrap, distance_m, gap)
+    owner = np.zeros((R, C), np.int32)
+    nobs = 0
+    has_shadow = False
+    for i in range(R):
+        for j in range(C):
+            if lab[i, j] > nobs:
+                nobs = lab[i, j]
+            if labels[i, j] == -3 or labels[i, j] == -4:
+                has_shadow = True
+    if not has_shadow or nobs == 0:
+        return lab, n, owner
+    sl, ns = components_kernel((labels == -3) | (labels == -4), wrap)
+    nobs += 1
+    fa, fb = _pairs_from(np.flatnonzero(sl), R, C, wrap)
+    keys = np.empty(len(fa), np.int64)
+    k = 0
+    for m in range(len(fa)):
+        z = sl[fa[m] // C, fa[m] % C]
+        b = lab[fb[m] // C, fb[m] % C]
+        if b > 0:
+            keys[k] = np.int64(z) * nobs + b
+            k += 1
+    if k == 0:
+        return lab, n, owner
+    keys = np.sort(keys[:k])
+    best = np.zeros(ns + 1, np.int32)
+    best_count = np.zeros(ns + 1, np.int64)
+    run = 1
+    for m in range(1, k + 1):
+        if m < k and keys[m] == keys[m - 1]:
+            run += 1
+            continue
+        z = keys[m - 1] // nobs
+        b = keys[m - 1] % nobs
+        if run >= best_count[z]:  # ties: the larger obstacle id (the twin's stable lexsort)
+            best_count[z] = run
+            best[z] = b
+        run = 1
+    for i in range(R):
+        for j in range(C):
+            if sl[i, j]:
+                owner[i, j] = best[sl[i, j]]
+    return lab, n, owner
+
+
+# ------------------------------------------------------------------------------------------
+# stage 7: boundaries, per-vertex classes, main ground, refinement by height above the ground
+
+
+@njit(cache=True)
+def vertex_kernel(labels, obs_lab, valid, wrap, main_share):  # type: ignore[no-untyped-def]
+    """``boundary_vertices`` + ``vertex_labels`` + ``main_ground_vertices`` in one pass over the
+    vertices. Returns ``vid, boundary, vertex labels, main ground vertices``."""
+    n_az, n_el = valid.shape
+    R = labels.shape[0]
+    C = labels.shape[1] // 2
+    vid, bnd = boundary_kernel(obs_lab, n_az, n_el, wrap)
+    # the main ground zones: component sizes of the ground triangles
+    root = _mesh_roots(labels == 0, wrap)
+    size = np.zeros(R * 2 * C, np.int32)
+    for f in range(R * 2 * C):
+        if root[f] >= 0:
+            size[root[f]] += 1
+    big = 0
+    for f in range(R * 2 * C):
+        if size[f] > big:
+            big = size[f]
+    main_tri = np.zeros((R, 2 * C), np.uint8)
+    if big > 0:
+        for f in range(R * 2 * C):
+            if root[f] >= 0 and size[root[f]] >= main_share * big:
+                main_tri[f // (2 * C), f % (2 * C)] = 1
+    vlab = np.empty((n_az, n_el), np.int8)
+    main = np.zeros((n_az, n_el), np.bool_)
+    for p in range(n_az):
+        for q in range(n_el):
+            flags = 0
+            mflag = 0
+            for k in range(6):
+                t = _incident(labels, p, q, k, R, C, wrap, 1)  # 1: no triangle
+                if t == 0:
+                    flags |= 1
+                elif t == -4:
+                    flags |= 2
+                elif t == -3:
+                    flags |= 4
+                elif t == -2:
+                    flags |= 8
+                mflag |= _incident(main_tri, p, q, k, R, C, wrap, 0)
+            main[p, q] = mflag > 0
+            if not valid[p, q]:
+                vlab[p, q] = -1
+            elif flags & 8:
+                vlab[p, q] = -2
+            elif flags & 1:
+                vlab[p, q] = 0
+            elif flags & 2:
+                vlab[p, q] = -4
+            elif flags & 4:
+                vlab[p, q] = -3
+            else:
+                vlab[p, q] = -1
+    return vid, bnd, vlab, main
+
+
+@njit(cache=True)
+def ground_cells_kernel(P, ref, cell_m, quantile):  # type: ignore[no-untyped-def]
+    """``ground.ground_height_map`` before its hole filling: the ``quantile`` of the reference
+    points' z per horizontal cell ``(nx, ny)`` (NaN: no point), and the grid's origin."""
+    n = P.shape[0]
+    m = 0
+    gx_min = np.inf
+    gy_min = np.inf
+    for p in range(n):
+        if ref[p] and math.isfinite(P[p, 0] + P[p, 1] + P[p, 2]):
+            m += 1
+            gx_min = min(gx_min, P[p, 0])
+            gy_min = min(gy_min, P[p, 1])
+    if m == 0:
+        return np.zeros((1, 1)), np.zeros(2), False
+    sel = np.empty(m, np.int64)
+    m = 0
+    for p in range(n):
+        if ref[p] and math.isfinite(P[p, 0] + P[p, 1] + P[p, 2]):
+            sel[m] = p
+            m += 1
+    ix = np.empty(m, np.int64)
+    iy = np.empty(m, np.int64)
+    nx = 0
+    ny = 0
+    for k in range(m):
+        p = sel[k]
+        ix[k] = math.floor((P[p, 0] - gx_min) / cell_m)
+        iy[k] = math.floor((P[p, 1] - gy_min) / cell_m)
+        nx = max(nx, ix[k] + 1)
+        ny = max(ny, iy[k] + 1)
+    counts = np.zeros(nx * ny + 1, np.int64)
+    for k in range(m):
+        counts[ix[k] * ny + iy[k] + 1] += 1
+    start = np.cumsum(counts)
+    fill = start.copy()
+    zs = np.empty(m, np.float64)
+    for k in range(m):
+        c = ix[k] * ny + iy[k]
+        zs[fill[c]] = P[sel[k], 2]
+        fill[c] += 1
+    heights = np.full((nx, ny), np.nan)
+    missing = False
+    for c in range(nx * ny):
+        a, b = start[c], start[c + 1]
+        if b > a:
+            heights[c // ny, c % ny] = _kth(zs[a:b], math.floor(quantile * (b - a - 1)))
+        else:
+            missing = True
+    origin = np.empty(2)
+    origin[0] = gx_min
+    origin[1] = gy_min
+    return heights, origin, missing
+
+
+@njit(cache=True)
+def refine_kernel(P, vlab, valid, grid, origin, cell_m, band_m, above_m):  # type: ignore[no-untyped-def]
+    """``ground.refine_by_ground_height`` (``envelope = 0``) per valid vertex."""
+    n = P.shape[0]
+    out = vlab.copy()
+    nx, ny = grid.shape
+    for p in range(n):
+        if not valid[p]:
+            continue
+        ix = math.floor((P[p, 0] - origin[0]) / cell_m)
+        iy = math.floor((P[p, 1] - origin[1]) / cell_m)
+        ix = min(max(ix, 0), nx - 1)
+        iy = min(max(iy, 0), ny - 1)
+        h = P[p, 2] - grid[ix, iy]
+        lab = out[p]
+        if abs(h) <= band_m:
+            lab = 0
+        if lab == 0 and h > above_m:
+            lab = -2
+        out[p] = lab
+    return out
+
+
+@njit(cache=True)
+def _median(values):  # type: ignore[no-untyped-def]
+    """``np.median`` of a 1-D array (reorders a copy)."""
+    v = values.copy()
+    m = len(v)
+    h = m // 2
+    if m % 2:
+        return _kth(v, h)
+    a = _kth(v, h - 1)
+    b = _kth(v, h)
+    return (a + b) / 2
+
+
+@njit(cache=True, error_model="numpy")
+def rings_by_order_kernel(az):  # type: ignore[no-untyped-def]
+    """``grids._rings_by_order``: ``(ok, ring per point, azimuth step)``; ``ok`` False when the
+    storage order is not a sweep."""
+    n = len(az)
+    two_pi = 2 * np.pi
+    empty = np.zeros(0, np.int64)
+    if n < 100:
+        return False, empty, 0.0
+    d = np.empty(n - 1)
+    ad = np.empty(n - 1)
+    pos = 0
+    for k in range(n - 1):
+        v = az[k + 1] - az[k]
+        if v >= np.pi:
+            v -= two_pi
+        elif v < -np.pi:
+            v += two_pi
+        d[k] = v
+        ad[k] = abs(v)
+        if v > 0:
+            pos += 1
+    step = _median(ad)
+    if not step > 0:
+        return False, empty, 0.0
+    direction = 1.0 if 2 * pos > n - 1 else -1.0
+    fwd = 0
+    for k in range(n - 1):
+        if direction * d[k] > -0.5 * step:
+            fwd += 1
+    if step > two_pi / 64 or fwd / (n - 1) < 0.9:
+        return False, empty, 0.0
+    ring = np.empty(n, np.int64)
+    acc = 0.0
+    half = 0.5 * step
+    lo = np.iinfo(np.int64).max
+    hi = np.iinfo(np.int64).min
+    for k in range(n):
+        if k > 0:
+            acc += d[k - 1]
+        r = math.floor((direction * acc + half) / two_pi)
+        ring[k] = r
+        lo = min(lo, r)
+        hi = max(hi, r)
+    if hi - lo + 1 < 2 or hi - lo + 1 > 512:
+        return False, empty, 0.0
+    for k in range(n):
+        ring[k] -= lo
+    return True, ring, step
+
+
+@njit(cache=True, error_model="numpy")
+def grid_cells_kernel(Q, rh, az, ring, n_columns, phase):  # type: ignore[no-untyped-def]
+    """The rest of ``grids.cloud_to_grid`` after the rings: rings ranked by rising mean
+    elevation, azimuth columns, flat cell per point. Returns ``(cell, n_el)``."""
+    n = len(ring)
+    n_r = 0
+    for k in range(n):
+        n_r = max(n_r, ring[k] + 1)
+    counts = np.zeros(n_r, np.int64)
+    sums = np.zeros(n_r, np.float64)
+    for k in range(n):
+        counts[ring[k]] += 1
+        sums[ring[k]] += Q[k, 2] / max(rh[k], 1e-9)
+    key = np.empty(n_r)
+    n_el = 0
+    for r in range(n_r):
+        if counts[r] > 0:
+            key[r] = sums[r] / max(counts[r], 1)
+            n_el += 1
+        else:
+            key[r] = np.inf
+    rank = np.argsort(key, kind="mergesort")
+    lut = np.empty(n_r, np.int64)
+    for r in range(n_r):
+        lut[rank[r]] = r
+    cell = np.empty(n, np.int64)
+    scale = 2 * np.pi
+    for k in range(n):
+        x = (az[k] + np.pi) / scale * n_columns
+        i = math.floor(x - phase + 0.5) % n_columns
+        cell[k] = i * n_el + lut[ring[k]]
+    return cell, n_el
+
+
+@njit(cache=True)
+def cloud_prep_kernel(P):  # type: ignore[no-untyped-def]
+    """The start of ``grids.cloud_to_grid``: the valid points (finite, not ``(0, 0, 0)``) of
+    ``P (N, >=3)`` as float64 rows ``Q (M, 3)``, their input indices and horizontal ranges."""
+    n = P.shape[0]
+    keep = np.empty(n, np.int64)
+    m = 0
+    for p in range(n):
+        x = np.float64(P[p, 0])
+        y = np.float64(P[p, 1])
+        z = np.float64(P[p, 2])
+        if math.isfinite(x) and math.isfinite(y) and math.isfinite(z):
+            if x != 0 or y != 0 or z != 0:
+                keep[m] = p
+                m += 1
+    Q = np.empty((m, 3), np.float64)
+    rh = np.empty(m, np.float64)
+    for k in range(m):
+        p = keep[k]
+        Q[k, 0] = np.float64(P[p, 0])
+        Q[k, 1] = np.float64(P[p, 1])
+        Q[k, 2] = np.float64(P[p, 2])
+        rh[k] = math.hypot(Q[k, 0], Q[k, 1])
+    return Q, keep[:m].copy(), rh
+
+
+# ------------------------------------------------------------------------------------------
+# stage 8 input: per-obstacle vertex sets (twin: detector._build_obstacles' groupings)
+
+
+@njit(cache=True)
+def _stable_group(ids, n):  # type: ignore[no-untyped-def]
+    """Counting sort of ``ids`` (1..n, 0 = none): ``(start (n + 2,), order)`` with the members
+    of each id in input order (what a stable argsort gives)."""
+    start = np.zeros(n + 2, np.int64)
+    for v in ids:
+        if v > 0:
+            start[v + 1] += 1
+    for a in range(1, n + 2):
+        start[a] += start[a - 1]
+    fill = start.copy()
+    order = np.empty(start[n + 1], np.int64)
+    for k in range(len(ids)):
+        v = ids[k]
+        if v > 0:
+            order[fill[v]] = k
+            fill[v] += 1
+    return start, order
+
+
+@njit(cache=True, error_model="numpy")
+def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ignore[no-untyped-def]
+    """Boundary vertices ``(x, y)``, all vertices ``(x, y, z)`` and obstacle-plus-shadow vertex
+    sets ``(x, y)`` of obstacles 1..n (each with ``start`` offsets), the shadow areas and the
+    triangle counts, in the twin's orders."""
+    vf = vid.ravel()
+    bf = boundary.ravel()
+    bid = np.where(bf, vf, 0)
+    b_start, b_order = _stable_group(bid, n)
+    b_xy = np.empty((len(b_order), 2))
+    for k in range(len(b_order)):
+        b_xy[k, 0] = flat[b_order[k], 0]
+        b_xy[k, 1] = flat[b_order[k], 1]
+    v_start, v_order = _stable_group(vf, n)
+    v_xyz = np.empty((len(v_order), 3))
+    for k in range(len(v_order)):
+        for c in range(3):
+            v_xyz[k, c] = flat[v_order[k], c]
+    of = owner.ravel()
+    lf = obs_lab.ravel()
+    ntri = np.zeros(n + 1, np.int64)
+    for t in range(len(lf)):
+        ntri[lf[t]] += 1
+    area = np.zeros(n + 1)
+    t_start, t_order = _stable_group(of, n)
+    R2 = tri.shape[1]
+    for t in range(len(of)):  # raster order, as the twin's bincount
+        a = of[t]
+        if a > 0:
+            r, c = t // R2, t % R2
+            i0, i1, i2 = tri[r, c, 0], tri[r, c, 1], tri[r, c, 2]
+            v0x, v0y = flat[i0, 0], flat[i0, 1]
+            area[a] += 0.5 * abs(
+                (flat[i1, 0] - v0x) * (flat[i2, 1] - v0y)
+                - (flat[i2, 0] - v0x) * (flat[i1, 1] - v0y)
+            )
+    s_start = np.zeros(n + 2, np.int64)
+    verts = np.empty(3 * len(t_order), np.int64)
+    m = 0
+    for a in range(1, n + 1):
+        seg0 = m
+        for k in range(t_start[a], t_start[a + 1]):
+            t = t_order[k]
+            r, c = t // R2, t % R2
+            for q in range(3):
+                verts[m] = tri[r, c, q]
+                m += 1
+        seg = np.sort(verts[seg0:m])
+        u = seg0
+        for k in range(len(seg)):
+            if k == 0 or seg[k] != seg[k - 1]:
+                verts[u] = seg[k]
+                u += 1
+        m = u
+        s_start[a + 1] = m
+    s_xy = np.empty((m, 2))
+    for k in range(m):
+        s_xy[k, 0] = flat[verts[k], 0]
+        s_xy[k, 1] = flat[verts[k], 1]
+    return b_start, b_xy, v_start, v_xyz, s_start, s_xy, area[1:], ntri[1:]
+
+
+@njit(cache=True)
+def points_kernel(P):  # type: ignore[no-untyped-def]
+    """Stage 1's validity codes C_d: ``valid`` = all three coordinates finite, and the points
+    with NaN rows where not valid (``detector.detect_obstacles_grid``)."""
+    n_az, n_el = P.shape[0], P.shape[1]
+    out = np.empty((n_az, n_el, 3), np.float64)
+    valid = np.empty((n_az, n_el), np.bool_)
+    for i in range(n_az):
+        for j in range(n_el):
+            x, y, z = P[i, j, 0], P[i, j, 1], P[i, j, 2]
+            ok = math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
+            valid[i, j] = ok
+            if ok:
+                out[i, j, 0] = x
+                out[i, j, 1] = y
+                out[i, j, 2] = z
+            else:
+                out[i, j, 0] = np.nan
+                out[i, j, 1] = np.nan
+                out[i, j, 2] = np.nan
+    return out, valid

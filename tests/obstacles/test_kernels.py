@@ -1,0 +1,237 @@
+"""The compiled (Numba) backend of stages 1-7 against its NumPy twin: the same answers.
+
+Classes, obstacle ids, shadow owners, boundaries and per-vertex labels must be identical; floats
+(points, normals, z extrema, shape parameters) equal to 1e-9 relative (in practice bit-identical:
+the kernels repeat the twin's float32 / float64 operations in the same order). Run on simulated
+scenes (both scanners, with noise) and on every real scan grid in ``NAVKIT_DATA/lidar``
+(SemanticKITTI clouds through ``cloud_to_grid``, SqueezeSeg range images through
+``organized_to_grid``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from navkit.errors import ConfigError
+from navkit.obstacles import (
+    Mounting,
+    ObstacleSettings,
+    cloud_to_grid,
+    detect_obstacles,
+    detect_obstacles_in_grid,
+    organized_to_grid,
+)
+from navkit.obstacles.detector import ObstacleDetection
+from navkit.obstacles.mesh import build_mesh, robust_cell_normals
+from navkit.obstacles.rules import classify
+
+pytest.importorskip("numba")
+
+# stages 1-7, the map's vertex sets and hulls, A1, and the compiled shapes A6 (with its A5
+# start) and MVEE
+FAST = ObstacleSettings(shapes=("A1", "A5", "A6", "MVEE"), guaranteed_shapes=("A1",))
+
+
+def _close(a: np.ndarray, b: np.ndarray, what: str) -> None:
+    a, b = np.asarray(a), np.asarray(b)
+    assert a.shape == b.shape and a.dtype == b.dtype, what
+    if a.dtype.kind == "f":
+        assert np.array_equal(np.isnan(a), np.isnan(b)), what
+        np.testing.assert_allclose(a, b, rtol=1e-9, atol=0, equal_nan=True, err_msg=what)
+    else:
+        np.testing.assert_array_equal(a, b, err_msg=what)
+
+
+def assert_same_detection(a: ObstacleDetection, b: ObstacleDetection) -> None:
+    """Every array and every obstacle of two detections equal (floats to 1e-9 relative)."""
+    for name in (
+        "points",
+        "valid",
+        "triangles",
+        "normals",
+        "jump",
+        "triangle_labels",
+        "triangle_obstacle",
+        "vertex_labels",
+        "vertex_obstacle",
+        "boundary",
+    ):
+        _close(getattr(a, name), getattr(b, name), name)
+    assert a.wrap == b.wrap
+    assert len(a.obstacles) == len(b.obstacles)
+    for oa, ob in zip(a.obstacles, b.obstacles, strict=True):
+        assert (oa.id, oa.n_triangles, oa.n_points) == (ob.id, ob.n_triangles, ob.n_points)
+        for f in ("z_min", "z_max", "shadow_area"):
+            assert getattr(oa, f) == pytest.approx(getattr(ob, f), rel=1e-9, abs=0)
+        for f in ("boundary_xy", "polygon_xy", "shadow_xy"):
+            _close(getattr(oa, f), getattr(ob, f), f"obstacle {oa.id} {f}")
+        for sa, sb in ((oa.shapes, ob.shapes), (oa.guaranteed, ob.guaranteed)):
+            assert sa.keys() == sb.keys()
+            for k in sa:
+                pa, pb = sa[k].params(), sb[k].params()
+                assert pa.keys() == pb.keys()
+                for f in pa:
+                    if isinstance(pa[f], str):
+                        assert pa[f] == pb[f]
+                    else:
+                        np.testing.assert_allclose(
+                            np.asarray(pa[f], dtype=float),
+                            np.asarray(pb[f], dtype=float),
+                            rtol=1e-9,
+                            err_msg=f"obstacle {oa.id} {k} {f}",
+                        )
+
+
+def _both(run):  # type: ignore[no-untyped-def]
+    return run(replace(FAST, backend="numpy")), run(replace(FAST, backend="compiled"))
+
+
+def test_backend_is_validated():
+    with pytest.raises(ConfigError, match="backend"):
+        ObstacleSettings(backend="cuda")
+
+
+@pytest.mark.parametrize(
+    ("scene", "scanner", "noise"),
+    [("four", "tilting", 0.01), ("four", "spinning64", 0.01), ("box", "spinning64", 0.02)],
+)
+def test_compiled_equals_numpy_on_simulated_scenes(scene, scanner, noise):
+    from navkit.experiments.obstacles import paper_scenes, scanners
+    from navkit.geometry import se3_from_rt
+    from navkit.sim import RangeNoise, render_scan
+
+    sc, height = scanners()[scanner]
+    T = se3_from_rt(np.eye(3), [0.0, 0.0, height])
+    sim = render_scan(
+        paper_scenes()[scene], sc, T, noise=RangeNoise(relative_sigma=noise), rng=3, max_range=60.0
+    )
+    a, b = _both(lambda s: detect_obstacles(sim.scan, s))
+    assert len(a.obstacles) > 0  # the comparison is not vacuous
+    assert_same_detection(a, b)
+
+
+def _kitti_grids(data_path):  # type: ignore[no-untyped-def]
+    from navkit.io.pointcloud import read_kitti_bin
+
+    folder = data_path("lidar/semantickitti-seq00")
+    return [
+        (f.name, cloud_to_grid(read_kitti_bin(f), backend="numpy"))
+        for f in sorted(folder.glob("*.bin"))
+    ]
+
+
+def test_stage_kernels_equal_numpy_on_kitti(data_path):
+    """Stages 2-5 separately, bit for bit, on every SemanticKITTI frame."""
+    s = ObstacleSettings()
+    for name, grid in _kitti_grids(data_path):
+        P = Mounting(1.73).to_body(grid.points)
+        valid = np.isfinite(P).all(axis=-1)
+        o = np.array([0.0, 0.0, 1.73])
+        kw = dict(
+            wrap=True,
+            jump_height_m=s.jump_height_m,
+            jump_range_fraction=s.jump_range_fraction,
+            jump_range_ratio=s.jump_range_ratio,
+        )
+        ma = build_mesh(P, valid, o, steep_cos=math.cos(s.c1_rad), backend="numpy", **kw)
+        mb = build_mesh(P, valid, o, steep_cos=math.cos(s.c1_rad), backend="compiled", **kw)
+        for f in ("valid", "normal", "vertex_ray", "range_mean", "z_min", "z_max", "jump"):
+            np.testing.assert_array_equal(getattr(ma, f), getattr(mb, f), err_msg=f"{name} {f}")
+        ra = robust_cell_normals(P, valid, o, support_m=1.0, backend="numpy", **kw)
+        rb = robust_cell_normals(P, valid, o, support_m=1.0, backend="compiled", **kw)
+        np.testing.assert_array_equal(ra, rb, err_msg=f"{name} robust normals")
+        la, rules_a = classify(ma, s, wrap=True, robust_cells=ra, backend="numpy")
+        lb, rules_b = classify(ma, s, wrap=True, robust_cells=ra, backend="compiled")
+        np.testing.assert_array_equal(la, lb, err_msg=f"{name} labels")
+        for k in rules_a:
+            np.testing.assert_array_equal(rules_a[k], rules_b[k], err_msg=f"{name} {k}")
+        assert (la == -2).sum() > 1000 and (la == 0).sum() > 50000  # a real frame, not empty
+
+
+def test_compiled_equals_numpy_on_kitti(data_path):
+    for name, grid in _kitti_grids(data_path):
+        a, b = _both(
+            lambda s, g=grid, n=name: detect_obstacles_in_grid(g, Mounting(1.73), s, source=n)
+        )
+        assert len(a.obstacles) > 20
+        assert_same_detection(a, b)
+
+
+def test_compiled_equals_numpy_on_squeezeseg(data_path):
+    folder = data_path("lidar/squeezeseg-kitti-raw")
+    files = sorted(folder.glob("*.npy"))
+    assert files
+    for f in files:
+        x = np.load(f)
+        P = x[..., :3].astype(np.float64)
+        P[x[..., 4] == 0] = np.nan
+        grid = organized_to_grid(P, source=f.name)
+        a, b = _both(lambda s, g=grid: detect_obstacles_in_grid(g, Mounting(1.73), s))
+        assert_same_detection(a, b)
+
+
+def _same_grid(a, b) -> None:  # type: ignore[no-untyped-def]
+    assert (a.method, a.wraps, a.shape) == (b.method, b.wraps, b.shape)
+    np.testing.assert_array_equal(a.points, b.points)
+    np.testing.assert_array_equal(a.cell_of_point, b.cell_of_point)
+    np.testing.assert_array_equal(a.azimuth, b.azimuth)
+
+
+def test_cloud_to_grid_compiled_equals_numpy_on_kitti(data_path):
+    from navkit.io.pointcloud import read_kitti_bin
+
+    folder = data_path("lidar/semantickitti-seq00")
+    for f in sorted(folder.glob("*.bin")):
+        pts = read_kitti_bin(f)
+        a = cloud_to_grid(pts, backend="numpy")
+        b = cloud_to_grid(pts, backend="compiled")
+        assert a.method == "order"
+        _same_grid(a, b)
+        # rings by elevation (the other recovery), and a shuffled cloud that is not a sweep
+        sub = pts[::7]
+        _same_grid(
+            cloud_to_grid(sub, ring_method="elevation", n_rings=64, backend="numpy"),
+            cloud_to_grid(sub, ring_method="elevation", n_rings=64, backend="compiled"),
+        )
+
+
+def test_cloud_to_grid_compiled_equals_numpy_on_a_shuffled_cloud(rng):
+    az = np.repeat(np.linspace(-np.pi, np.pi, 720, endpoint=False), 16)
+    el = np.tile(np.radians(np.linspace(-20, 5, 16)), 720)
+    r = rng.uniform(3, 40, size=az.size)
+    P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * r[:, None]
+    P = np.concatenate([P, P[rng.integers(0, len(P), 3000)] * 1.01])[rng.permutation(len(P) + 3000)]
+    P[rng.random(len(P)) < 0.05] = 0.0  # no-returns stored as zeros
+    a = cloud_to_grid(P, backend="numpy")
+    assert a.method == "elevation"
+    _same_grid(a, cloud_to_grid(P, backend="compiled"))
+
+
+def test_mvee_and_a6_compiled_equal_numpy(rng):
+    from navkit.geometry.shapes import ellipse_a5, ellipses_a6_batch, hull_points, mvee_batch
+
+    sets = []
+    for _ in range(40):
+        k = int(rng.integers(3, 300))
+        P = rng.normal(size=(k, 2)) * rng.uniform(0.05, 4.0, size=2) + rng.uniform(-30, 30, 2)
+        sets.append(hull_points(P))
+    sets.append(hull_points(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])))  # a triangle
+    starts = [ellipse_a5(h) for h in sets]
+    pairs = list(
+        zip(mvee_batch(sets, backend="numpy"), mvee_batch(sets, backend="compiled"), strict=True)
+    ) + list(
+        zip(
+            ellipses_a6_batch(sets, starts, backend="numpy"),
+            ellipses_a6_batch(sets, starts, backend="compiled"),
+            strict=True,
+        )
+    )
+    for a, b in pairs:
+        pa, pb = a.params(), b.params()
+        for f in pa:
+            if not isinstance(pa[f], str):
+                np.testing.assert_allclose(pa[f], pb[f], rtol=1e-9, atol=1e-12, err_msg=f)
