@@ -158,3 +158,33 @@ def test_build_reads_map_settings_from_config(cli, tiny_log, tmp_path):
     cfg.write_text("[map]\nresolution = -1\n")
     res = cli("map", "build", log_path, "-o", tmp_path / "m2", "--config", cfg)
     assert res.exit_code == 2 and "resolution" in res.stderr
+
+
+def test_locate_says_self_consistency_and_runs_several_logs_as_a_batch(cli, tiny_log, tmp_path):
+    """Against the map built from the same log the headline is a self-consistency check; a second
+    log of the same room (another drive) is scored against its own poses; a batch of both writes
+    what the single runs write."""
+    log_path, poses = tiny_log
+    other = tmp_path / "other.log"
+    _write_log(other, poses[::-1].copy(), np.linspace(-np.pi / 2, np.pi / 2, 181), 0.01)
+    assert cli("map", "build", log_path, "-o", tmp_path / "map", "--every", "2").exit_code == 0
+    m = tmp_path / "map" / "map.json"
+    res = cli("map", "locate", m, log_path, "-o", tmp_path / "same", "--every", "4")
+    assert res.exit_code == 0, res.output
+    assert "self-consistency" in res.output
+    same = json.loads((tmp_path / "same" / "summary.json").read_text())
+    assert same["reference"].startswith("self-consistency")
+    res = cli("map", "locate", m, other, "-o", tmp_path / "other", "--every", "4")
+    assert res.exit_code == 0 and "self-consistency" not in res.output
+    assert (
+        "corrected poses"
+        in json.loads((tmp_path / "other" / "summary.json").read_text())["reference"]
+    )
+    res = cli("map", "locate", m, log_path, other, "-o", tmp_path / "both", "--every", "4")
+    assert res.exit_code == 0, res.output
+    for name, single in (("tiny", "same"), ("other", "other")):
+        a = (tmp_path / "both" / name / "poses.tum").read_text()
+        assert a == (tmp_path / single / "poses.tum").read_text()
+    rows = [json.loads(x) for x in (tmp_path / "both" / "batch.jsonl").read_text().splitlines()]
+    assert [r["status"] for r in rows] == ["ok", "ok"]
+    assert rows[0]["figures"]["success_rate"] == same["success_rate"]

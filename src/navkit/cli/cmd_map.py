@@ -30,6 +30,7 @@ from typing import Any
 
 import typer
 
+from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
 from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
 
 log = logging.getLogger(__name__)
@@ -50,37 +51,6 @@ class BuildInput:
     kind: str
     every: int
     max_range: float
-
-
-@dataclass(frozen=True)
-class LocateInput:
-    map: str
-    input: str
-    kind: str
-    every: int
-    group: int
-    prior: str
-    max_range: float
-    success_m: float
-    success_deg: float
-    known_heading: bool
-
-
-def _localizer_settings(
-    config: Path | None, sigma: float | None, refine: bool | None, seq: Any
-) -> Any:
-    """LocalizerSettings from the ``[localizer]`` table of ``--config`` (a ``settings.toml``
-    of an earlier run works; its ``[input]`` table is ignored), the options given on top; not
-    set anywhere: refinement on for stereo frames, the input's own range error model."""
-    from navkit.localization import LocalizerSettings
-
-    data: dict[str, Any] = {}
-    if config is not None:
-        data = dict(_read_toml(config).get("localizer", {}))
-    data.setdefault("refine", seq.kind == "stereo")
-    data.setdefault("range_sigma_coefficient", seq.range_sigma_coefficient)
-    data.update({k: v for k, v in (("sigma", sigma), ("refine", refine)) if v is not None})
-    return LocalizerSettings.from_dict(data, source=str(config or "options"))
 
 
 def _read_toml(path: Path) -> dict[str, Any]:
@@ -182,30 +152,14 @@ _REFINE_HELP = (
 _GROUP_HELP = "Stereo: N consecutive frames taken at one place form one fragment."
 
 
-def _locate_summary(seq: Any, wall_map: Any, stats: dict[str, Any], **extra: Any) -> dict[str, Any]:
-    """summary.json of map locate: the run's facts, the evaluation, the error relative to the
-    map's size."""
-    import numpy as np
-
-    summary: dict[str, Any] = {
-        "input_kind": seq.kind,
-        **extra,
-        "reference": "poses.tum of the frames"
-        if seq.kind == "stereo"
-        else "corrected poses of the log",
-        **stats,
-    }
-    if wall_map.walls:
-        size = float(np.linalg.norm(np.subtract(*wall_map.bounds[::-1])))
-        summary["map_diagonal_m"] = size
-        summary["position_error_relative_median"] = stats["position_error_m_median"] / size
-    return summary
-
-
 @map_app.command("locate")
 def locate_cmd(
     map_json: Path = typer.Argument(..., help="map.json from navkit map build."),
-    input: Path = typer.Argument(..., help="CARMEN log or stereo frame folder to localize."),
+    inputs: list[Path] = typer.Argument(
+        ...,
+        help="CARMEN log(s) or stereo frame folder(s) to localize; several: one output folder "
+        "each, named after the input.",
+    ),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     prior: PriorChoice = typer.Option(
         PriorChoice.none, help="none: global search; odometry: last fix + odometry."
@@ -225,64 +179,72 @@ def locate_cmd(
     known_heading: bool = typer.Option(False, "--known-heading", help=_KNOWN_HEADING_HELP),
     refine: bool | None = typer.Option(None, "--refine/--no-refine", help=_REFINE_HELP),
     config: Path | None = typer.Option(
-        None, "--config", help="TOML with a [localizer] table (as in the settings.toml written)."
+        None, "--config", help="TOML with a localizer table (as in the settings.toml written)."
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace earlier outputs in --out."),
+    workers: int | None = WORKERS,
+    scheduler: str | None = SCHEDULER,
+    resume: bool = RESUME,
 ) -> None:
     """Localize scans / frames in a wall map (navkit.localization.Localizer); poses as TUM, fixes as CSV.
 
     Example: navkit map locate out/aces/map.json ../shared/data/laser2d/aces-corrected.log.gz --prior odometry --every 20 -o out/aces-locate
     """
     with cli_errors():
-        import numpy as np
+        from navkit.batch.locate import LocateInput, locate_input
 
-        from navkit.io.fixes import write_fix_poses, write_fixes_csv
-        from navkit.io.scan_sequence import read_scan_sequence
-        from navkit.io.wallmap import read_wall_map
-        from navkit.localization import Localizer, evaluate_fixes, reported_poses
-        from navkit.viz.maps import plot_map
-
-        check_out_dir(out, overwrite)
-        wall_map = read_wall_map(map_json)
-        seq = read_scan_sequence(input, every=every, group=group, max_range=max_range)
-        settings = _localizer_settings(config, sigma, refine, seq)
-        loc = Localizer(wall_map, settings, view=seq.view)
-        tracking = prior == PriorChoice.odometry
-        results = [
-            loc.register(
-                seq.points(k),
-                odometry_delta=seq.odometry_delta(k) if tracking else None,
-                heading=float(seq.reference[k, 2]) if known_heading else None,
-            )
-            for k in progress(range(len(seq)), "localizing")
-        ]
-        out.mkdir(parents=True, exist_ok=True)
-        write_fix_poses(out / "poses.tum", results, seq.timestamps)
-        write_fixes_csv(out / "fixes.csv", results, seq.indices, seq.timestamps, seq.reference)
-        stats = evaluate_fixes(results, seq.reference, success_m=success_m, success_deg=success_deg)
-        method = "known heading (paper 3)" if known_heading else "correlative matching"
-        summary = _locate_summary(seq, wall_map, stats, prior=prior.value, method=method)
-        title = f"{input.name}: {100 * stats['success_rate']:.0f}% within {success_m} m"
-        est = np.where([[r.ok] for r in results], reported_poses(results), np.nan)
-        plot_map(wall_map, out / "locate.png", poses=est, truth=seq.reference, title=title)
-        inp = LocateInput(
-            str(map_json),
-            str(input),
-            seq.kind,
-            every,
-            group,
-            prior.value,
-            max_range,
-            success_m,
-            success_deg,
-            known_heading,
+        check_out_dir(out, overwrite or resume)
+        table = dict(_read_toml(config).get("localizer", {})) if config is not None else {}
+        table.update({k: v for k, v in (("sigma", sigma), ("refine", refine)) if v is not None})
+        opts: dict[str, Any] = dict(every=every, group=group, prior=prior.value, max_range=max_range,
+                    success_m=success_m, success_deg=success_deg, known_heading=known_heading,
+                    localizer=table)  # fmt: skip
+        if len(inputs) > 1 or workers or scheduler or resume:
+            summary = _locate_batch(map_json, inputs, out, opts, workers, scheduler, resume)
+            write_run_files(out, {"input": opts}, summary)
+            exit_if_failed(summary)
+            return
+        inp = LocateInput(str(map_json), str(inputs[0]), **opts)
+        summary, settings = locate_input(
+            out, inp, iterate=lambda steps, n: progress(steps, "localizing", total=n)
         )
         write_run_files(out, {"input": inp, "localizer": settings}, summary)
+        self_check = summary["reference"].startswith("self-consistency")
         typer.echo(
-            f"{len(seq)} scans: {100 * stats['success_rate']:.1f}% fixed within {success_m} m / "
-            f"{success_deg} deg, median error {stats['position_error_m_median']:.3f} m, "
-            f"{stats['ms_per_fix_median']:.1f} ms per fix -> {out}"
+            f"{summary['fixes']} scans: {100 * summary['success_rate']:.1f}% fixed within "
+            f"{success_m} m / {success_deg} deg of {'the same poses the map was built from (a self-consistency check)' if self_check else 'the reference'}"
+            f", median error {summary['position_error_m_median']:.3f} m, "
+            f"{summary['ms_per_fix_median']:.1f} ms per fix -> {out}"
         )
+
+
+def _locate_batch(
+    map_json: Path,
+    inputs: list[Path],
+    out: Path,
+    opts: dict[str, Any],
+    workers: int | None,
+    scheduler: str | None,
+    resume: bool,
+) -> dict[str, Any]:
+    """Every input as one task of a batch (``out/<input name>/``)."""
+    from navkit.batch import BatchTask, settings_hash
+    from navkit.batch.locate import LocateInput, locate_job
+
+    names = [p.name.split(".")[0] for p in inputs]
+    keys = [k if names.count(k) == 1 else f"{k}_{i}" for i, k in enumerate(names)]
+    tasks = [
+        BatchTask(
+            key,
+            locate_job,
+            {"inp": LocateInput(str(map_json), str(p), **opts)},
+            settings_hash(map_json, p, opts),
+        )
+        for key, p in zip(keys, inputs, strict=True)
+    ]
+    return run_inputs(
+        tasks, out, workers=workers, scheduler=scheduler, resume=resume, description="inputs"
+    )
 
 
 def register(app: typer.Typer) -> None:
