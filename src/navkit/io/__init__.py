@@ -5,7 +5,8 @@ the field and what was expected; writers are atomic (:mod:`navkit.io.atomic`). N
 imported lazily, so ``import navkit.io`` stays cheap:
 
 - :mod:`navkit.io.pointcloud` - KITTI ``.bin``/``.label``, PCD v0.7 (ascii, binary,
-  binary_compressed), PLY; :class:`PointCloud`.
+  binary_compressed), PLY; :class:`PointCloud` (one module per format: ``kitti``, ``pcd``,
+  ``ply``, ``lzf``, ``cloud``; ``pointcloud`` re-exports them).
 - :mod:`navkit.io.trajectory` - TUM, KITTI poses, EuRoC CSV, ``time v omega`` odometry logs;
   :class:`Trajectory`.
 - :mod:`navkit.io.images` - PNG/JPG/PGM/PPM images (RGB), depth images, PFM.
@@ -37,6 +38,7 @@ _EXPORTS = {
         "read_kitti_labels",
         "read_pcd",
         "read_ply",
+        "read_pointcloud",
         "write_kitti_bin",
         "write_kitti_labels",
         "write_pcd",
@@ -148,6 +150,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load on first
         read_kitti_labels,
         read_pcd,
         read_ply,
+        read_pointcloud,
         write_kitti_bin,
         write_kitti_labels,
         write_pcd,
