@@ -3,7 +3,10 @@
 - Outputs go to ``--out DIR``; each run writes its resolved settings (``settings.toml``) and a
   ``summary.json`` of its key figures there (:func:`write_run_files`).
 - Bad input exits with code 2 and one line ``error: ...`` naming the file / field and what was
-  expected; the traceback only with ``navkit --debug`` (:func:`cli_errors`).
+  expected; a bug exits with code 1 and one line ``internal error: ...``; the traceback only
+  with ``navkit --debug`` (:func:`cli_errors`).
+- A command's outputs are all-or-nothing: a failed run leaves ``--out`` as it was
+  (:func:`cli_errors` opens a :func:`navkit.io.atomic.output_transaction`).
 - Long work shows a progress bar (:func:`progress`), on stderr, hidden when not a terminal.
 - Heavy imports happen inside the command functions, so ``navkit --help`` stays fast.
 """
@@ -24,6 +27,7 @@ from navkit.errors import InputError, NavkitError
 
 __all__ = [
     "STATE",
+    "check_out_path",
     "cli_errors",
     "expand_inputs",
     "progress",
@@ -44,21 +48,118 @@ class _State:
 STATE = _State()
 
 
+def _out_dirs() -> list[Path]:
+    """The ``--out`` folder(s) of the running command, from click's context (none outside one)."""
+    try:  # typer >= 0.17 vendors click as typer._click
+        from typer._click.globals import get_current_context
+    except ImportError:  # pragma: no cover - older typer uses click itself
+        from click import get_current_context  # type: ignore[no-redef]
+
+    ctx = get_current_context(silent=True)
+    if ctx is None:
+        return []
+    return [
+        Path(value)
+        for name, value in ctx.params.items()
+        if name in ("out", "out_dir", "output") and isinstance(value, (str, Path))
+    ]
+
+
+def check_out_path(out: Path) -> None:
+    """Refuse an ``--out`` that is a file or lies under a file, before anything runs.
+
+    Raises
+    ------
+    InputError
+        Naming the file that is in the way.
+    """
+    for d in (out, *out.parents):
+        if d.exists():
+            if not d.is_dir():
+                where = "is a file" if d == out else f"lies under the file {d}"
+                raise InputError(
+                    f"the output folder {where}",
+                    source=out,
+                    field="--out",
+                    expected="a folder, or a path that does not exist yet",
+                )
+            return
+
+
+def _command_line() -> str:
+    return " ".join(["navkit", *sys.argv[1:]])
+
+
 @contextmanager
 def cli_errors() -> Iterator[None]:
-    """Turn navkit errors into ``error: ...`` on stderr and exit code 2 (traceback with --debug)."""
+    """Run a command body as one transaction, with the CLI's error handling.
+
+    - The body's outputs are all-or-nothing (:func:`navkit.io.atomic.output_transaction`): a
+      failed or interrupted run leaves ``--out`` exactly as it was.
+    - A navkit error (bad input) prints ``error: ...`` and exits 2; so do operating-system errors
+      on a named file, undecodable text and inputs too large for memory.
+    - Ctrl-C exits 130.
+    - Anything else is a bug: one line ``internal error: <type>: <message> (command: ...; run with
+      --debug for the traceback)`` and exit code 1, never 0.
+
+    With ``navkit --debug`` every exception propagates with its traceback (after the rollback).
+    """
+    from navkit.io.atomic import output_transaction
+
     try:
-        yield
-    except NavkitError as exc:
+        outs = _out_dirs()
+        for out in outs:
+            check_out_path(out)
+        with output_transaction(*outs):
+            yield
+    except (typer.Exit, typer.Abort):
+        raise
+    except Exception as exc:
+        if _is_click_exception(exc) or STATE.debug:
+            raise
+        _report(exc)
+    except KeyboardInterrupt:
         if STATE.debug:
             raise
+        typer.echo("interrupted: no output was changed", err=True)
+        raise typer.Exit(code=130) from None
+
+
+def _is_click_exception(exc: BaseException) -> bool:
+    """Click's own control flow (usage errors, exit, abort), vendored by typer or not."""
+    return any(cls.__module__.split(".")[0] in ("click", "typer") for cls in type(exc).__mro__[:-2])
+
+
+def _report(exc: Exception) -> None:
+    """Print one line for ``exc`` and exit: 2 for bad input, 1 for a bug."""
+    if isinstance(exc, NavkitError):
         typer.echo(f"error: {exc}", err=True)
         raise typer.Exit(code=2) from None
-    except (FileNotFoundError, IsADirectoryError, PermissionError) as exc:
-        if STATE.debug:
-            raise
-        typer.echo(f"error: {exc.filename or ''}: {exc.strerror}", err=True)
+    if isinstance(exc, OSError) and exc.filename is not None:
+        where = exc.filename if exc.filename2 is None else f"{exc.filename} -> {exc.filename2}"
+        typer.echo(f"error: {where}: {exc.strerror or exc}", err=True)
         raise typer.Exit(code=2) from None
+    if isinstance(exc, MemoryError):
+        typer.echo(
+            f"error: the input needs more memory than is available (command: {_command_line()})",
+            err=True,
+        )
+        raise typer.Exit(code=2) from None
+    _internal_error(exc)  # the last line of defence: a bug, reported in one line
+
+
+def internal_error_line(exc: BaseException) -> str:
+    """The one line printed for an unexpected exception (a bug, not a bad input)."""
+    message = " ".join(str(exc).split())[:300]
+    return (
+        f"internal error: {type(exc).__name__}: {message} "
+        f"(command: {_command_line()}; run with --debug for the traceback)"
+    )
+
+
+def _internal_error(exc: BaseException) -> None:
+    typer.echo(internal_error_line(exc), err=True)
+    raise typer.Exit(code=1) from None
 
 
 def progress(
