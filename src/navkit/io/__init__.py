@@ -106,6 +106,7 @@ __all__ = [
     "read_pcd",
     "read_pfm",
     "read_ply",
+    "read_pointcloud",
     "read_trajectory",
     "read_tum",
     "write_depth",

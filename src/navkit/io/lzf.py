@@ -10,7 +10,16 @@ from bisect import bisect_left
 
 import numpy as np
 
-__all__ = ["LZFError", "lzf_compress", "lzf_decompress"]
+__all__ = ["LZFError", "lzf_compress", "lzf_decompress", "max_lzf_output"]
+
+#: Largest expansion of an LZF stream: a 3-byte back reference yields at most 264 bytes.
+_LZF_MAX_RATIO = 88
+
+
+def max_lzf_output(n_compressed: int) -> int:
+    """Upper bound of the decompressed size of ``n_compressed`` bytes of LZF (checked before
+    allocating, so a lying size field cannot reserve gigabytes)."""
+    return _LZF_MAX_RATIO * n_compressed
 
 
 class LZFError(ValueError):
@@ -37,11 +46,17 @@ def lzf_decompress(data: bytes | bytearray | memoryview, expected_size: int) -> 
     Raises
     ------
     LZFError
-        If a token runs past the input, refers before the start of the output, or the output
-        size differs from ``expected_size``.
+        If ``expected_size`` is more than the stream can expand to (:func:`max_lzf_output`,
+        checked before anything is allocated), a token runs past the input, refers before the
+        start of the output, or the output size differs from ``expected_size``.
     """
     src = bytes(data)
     n_in = len(src)
+    if expected_size < 0 or expected_size > max_lzf_output(n_in):
+        raise LZFError(
+            f"{n_in} compressed bytes cannot hold {expected_size} bytes "
+            f"(LZF expands at most {_LZF_MAX_RATIO}x)"
+        )
     out = bytearray(expected_size)
     ip = 0
     op = 0

@@ -20,7 +20,7 @@ from navkit.errors import FormatError, InputError
 from navkit.io.atomic import atomic_write
 from navkit.io.cloud import PathLike, PointCloud
 from navkit.io.cloud import existing_file as _existing
-from navkit.io.lzf import LZFError, lzf_compress, lzf_decompress
+from navkit.io.lzf import LZFError, lzf_compress, lzf_decompress, max_lzf_output
 
 __all__ = ["read_pcd", "write_pcd"]
 
@@ -252,6 +252,13 @@ def _pcd_records_compressed(p: Path, hdr: _PcdHeader, body: memoryview) -> dict[
             source=p,
             field="DATA",
             expected=f"{need} bytes",
+        )
+    if usize > max_lzf_output(min(csize, len(body) - 8)):
+        raise FormatError(
+            f"{csize} compressed bytes cannot hold {usize} bytes ({hdr.points} points)",
+            source=p,
+            field="DATA",
+            expected=f"an uncompressed size of at most {max_lzf_output(csize)} bytes",
         )
     if len(body) - 8 < csize:
         raise FormatError(

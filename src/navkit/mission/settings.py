@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from navkit.errors import ConfigError, DataNotFoundError, FormatError
+from navkit.geometry._validate import check_settings
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -68,6 +69,9 @@ class RobotSettings:
     goal_tolerance: float = 0.3
     dt: float = 0.1
 
+    def __post_init__(self) -> None:
+        check_settings(self)
+
 
 @dataclass(frozen=True)
 class VOSettings:
@@ -82,6 +86,9 @@ class VOSettings:
     scale_sigma: float = 0.05
     heading_bias_deg_per_m: float = 0.6
     heading_sigma_deg: float = 0.3
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -98,6 +105,9 @@ class LidarSettings:
     relative_sigma: float = 0.002
     absolute_sigma: float = 0.01
     dropout: float = 0.01
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -118,6 +128,9 @@ class CameraSettings:
     hfov_deg: float = 80.0
     depth_relative_sigma: float = 0.003
     max_depth: float = 10.0
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -140,6 +153,9 @@ class StereoSettings:
     pixel_noise: float = 2.0
     supersample: int = 1
     pan_deg: tuple[float, ...] = (0.0, 90.0, 180.0, -90.0)
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -204,6 +220,9 @@ class FusionSettings:
     map_fix_gate_m: float = 0.8
     map_fix_min_points: int = 40
 
+    def __post_init__(self) -> None:
+        check_settings(self)
+
 
 @dataclass(frozen=True)
 class ObstacleMapSettings:
@@ -237,6 +256,9 @@ class ObstacleMapSettings:
     match_tolerance: float = 0.6
     max_range: float = 15.0
     recent_scans: int = 4
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -273,6 +295,9 @@ class BlockSettings:
     detour: bool = True
     detour_margin: float = 0.2
     detour_search: float = 8.0
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -368,6 +393,7 @@ class MissionSettings:
     block: BlockSettings = field(default_factory=BlockSettings)
 
     def __post_init__(self) -> None:
+        check_settings(self)
         for name, v in (
             ("robot.dt", self.robot.dt),
             ("lidar.rate_hz", self.lidar.rate_hz),
