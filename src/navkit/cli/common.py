@@ -78,7 +78,7 @@ def check_out_path(out: Path) -> None:
             if not d.is_dir():
                 where = "is a file" if d == out else f"lies under the file {d}"
                 raise InputError(
-                    f"the output folder {where}",
+                    f"the output folder {where}, not a folder",
                     source=out,
                     field="--out",
                     expected="a folder, or a path that does not exist yet",
@@ -130,6 +130,19 @@ def _is_click_exception(exc: BaseException) -> bool:
     return any(cls.__module__.split(".")[0] in ("click", "typer") for cls in type(exc).__mro__[:-2])
 
 
+def _unreadable_input_types() -> tuple[type[BaseException], ...]:
+    import json
+
+    if sys.version_info >= (3, 11):
+        import tomllib
+    else:  # pragma: no cover
+        import tomli as tomllib
+    return (UnicodeDecodeError, json.JSONDecodeError, tomllib.TOMLDecodeError, RecursionError)
+
+
+_UNREADABLE_INPUT = _unreadable_input_types()
+
+
 def _report(exc: Exception) -> None:
     """Print one line for ``exc`` and exit: 2 for bad input, 1 for a bug."""
     if isinstance(exc, NavkitError):
@@ -138,6 +151,15 @@ def _report(exc: Exception) -> None:
     if isinstance(exc, OSError) and exc.filename is not None:
         where = exc.filename if exc.filename2 is None else f"{exc.filename} -> {exc.filename2}"
         typer.echo(f"error: {where}: {exc.strerror or exc}", err=True)
+        raise typer.Exit(code=2) from None
+    if isinstance(exc, _UNREADABLE_INPUT):
+        # a parser deep inside a reader met a user file it cannot read: still bad input
+        message = " ".join(str(exc).split())[:200] or type(exc).__name__
+        typer.echo(
+            f"error: an input could not be read ({type(exc).__name__}: {message}; "
+            f"command: {_command_line()})",
+            err=True,
+        )
         raise typer.Exit(code=2) from None
     if isinstance(exc, MemoryError):
         typer.echo(

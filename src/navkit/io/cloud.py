@@ -48,7 +48,8 @@ class PointCloud:
     faces: NDArray[np.int64] | None = None
 
     def __post_init__(self) -> None:
-        pts = np.asarray(self.points, dtype=np.float64)
+        with np.errstate(invalid="ignore"):  # signalling NaNs (from files) are NaN points
+            pts = np.asarray(self.points, dtype=np.float64)
         if pts.ndim != 2 or pts.shape[1] != 3:
             raise InputError(
                 f"points has shape {pts.shape}", field="points", expected="an (N, 3) array"

@@ -28,6 +28,10 @@ log = logging.getLogger(__name__)
 
 _COLOR_FIELDS = ("rgb", "rgba")
 
+#: Largest point record accepted (bytes): PCL's widest common records (FPFH, 33 floats; SHOT,
+#: 352 floats) are a few kB; a lying COUNT must not make a NumPy dtype of gigabytes.
+_MAX_POINT_BYTES = 1 << 16
+
 _PCD_TYPES = {
     ("F", 4): "<f4",
     ("F", 8): "<f8",
@@ -56,7 +60,8 @@ class _PcdHeader:
     data_offset: int
 
     def dtype(self) -> np.dtype[Any]:
-        names, formats = [], []
+        names: list[str] = []
+        formats: list[Any] = []
         for i, (name, size, typ, count) in enumerate(
             zip(self.fields, self.sizes, self.types, self.counts, strict=True)
         ):
@@ -148,9 +153,18 @@ def _parse_pcd_header(p: Path, buf: bytes) -> _PcdHeader:
     real = [n for n in names if n != "_"]
     if len(set(real)) != len(real):
         raise FormatError(f"duplicate field names {names}", source=p, field="FIELDS")
+    if any(c < 1 for c in counts) or sum(s * c for s, c in zip(sizes, counts, strict=True)) > (
+        _MAX_POINT_BYTES
+    ):
+        raise FormatError(
+            f"COUNT {counts[:6]} with SIZE {sizes[:6]}",
+            source=p,
+            field="COUNT",
+            expected=f"counts >= 1 and at most {_MAX_POINT_BYTES} bytes per point",
+        )
     width = ints("WIDTH", need("WIDTH")[:1])[0]
-    height = ints("HEIGHT", entries.get("HEIGHT", ["1"])[:1])[0]
-    points = ints("POINTS", entries.get("POINTS", [str(width * height)])[:1])[0]
+    height = ints("HEIGHT", need("HEIGHT")[:1] if "HEIGHT" in entries else ["1"])[0]
+    points = ints("POINTS", need("POINTS")[:1] if "POINTS" in entries else [str(width * height)])[0]
     if points != width * height:
         raise FormatError(
             f"POINTS {points} differs from WIDTH {width} x HEIGHT {height}",
@@ -204,11 +218,15 @@ def _pcd_records_ascii(p: Path, hdr: _PcdHeader, body: bytes) -> dict[str, NDArr
                 # PCL writes the packed colour of an ascii file as its uint32 bit pattern
                 vals = block.astype(np.uint64).astype("<u4").view("<f4")
             elif typ == "F":
-                vals = block.astype(np.float64).astype(dtype)
+                with np.errstate(over="ignore"):  # beyond float32's range -> inf, as PCL does
+                    vals = block.astype(np.float64).astype(dtype)
             else:
                 vals = block.astype(np.float64)
-                if not np.all(vals == np.round(vals)):
-                    raise ValueError("non-integer")
+                info = np.iinfo(dtype)
+                if not np.all(vals == np.round(vals)) or not np.all(
+                    (vals >= info.min) & (vals <= info.max)
+                ):
+                    raise ValueError("non-integer or out of range")
                 vals = vals.astype(dtype)
         except ValueError:
             raise FormatError(
@@ -332,7 +350,8 @@ def read_pcd(path: PathLike) -> PointCloud:
             )
         if rec[axis].ndim != 1:
             raise FormatError("has COUNT > 1", source=p, field=axis, expected="COUNT 1")
-    points = np.column_stack([rec.pop("x"), rec.pop("y"), rec.pop("z")]).astype(np.float64)
+    with np.errstate(invalid="ignore"):  # signalling NaNs in the file are NaN points
+        points = np.column_stack([rec.pop(a).astype(np.float64) for a in "xyz"])
     colors = None
     for cname in _COLOR_FIELDS:
         if cname in rec and rec[cname].ndim == 1 and rec[cname].dtype.itemsize == 4:

@@ -164,6 +164,23 @@ def _fan_triangulate(polys: list[NDArray[Any]]) -> NDArray[np.int64]:
     return np.concatenate(tris).astype(np.int64)
 
 
+def _cast_column(p: Path, name: str, values: NDArray[np.float64], vt: str) -> NDArray[Any]:
+    """Parsed ascii numbers to the property's type: integers must be whole and in range."""
+    dtype = np.dtype(vt)
+    if dtype.kind == "f":
+        with np.errstate(over="ignore"):  # beyond float32's range -> inf
+            return values.astype(dtype)
+    info = np.iinfo(dtype)
+    if not np.all((values == np.round(values)) & (values >= info.min) & (values <= info.max)):
+        raise FormatError(
+            "non-integer or out-of-range values",
+            source=p,
+            field=name,
+            expected=f"integers in [{info.min}, {info.max}] ({dtype})",
+        )
+    return values.astype(dtype)
+
+
 def _ply_ascii_elements(
     p: Path, elements: list[_PlyElement], body: bytes
 ) -> dict[str, dict[str, NDArray[Any]]]:
@@ -196,7 +213,7 @@ def _ply_ascii_elements(
                 )
             table = table.reshape(el.count, len(el.props))
             for k, (nm, vt, _) in enumerate(el.props):
-                cols[nm] = table[:, k].astype(vt)
+                cols[nm] = _cast_column(p, nm, table[:, k], vt)
         else:
             cols.update(_ply_ascii_list_element(p, el, chunk))
         out[el.name] = cols

@@ -323,6 +323,19 @@ class Route:
     block_size: tuple[float, float, float] = (0.8, 0.8, 1.0)
 
     def __post_init__(self) -> None:
+        try:
+            self._check()
+        except (TypeError, ValueError) as exc:  # ragged lists, strings where numbers belong
+            if isinstance(exc, ConfigError):
+                raise
+            raise ConfigError(
+                f"has a value of the wrong type or shape ({exc})",
+                field="route",
+                expected="waypoints = [[x, y], ...], room = [xmin, ymin, xmax, ymax], "
+                "block_at = metres, block_size = [x, y, z]",
+            ) from None
+
+    def _check(self) -> None:
         w = np.asarray(self.waypoints, dtype=np.float64)
         if w.ndim != 2 or w.shape[1] != 2 or len(w) < 1 or not np.all(np.isfinite(w)):
             raise ConfigError(
@@ -483,9 +496,11 @@ def load_route(path: str | Path) -> tuple[Route, dict[str, Any]]:
         raise DataNotFoundError(f"{p}: no such mission file")
     try:
         data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise FormatError(
-            f"not valid TOML: {exc}", source=p, expected="a TOML mission file"
+            f"not valid TOML: {str(exc) or type(exc).__name__}",
+            source=p,
+            expected="a UTF-8 TOML mission file",
         ) from None
     unknown = sorted(set(data) - {"route", "settings"})
     if unknown:
