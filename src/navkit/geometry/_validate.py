@@ -102,6 +102,10 @@ def check_grid_size(shape: tuple[float, ...], *, setting: str, source: str | Non
         )
 
 
+#: No setting of a robot is beyond this in SI units (1e9 m, 1e9 s, 1e9 points); larger values
+#: are typos or fuzz and would overflow the arithmetic they feed.
+MAX_SETTING_MAGNITUDE = 1e9
+
 _NUMBER_TYPES = {"float": (int, float, np.integer, np.floating), "int": (int, np.integer)}
 
 
@@ -111,8 +115,8 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
     Every field annotated ``float`` or ``int`` (also ``float | None``) must hold a number of that
     kind (a bool or a string from a settings file is refused), and a float must be finite (NaN
     always refused, infinity only for the fields in ``allow_inf``, e.g. "inf disables"); a field
-    annotated ``bool`` must hold a bool. Ranges are checked by each class's own
-    ``__post_init__``.
+    annotated ``bool`` must hold a bool; no number may exceed :data:`MAX_SETTING_MAGNITUDE` in
+    magnitude. Ranges are checked by each class's own ``__post_init__``.
 
     Raises
     ------
@@ -158,4 +162,11 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
                 source=cls,
                 field=f.name,
                 expected="a finite number" + (" or inf" if f.name in allow_inf else ""),
+            )
+        if abs(value) > MAX_SETTING_MAGNITUDE:
+            raise ConfigError(
+                f"is {value!r}",
+                source=cls,
+                field=f.name,
+                expected=f"a magnitude of at most {MAX_SETTING_MAGNITUDE:.0e} (SI units)",
             )
