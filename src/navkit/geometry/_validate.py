@@ -163,7 +163,7 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
                 field=f.name,
                 expected="a finite number" + (" or inf" if f.name in allow_inf else ""),
             )
-        if abs(value) > MAX_SETTING_MAGNITUDE:
+        if abs(float(value)) > MAX_SETTING_MAGNITUDE:
             raise ConfigError(
                 f"is {value!r}",
                 source=cls,
