@@ -27,6 +27,7 @@ from navkit.errors import InputError, NavkitError
 
 __all__ = [
     "STATE",
+    "check_finite_options",
     "check_out_path",
     "cli_errors",
     "expand_inputs",
@@ -48,14 +49,19 @@ class _State:
 STATE = _State()
 
 
-def _out_dirs() -> list[Path]:
-    """The ``--out`` folder(s) of the running command, from click's context (none outside one)."""
+def _context() -> Any:
+    """click's context of the running command, or None outside one."""
     try:  # typer >= 0.17 vendors click as typer._click
         from typer._click.globals import get_current_context
     except ImportError:  # pragma: no cover - older typer uses click itself
         from click import get_current_context  # type: ignore[no-redef]
 
-    ctx = get_current_context(silent=True)
+    return get_current_context(silent=True)
+
+
+def _out_dirs() -> list[Path]:
+    """The ``--out`` folder(s) of the running command, from click's context (none outside one)."""
+    ctx = _context()
     if ctx is None:
         return []
     return [
@@ -63,6 +69,35 @@ def _out_dirs() -> list[Path]:
         for name, value in ctx.params.items()
         if name in ("out", "out_dir", "output") and isinstance(value, (str, Path))
     ]
+
+
+def check_finite_options() -> None:
+    """Refuse NaN and infinite values of the running command's numeric options.
+
+    Every command gets this through :func:`cli_errors`, whatever its options: no navkit option
+    means anything with NaN, and "no limit" is written as a large number, never ``inf``
+    (decision: one rule for every command beats per-option callbacks that a new option forgets).
+
+    Raises
+    ------
+    InputError
+        Naming the option and its value.
+    """
+    import math
+
+    ctx = _context()
+    if ctx is None:
+        return
+    names = {
+        p.name: (p.opts[0] if getattr(p, "opts", None) else p.name) for p in ctx.command.params
+    }
+    for name, value in ctx.params.items():
+        values = value if isinstance(value, (list, tuple)) else [value]
+        for v in values:
+            if isinstance(v, float) and not math.isfinite(v):
+                raise InputError(
+                    f"is {v}", source=names.get(name, name), expected="a finite number"
+                )
 
 
 def check_out_path(out: Path) -> None:
@@ -107,6 +142,7 @@ def cli_errors() -> Iterator[None]:
     from navkit.io.atomic import output_transaction
 
     try:
+        check_finite_options()
         outs = _out_dirs()
         for out in outs:
             check_out_path(out)
