@@ -71,8 +71,13 @@ def _out_dirs() -> list[Path]:
     ]
 
 
+#: Bound on any numeric option (as for settings, :data:`navkit.geometry._validate.MAX_SETTING_MAGNITUDE`):
+#: nothing a robot measures or counts is beyond 1e9 in SI units; seeds are exempt.
+MAX_OPTION_MAGNITUDE = 1e9
+
+
 def check_finite_options() -> None:
-    """Refuse NaN and infinite values of the running command's numeric options.
+    """Refuse NaN, infinite and absurdly large values of the running command's numeric options.
 
     Every command gets this through :func:`cli_errors`, whatever its options: no navkit option
     means anything with NaN, and "no limit" is written as a large number, never ``inf``
@@ -97,6 +102,17 @@ def check_finite_options() -> None:
             if isinstance(v, float) and not math.isfinite(v):
                 raise InputError(
                     f"is {v}", source=names.get(name, name), expected="a finite number"
+                )
+            if (
+                isinstance(v, (int, float))
+                and not isinstance(v, bool)
+                and "seed" not in name
+                and abs(v) > MAX_OPTION_MAGNITUDE
+            ):
+                raise InputError(
+                    f"is {v}",
+                    source=names.get(name, name),
+                    expected=f"a magnitude of at most {MAX_OPTION_MAGNITUDE:.0e}",
                 )
 
 

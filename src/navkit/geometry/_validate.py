@@ -170,3 +170,48 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
                 field=f.name,
                 expected=f"a magnitude of at most {MAX_SETTING_MAGNITUDE:.0e} (SI units)",
             )
+
+
+def as_vectors(
+    x: ArrayLike, size: int, name: str = "x", *, finite: bool = False
+) -> NDArray[np.float64]:
+    """``x`` as float64 ``(..., size)`` (at least 1-D), or :class:`InputError`.
+
+    With ``finite`` every entry must be finite (rotations, quaternions: maths, not sensor data).
+    """
+    try:
+        arr = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise InputError(
+            f"cannot be read as numbers: {exc}", field=name, expected=f"(..., {size}) floats"
+        ) from None
+    if arr.ndim < 1 or arr.shape[-1] != size:
+        raise InputError(f"has shape {arr.shape}", field=name, expected=f"(..., {size}) array")
+    if finite and not np.isfinite(arr).all():
+        raise InputError("has NaN or inf entries", field=name, expected="finite numbers")
+    return arr
+
+
+def as_quaternions(q: ArrayLike, name: str = "quat_xyzw") -> NDArray[np.float64]:
+    """Finite ``(..., 4)`` quaternions with a non-zero norm (not normalised), or InputError."""
+    arr = as_vectors(q, 4, name, finite=True)
+    with np.errstate(over="ignore"):
+        norm = np.linalg.norm(arr, axis=-1)
+    if not np.all((norm > 1e-12) & np.isfinite(norm)):
+        raise InputError("has a zero or huge quaternion", field=name, expected="norm > 0")
+    return arr
+
+
+def as_rotations(R: ArrayLike, name: str = "R") -> NDArray[np.float64]:
+    """Finite ``(..., 3, 3)`` matrices (not checked for orthonormality), or InputError."""
+    try:
+        arr = as_matrices(R, 3, name)
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, InputError):
+            raise
+        raise InputError(
+            f"cannot be read as numbers: {exc}", field=name, expected="(..., 3, 3) floats"
+        ) from None
+    if not np.isfinite(arr).all():
+        raise InputError("has NaN or inf entries", field=name, expected="a finite rotation")
+    return arr

@@ -785,6 +785,10 @@ def build_map(
     WallMap
     """
     s = settings or MapSettings()
+    if not hasattr(views, "__len__") or (isinstance(views, np.ndarray) and views.ndim == 0):
+        raise InputError(
+            f"is {type(views).__name__}", field="views", expected="a list of (N, 2) arrays"
+        )
     views = list(views)
     if poses is not None:
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)

@@ -167,6 +167,9 @@ def _rings_by_elevation(el: NDArray[np.float64], n_rings: int | None) -> NDArray
     return ring
 
 
+_FAR = 1e9  # metres
+
+
 def cloud_to_grid(
     points: ArrayLike,
     *,
@@ -181,7 +184,8 @@ def cloud_to_grid(
     ----------
     points : (N, 3) or (N, >=3) float
         Sensor-frame points (extra columns such as intensity are ignored). Points at exactly
-        ``(0, 0, 0)`` or with a NaN are no-returns (several datasets store them so).
+        ``(0, 0, 0)``, with a NaN or farther than 1e9 m are no-returns (several datasets store
+        them so).
     n_rings : int, optional
         Number of beams; needed only by ``ring_method="elevation"`` when the elevations are not
         cleanly separated.
@@ -206,6 +210,8 @@ def cloud_to_grid(
     x0, y0, z0 = P[:, 0], P[:, 1], P[:, 2]
     # column by column: reductions along a length-3 axis are slow in NumPy
     ok = np.isfinite(x0) & np.isfinite(y0) & np.isfinite(z0) & ((x0 != 0) | (y0 != 0) | (z0 != 0))
+    # a "return" beyond 1e9 m is a corrupt value, not a point (its squares would overflow)
+    ok &= (np.abs(x0) < _FAR) & (np.abs(y0) < _FAR) & (np.abs(z0) < _FAR)
     all_ok = bool(ok.all())
     idx = np.arange(N) if all_ok else np.flatnonzero(ok)
     if idx.size < 4:

@@ -128,6 +128,12 @@ def ground_plane(positions: ArrayLike, plane: str = "auto") -> GroundPlane:
         raise InputError(
             f"has shape {P.shape}", field="positions", expected="(N, 2) or (N, 3) with N >= 1"
         )
+    if not (np.isfinite(P).all() and np.abs(P).max() < 1e9):
+        raise InputError(
+            "has NaN, inf or coordinates beyond 1e9 m",
+            field="positions",
+            expected="finite positions (clean_track drops the bad ones)",
+        )
     if plane in ("xy", "xz", "yz"):
         if P.shape[1] < 3 and plane != "xy":
             raise ConfigError(
