@@ -109,3 +109,22 @@ def test_toml_file_errors_name_the_file(tmp_path, content, match):
     p.write_bytes(content)
     with pytest.raises(FormatError, match=rf"user\.toml.*({match})"):
         load_toml_file(p)
+
+
+def test_generic_yaml_calib_takes_the_size_from_the_images(tmp_path):
+    from navkit.io.stereo import read_stereo_calib
+
+    p = tmp_path / "calib.yaml"
+    p.write_text("K: [500, 0, 320, 0, 500, 240, 0, 0, 1]\nbaseline: 0.12\n")
+    rig = read_stereo_calib(p, image_size=(640, 480))
+    assert (rig.camera.width, rig.camera.height, rig.baseline) == (640, 480, 0.12)
+    with pytest.raises(FormatError, match="width"):
+        read_stereo_calib(p)  # no images, no size: the file must say
+    p.write_text(
+        "K: [500, 0, 320, 0, 500, 240, 0, 0, 1]\nbaseline: 0.12\nwidth: 800\nheight: 480\n"
+    )
+    with pytest.raises(FormatError, match=r"calib\.yaml.*width.*is 800 but the images are 640"):
+        read_stereo_calib(p, image_size=(640, 480))
+    p.write_text("K: [500, 0, 320, 0, 500, 240, 0, 0, 1]\nbaseline: nan\n")
+    with pytest.raises(FormatError, match="baseline"):
+        read_stereo_calib(p, image_size=(640, 480))
