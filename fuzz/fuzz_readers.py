@@ -1,7 +1,7 @@
 """Coverage-guided fuzzing of navkit's binary readers with atheris (``make fuzz``).
 
 Each input's first byte picks a reader (KITTI ``.bin`` / ``.label``, PCD, PLY, PFM, PNG depth,
-LZF); the rest is the file. A navkit error is the expected answer to bad bytes; any other
+``.npy``, ``.npz``, LZF); the rest is the file. A navkit error is the expected answer to bad bytes; any other
 exception, or an allocation beyond the RLIMIT_AS set below, is a finding (atheris stops and
 writes the crashing input to ``crash-*``).
 
@@ -26,6 +26,7 @@ from navkit.errors import require_module
 atheris = require_module("atheris", "fuzz", "coverage-guided fuzzing")
 
 with atheris.instrument_imports():
+    import navkit.io.arrays as arrays
     import navkit.io.images as images
     import navkit.io.kitti as kitti
     import navkit.io.lzf as lzf
@@ -41,6 +42,8 @@ READERS = [
     (".ply", ply.read_ply),
     (".pfm", images.read_pfm),
     (".png", lambda p: images.read_depth(p, 1000.0)),
+    (".npy", arrays.read_npy),
+    (".npz", arrays.read_npz),
 ]
 MEMORY_LIMIT = int(os.environ.get("NAVKIT_FUZZ_RLIMIT_AS", 2 * 2**30))
 

@@ -131,6 +131,10 @@ def _write(kind: str, folder: Path) -> Path:
         from navkit.sensors import PinholeCamera, StereoRig
 
         write_generic_yaml_calib(p, StereoRig(PinholeCamera.from_fov(64, 48, 90.0), 0.2))
+    elif kind == "array.npy":
+        np.save(p, np.random.default_rng(5).normal(size=(6, 4)))
+    elif kind == "scan.npz":
+        np.savez_compressed(p, ranges=np.ones((4, 5)), azimuth=np.arange(4.0))
     elif kind == "carmen.log":
         try:
             src = datasets.find("laser2d/intel-corrected.log.gz")
@@ -151,6 +155,7 @@ def _write(kind: str, folder: Path) -> Path:
 
 def _readers() -> dict[str, Callable[[Path], Any]]:
     import navkit.io as nio
+    from navkit.io.arrays import read_npy, read_npz
     from navkit.io.carmen import read_carmen
     from navkit.io.pathjson import read_path_json
     from navkit.io.stereo import read_stereo_calib
@@ -175,6 +180,8 @@ def _readers() -> dict[str, Callable[[Path], Any]]:
         "middlebury_calib.txt": lambda p: read_stereo_calib(p, (741, 497)),
         "generic_calib.yaml": lambda p: read_stereo_calib(p, (64, 48)),
         "carmen.log": read_carmen,
+        "array.npy": read_npy,
+        "scan.npz": read_npz,
     }
 
 

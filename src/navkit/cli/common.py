@@ -189,7 +189,16 @@ def _unreadable_input_types() -> tuple[type[BaseException], ...]:
         import tomllib
     else:  # pragma: no cover
         import tomli as tomllib
-    return (UnicodeDecodeError, json.JSONDecodeError, tomllib.TOMLDecodeError, RecursionError)
+    import zipfile
+
+    return (
+        UnicodeDecodeError,
+        json.JSONDecodeError,
+        tomllib.TOMLDecodeError,
+        RecursionError,
+        EOFError,
+        zipfile.BadZipFile,
+    )
 
 
 _UNREADABLE_INPUT = _unreadable_input_types()

@@ -13,7 +13,9 @@ imported lazily, so ``import navkit.io`` stays cheap:
 - :mod:`navkit.io.maps` - ROS map_server occupancy grids (PGM + YAML), GeoJSON.
 - :mod:`navkit.io.rosbag` - PointCloud2 / Image messages from ROS1 bags and ROS2 folders
   (optional extra ``rosbag``).
-- :mod:`navkit.io.atomic` - atomic writes.
+- :mod:`navkit.io.atomic` - atomic writes and output transactions.
+- :mod:`navkit.io.arrays` - ``.npy`` / ``.npz`` with declared sizes checked first.
+- :mod:`navkit.io.textfiles` - JSON / TOML / text user files, one error per failure.
 
 See ``docs/formats.md`` for every format's conventions.
 """
@@ -24,6 +26,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 _EXPORTS = {
+    "arrays": ["read_npy", "read_npz"],
     "atomic": [
         "atomic_path",
         "atomic_write",
@@ -101,6 +104,8 @@ __all__ = [
     "read_kitti_bin",
     "read_kitti_labels",
     "read_kitti_poses",
+    "read_npy",
+    "read_npz",
     "read_occupancy_grid",
     "read_odometry_log",
     "read_pcd",
@@ -125,6 +130,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load on first use
+    from navkit.io.arrays import read_npy, read_npz
     from navkit.io.atomic import atomic_path, atomic_write, write_json, write_text
     from navkit.io.images import (
         read_depth,
