@@ -146,7 +146,8 @@ def cli_errors() -> Iterator[None]:
     """Run a command body as one transaction, with the CLI's error handling.
 
     - The body's outputs are all-or-nothing (:func:`navkit.io.atomic.output_transaction`): a
-      failed or interrupted run leaves ``--out`` exactly as it was.
+      failed or interrupted run leaves ``--out`` exactly as it was. A ``typer.Exit`` raised by
+      the body is the command's own decision (any code): its outputs are kept.
     - A navkit error (bad input) prints ``error: ...`` and exits 2; so do operating-system errors
       on a named file, undecodable text and inputs too large for memory.
     - Ctrl-C exits 130.
@@ -162,8 +163,14 @@ def cli_errors() -> Iterator[None]:
         outs = _out_dirs()
         for out in outs:
             check_out_path(out)
+        deliberate: typer.Exit | None = None
         with output_transaction(*outs):
-            yield
+            try:
+                yield
+            except typer.Exit as exc:  # the command chose its exit code: keep what it wrote
+                deliberate = exc
+        if deliberate is not None:
+            raise deliberate
     except (typer.Exit, typer.Abort):
         raise
     except Exception as exc:
