@@ -128,3 +128,12 @@ def test_generic_yaml_calib_takes_the_size_from_the_images(tmp_path):
     p.write_text("K: [500, 0, 320, 0, 500, 240, 0, 0, 1]\nbaseline: nan\n")
     with pytest.raises(FormatError, match="baseline"):
         read_stereo_calib(p, image_size=(640, 480))
+
+
+def test_camera_yaml_that_is_not_utf8_names_the_file(tmp_path):
+    from navkit.io.rgbd import read_camera_yaml
+
+    p = tmp_path / "camera.yaml"
+    p.write_bytes(b"fx: 500\n# \xff\xfe\nfy: 500\n")
+    with pytest.raises(FormatError, match=r"camera\.yaml.*not UTF-8"):
+        read_camera_yaml(p)
