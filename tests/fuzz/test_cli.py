@@ -98,8 +98,11 @@ class Inputs:
         assert res.exit_code == 0, res.output
         try:
             self.kitti: Path | None = datasets.find("lidar/semantickitti-seq00/000000.bin")
+            self.range_image: Path | None = datasets.find(
+                "lidar/squeezeseg-kitti-raw/2011_09_26_0001_0000000010.npy"
+            )
         except DataNotFoundError:
-            self.kitti = None
+            self.kitti = self.range_image = None
         self.random_bytes = root / "random.bin"
         self.random_bytes.write_bytes(np.random.default_rng(0).bytes(3000))
         self.not_utf8 = root / "not-utf8.txt"
@@ -121,7 +124,9 @@ class Inputs:
             "stereo disparity": [self.left, self.right, "--calib", self.stereo / "calib.yaml"],
             "map build": [self.stereo],
             "map locate": [self.map_json, self.stereo],
-            "obstacles detect": None if self.kitti is None or not FULL else [self.kitti],
+            "obstacles detect": None
+            if self.kitti is None or self.range_image is None
+            else [self.kitti if FULL else self.range_image],
         }.get(command)
 
     def bad_paths(self) -> list[Path]:
@@ -273,3 +278,13 @@ def test_absurd_numbers(
 
 def test_every_case_is_counted() -> None:
     assert math.isfinite(len(NUMBER_CASES)) and len(PATH_CASES) > 10
+
+
+def test_second_input_bad_leaves_nothing(inputs: Inputs, runner: Any, tmp_path: Path) -> None:
+    """Issue 13 family 4: the first input's outputs are written, then the second is bad."""
+    if inputs.range_image is None:
+        pytest.skip("recorded data absent")
+    bad = tmp_path / "bad.npy"
+    bad.write_bytes(b"\x93NUMPY")
+    res = run_case(runner, tmp_path, ["obstacles", "detect", inputs.range_image, bad])
+    assert res.exit_code == 2

@@ -67,3 +67,21 @@ def test_unwritable_folder_is_an_input_error(tmp_path):
             write_text(ro / "a.txt", "a")
     finally:
         ro.chmod(0o700)
+
+
+def test_rollback_removes_subfolders_the_run_made_itself(tmp_path):
+    """A command that makes ``out/frame1`` with mkdir and writes into it, then fails: both go;
+    sub-folders that were there before stay, even when empty."""
+    out = tmp_path / "out"
+    (out / "old-empty").mkdir(parents=True)
+    with pytest.raises(RuntimeError), output_transaction(out):
+        (out / "frame1" / "deeper").mkdir(parents=True)
+        write_text(out / "frame1" / "deeper" / "a.txt", "a")
+        raise RuntimeError
+    assert sorted(p.name for p in out.iterdir()) == ["old-empty"]
+    new = tmp_path / "new-out"
+    with pytest.raises(RuntimeError), output_transaction(new):
+        (new / "frame1").mkdir(parents=True)
+        write_text(new / "frame1" / "a.txt", "a")
+        raise RuntimeError
+    assert not new.exists()

@@ -60,6 +60,19 @@ class OutputTransaction:
 
     backups: dict[Path, Path | None] = field(default_factory=dict)
     created_dirs: list[Path] = field(default_factory=list)
+    roots: dict[Path, set[Path]] = field(default_factory=dict)
+
+    def watch_root(self, folder: str | os.PathLike[str]) -> None:
+        """Watch an output folder: a rollback also removes the empty sub-folders it did not have
+        (ones a command made itself with ``mkdir``, not through the atomic writers)."""
+        root = Path(folder).absolute()
+        if root in self.roots:
+            return
+        existing: set[Path] = set()
+        if root.is_dir():
+            existing = {Path(sub) for sub, _, _ in os.walk(root)}
+        self.roots[root] = existing
+        self.watch_dir(root)
 
     def watch_dir(self, folder: str | os.PathLike[str]) -> None:
         """Remember the missing ancestors of ``folder`` so a rollback removes them if empty."""
@@ -97,6 +110,7 @@ class OutputTransaction:
                 backup.unlink(missing_ok=True)
         self.backups.clear()
         self.created_dirs.clear()
+        self.roots.clear()
 
     def rollback(self) -> None:
         """Undo every write: remove new files and folders, put the old files back."""
@@ -108,6 +122,15 @@ class OutputTransaction:
                     os.replace(backup, target)
             except OSError as exc:  # pragma: no cover - best effort, never mask the real error
                 log.warning("could not restore %s: %s", target, exc)
+        for root, existing in self.roots.items():
+            if not root.is_dir():
+                continue
+            for sub, _, _ in os.walk(root, topdown=False):
+                if Path(sub) not in existing and Path(sub) != root:
+                    try:
+                        os.rmdir(sub)  # only when empty: files the run did not write stay
+                    except OSError:
+                        pass
         for d in reversed(self.created_dirs):
             try:
                 d.rmdir()  # only when empty: files the run did not write stay
@@ -115,6 +138,7 @@ class OutputTransaction:
                 pass
         self.backups.clear()
         self.created_dirs.clear()
+        self.roots.clear()
 
 
 _TRANSACTION: contextvars.ContextVar[OutputTransaction | None] = contextvars.ContextVar(
@@ -134,8 +158,9 @@ def output_transaction(*watch: str | os.PathLike[str] | None) -> Iterator[Output
     Parameters
     ----------
     *watch : path, optional
-        Output folders the block may create itself (``out.mkdir(...)``); a rollback removes them
-        again when they are left empty. Folders created by the writes are tracked anyway.
+        Output folders (``--out``): a rollback removes the folders and sub-folders the block
+        created in them (with the writers or its own ``mkdir``) when they are left empty.
+        Folders created by the writes are tracked anywhere.
 
     Nested transactions join the outer one (only the outermost commits or rolls back).
     """
@@ -143,13 +168,13 @@ def output_transaction(*watch: str | os.PathLike[str] | None) -> Iterator[Output
     if outer is not None:
         for folder in watch:
             if folder is not None:
-                outer.watch_dir(folder)
+                outer.watch_root(folder)
         yield outer
         return
     txn = OutputTransaction()
     for folder in watch:
         if folder is not None:
-            txn.watch_dir(folder)
+            txn.watch_root(folder)
     token = _TRANSACTION.set(txn)
     try:
         yield txn
