@@ -62,6 +62,9 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+#: Finest occupancy grid cell accepted, metres.
+MIN_RESOLUTION = 1e-3
+
 MAP_FORMAT = "navkit-wall-map"
 MAP_VERSION = 1
 
@@ -88,7 +91,8 @@ class MapSettings:
         Metres; collinear walls whose facing ends are closer than this are linked across a
         doorway when tracing the outline.
     resolution : float
-        Occupancy grid cell size, metres.
+        Occupancy grid cell size, metres (at least :data:`MIN_RESOLUTION`, 1 mm; the grid's
+        cell count is bounded too, see ``navkit.geometry._validate.check_grid_size``).
     min_wall_length : float
         Metres; merged walls shorter than this are dropped from the map.
     min_relative_support : float
@@ -145,6 +149,12 @@ class MapSettings:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError(f"is {v}", field=name, expected="a positive number of metres")
+        if self.resolution < MIN_RESOLUTION:
+            raise ConfigError(
+                f"is {self.resolution}",
+                field="resolution",
+                expected=f"at least {MIN_RESOLUTION} m (a room map finer than 1 mm is a typo)",
+            )
         if not 0 < self.merge_angle_deg < 90:
             raise ConfigError(
                 f"is {self.merge_angle_deg}", field="merge_angle_deg", expected="in (0, 90)"
