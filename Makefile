@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test bench lint clean
+.PHONY: demo test bench lint fuzz clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -31,9 +31,17 @@ test: $(STAMP)
 bench: $(VENV)/.bench-installed
 	MPLBACKEND=Agg $(BIN)/python -m benchmarks
 
+# Coverage-guided fuzzing of the binary readers (atheris; optional extra "fuzz"). The in-project
+# Hypothesis fuzz suite (tests/fuzz) runs with `make test`; this one searches longer.
+FUZZ_SECONDS ?= 120
+fuzz: $(STAMP)
+	$(BIN)/pip install --quiet -e ".[fuzz]"
+	@mkdir -p out/fuzz/corpus
+	cd out/fuzz && MPLBACKEND=Agg ../../$(BIN)/python ../../fuzz/fuzz_readers.py -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 corpus
+
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/ruff format --check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks fuzz
+	$(BIN)/ruff format --check src tests benchmarks fuzz
 	$(BIN)/mypy
 
 clean:

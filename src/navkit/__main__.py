@@ -1,3 +1,3 @@
-from navkit.cli.main import app
+from navkit.cli.main import run
 
-app()
+run()

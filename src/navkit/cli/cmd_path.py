@@ -177,10 +177,12 @@ def _record_batch(
 @path_app.command("return")
 def return_(
     path_json: Path = typer.Argument(..., help="A path.json written by 'navkit path record'."),
-    runs: int = typer.Option(40, "--runs", help="Number of simulated returns (paper: 40)."),
+    runs: int = typer.Option(
+        40, "--runs", min=1, max=10_000, help="Number of simulated returns (paper: 40)."
+    ),
     out: Path = typer.Option(..., "--out", "-o", help=OUT_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     vo_rate_hz: float = typer.Option(10.0, "--vo-rate-hz", help="VO (and control) rate (Hz)."),
     vo_scale_sigma: float = typer.Option(
         0.02, "--vo-scale-sigma", help="VO per-step relative scale noise."
@@ -279,13 +281,13 @@ def return_(
 def simulate(
     out: Path = typer.Option(..., "--out", "-o", help=OUT_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
-    legs: int = typer.Option(7, "--legs", help="Number of straight legs."),
+    legs: int = typer.Option(7, "--legs", min=1, max=10_000, help="Number of straight legs."),
     leg_length: float = typer.Option(0.5, "--leg-length", help="Leg length (m) (paper: 0.5)."),
     turn_deg: float = typer.Option(90.0, "--turn-deg", help="Turn between legs (deg) (paper: 90)."),
     random_turns: bool = typer.Option(
         False, "--random-turns", help="Turn left or right at random."
     ),
-    seed: int = typer.Option(0, "--seed", help="Random seed."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     vo_scale_sigma: float = typer.Option(
         0.02, "--vo-scale-sigma", help="VO per-step relative scale noise."
     ),

@@ -185,20 +185,29 @@ def simulate_cmd(
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace outputs already in --out."),
     random_poses: int = typer.Option(
-        0, "--random", help="Render N random poses instead of the survey."
+        0, "--random", min=0, max=10_000, help="Render N random poses instead of the survey."
     ),
-    width: int = typer.Option(320, help="Image width (pixels); the height is 3/4 of it."),
-    hfov_deg: float = typer.Option(90.0, help="Horizontal field of view (deg)."),
-    baseline: float = typer.Option(0.2, help="Stereo baseline (m)."),
-    height: float = typer.Option(1.2, help="Camera height above the floor (m)."),
+    width: int = typer.Option(
+        320, min=16, max=4096, help="Image width (pixels); the height is 3/4 of it."
+    ),
+    hfov_deg: float = typer.Option(
+        90.0, min=1.0, max=170.0, help="Horizontal field of view (deg)."
+    ),
+    baseline: float = typer.Option(0.2, min=1e-3, max=10.0, help="Stereo baseline (m)."),
+    height: float = typer.Option(
+        1.2, min=0.0, max=10.0, help="Camera height above the floor (m)."
+    ),
     turn: int = typer.Option(
         1,
         "--turn",
         min=1,
+        max=360,
         help="Frames per place: the camera turns through N headings (use with map locate --group N).",
     ),
-    seed: int = typer.Option(0, help="Seed of the random poses and the image noise."),
-    pixel_noise: float = typer.Option(1.0, help="Image noise (grey levels)."),
+    seed: int = typer.Option(0, min=0, help="Seed of the random poses and the image noise."),
+    pixel_noise: float = typer.Option(
+        1.0, min=0.0, max=255.0, help="Image noise (grey levels)."
+    ),
 ) -> None:
     """Render a textured test room with a stereo rig (survey or random poses) into a frame folder.
 

@@ -77,5 +77,26 @@ def _register_commands() -> None:
 
 _register_commands()
 
+
+def run() -> None:
+    """The ``navkit`` entry point: :data:`app` with a last line of defence around it.
+
+    Command bodies handle their errors in :func:`navkit.cli.common.cli_errors`; this catches what
+    escapes outside a body (option callbacks, command registration): one ``internal error: ...``
+    line and exit code 1, Ctrl-C exit code 130; with ``--debug`` the traceback.
+    """
+    import sys
+
+    from navkit.cli.common import internal_error_line
+
+    try:
+        app()  # standalone: click prints usage errors and exits itself
+    except Exception as exc:
+        if STATE.debug or "--debug" in sys.argv[1:]:
+            raise
+        typer.echo(internal_error_line(exc), err=True)
+        sys.exit(1)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    app()
+    run()

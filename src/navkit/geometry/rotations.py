@@ -17,7 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial.transform import Rotation
 
 from navkit.errors import DegenerateGeometryError
-from navkit.geometry._validate import as_points
+from navkit.geometry._validate import as_points, as_quaternions, as_rotations, as_vectors
 
 __all__ = [
     "EULER_ORDER_PAPER",
@@ -39,13 +39,13 @@ EULER_ORDER_PAPER = "ZXY"
 
 def quat_to_matrix(quat_xyzw: ArrayLike) -> NDArray[np.float64]:
     """Rotation matrices ``(..., 3, 3)`` from quaternions ``(..., 4)`` (normalised first)."""
-    q = np.asarray(quat_xyzw, dtype=np.float64)
+    q = as_quaternions(quat_xyzw)
     return Rotation.from_quat(q.reshape(-1, 4)).as_matrix().reshape((*q.shape[:-1], 3, 3))
 
 
 def matrix_to_quat(R: ArrayLike) -> NDArray[np.float64]:
     """Unit quaternions ``(..., 4)`` with ``w >= 0`` from rotation matrices ``(..., 3, 3)``."""
-    R = np.asarray(R, dtype=np.float64)
+    R = as_rotations(R)
     q = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_quat().reshape((*R.shape[:-2], 4))
     return np.where(q[..., 3:4] < 0, -q, q)
 
@@ -64,15 +64,15 @@ def matrix_to_euler_zxy(R: ArrayLike) -> NDArray[np.float64]:
 
     ``psi`` lies in ``[-pi/2, pi/2]``; at ``|psi| = pi/2`` (gimbal lock) SciPy's convention is kept.
     """
-    R = np.asarray(R, dtype=np.float64)
+    R = as_rotations(R)
     e = Rotation.from_matrix(R.reshape(-1, 3, 3)).as_euler(EULER_ORDER_PAPER)
     return e.reshape((*R.shape[:-2], 3))
 
 
 def quat_multiply(q1: ArrayLike, q2: ArrayLike) -> NDArray[np.float64]:
     """Hamilton product ``q1 q2`` of scalar-last quaternions (rotation ``q2`` first, then ``q1``)."""
-    a = np.asarray(q1, dtype=np.float64)
-    b = np.asarray(q2, dtype=np.float64)
+    a = as_vectors(q1, 4, "q1")
+    b = as_vectors(q2, 4, "q2")
     v1, w1 = a[..., :3], a[..., 3:]
     v2, w2 = b[..., :3], b[..., 3:]
     v = w1 * v2 + w2 * v1 + np.cross(v1, v2)
@@ -82,14 +82,14 @@ def quat_multiply(q1: ArrayLike, q2: ArrayLike) -> NDArray[np.float64]:
 
 def quat_conjugate(q: ArrayLike) -> NDArray[np.float64]:
     """Conjugate (the inverse of a unit quaternion)."""
-    q = np.asarray(q, dtype=np.float64)
+    q = as_vectors(q, 4, "q")
     return np.concatenate([-q[..., :3], q[..., 3:]], axis=-1)
 
 
 def quat_rotate(q: ArrayLike, vectors: ArrayLike) -> NDArray[np.float64]:
     """Rotate vectors ``(N, 3)`` by a unit quaternion: ``q V q^-1`` (paper 2, after eq. 8)."""
     V = as_points(vectors, 3, "vectors")
-    q = np.asarray(q, dtype=np.float64)
+    q = as_vectors(q, 4, "q")
     Vq = np.concatenate([V, np.zeros((len(V), 1))], axis=1)
     return quat_multiply(quat_multiply(q, Vq), quat_conjugate(q))[:, :3]
 
@@ -131,5 +131,5 @@ def rotation_between(a: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
 
 def rotation_angle(R: ArrayLike) -> NDArray[np.float64]:
     """Angle (radians, in ``[0, pi]``) of rotation matrices ``(..., 3, 3)``; for errors between poses."""
-    R = np.asarray(R, dtype=np.float64)
+    R = as_rotations(R)
     return Rotation.from_matrix(R.reshape(-1, 3, 3)).magnitude().reshape(R.shape[:-2])

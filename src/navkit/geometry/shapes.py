@@ -789,6 +789,14 @@ def compute_shapes(
         raise InputError(
             f"unknown shapes {unknown}", field="shapes", expected=f"names among {sorted(SHAPES)}"
         )
+    if not hasattr(point_sets, "__len__") or (
+        isinstance(point_sets, np.ndarray) and point_sets.ndim == 0
+    ):
+        raise InputError(
+            f"is {type(point_sets).__name__}",
+            field="point_sets",
+            expected="a list of (N, 2) point arrays",
+        )
     hulls = [np.asarray(p, dtype=np.float64) if are_hulls else hull_points(p) for p in point_sets]
     out: list[dict[str, Any]] = [{} for _ in hulls]
     for name in names:

@@ -5,14 +5,17 @@ the field and what was expected; writers are atomic (:mod:`navkit.io.atomic`). N
 imported lazily, so ``import navkit.io`` stays cheap:
 
 - :mod:`navkit.io.pointcloud` - KITTI ``.bin``/``.label``, PCD v0.7 (ascii, binary,
-  binary_compressed), PLY; :class:`PointCloud`.
+  binary_compressed), PLY; :class:`PointCloud` (one module per format: ``kitti``, ``pcd``,
+  ``ply``, ``lzf``, ``cloud``; ``pointcloud`` re-exports them).
 - :mod:`navkit.io.trajectory` - TUM, KITTI poses, EuRoC CSV, ``time v omega`` odometry logs;
   :class:`Trajectory`.
 - :mod:`navkit.io.images` - PNG/JPG/PGM/PPM images (RGB), depth images, PFM.
 - :mod:`navkit.io.maps` - ROS map_server occupancy grids (PGM + YAML), GeoJSON.
 - :mod:`navkit.io.rosbag` - PointCloud2 / Image messages from ROS1 bags and ROS2 folders
   (optional extra ``rosbag``).
-- :mod:`navkit.io.atomic` - atomic writes.
+- :mod:`navkit.io.atomic` - atomic writes and output transactions.
+- :mod:`navkit.io.arrays` - ``.npy`` / ``.npz`` with declared sizes checked first.
+- :mod:`navkit.io.textfiles` - JSON / TOML / text user files, one error per failure.
 
 See ``docs/formats.md`` for every format's conventions.
 """
@@ -23,6 +26,7 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 _EXPORTS = {
+    "arrays": ["read_npy", "read_npz"],
     "atomic": [
         "atomic_path",
         "atomic_write",
@@ -37,6 +41,7 @@ _EXPORTS = {
         "read_kitti_labels",
         "read_pcd",
         "read_ply",
+        "read_pointcloud",
         "write_kitti_bin",
         "write_kitti_labels",
         "write_pcd",
@@ -99,11 +104,14 @@ __all__ = [
     "read_kitti_bin",
     "read_kitti_labels",
     "read_kitti_poses",
+    "read_npy",
+    "read_npz",
     "read_occupancy_grid",
     "read_odometry_log",
     "read_pcd",
     "read_pfm",
     "read_ply",
+    "read_pointcloud",
     "read_trajectory",
     "read_tum",
     "write_depth",
@@ -122,6 +130,7 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load on first use
+    from navkit.io.arrays import read_npy, read_npz
     from navkit.io.atomic import atomic_path, atomic_write, write_json, write_text
     from navkit.io.images import (
         read_depth,
@@ -148,6 +157,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time names load on first
         read_kitti_labels,
         read_pcd,
         read_ply,
+        read_pointcloud,
         write_kitti_bin,
         write_kitti_labels,
         write_pcd,

@@ -47,7 +47,9 @@ class CarmenLog:
     odom_poses : (K, 3) float64 array
         Raw odometry ``(x, y, theta)`` at each scan.
     timestamps : (K,) float64 array
-        Logger timestamps of the scans, seconds.
+        Logger timestamps of the scans, seconds. When they do not strictly increase (Radish logs
+        with every timestamp 0) the scan order is used instead (scan ``k`` at ``k`` s), with a
+        warning, so ``map build`` and ``map locate`` treat such logs alike.
     odom_t, odom_xytheta, odom_velocity : arrays
         ``ODOM`` messages: times ``(M,)``, poses ``(M, 3)``, ``(tv, rv)`` ``(M, 2)``.
     source : str
@@ -201,13 +203,25 @@ def read_carmen(path: str | os.PathLike[str], *, fov_deg: float = 180.0) -> Carm
             expected="finite x y theta and timestamps",
         )
     odo = np.asarray(odom, dtype=np.float64).reshape(-1, 6)
+    stamps = S[:, n_beams + 6].copy()
+    if len(stamps) > 1 and not np.all(np.diff(stamps) > 0):
+        # Radish logs (e.g. orebro) carry all-zero logger timestamps: time is the scan order
+        log.warning(
+            "%s: logger timestamps do not increase (%d of %d scans repeat or go back, all zero: "
+            "%s); the scan order is used as time (scan k at k seconds)",
+            p.name,
+            int(np.sum(np.diff(stamps) <= 0)),
+            len(stamps),
+            bool(np.all(stamps == 0)),
+        )
+        stamps = np.arange(len(stamps), dtype=np.float64)
     half = np.radians(fov_deg) / 2
     out = CarmenLog(
         ranges=R,
         bearings=np.linspace(-half, half, n_beams),
         poses=S[:, n_beams : n_beams + 3].copy(),
         odom_poses=S[:, n_beams + 3 : n_beams + 6].copy(),
-        timestamps=S[:, n_beams + 6].copy(),
+        timestamps=stamps,
         odom_t=odo[:, 5].copy(),
         odom_xytheta=odo[:, 0:3].copy(),
         odom_velocity=odo[:, 3:5].copy(),

@@ -110,7 +110,7 @@ def write_image(path: PathLike, image: ArrayLike) -> None:
         buf.tofile(tmp)
 
 
-def read_depth(path: PathLike, scale: float) -> NDArray[np.float64]:
+def read_depth(path: PathLike, scale: float, *, allow_8bit: bool = False) -> NDArray[np.float64]:
     """Read a depth image in metres.
 
     Parameters
@@ -119,14 +119,23 @@ def read_depth(path: PathLike, scale: float) -> NDArray[np.float64]:
         A single-channel 16-bit PNG / PGM (or 8-bit, or a float TIFF).
     scale : float
         Raw units per metre: ``metres = raw / scale`` (1000 for millimetres, 5000 for TUM).
+    allow_8bit : bool
+        Accept an 8-bit image as depth. Off by default: an 8-bit PNG is almost always a
+        visualisation of depth (or a grey image), and read in millimetres it would put every
+        point within 0.255 m without a word.
+
+    Raises
+    ------
+    FormatError
+        A multi-channel image, or an 8-bit one unless ``allow_8bit``.
 
     Returns
     -------
     (H, W) float64
         Depth along the optical axis in metres, NaN where the raw value is 0 (no measurement).
     """
-    if not scale > 0:
-        raise InputError(f"scale {scale!r}", field="scale", expected="a positive number")
+    if not (np.isfinite(scale) and scale > 0):
+        raise InputError(f"scale {scale!r}", field="scale", expected="a finite positive number")
     p = _existing(path)
     raw = _imread(p)
     if raw.ndim != 2:
@@ -135,6 +144,13 @@ def read_depth(path: PathLike, scale: float) -> NDArray[np.float64]:
             source=p,
             field="depth",
             expected="a single-channel image",
+        )
+    if raw.dtype.itemsize == 1 and not allow_8bit:
+        raise FormatError(
+            "is an 8-bit image (a depth visualisation or a grey image?)",
+            source=p,
+            field="depth",
+            expected="a 16-bit depth image (or allow_8bit=True for 8-bit depth)",
         )
     depth = raw.astype(np.float64) / float(scale)
     depth[(raw == 0) | ~np.isfinite(depth)] = np.nan

@@ -349,9 +349,12 @@ def read_occupancy_grid(yaml_path: PathLike) -> OccupancyGrid:
                 raise FormatError("missing", source=p, field=key, expected="a number")
             return default
         try:
-            return float(meta[key])
+            value = float(meta[key])
         except (TypeError, ValueError):
-            raise FormatError(f"{meta[key]!r}", source=p, field=key, expected="a number") from None
+            value = float("nan")
+        if not np.isfinite(value):
+            raise FormatError(f"{meta[key]!r}", source=p, field=key, expected="a finite number")
+        return value
 
     if "image" not in meta:
         raise FormatError("missing", source=p, field="image", expected="the map image file name")
@@ -361,9 +364,22 @@ def read_occupancy_grid(yaml_path: PathLike) -> OccupancyGrid:
         ox, oy, oyaw = (float(v) for v in origin)  # type: ignore[union-attr]
     except (TypeError, ValueError):
         raise FormatError(f"{origin!r}", source=p, field="origin", expected="[x, y, yaw]") from None
-    negate = int(number("negate", 0.0))
+    if not res > 0:
+        raise FormatError(f"{res}", source=p, field="resolution", expected="metres per cell > 0")
+    if not all(np.isfinite(v) for v in (ox, oy, oyaw)):
+        raise FormatError(f"{origin!r}", source=p, field="origin", expected="finite [x, y, yaw]")
+    negate = number("negate", 0.0)
+    if negate not in (0.0, 1.0):
+        raise FormatError(f"{negate:g}", source=p, field="negate", expected="0 or 1")
     occ_t = number("occupied_thresh", OCCUPIED_THRESH)
     free_t = number("free_thresh", FREE_THRESH)
+    if not 0.0 <= free_t < occ_t <= 1.0:
+        raise FormatError(
+            f"free_thresh {free_t:g}, occupied_thresh {occ_t:g}",
+            source=p,
+            field="occupied_thresh",
+            expected="0 <= free_thresh < occupied_thresh <= 1",
+        )
     mode = str(meta.get("mode", "trinary"))
     if mode not in ("trinary", "scale", "raw"):
         raise FormatError(f"{mode!r}", source=p, field="mode", expected="trinary, scale or raw")

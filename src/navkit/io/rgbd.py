@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from navkit.errors import DataNotFoundError, FormatError, InputError
+from navkit.io.textfiles import read_text_file
 from navkit.sensors import PinholeCamera, RGBDFrame
 
 __all__ = [
@@ -64,7 +65,7 @@ def read_camera_yaml(path: str | Path) -> dict[str, float]:
     if not p.is_file():
         raise DataNotFoundError(f"{p}: camera file not found")
     out: dict[str, float] = {}
-    for n, line in enumerate(p.read_text(encoding="utf-8").splitlines(), 1):
+    for n, line in enumerate(read_text_file(p, "a camera YAML").splitlines(), 1):
         text = line.split("#", 1)[0].strip()
         if not text or text.startswith("%") or text == "---":
             continue
@@ -173,7 +174,7 @@ def _read_list(path: Path) -> list[tuple[float, str]]:
     if not path.is_file():
         raise DataNotFoundError(f"{path}: not found (a TUM RGB-D folder has rgb.txt and depth.txt)")
     rows = []
-    for n, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+    for n, line in enumerate(read_text_file(path, "a TUM RGB-D list").splitlines(), 1):
         text = line.strip()
         if not text or text.startswith("#"):
             continue

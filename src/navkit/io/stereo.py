@@ -171,8 +171,12 @@ def _yaml_value(raw: str) -> object:
         return raw.strip("'\"")
 
 
-def read_generic_yaml_calib(path: PathLike) -> StereoRig:
-    """Read the generic YAML calibration (``K``, ``baseline`` metres, ``width``, ``height``, ``doffs``)."""
+def read_generic_yaml_calib(path: PathLike, image_size: tuple[int, int] | None = None) -> StereoRig:
+    """Read the generic YAML calibration (``K``, ``baseline`` metres, ``width``, ``height``, ``doffs``).
+
+    ``width`` / ``height`` may be left out when ``image_size`` ``(width, height)`` is given (the
+    images of the pair); when both are there they must agree.
+    """
     p, text = _text(path)
     data: dict[str, object] = {}
     key = None
@@ -186,23 +190,51 @@ def read_generic_yaml_calib(path: PathLike) -> StereoRig:
             data[key] = val
         elif key is not None:
             data[key] = str(data[key]) + " " + line  # continuation (nested rows)
-    for need in ("K", "baseline", "width", "height"):
+    need_keys = (
+        ("K", "baseline") if image_size is not None else ("K", "baseline", "width", "height")
+    )
+    for need in need_keys:
         if need not in data:
             raise FormatError(
                 "missing",
                 source=p,
                 field=need,
-                expected="K (9 numbers), baseline (m), width, height",
+                expected="K (9 numbers), baseline (m), width, height (or the images' size)",
             )
     K = _numbers(str(data["K"]), p, "K", 9).reshape(3, 3)
     try:
         baseline = float(str(data["baseline"]).strip())
-        width, height = int(float(str(data["width"]))), int(float(str(data["height"])))
         doffs = float(str(data.get("doffs", "0")).strip() or 0)
-    except ValueError as exc:
+        size = [int(float(str(data[k]))) if k in data else None for k in ("width", "height")]
+    except (ValueError, OverflowError) as exc:
         raise FormatError(
             f"{exc}", source=p, field="baseline/width/height", expected="numbers"
         ) from None
+    if image_size is not None:
+        for k, (given, actual) in enumerate(zip(size, image_size, strict=True)):
+            name = ("width", "height")[k]
+            if given is not None and given != actual:
+                raise FormatError(
+                    f"is {given} but the images are {image_size[0]} x {image_size[1]}",
+                    source=p,
+                    field=name,
+                    expected=f"{actual} (or leave it out)",
+                )
+        size = [int(image_size[0]), int(image_size[1])]
+    width, height = int(size[0] or 0), int(size[1] or 0)
+    if not (np.isfinite(K).all() and K[0, 0] > 0 and K[1, 1] > 0):
+        raise FormatError(f"{K.ravel().tolist()}", source=p, field="K", expected="fx, fy > 0")
+    if not (np.isfinite(baseline) and baseline > 0 and np.isfinite(doffs)):
+        raise FormatError(
+            f"baseline {baseline}, doffs {doffs}",
+            source=p,
+            field="baseline",
+            expected="a finite baseline > 0 (m) and a finite doffs",
+        )
+    if not (0 < width <= 100_000 and 0 < height <= 100_000):
+        raise FormatError(
+            f"{width} x {height}", source=p, field="width/height", expected="1..100000 pixels"
+        )
     return StereoRig(
         PinholeCamera(
             float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), width, height
@@ -240,7 +272,7 @@ def read_stereo_calib(path: PathLike, image_size: tuple[int, int] | None = None)
     if re.search(r"^\s*(P2|P_rect_02)\s*:", text, re.M):
         return read_kitti_stereo_calib(p, image_size)
     if re.search(r"^\s*K\s*:", text, re.M):
-        return read_generic_yaml_calib(p)
+        return read_generic_yaml_calib(p, image_size)
     raise FormatError(
         "unknown calibration format",
         source=p,

@@ -255,11 +255,12 @@ def _check_times(
 def _poses_from_xyz_quat(
     p: Path, xyz: NDArray[np.float64], q_xyzw: NDArray[np.float64], lines: NDArray[np.int64]
 ) -> NDArray[np.float64]:
-    norm = np.linalg.norm(q_xyzw, axis=1)
-    bad = np.flatnonzero(norm < 1e-9)
+    with np.errstate(over="ignore", invalid="ignore"):
+        norm = np.linalg.norm(q_xyzw, axis=1)
+    bad = np.flatnonzero(~((norm >= 1e-9) & (norm < 1e150)))
     if bad.size:
         raise FormatError(
-            f"line {lines[bad[0]]} has a zero quaternion",
+            f"line {lines[bad[0]]} has a zero quaternion (or a huge or non-finite one)",
             source=p,
             field=f"line {lines[bad[0]]}",
             expected="a unit quaternion",
@@ -315,8 +316,9 @@ def read_kitti_poses(path: PathLike, timestamps: PathLike | ArrayLike | None = N
     poses[:, :3, :] = tab.values.reshape(n, 3, 4)
     poses[:, 3, 3] = 1.0
     R = poses[:, :3, :3]
-    err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2)) if n else np.zeros(0)
-    bad = np.flatnonzero(err > 1e-3)
+    with np.errstate(over="ignore", invalid="ignore"):
+        err = np.abs(R @ np.swapaxes(R, 1, 2) - np.eye(3)).max(axis=(1, 2)) if n else np.zeros(0)
+    bad = np.flatnonzero(~(err <= 1e-3))  # NaN / inf entries are not a rotation either
     if bad.size:
         raise FormatError(
             f"line {tab.lines[bad[0]]}: rotation block is not orthonormal (error {err[bad[0]]:.2g})",

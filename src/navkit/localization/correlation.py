@@ -34,7 +34,7 @@ from scipy.signal import fftconvolve
 
 from navkit.errors import ConfigError, InputError
 from navkit.geometry import points_in_polygon
-from navkit.geometry._validate import as_points
+from navkit.geometry._validate import as_points, check_settings
 from navkit.localization.field import LikelihoodField
 from navkit.localization.refine import (
     PoseRefinement,
@@ -176,6 +176,7 @@ class KnownHeadingSettings:
     refine: RefineSettings = field(default_factory=RefineSettings)
 
     def __post_init__(self) -> None:
+        check_settings(self)
         if not 0 < self.peak_tolerance < 1:
             raise ConfigError(
                 f"is {self.peak_tolerance}", field="peak_tolerance", expected="in (0, 1)"

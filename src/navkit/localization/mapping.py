@@ -33,7 +33,7 @@ from scipy.sparse.csgraph import connected_components
 
 from navkit.errors import ConfigError, FormatError, InputError
 from navkit.geometry import polygon_area, se2_apply, se2_from_xytheta, signed_area
-from navkit.geometry._validate import as_points
+from navkit.geometry._validate import as_points, check_grid_size, check_settings
 from navkit.localization.field import LikelihoodField
 from navkit.localization.walls import (
     SegmentationSettings,
@@ -63,6 +63,9 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+#: Finest occupancy grid cell accepted, metres.
+MIN_RESOLUTION = 1e-3
+
 MAP_FORMAT = "navkit-wall-map"
 MAP_VERSION = 1
 
@@ -89,7 +92,8 @@ class MapSettings:
         Metres; collinear walls whose facing ends are closer than this are linked across a
         doorway when tracing the outline.
     resolution : float
-        Occupancy grid cell size, metres.
+        Occupancy grid cell size, metres (at least :data:`MIN_RESOLUTION`, 1 mm; the grid's
+        cell count is bounded too, see ``navkit.geometry._validate.check_grid_size``).
     min_wall_length : float
         Metres; merged walls shorter than this are dropped from the map.
     min_relative_support : float
@@ -143,6 +147,7 @@ class MapSettings:
         return settings_from_dict(cls, data, source, "map")  # type: ignore[no-any-return]
 
     def __post_init__(self) -> None:
+        check_settings(self)
         for name in (
             "merge_distance",
             "merge_gap",
@@ -153,6 +158,12 @@ class MapSettings:
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ConfigError(f"is {v}", field=name, expected="a positive number of metres")
+        if self.resolution < MIN_RESOLUTION:
+            raise ConfigError(
+                f"is {self.resolution}",
+                field="resolution",
+                expected=f"at least {MIN_RESOLUTION} m (a room map finer than 1 mm is a typo)",
+            )
         if not 0 < self.merge_angle_deg < 90:
             raise ConfigError(
                 f"is {self.merge_angle_deg}", field="merge_angle_deg", expected="in (0, 90)"
@@ -578,18 +589,34 @@ def rasterize(
     if occupied_points is not None:
         extra = as_points(occupied_points, 2, "occupied_points")
         occ = np.concatenate([occ, extra[np.all(np.isfinite(extra), axis=1)]])
+    occ = occ[np.all(np.isfinite(occ), axis=1)]
     extent = [occ] if len(occ) else []
     if rays is not None:
         o, e = as_points(rays[0], 2, "ray origins"), as_points(rays[1], 2, "ray ends")
+        if len(o) != len(e):
+            raise InputError(
+                f"{len(o)} origins for {len(e)} ends", field="rays", expected="one origin per end"
+            )
+        ok = np.all(np.isfinite(o), axis=1) & np.all(np.isfinite(e), axis=1)
+        o, e = o[ok], e[ok]  # beams without a return carry no free space
         extent += [o, e]
     if free_polygon is not None:
-        extent.append(as_points(free_polygon, 2, "free_polygon"))
+        poly = as_points(free_polygon, 2, "free_polygon")
+        if not np.isfinite(poly).all():
+            raise InputError("has NaN or inf corners", field="free_polygon", expected="finite")
+        extent.append(poly)
+    extent = [x for x in extent if len(x)]
     if not extent:
+        log.warning("rasterize: no wall, no valid beam and no outline: the grid is empty")
         return np.full((1, 1), -1, dtype=np.int8), np.zeros(2)
+    if not (np.isfinite(margin) and margin >= 0):
+        raise InputError(f"is {margin}", field="margin", expected="metres >= 0")
     allp = np.concatenate(extent)
     lo = np.floor((allp.min(axis=0) - margin) / resolution) * resolution
     hi = allp.max(axis=0) + margin
-    W, H = (np.ceil((hi - lo) / resolution).astype(int) + 1).tolist()
+    size = np.ceil((hi - lo) / resolution) + 1
+    check_grid_size((size[1], size[0]), setting="resolution")
+    W, H = size.astype(int).tolist()
     grid = np.full((H, W), -1, dtype=np.int8)
 
     def cells(p: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -606,7 +633,6 @@ def rasterize(
         inside = points_in_polygon(centres, as_points(free_polygon, 2)).reshape(H, W)
         grid[inside] = 0
     if rays is not None:
-        o, e = as_points(rays[0], 2), as_points(rays[1], 2)
         length = np.linalg.norm(e - o, axis=1)
         n = np.maximum(1, np.ceil(length / (resolution / 2)).astype(int))
         chunk = 2_000_000
@@ -778,6 +804,10 @@ def build_map(
     WallMap
     """
     s = settings or MapSettings()
+    if not hasattr(views, "__len__") or (isinstance(views, np.ndarray) and views.ndim == 0):
+        raise InputError(
+            f"is {type(views).__name__}", field="views", expected="a list of (N, 2) arrays"
+        )
     views = list(views)
     if poses is not None:
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)

@@ -45,7 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
 from navkit.geometry import wrap_angle
-from navkit.geometry._validate import as_points
+from navkit.geometry._validate import as_points, check_settings
 from navkit.localization.field import LikelihoodField, _pyramid
 
 __all__ = ["Ambiguity", "Fix", "MatcherSettings", "analyse_peak", "match_scan", "score_poses"]
@@ -111,6 +111,7 @@ class MatcherSettings:
     global_resolution: float = 0.2
 
     def __post_init__(self) -> None:
+        check_settings(self)
         for name in (
             "linear_window",
             "angular_window_deg",

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
-from navkit.geometry._validate import as_points
+from navkit.geometry._validate import as_points, check_settings
 from navkit.localization.walls import WallSegment
 
 __all__ = [
@@ -90,6 +90,7 @@ class RefineSettings:
     degenerate_sigma: float = 0.05
 
     def __post_init__(self) -> None:
+        check_settings(self)
         for name in ("max_distance", "sigma_floor", "huber", "tolerance", "max_step"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):

@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError
-from navkit.geometry._validate import as_points
+from navkit.geometry._validate import as_points, check_settings
 
 __all__ = [
     "SegmentationSettings",
@@ -87,6 +87,7 @@ class SegmentationSettings:
     min_fraction: float = 0.03
 
     def __post_init__(self) -> None:
+        check_settings(self)
         for name in ("split_distance", "gap", "min_length", "merge_rms"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):

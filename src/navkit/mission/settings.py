@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from navkit.errors import ConfigError, DataNotFoundError, FormatError
+from navkit.geometry._validate import check_settings
 from navkit.sim.render import (
     CAMERA_HEIGHT,
     CAMERA_HFOV_DEG,
@@ -92,6 +93,9 @@ class RobotSettings:
     goal_tolerance: float = 0.3
     dt: float = 0.1
 
+    def __post_init__(self) -> None:
+        check_settings(self)
+
 
 @dataclass(frozen=True)
 class VOSettings:
@@ -106,6 +110,9 @@ class VOSettings:
     scale_sigma: float = 0.05
     heading_bias_deg_per_m: float = 0.6
     heading_sigma_deg: float = 0.3
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -123,6 +130,9 @@ class LidarSettings:
     relative_sigma: float = LIDAR_RELATIVE_SIGMA
     absolute_sigma: float = LIDAR_ABSOLUTE_SIGMA
     dropout: float = LIDAR_DROPOUT
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -145,6 +155,9 @@ class CameraSettings:
     depth_relative_sigma: float = DEPTH_RELATIVE_SIGMA
     max_depth: float = DEPTH_MAX
 
+    def __post_init__(self) -> None:
+        check_settings(self)
+
 
 @dataclass(frozen=True)
 class StereoSettings:
@@ -166,6 +179,9 @@ class StereoSettings:
     pixel_noise: float = STEREO_PIXEL_NOISE
     supersample: int = 1
     pan_deg: tuple[float, ...] = (0.0, 90.0, 180.0, -90.0)
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)
@@ -229,6 +245,9 @@ class FusionSettings:
     map_fix_weight: float = 0.5
     map_fix_gate_m: float = 0.8
     map_fix_min_points: int = 40
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
     def room_localizer(self) -> LocalizerSettings | None:
         """:class:`~navkit.localization.LocalizerSettings` of the room fixes: a 5 cm field of
@@ -303,6 +322,9 @@ class ObstacleMapSettings:
     max_range: float = 15.0
     recent_scans: int = 4
 
+    def __post_init__(self) -> None:
+        check_settings(self)
+
 
 @dataclass(frozen=True)
 class BlockSettings:
@@ -339,6 +361,9 @@ class BlockSettings:
     detour_margin: float = 0.2
     detour_search: float = 8.0
 
+    def __post_init__(self) -> None:
+        check_settings(self)
+
 
 @dataclass(frozen=True)
 class Route:
@@ -363,6 +388,19 @@ class Route:
     block_size: tuple[float, float, float] = (0.8, 0.8, 1.0)
 
     def __post_init__(self) -> None:
+        try:
+            self._check()
+        except (TypeError, ValueError) as exc:  # ragged lists, strings where numbers belong
+            if isinstance(exc, ConfigError):
+                raise
+            raise ConfigError(
+                f"has a value of the wrong type or shape ({exc})",
+                field="route",
+                expected="waypoints = [[x, y], ...], room = [xmin, ymin, xmax, ymax], "
+                "block_at = metres, block_size = [x, y, z]",
+            ) from None
+
+    def _check(self) -> None:
         w = np.asarray(self.waypoints, dtype=np.float64)
         if w.ndim != 2 or w.shape[1] != 2 or len(w) < 1 or not np.all(np.isfinite(w)):
             raise ConfigError(
@@ -433,6 +471,7 @@ class MissionSettings:
     block: BlockSettings = field(default_factory=BlockSettings)
 
     def __post_init__(self) -> None:
+        check_settings(self)
         for name, v in (
             ("robot.dt", self.robot.dt),
             ("lidar.rate_hz", self.lidar.rate_hz),
@@ -540,9 +579,11 @@ def load_route(path: str | Path) -> tuple[Route, dict[str, Any]]:
         raise DataNotFoundError(f"{p}: no such mission file")
     try:
         data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError, RecursionError) as exc:
         raise FormatError(
-            f"not valid TOML: {exc}", source=p, expected="a TOML mission file"
+            f"not valid TOML: {str(exc) or type(exc).__name__}",
+            source=p,
+            expected="a UTF-8 TOML mission file",
         ) from None
     unknown = sorted(set(data) - {"route", "settings"})
     if unknown:

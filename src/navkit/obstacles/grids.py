@@ -170,6 +170,9 @@ def _rings_by_elevation(el: NDArray[np.float64], n_rings: int | None) -> NDArray
     return ring
 
 
+_FAR = 1e9  # metres
+
+
 def cloud_to_grid(
     points: ArrayLike,
     *,
@@ -185,7 +188,8 @@ def cloud_to_grid(
     ----------
     points : (N, 3) or (N, >=3) float
         Sensor-frame points (extra columns such as intensity are ignored). Points at exactly
-        ``(0, 0, 0)`` or with a NaN are no-returns (several datasets store them so).
+        ``(0, 0, 0)``, with a NaN or farther than 1e9 m are no-returns (several datasets store
+        them so).
     n_rings : int, optional
         Number of beams; needed only by ``ring_method="elevation"`` when the elevations are not
         cleanly separated.
@@ -212,6 +216,9 @@ def cloud_to_grid(
     compiled = check_backend(backend) == "compiled"
     P = _as_cloud(points, source, convert=not compiled)
     N = len(P)
+    far = np.abs(P) >= _FAR  # NaN compares False
+    if far.any():  # a "return" beyond 1e9 m is a corrupt value, not a point (both backends)
+        P = np.where(far.any(axis=1, keepdims=True), np.nan, P)
     if compiled:  # validity, the valid rows as float64 and their horizontal range: one pass
         from navkit.obstacles import _kernels
 

@@ -9,6 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from navkit.errors import ConfigError
+from navkit.geometry._validate import check_grid_size
 from navkit.obstacles.rules import GROUND, OBSTACLE, SHADOW_BEHIND, SIDE_SHADOW
 
 __all__ = ["OccupancyMap", "occupancy_grid"]
@@ -69,6 +70,7 @@ def occupancy_grid(
         extent_m = float(np.nanmax(rh)) + resolution if np.isfinite(rh).any() else 10.0
     if not (extent_m > 0 and math.isfinite(extent_m)):
         raise ConfigError(f"= {extent_m!r}", field="extent_m", expected="metres > 0")
+    check_grid_size((2 * extent_m / resolution,) * 2, setting="resolution / extent_m")
     n = math.ceil(2 * extent_m / resolution)
     origin = np.array([s[0] - extent_m, s[1] - extent_m])
     # rank per mesh cell: the most cautious of its two triangles

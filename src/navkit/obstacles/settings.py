@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, fields
 
 from navkit.errors import ConfigError
+from navkit.geometry._validate import check_settings
 
 __all__ = ["BACKENDS", "DEFAULT_SHAPES", "ObstacleSettings", "check_backend"]
 
@@ -127,6 +128,8 @@ class ObstacleSettings:
     backend: str = "compiled"
 
     def __post_init__(self) -> None:
+        check_settings(self, allow_inf=("jump_range_ratio",))
+
         def check(name: str, ok: bool, expected: str) -> None:
             if not ok:
                 raise ConfigError(f"= {getattr(self, name)!r}", field=name, expected=expected)

@@ -37,6 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
+from navkit.geometry._validate import check_settings
 from navkit.path.fitting import (
     CubicFit,
     check_variant,
@@ -101,6 +102,7 @@ class ApproximatorSettings:
     max_segment_points: int = 2000
 
     def __post_init__(self) -> None:
+        check_settings(self)
         if not (np.isfinite(self.tolerance) and self.tolerance > 0):
             raise ConfigError(
                 f"is {self.tolerance}", field="tolerance", expected="a positive distance in metres"

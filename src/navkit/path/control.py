@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
+from navkit.geometry._validate import check_settings
 from navkit.path.spline import PathSpline
 
 __all__ = ["ReturnCommand", "ReturnController", "ReturnSettings"]
@@ -66,6 +67,7 @@ class ReturnSettings:
     window_ahead: float = 0.5
 
     def __post_init__(self) -> None:
+        check_settings(self)
         for name in (
             "delta",
             "v_max",

@@ -48,6 +48,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from navkit.errors import ConfigError, InputError
+from navkit.geometry._validate import check_settings
 from navkit.path.spline import PathSpline
 
 __all__ = [
@@ -122,6 +123,7 @@ class DetourSettings:
     escape_penalty: float = 5.0
 
     def __post_init__(self) -> None:
+        check_settings(self)
         for name in ("robot_radius", "search_length", "window_pad", "escape_penalty"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):

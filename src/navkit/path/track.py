@@ -124,6 +124,16 @@ def ground_plane(positions: ArrayLike, plane: str = "auto") -> GroundPlane:
     from navkit.geometry import fit_plane
 
     P = np.asarray(positions, dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] not in (2, 3) or len(P) == 0:
+        raise InputError(
+            f"has shape {P.shape}", field="positions", expected="(N, 2) or (N, 3) with N >= 1"
+        )
+    if not (np.isfinite(P).all() and np.abs(P).max() < 1e9):
+        raise InputError(
+            "has NaN, inf or coordinates beyond 1e9 m",
+            field="positions",
+            expected="finite positions (clean_track drops the bad ones)",
+        )
     if plane in ("xy", "xz", "yz"):
         if P.shape[1] < 3 and plane != "xy":
             raise ConfigError(
@@ -146,9 +156,9 @@ def ground_plane(positions: ArrayLike, plane: str = "auto") -> GroundPlane:
         axes = fit.basis()
         rms = fit.rms
     except DegenerateGeometryError:
-        c = P - P.mean(0)
-        _, _, Vt = np.linalg.svd(c, full_matrices=True)
-        axes, rms = Vt[:2], 0.0
+        # collinear or identical positions: principal axes of the 3 x 3 scatter matrix (never
+        # the N x N factor of a full SVD of the N x 3 data, which needs O(N^2) memory)
+        axes, rms = _line_plane_axes(P), 0.0
     # Orientation: seen from "up" the path must not be mirrored (a left turn stays a left turn).
     # Up is not in the data; guess it from the frame convention: a plane normal along y is a
     # camera frame (OpenCV / KITTI / TUM cameras: y down, so up = -y), along z a z-up world
@@ -159,6 +169,24 @@ def ground_plane(positions: ArrayLike, plane: str = "auto") -> GroundPlane:
     if normal[k] * up < 0:
         axes = np.stack([axes[0], -axes[1]])
     return GroundPlane(origin=P[0].copy(), axes=axes, method="fit", rms=float(rms))
+
+
+def _line_plane_axes(P: NDArray[np.float64]) -> NDArray[np.float64]:
+    """In-plane axes for collinear positions: the line and a horizontal perpendicular.
+
+    The line's direction is the principal axis of the 3 x 3 scatter matrix (O(N) memory, never
+    the N x N factor of a full SVD). The second axis is perpendicular to the line and to a guessed
+    up (z, or y when the line runs along z, as in a camera frame). Identical positions (no line)
+    give the x-y axes.
+    """
+    c = P - P.mean(0)
+    w, V = np.linalg.eigh(c.T @ c)
+    if w[-1] <= 1e-24 * max(1.0, float(np.abs(P).max()) ** 2):
+        return np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    d = V[:, -1]
+    up = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([0.0, -1.0, 0.0])
+    second = np.cross(up, d)
+    return np.stack([d, second / np.linalg.norm(second)])
 
 
 def to_plane(positions: ArrayLike, frame: GroundPlane) -> NDArray[np.float64]:

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
 
 from navkit.geometry import points_in_polygon
+from navkit.geometry._validate import check_settings
 from navkit.planes.extract_cloud import voxelize
 from navkit.planes.segments import PlaneSegment, plane_frame
 
@@ -62,6 +63,9 @@ class AssociationSettings:
     distances bias the closed form (slambook 2 -> 3: 27 cm / 3.0 deg with them, 16.6 cm /
     3.0 deg without). 8 cm = twice the Kinect depth noise at 4 m (0.0025 z^2); the simulated
     floors reaching 10 m and more fit to 6-7 cm."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 def _overlap(a: PlaneSegment, b_pts: NDArray[np.float64], margin: float, frame=None) -> bool:
@@ -269,6 +273,9 @@ class GlobalAssociationSettings:
     refine: bool = True
     refine_top: int = 8
     max_rms: float = 0.08
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)

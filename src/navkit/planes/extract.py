@@ -46,6 +46,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
 from navkit.geometry import Plane, canonical_plane
+from navkit.geometry._validate import check_settings
 from navkit.planes.extract_cloud import CloudExtractionSettings, extract_planes_cloud
 from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points, plane_frame
 
@@ -112,6 +113,7 @@ class ExtractionSettings:
     refine: str = "boundary"
 
     def __post_init__(self) -> None:
+        check_settings(self)
         if int(self.cell) < 3:
             raise InputError(f"is {self.cell}", field="cell", expected="an integer >= 3")
         if not 0 < self.angle_deg < 90:

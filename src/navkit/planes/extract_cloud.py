@@ -38,6 +38,7 @@ from scipy.spatial import cKDTree
 
 from navkit.errors import InputError
 from navkit.geometry import Plane, canonical_plane
+from navkit.geometry._validate import check_settings
 from navkit.geometry.linalg import rows_matmul
 from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points, plane_frame
 
@@ -118,6 +119,9 @@ class CloudExtractionSettings:
     connect_cell: float = 0.3
     outline_cell: float = 0.05
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)

@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError, NavkitError
 from navkit.geometry import Plane, canonical_plane, points_in_polygon, se3_inverse
+from navkit.geometry._validate import check_settings
 from navkit.geometry.linalg import rows_matmul
 from navkit.planes.frame import PlaneObservation
 from navkit.planes.motion import (
@@ -91,6 +92,9 @@ class OdometrySettings:
     min_map_plane_points: int = 3000
     frame_to_map: bool = True
     map_texture_pixels: int = 400
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass

@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.geometry import Plane, canonical_plane, se3_from_rt
+from navkit.geometry._validate import check_settings
 from navkit.geometry.linalg import rows_matmul
 from navkit.planes.associate import AssociationSettings, associate, associate_global
 from navkit.planes.frame import PlaneObservation
@@ -68,6 +69,9 @@ class MotionSettings:
     min_depth_points: int = 500
     """Fewest off-plane points needed for the depth check to decide (otherwise it is skipped:
     a scene of only the matched planes has nothing else to check)."""
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 NORMAL_SCATTER_DEG = 3.0

@@ -29,6 +29,7 @@ from navkit.geometry import (
     quat_rotate,
     rotation_between,
 )
+from navkit.geometry._validate import as_quaternions
 
 __all__ = [
     "OPTICAL_AXIS",
@@ -48,7 +49,7 @@ def euler_zxy_from_quat(q: ArrayLike) -> NDArray[np.float64]:
 
     ``A = A_Z(dphi) A_X(dpsi) A_Y(dtheta)`` (eq. 11, derived in the module docstring).
     """
-    qa = np.asarray(q, dtype=np.float64)
+    qa = as_quaternions(q, "q")
     qa = qa / np.linalg.norm(qa, axis=-1, keepdims=True)
     x, y, z, w = qa[..., 0], qa[..., 1], qa[..., 2], qa[..., 3]
     phi = np.arctan2(2 * (w * z - x * y), 1 - 2 * (x * x + z * z))

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from navkit.errors import ConfigError, NavkitError
 from navkit.geometry import Plane, matrix_to_quat, quat_to_matrix, se3_from_rt
+from navkit.geometry._validate import check_settings
 from navkit.planes.align import Search1D, Search2D, search_1d, search_2d
 from navkit.planes.quaternion import (
     compose_q3_q1,
@@ -101,6 +102,9 @@ class SolverSettings:
     min_distinctness: float = 0.1
     min_peak: float = 0.3
     translation: str = "centroid"
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
 
 @dataclass(frozen=True)

@@ -86,9 +86,11 @@ def to_gray(color: ArrayLike) -> NDArray[np.float32]:
     """``(H, W)`` float32 brightness in ``[0, 1]`` of an RGB uint8 (or gray) image (BT.601)."""
     c = np.asarray(color)
     if c.ndim == 2:
-        g = c.astype(np.float32)
+        with np.errstate(over="ignore"):
+            g = c.astype(np.float32)
     elif c.ndim == 3 and c.shape[2] == 3:
-        cf = c.astype(np.float32)
+        with np.errstate(over="ignore"):  # values beyond float32 are not an image: inf
+            cf = c.astype(np.float32)
         g = 0.299 * cf[..., 0] + 0.587 * cf[..., 1] + 0.114 * cf[..., 2]
     else:
         raise InputError(

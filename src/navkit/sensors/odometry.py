@@ -17,7 +17,11 @@ from numpy.typing import ArrayLike, NDArray
 from navkit.errors import InputError
 from navkit.geometry import se2_compose, se2_from_xytheta, se2_inverse, se2_to_xytheta
 
-__all__ = ["VisualOdometryNoise"]
+__all__ = ["MAX_VO_RATE_HZ", "VisualOdometryNoise"]
+
+#: Highest VO rate accepted: a camera-based VO runs at tens of Hz; 1 kHz leaves a wide margin
+#: while keeping a simulated return's step count bounded (``path return --vo-rate-hz 1e9``).
+MAX_VO_RATE_HZ = 1000.0
 
 
 @dataclass(frozen=True)
@@ -45,8 +49,20 @@ class VisualOdometryNoise:
     heading_sigma: float = np.radians(0.2)
 
     def __post_init__(self) -> None:
-        if not self.rate_hz > 0:
-            raise InputError(f"is {self.rate_hz}", field="rate_hz", expected="positive Hz")
+        for name in ("rate_hz", "scale_bias", "scale_sigma", "heading_bias_per_m", "heading_sigma"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float, np.number)):
+                raise InputError(f"is {value!r}", field=name, expected="a number")
+            if not np.isfinite(value):
+                raise InputError(f"is {value}", field=name, expected="a finite number")
+        if not 0 < self.rate_hz <= MAX_VO_RATE_HZ:
+            raise InputError(
+                f"is {self.rate_hz}",
+                field="rate_hz",
+                expected=f"Hz in (0, {MAX_VO_RATE_HZ:g}] (a camera's frame rate)",
+            )
+        if not self.scale_bias > -1:
+            raise InputError(f"is {self.scale_bias}", field="scale_bias", expected="> -1")
         for name in ("scale_sigma", "heading_sigma"):
             if getattr(self, name) < 0:
                 raise InputError(f"is {getattr(self, name)}", field=name, expected=">= 0")

@@ -26,6 +26,10 @@ from navkit.path.spline import PathSpline
 from navkit.sensors import VisualOdometryNoise
 from navkit.sim.unicycle import simulate_unicycle, unicycle_step
 
+#: Bound on runs x time steps of one simulated batch of returns (memory of the histories and
+#: run time stay bounded whatever the VO rate).
+_MAX_ROBOT_STEPS = 20_000_000
+
 __all__ = ["ReturnSimResult", "corrupt_step", "leg_drive", "simulate_returns"]
 
 log = logging.getLogger(__name__)
@@ -173,6 +177,15 @@ def simulate_returns(
     lat_max = np.zeros(runs)
     lat_n = np.zeros(runs)
     duration = np.full(runs, np.nan)
+    if not (np.isfinite(max_time) and max_time > 0):
+        raise ConfigError(f"is {max_time}", field="max_time", expected="seconds > 0")
+    if max_time / dt * runs > _MAX_ROBOT_STEPS:
+        raise ConfigError(
+            f"{max_time:.3g} s at {vo.rate_hz:g} Hz for {runs} runs is "
+            f"{max_time / dt * runs:.3g} robot steps",
+            field="rate_hz / runs",
+            expected=f"at most {_MAX_ROBOT_STEPS:.0e} (a lower VO rate or fewer runs)",
+        )
     n_steps = int(np.ceil(max_time / dt))
     for k in range(n_steps):  # time steps (not points): each step is vectorised over the runs
         cmd = ctrl.command(est)

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
+from navkit.geometry._validate import check_settings
 
 __all__ = [
     "DisparityResult",
@@ -107,6 +108,7 @@ class DisparitySettings:
     subpixel_smooth: int = 15
 
     def __post_init__(self) -> None:
+        check_settings(self)
         if self.matcher not in ("sgbm", "sgbm3way", "hh", "bm"):
             raise ConfigError(
                 f"is {self.matcher!r}", field="matcher", expected="sgbm, sgbm3way, hh or bm"

@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
 from navkit.geometry import R_BODY_FROM_OPTICAL, se3_apply
+from navkit.geometry._validate import check_settings
 from navkit.sensors import StereoRig
 from navkit.stereo.disparity import DisparitySettings, compute_disparity
 from navkit.stereo.triangulation import disparity_to_points
@@ -73,6 +74,7 @@ class FloorplanSettings:
     subpixel: Literal["lk", "parabola"] = "lk"
 
     def __post_init__(self) -> None:
+        check_settings(self)
         if not self.max_height > self.min_height:
             raise ConfigError(
                 f"{self.min_height} .. {self.max_height}",
