@@ -152,3 +152,21 @@ def test_settings_are_checked():
         BatchTask("../escape", record_path_job)
     with pytest.raises(ConfigError, match="output names"):
         run_batch([BatchTask("a", record_path_job)] * 2, "/nonexistent-never-created")
+
+
+def test_an_interrupted_batch_keeps_its_completed_inputs(real_tasks, tmp_path):
+    """In a command's output transaction, Ctrl-C after two inputs undoes only the one in flight:
+    the completed inputs stay (with their markers), so --resume goes on from there."""
+    from navkit.batch import iter_batch
+    from navkit.io.atomic import output_transaction
+
+    out = tmp_path / "b"
+    good = [t for t in real_tasks if t.key != "broken"]
+    with pytest.raises(KeyboardInterrupt), output_transaction(out):
+        for i, _ in enumerate(iter_batch(good, out)):
+            if i == 1:
+                raise KeyboardInterrupt
+    done = [t.key for t in good if (out / t.key / DONE_MARKER).is_file()]
+    assert done == [good[0].key, good[1].key]
+    res = run_batch(good, out, BatchSettings(resume=True))
+    assert [r["status"] for r in res.rows] == ["skipped", "skipped", "ok"]

@@ -130,7 +130,9 @@ def test_cli_mission_run_on_a_users_scene(cli, tmp_path):
     # the outputs of a run are not overwritten silently
     before = (out / "summary.json").read_text()
     res = cli("mission", "run", scene_file, "--out", out, "--small")
-    assert res.exit_code == 2 and "already holds outputs" in res.output and "--overwrite" in res.output
+    assert (
+        res.exit_code == 2 and "already holds outputs" in res.output and "--overwrite" in res.output
+    )
     assert (out / "summary.json").read_text() == before
 
 

@@ -260,8 +260,16 @@ class _Manifest:
 
 
 def _run_local(todo: Sequence[BatchTask], out: Path) -> Iterator[dict[str, Any]]:
+    from navkit.io.atomic import current_transaction
+
     for task in todo:
-        yield execute_task(task, str(out))
+        row = execute_task(task, str(out))
+        # inside a command's output transaction, a completed input is kept even if the run is
+        # interrupted later (its marker lets --resume skip it); only the input in flight is undone
+        txn = current_transaction()
+        if txn is not None:
+            txn.commit()
+        yield row
 
 
 _ONE_THREAD = {

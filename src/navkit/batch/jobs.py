@@ -82,6 +82,10 @@ def mission_sweep_tasks(
     mission and config files, the settings and the navkit version."""
     from navkit import __version__
     from navkit.batch.engine import BatchTask, settings_hash
+    from navkit.mission.demo import load_scene_file
+
+    # every input read and checked once, before any seed runs or writes
+    load_scene_file(scene, mission=mission, seed=seeds[0], small=small, config=config)
 
     def ident(p: str | Path | None) -> Any:
         return None if p is None else (Path(p) if Path(p).is_file() else str(p))

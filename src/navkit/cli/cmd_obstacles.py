@@ -254,6 +254,10 @@ def detect(
             )
             first_error = None
         else:
+            from navkit.io.scans import check_scan_input
+
+            for f in files:  # every input's container checked before anything is written
+                check_scan_input(f)
             frames, failed, height, first_error = _run_frames(files, out, settings, opts, mopts)
         if first_error is not None and not frames:
             raise first_error  # nothing worked: the one-line error, exit code 2, no run files

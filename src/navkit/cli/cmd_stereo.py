@@ -194,9 +194,7 @@ def simulate_cmd(
         90.0, min=1.0, max=170.0, help="Horizontal field of view (deg)."
     ),
     baseline: float = typer.Option(0.2, min=1e-3, max=10.0, help="Stereo baseline (m)."),
-    height: float = typer.Option(
-        1.2, min=0.0, max=10.0, help="Camera height above the floor (m)."
-    ),
+    height: float = typer.Option(1.2, min=0.0, max=10.0, help="Camera height above the floor (m)."),
     turn: int = typer.Option(
         1,
         "--turn",
@@ -205,9 +203,7 @@ def simulate_cmd(
         help="Frames per place: the camera turns through N headings (use with map locate --group N).",
     ),
     seed: int = typer.Option(0, min=0, help="Seed of the random poses and the image noise."),
-    pixel_noise: float = typer.Option(
-        1.0, min=0.0, max=255.0, help="Image noise (grey levels)."
-    ),
+    pixel_noise: float = typer.Option(1.0, min=0.0, max=255.0, help="Image noise (grey levels)."),
 ) -> None:
     """Render a textured test room with a stereo rig (survey or random poses) into a frame folder.
 

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from navkit.errors import ConfigError, FormatError, InputError
 
-__all__ = ["SCAN_SUFFIXES", "ScanInput", "read_scan_grid"]
+__all__ = ["SCAN_SUFFIXES", "ScanInput", "check_scan_input", "read_scan_grid"]
 
 SCAN_SUFFIXES = (".npz", ".bin", ".pcd", ".ply", ".npy", ".png", ".pgm", ".tif", ".tiff")
 """File suffixes :func:`read_scan_grid` reads."""
@@ -179,3 +179,79 @@ def read_scan_grid(
     fx, fy, cx, cy = intrinsics
     cam = PinholeCamera(fx, fy, cx, cy, depth.shape[1], depth.shape[0])
     return ScanInput(depth_to_grid(depth, cam, source=str(path)), "depth")
+
+
+def check_scan_input(path: str | Path) -> None:
+    """Check an input's container before any run writes an output: the cheap part of reading it
+    (a ``.bin`` size that is a whole number of points, a ``.npy`` header whose declared size the
+    file holds, an ``.npz`` directory with ``ranges``, a PCD or PLY header).
+
+    A file that passes can still fail when read in full (a corrupt body); a run reports that
+    frame as failed and goes on.
+
+    Raises
+    ------
+    DataNotFoundError, FormatError
+        Naming the file and what is wrong.
+    """
+    import zipfile
+
+    from navkit.errors import DataNotFoundError
+
+    p = Path(path)
+    if not p.is_file():
+        raise DataNotFoundError(f"{p}: no such file")
+    size = p.stat().st_size
+    suffix = p.suffix.lower()
+    if size == 0:
+        raise FormatError("is empty", source=p, expected=f"a {suffix} scan")
+    if suffix == ".bin" and size % 16:
+        raise FormatError(
+            f"{size} bytes is not a whole number of points",
+            source=p,
+            expected="KITTI float32 x, y, z, reflectance (16 bytes a point)",
+        )
+    if suffix == ".npy":
+        _check_npy_header(p, size)
+    elif suffix == ".npz":
+        try:
+            with zipfile.ZipFile(p) as z:
+                names = z.namelist()
+        except (zipfile.BadZipFile, OSError) as exc:
+            raise FormatError(
+                f"not an .npz archive ({exc})", source=p, expected="an .npz"
+            ) from None
+        if "ranges.npy" not in names:
+            raise FormatError(
+                "has no 'ranges' array", source=p, field="ranges", expected="a range scan .npz"
+            )
+    elif suffix in (".pcd", ".ply"):
+        with open(p, "rb") as fh:
+            head = fh.read(65536)
+        if suffix == ".pcd":
+            from navkit.io.pcd import _parse_pcd_header
+
+            _parse_pcd_header(p, head)
+        else:
+            from navkit.io.ply import _parse_ply_header
+
+            _parse_ply_header(p, head)
+
+
+def _check_npy_header(p: Path, size: int) -> None:
+    fmt = np.lib.format
+    try:
+        with open(p, "rb") as fh:
+            major, _ = fmt.read_magic(fh)
+            read = fmt.read_array_header_1_0 if major == 1 else fmt.read_array_header_2_0
+            shape, _, dtype = read(fh, max_header_size=65536)
+            offset = fh.tell()
+    except (ValueError, OSError, SyntaxError) as exc:
+        raise FormatError(f"not a .npy array ({exc})", source=p, expected="a .npy file") from None
+    need = int(np.prod(shape, dtype=np.float64)) * dtype.itemsize
+    if need > size - offset:
+        raise FormatError(
+            f"declares {need} bytes of data, the file holds {size - offset}",
+            source=p,
+            expected="a complete .npy file",
+        )

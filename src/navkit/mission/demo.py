@@ -30,7 +30,14 @@ from navkit.mission.settings import (
     read_config,
 )
 
-__all__ = ["run_demo", "run_scene_file", "run_to_dir", "summary_of", "write_outputs"]
+__all__ = [
+    "load_scene_file",
+    "run_demo",
+    "run_scene_file",
+    "run_to_dir",
+    "summary_of",
+    "write_outputs",
+]
 
 log = logging.getLogger(__name__)
 
@@ -131,19 +138,16 @@ def run_to_dir(
     return metrics
 
 
-def run_scene_file(
+def load_scene_file(
     scene_path: str | Path,
-    out: str | Path,
     *,
     mission: str | Path | None = None,
     seed: int | None = None,
     small: bool = False,
     start: tuple[float, float, float] | None = None,
-    progress: ProgressFn | None = None,
-    report: ReportFn | None = None,
     config: str | Path | None = None,
-) -> dict[str, Any]:
-    """``navkit mission run``: a scene TOML (or built-in name) and its mission file.
+) -> tuple[Any, Route, MissionSettings]:
+    """Read and check everything a mission run needs: the scene, its route and the settings.
 
     The mission file is ``mission`` if given, else ``<scene stem>.mission.toml`` beside the
     scene, else the built-in ``mission_<name>.toml`` for a built-in scene. ``start`` overrides
@@ -177,6 +181,26 @@ def run_scene_file(
         settings = settings.with_overrides(read_config(config), source=str(config))
     if seed is not None:
         settings = dataclasses.replace(settings, seed=int(seed))
+    return scene, route, settings
+
+
+def run_scene_file(
+    scene_path: str | Path,
+    out: str | Path,
+    *,
+    mission: str | Path | None = None,
+    seed: int | None = None,
+    small: bool = False,
+    start: tuple[float, float, float] | None = None,
+    progress: ProgressFn | None = None,
+    report: ReportFn | None = None,
+    config: str | Path | None = None,
+) -> dict[str, Any]:
+    """``navkit mission run``: a scene TOML (or built-in name) and its mission file
+    (:func:`load_scene_file`), run into ``out``."""
+    scene, route, settings = load_scene_file(
+        scene_path, mission=mission, seed=seed, small=small, start=start, config=config
+    )
     return run_to_dir(scene, route, settings, out, progress, report)
 
 
