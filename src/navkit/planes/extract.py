@@ -60,6 +60,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _REFINE_MODES = ("boundary", "full")
+_MAX_CELL = 128  # the compiled kernels' largest patch (navkit.planes._kernels.MAX_CELL)
 # upper-triangle index pairs of a symmetric 3 x 3 matrix: xx, xy, xz, yy, yz, zz
 _IU = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
 
@@ -219,6 +220,14 @@ class _Workspace(threading.local):
 _WS = _Workspace()
 
 
+def _kernels():  # type: ignore[no-untyped-def]
+    """The compiled kernels (:mod:`navkit.planes._kernels`), imported on first use so that
+    ``import navkit`` does not load Numba."""
+    from navkit.planes import _kernels
+
+    return _kernels
+
+
 # ------------------------------------------------------------------------------ moments
 
 # a moment row: [n, S (3), SS (3 x 3, row-major)] - count, sums and sums of outer products (raw)
@@ -288,28 +297,44 @@ class _Patches:
     tol: NDArray[np.float32]  # (Hc, Wc) inlier bound at each pixel's range, -1 where invalid
 
 
-def _patch_moments(P: NDArray[np.float64], s: ExtractionSettings, hc: int, wc: int) -> _Patches:
+def _patch_moments(
+    P: NDArray[np.float64], s: ExtractionSettings, hc: int, wc: int, compiled: bool = True
+) -> _Patches:
     """Step 1: moments of every patch in one pass of block reductions (float32, centred).
 
     A patch's scatter about its mean is ~1e-3 m^2 along the plane and ~1e-6 m^2 across it (the
     thickness), while raw second moments at 5 m are ~25 m^2: in float32 (eps 6e-8) raw moments
     would lose the thickness to cancellation (25 * 6e-8 = 1.5e-6 m^2). Centred on the patch's
     float32 mean, the products are <= ~0.01 m^2 and keep ~1e-9 m^2; the moments about the
-    reference are converted to raw float64 moments for the region sums. The coordinates are
-    centred in place, and one scratch image serves all products (no per-product allocation).
+    reference are converted to raw float64 moments for the region sums. ``compiled``: one
+    fused pass per patch (:func:`navkit.planes._kernels.patch_moments`, same bits); else the
+    NumPy block reductions below (the oracle), where the coordinates are centred in place and
+    one scratch image serves all products.
     """
     c = int(s.cell)
     Hc, Wc = hc * c, wc * c
     X = _WS.get("X", (3, Hc, Wc), np.float32)
+    r2 = _WS.get("r2", (Hc, Wc), np.float32)
+    valid = _WS.get("valid", (Hc, Wc), np.bool_)
+    tol_scale = np.float32(s.inlier_factor * s.rms_quadratic)
+    tol_base = np.float32(s.inlier_factor * s.rms_base)
+    if compiled and c <= _MAX_CELL:
+        K = _kernels()
+        cnt, ref_g, Sd, SSd6 = K.patch_moments(
+            np.ascontiguousarray(P), hc, wc, c, tol_scale, tol_base, X, r2, valid
+        )
+        SSd = SSd6[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
+        M = _moment_rows(cnt, ref_g.astype(np.float64), Sd, SSd)
+        return _Patches(P=P, valid=valid, ref=ref_g, M=M, D=X, tol=r2)
     for k in range(3):
         X[k] = P[:Hc, :Wc, k]
     x, y, z = X
-    r2 = np.multiply(x, x, out=_WS.get("r2", (Hc, Wc), np.float32))
+    np.multiply(x, x, out=r2)
     tmp = np.multiply(y, y, out=_WS.get("tmp", (Hc, Wc), np.float32))
     r2 += tmp
     np.multiply(z, z, out=tmp)
     r2 += tmp  # NaN / inf anywhere -> not finite
-    valid = np.greater(r2, 0, out=_WS.get("valid", (Hc, Wc), np.bool_))
+    np.greater(r2, 0, out=valid)
     invalid = np.less(r2, np.inf, out=_WS.get("invalid", (Hc, Wc), np.bool_))
     valid &= invalid
     np.logical_not(valid, out=invalid)
@@ -331,8 +356,8 @@ def _patch_moments(P: NDArray[np.float64], s: ExtractionSettings, hc: int, wc: i
     ref_g = np.ascontiguousarray(ref.reshape(3, -1).T, dtype=np.float32)
     M = _moment_rows(cnt.ravel().astype(np.float64), ref_g.astype(np.float64), Sd, SSd)
     # the refinement's per-pixel bound inlier_factor * noise(r^2), in place of r^2
-    r2 *= np.float32(s.inlier_factor * s.rms_quadratic)
-    r2 += np.float32(s.inlier_factor * s.rms_base)
+    r2 *= tol_scale
+    r2 += tol_base
     np.copyto(r2, np.float32(-1), where=invalid)
     return _Patches(P=P, valid=valid, ref=ref_g, M=M, D=D, tol=r2)
 
@@ -514,6 +539,7 @@ def _refine_border(
     wc: int,
     c: int,
     raster: float,
+    compiled: bool = True,
 ) -> _Border:
     """Step 5: the pixels of the border patches against their candidate planes.
 
@@ -521,45 +547,33 @@ def _refine_border(
     noise bound at its range. Distances use the centred coordinates: ``n . x - rho =
     n . d + (n . ref - rho)``, one offset per (patch, plane). A region patch whose valid pixels
     all stay in its own region is *complete* (its patch moments stand); the pixels of the other
-    (*mixed*) patches give per-pixel moments, grouped by (patch, plane).
+    (*mixed*) patches give per-pixel moments, grouped by (patch, plane), summed in float64 (the
+    products of the float32 coordinates are exact in float64). ``compiled``: one loop over the
+    border pixels (:func:`navkit.planes._kernels.refine_pixels`); else NumPy passes per
+    candidate slot (the oracle: same labels, moments within float64 rounding).
     """
-    B, m = cand.shape
+    B = len(cand)
     ci, cj = np.divmod(ids, wc)
-    d = [pt.D[k].reshape(hc, c, wc, c)[ci, :, cj, :] for k in range(3)]  # (B, c, c) each
-    tol = pt.tol.reshape(hc, c, wc, c)[ci, :, cj, :]  # -1 where invalid: never an inlier
     ref = pt.ref[ids]  # (B, 3) float32
-    e = (slice(None), None, None)
-    best_d = _WS.get("best_d", (B, c, c), np.float32)
-    best_d.fill(np.inf)
-    label = np.full((B, c, c), -1, np.int16 if n_reg < 32767 else np.int32)
-    dist_ws = _WS.get("dist", (B, c, c), np.float32)
-    tmp_ws = _WS.get("dist_tmp", (B, c, c), np.float32)
-    better_ws = _WS.get("better", (B, c, c), np.bool_)
-    ok_ws = _WS.get("ok", (B, c, c), np.bool_)
     n32 = rn.astype(np.float32)
     rho32 = rd.astype(np.float32)
-    n_with = (cand >= 0).sum(axis=0)  # patches with more than `slot` candidates: a prefix
-    for slot in range(m):
-        b = int(n_with[slot])
-        k = cand[:b, slot]
-        nk = n32[k]
-        off = np.einsum("bi,bi->b", nk, ref[:b]) - rho32[k]
-        dist, tmp, better, ok = dist_ws[:b], tmp_ws[:b], better_ws[:b], ok_ws[:b]
-        np.multiply(d[0][:b], nk[:, 0][e], out=dist)
-        for a in (1, 2):
-            np.multiply(d[a][:b], nk[:, a][e], out=tmp)
-            dist += tmp
-        dist += off[e]
-        np.abs(dist, out=dist)
-        np.less(dist, tol[:b], out=better)
-        better &= np.less(dist, best_d[:b], out=ok)
-        np.copyto(best_d[:b], dist, where=better)
-        np.copyto(label[:b], k.astype(label.dtype)[e], where=better)
     own = comp[ids]
-    complete = (own >= 0) & np.all((label == own[e]) | (tol < 0), axis=(1, 2))
-    # per-pixel moments of the mixed patches per (patch, candidate): one batched product of
-    # the candidate indicators (Bm, m, c^2) with the pixels' [1, d, d d^T] (Bm, c^2, 10)
-    mixed = np.flatnonzero(~complete)
+    label = np.full((B, c, c), -1, np.int16 if n_reg < 32767 else np.int32)
+    # n . ref - rho per (patch, candidate), float32 (-1 slots: unused)
+    kc = np.maximum(cand, 0)
+    nk = n32[kc]  # (B, m, 3)
+    off = nk[..., 0] * ref[:, None, 0] + nk[..., 1] * ref[:, None, 1]
+    off += nk[..., 2] * ref[:, None, 2]
+    off -= rho32[kc]
+    if compiled and c <= _MAX_CELL:
+        complete, Gall = _kernels().refine_pixels(
+            pt.D, pt.tol, ids, own, cand, np.ascontiguousarray(off), n32, wc, c, label
+        )
+        mixed = np.flatnonzero(~complete)
+        G = Gall[mixed].reshape(-1, 10)
+    else:
+        complete, G = _refine_border_numpy(pt, ids, ci, cj, own, cand, off, n32, label, hc, wc, c)
+        mixed = np.flatnonzero(~complete)
     M = np.zeros((n_reg, _NM))
     points = np.zeros((3, 0), np.float32)
     point_region = np.zeros(0, label.dtype)
@@ -567,15 +581,6 @@ def _refine_border(
         Bm = len(mixed)
         lm = label[mixed].reshape(Bm, -1)
         cm = cand[mixed]
-        onehot = _WS.get("onehot", (Bm, cm.shape[1], c * c), np.float32)
-        np.equal(lm[:, None, :], cm[:, :, None], out=onehot)  # -1 slots never match
-        dx, dy, dz = (a[mixed].reshape(Bm, -1) for a in d)
-        Q = _WS.get("Q", (10, Bm, c * c), np.float32)  # one contiguous image per quantity
-        Q[0] = 1.0
-        Q[1], Q[2], Q[3] = dx, dy, dz
-        for j, (a_, b_) in enumerate(zip(*_IU, strict=True)):
-            np.multiply(Q[1 + a_], Q[1 + b_], out=Q[4 + j])
-        G = np.matmul(onehot, Q.transpose(1, 2, 0)).astype(np.float64).reshape(-1, 10)
         used = np.flatnonzero(G[:, 0] > 0)
         g = G[used]
         Sdd = np.empty((len(used), 3, 3))
@@ -587,13 +592,76 @@ def _refine_border(
         # (lattice masks per stride looked up, one index list for all three coordinates)
         t = _sample_stride(pt.M[ids[mixed]], c, raster)
         flat = np.flatnonzero((lm >= 0) & _stride_masks(c)[t])
-        bi = flat // (c * c)
+        bi, pix = np.divmod(flat, c * c)
+        pr, pq = np.divmod(pix, c)
         point_region = lm.ravel()[flat]
-        points = np.take(Q[1:4].reshape(3, -1), flat, axis=1)
+        rows, cols = ci[mixed][bi] * c + pr, cj[mixed][bi] * c + pq
+        points = pt.D[:, rows, cols]
         points += np.take(np.ascontiguousarray(ref[mixed].T), bi, axis=1)
     return _Border(
         ids=ids, label=label, complete=complete, M=M, points=points, point_region=point_region
     )
+
+
+def _refine_border_numpy(
+    pt: _Patches,
+    ids: NDArray[np.int64],
+    ci: NDArray[np.int64],
+    cj: NDArray[np.int64],
+    own: NDArray[np.int64],
+    cand: NDArray[np.int64],
+    off: NDArray[np.float32],
+    n32: NDArray[np.float32],
+    label: NDArray[np.signedinteger],
+    hc: int,
+    wc: int,
+    c: int,
+) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+    """NumPy oracle of :func:`navkit.planes._kernels.refine_pixels`: fills ``label`` and returns
+    ``complete (B,)`` and the float64 moments ``(Bm * m, 10)`` of the mixed patches' pixels per
+    (patch, candidate slot)."""
+    B, m = cand.shape
+    d = [pt.D[k].reshape(hc, c, wc, c)[ci, :, cj, :] for k in range(3)]  # (B, c, c) each
+    tol = pt.tol.reshape(hc, c, wc, c)[ci, :, cj, :]  # -1 where invalid: never an inlier
+    e = (slice(None), None, None)
+    best_d = _WS.get("best_d", (B, c, c), np.float32)
+    best_d.fill(np.inf)
+    dist_ws = _WS.get("dist", (B, c, c), np.float32)
+    tmp_ws = _WS.get("dist_tmp", (B, c, c), np.float32)
+    better_ws = _WS.get("better", (B, c, c), np.bool_)
+    ok_ws = _WS.get("ok", (B, c, c), np.bool_)
+    n_with = (cand >= 0).sum(axis=0)  # patches with more than `slot` candidates: a prefix
+    for slot in range(m):
+        b = int(n_with[slot])
+        k = cand[:b, slot]
+        nk = n32[k]
+        dist, tmp, better, ok = dist_ws[:b], tmp_ws[:b], better_ws[:b], ok_ws[:b]
+        np.multiply(d[0][:b], nk[:, 0][e], out=dist)
+        for a in (1, 2):
+            np.multiply(d[a][:b], nk[:, a][e], out=tmp)
+            dist += tmp
+        dist += off[:b, slot][e]
+        np.abs(dist, out=dist)
+        np.less(dist, tol[:b], out=better)
+        better &= np.less(dist, best_d[:b], out=ok)
+        np.copyto(best_d[:b], dist, where=better)
+        np.copyto(label[:b], k.astype(label.dtype)[e], where=better)
+    complete = (own >= 0) & np.all((label == own[e]) | (tol < 0), axis=(1, 2))
+    # per-pixel moments of the mixed patches per (patch, candidate): one batched product of
+    # the candidate indicators (Bm, m, c^2) with the pixels' [1, d, d d^T] (Bm, c^2, 10)
+    mixed = np.flatnonzero(~complete)
+    Bm = len(mixed)
+    lm = label[mixed].reshape(Bm, c * c)
+    cm = cand[mixed]
+    onehot = np.equal(lm[:, None, :], cm[:, :, None]).astype(np.float64)  # -1 never matches
+    dx, dy, dz = (a[mixed].reshape(Bm, c * c).astype(np.float64) for a in d)
+    Q = np.empty((10, Bm, c * c))  # one contiguous image per quantity
+    Q[0] = 1.0
+    Q[1], Q[2], Q[3] = dx, dy, dz
+    for j, (a_, b_) in enumerate(zip(*_IU, strict=True)):
+        np.multiply(Q[1 + a_], Q[1 + b_], out=Q[4 + j])
+    G = np.matmul(onehot, Q.transpose(1, 2, 0)).reshape(-1, 10)
+    return complete, G
 
 
 # ------------------------------------------------------------------------------ main entry
@@ -617,6 +685,14 @@ def extract_planes_organized(
     ExtractionResult
         ``labels`` is ``(H, W)``; inlier indices are ``row * W + col``, increasing.
     """
+    return _extract(points, settings, compiled=True)
+
+
+def _extract(
+    points: ArrayLike, settings: ExtractionSettings | None, *, compiled: bool
+) -> ExtractionResult:
+    """:func:`extract_planes_organized` with the compiled kernels (``compiled=True``) or their
+    NumPy oracles (the tests compare the two)."""
     s = settings or ExtractionSettings()
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 3 or P.shape[2] != 3:
@@ -629,7 +705,7 @@ def extract_planes_organized(
     if hc == 0 or wc == 0:
         return ExtractionResult((), -np.ones((H, W), np.int64))
     # 1. patch moments
-    pt = _patch_moments(P, s, hc, wc)
+    pt = _patch_moments(P, s, hc, wc, compiled)
     # 2.-4. planar patches, region growing, pruning, merging
     n_reg, comp, n_planar = _grow_regions(pt.M, hc, wc, s)
     if n_reg == 0:
@@ -638,7 +714,7 @@ def extract_planes_organized(
     rn, rd, _, _ = _planes_from_rows(_sum_rows(comp, n_reg, pt.M))
     cellmap = comp.reshape(hc, wc)
     wholesale, ids, cand = _border_patches(cellmap, s.refine == "full")
-    bd = _refine_border(pt, comp, ids, cand, rn, rd, n_reg, hc, wc, c, s.outline_cell)
+    bd = _refine_border(pt, comp, ids, cand, rn, rd, n_reg, hc, wc, c, s.outline_cell, compiled)
     wholesale = wholesale.ravel()
     wholesale[ids[bd.complete]] = True
     # 6. final planes from the moments of their inliers: wholesale patches + mixed pixels
