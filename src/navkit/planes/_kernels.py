@@ -60,23 +60,15 @@ def _pairwise32(a: np.ndarray, n: int) -> np.float32:  # pragma: no cover - comp
 
 @njit(cache=True)
 def patch_moments(
-    P: np.ndarray,
-    hc: int,
-    wc: int,
-    c: int,
-    tol_scale: np.float32,
-    tol_base: np.float32,
-    X: np.ndarray,
-    tol: np.ndarray,
-    valid: np.ndarray,
+    P: np.ndarray, hc: int, wc: int, c: int, valid: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Step 1 of the extraction in one pass per patch (see ``extract._patch_moments``).
 
-    Fills ``X (3, hc c, wc c)`` float32 with the coordinates minus their patch's float32 mean
-    (0 where invalid), ``tol (hc c, wc c)`` float32 with the inlier bound ``tol_scale r^2 +
-    tol_base`` (-1 where invalid) and ``valid`` (finite, non-zero range). Returns per patch the
-    count ``(G,)``, the float32 mean ``(G, 3)``, the sums of the centred coordinates ``(G, 3)``
-    and of their products ``(G, 6)`` (xx, xy, xz, yy, yz, zz), float32 sums as float64.
+    Fills ``valid (hc c, wc c)`` (finite, non-zero range) and returns per patch the count
+    ``(G,)``, the float32 mean ``(G, 3)``, the sums of the coordinates minus that mean ``(G, 3)``
+    and of their products ``(G, 6)`` (xx, xy, xz, yy, yz, zz), float32 sums as float64. The
+    centred coordinates themselves are not stored: :func:`refine_pixels` recomputes them for
+    the few patches it needs (writing them for the whole grid cost more memory traffic).
     """
     G = hc * wc
     cnt = np.empty(G, np.float64)
@@ -84,10 +76,11 @@ def patch_moments(
     Sd = np.empty((G, 3), np.float64)
     SSd = np.empty((G, 6), np.float64)
     col = np.empty((10, c), np.float32)  # per-column sums of one patch
+    X = np.empty((3, c, c), np.float32)  # one patch's float32 coordinates, 0 where invalid
     for i in range(hc):
         for j in range(wc):
             g = i * wc + j
-            # pass 1: coordinates, validity, bound; column sums of the count and coordinates
+            # pass 1: coordinates and validity; column sums of the count and coordinates
             for r in range(c):
                 y = i * c + r
                 for q in range(c):
@@ -101,17 +94,15 @@ def patch_moments(
                     ok = r2 > 0 and r2 < np.inf
                     valid[y, x] = ok
                     if ok:
-                        tol[y, x] = np.float32(np.float32(r2 * tol_scale) + tol_base)
                         v = np.float32(1.0)
                     else:
-                        tol[y, x] = np.float32(-1.0)
                         px = np.float32(0.0)
                         py = np.float32(0.0)
                         pz = np.float32(0.0)
                         v = np.float32(0.0)
-                    X[0, y, x] = px
-                    X[1, y, x] = py
-                    X[2, y, x] = pz
+                    X[0, r, q] = px
+                    X[1, r, q] = py
+                    X[2, r, q] = pz
                     if r == 0:
                         col[0, q] = v
                         col[1, q] = px
@@ -137,12 +128,9 @@ def patch_moments(
                 for q in range(c):
                     x = j * c + q
                     v = np.float32(1.0) if valid[y, x] else np.float32(0.0)
-                    dx = np.float32(np.float32(X[0, y, x] - mx) * v)
-                    dy = np.float32(np.float32(X[1, y, x] - my) * v)
-                    dz = np.float32(np.float32(X[2, y, x] - mz) * v)
-                    X[0, y, x] = dx
-                    X[1, y, x] = dy
-                    X[2, y, x] = dz
+                    dx = np.float32(np.float32(X[0, r, q] - mx) * v)
+                    dy = np.float32(np.float32(X[1, r, q] - my) * v)
+                    dz = np.float32(np.float32(X[2, r, q] - mz) * v)
                     xx = np.float32(dx * dx)
                     xy = np.float32(dx * dy)
                     xz = np.float32(dx * dz)
@@ -178,44 +166,74 @@ def patch_moments(
 
 @njit(cache=True)
 def refine_pixels(
-    D: np.ndarray,
-    tol: np.ndarray,
+    P: np.ndarray,
+    ref: np.ndarray,
+    tol_scale: np.float32,
+    tol_base: np.float32,
     ids: np.ndarray,
     own: np.ndarray,
     cand: np.ndarray,
     off: np.ndarray,
     n32: np.ndarray,
+    stride: np.ndarray,
     wc: int,
     c: int,
     label: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Step 5, the border patches pixel by pixel (see ``extract._refine_border``).
 
-    ``D (3, H, W)`` centred float32 coordinates, ``tol (H, W)`` inlier bounds (-1 = invalid),
-    ``ids (B,)`` patches, ``own (B,)`` their regions (-1 = none), ``cand (B, m)`` candidate
-    regions (-1 padded), ``off (B, m)`` float32 ``n . ref - rho`` per (patch, candidate),
-    ``n32 (n_reg, 3)`` float32 normals. Fills ``label (B, c, c)`` (closest candidate within the
-    bound, -1 = none; ties keep the earlier slot). Returns ``complete (B,)`` and the float64
-    moments ``(B, m, 10)`` - count, sums of d, sums of d d^T (xx, xy, xz, yy, yz, zz) - of the
-    pixels of each (incomplete patch, candidate) (zero for complete patches).
+    ``P (H, W, 3)`` the points, ``ref (G, 3)`` the patches' float32 means, ``tol_scale r^2 +
+    tol_base`` the inlier bound, ``ids (B,)`` patches, ``own (B,)`` their regions (-1 = none),
+    ``cand (B, m)`` candidate regions (-1 padded), ``off (B, m)`` float32 ``n . ref - rho`` per
+    (patch, candidate), ``n32 (n_reg, 3)`` float32 normals. The centred float32 coordinates and
+    the bound are recomputed exactly as :func:`patch_moments` / the NumPy path define them.
+    Fills ``label (B, c, c)`` (closest candidate within the bound, -1 = none; ties keep the
+    earlier slot). Returns ``complete (B,)`` and the float64 moments ``(B, m, 10)`` - count,
+    sums of d, sums of d d^T (xx, xy, xz, yy, yz, zz) - of the pixels of each (incomplete
+    patch, candidate) (zero for complete patches) - and the outline samples of the incomplete
+    patches: their labelled pixels on every ``stride[b]``-th row and column, ``float32(d + ref)``
+    ``(3, K)``, and their regions ``(K,)`` (patch by patch, raster order within one).
     """
     B, m = cand.shape
     complete = np.empty(B, np.bool_)
     G = np.zeros((B, m, 10), np.float64)
+    d = np.empty((3, c, c), np.float32)
+    pts = np.empty((3, B * c * c), np.float32)
+    preg = np.empty(B * c * c, np.int64)
+    n_pts = 0
     for b in range(B):
         i = ids[b] // wc
         j = ids[b] - i * wc
+        g = ids[b]
+        mx = ref[g, 0]
+        my = ref[g, 1]
+        mz = ref[g, 2]
         ok = own[b] >= 0
         for r in range(c):
             y = i * c + r
             for q in range(c):
                 x = j * c + q
-                t = tol[y, x]
+                px = np.float32(P[y, x, 0])
+                py = np.float32(P[y, x, 1])
+                pz = np.float32(P[y, x, 2])
+                r2 = np.float32(
+                    np.float32(np.float32(px * px) + np.float32(py * py)) + np.float32(pz * pz)
+                )
+                if r2 > 0 and r2 < np.inf:
+                    t = np.float32(np.float32(r2 * tol_scale) + tol_base)
+                    dx = np.float32(px - mx)
+                    dy = np.float32(py - my)
+                    dz = np.float32(pz - mz)
+                else:  # never an inlier
+                    t = np.float32(-1.0)
+                    dx = np.float32(0.0)
+                    dy = np.float32(0.0)
+                    dz = np.float32(0.0)
+                d[0, r, q] = dx
+                d[1, r, q] = dy
+                d[2, r, q] = dz
                 best = np.float32(np.inf)
                 lab = -1
-                dx = D[0, y, x]
-                dy = D[1, y, x]
-                dz = D[2, y, x]
                 for s in range(m):
                     k = cand[b, s]
                     if k < 0:
@@ -238,7 +256,6 @@ def refine_pixels(
         if ok:
             continue
         for r in range(c):
-            y = i * c + r
             for q in range(c):
                 lab = label[b, r, q]
                 if lab < 0:
@@ -246,18 +263,88 @@ def refine_pixels(
                 s = 0
                 while cand[b, s] != lab:
                     s += 1
-                x = j * c + q
-                dx = np.float64(D[0, y, x])
-                dy = np.float64(D[1, y, x])
-                dz = np.float64(D[2, y, x])
+                ex = np.float64(d[0, r, q])
+                ey = np.float64(d[1, r, q])
+                ez = np.float64(d[2, r, q])
+                if r % stride[b] == 0 and q % stride[b] == 0:
+                    pts[0, n_pts] = np.float32(d[0, r, q] + mx)
+                    pts[1, n_pts] = np.float32(d[1, r, q] + my)
+                    pts[2, n_pts] = np.float32(d[2, r, q] + mz)
+                    preg[n_pts] = lab
+                    n_pts += 1
                 G[b, s, 0] += 1.0
-                G[b, s, 1] += dx
-                G[b, s, 2] += dy
-                G[b, s, 3] += dz
-                G[b, s, 4] += dx * dx
-                G[b, s, 5] += dx * dy
-                G[b, s, 6] += dx * dz
-                G[b, s, 7] += dy * dy
-                G[b, s, 8] += dy * dz
-                G[b, s, 9] += dz * dz
-    return complete, G
+                G[b, s, 1] += ex
+                G[b, s, 2] += ey
+                G[b, s, 3] += ez
+                G[b, s, 4] += ex * ex
+                G[b, s, 5] += ex * ey
+                G[b, s, 6] += ex * ez
+                G[b, s, 7] += ey * ey
+                G[b, s, 8] += ey * ez
+                G[b, s, 9] += ez * ez
+    return complete, G, pts[:, :n_pts].copy(), preg[:n_pts].copy()
+
+
+@njit(cache=True)
+def label_image(
+    valid: np.ndarray,
+    lab_cell: np.ndarray,
+    mixed_ids: np.ndarray,
+    mixed_label: np.ndarray,
+    H: int,
+    W: int,
+    K: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """The label image and the inliers of each segment in raster order (see
+    ``extract._extract``): ``valid (hc c, wc c)``, ``lab_cell (hc, wc)`` the segment of each
+    wholesale patch (-1 = none), ``mixed_ids (Bm,)`` the patches refined pixel by pixel and
+    ``mixed_label (Bm, c, c)`` their pixels' segments. Returns ``labels (H, W)`` int64 (-1 =
+    none), the inlier indices ``row * W + col`` of all segments one after the other and the
+    ``(K + 1,)`` cuts between segments."""
+    hc, wc = lab_cell.shape
+    c = valid.shape[0] // hc
+    labels = np.full((H, W), -1, np.int64)
+    for i in range(hc):
+        for j in range(wc):
+            s = lab_cell[i, j]
+            if s < 0:
+                continue
+            for r in range(c):
+                for q in range(c):
+                    if valid[i * c + r, j * c + q]:
+                        labels[i * c + r, j * c + q] = s
+    for b in range(len(mixed_ids)):
+        i = mixed_ids[b] // wc
+        j = mixed_ids[b] - i * wc
+        for r in range(c):
+            for q in range(c):
+                labels[i * c + r, j * c + q] = mixed_label[b, r, q]
+    count = np.zeros(K + 1, np.int64)
+    for y in range(H):
+        for x in range(W):
+            count[labels[y, x] + 1] += 1
+    cuts = np.zeros(K + 1, np.int64)
+    for k in range(K):
+        cuts[k + 1] = cuts[k] + count[k + 1]
+    inl = np.empty(cuts[K], np.int64)
+    pos = cuts[:K].copy()
+    for y in range(H):
+        for x in range(W):
+            s = labels[y, x]
+            if s >= 0:
+                inl[pos[s]] = y * W + x
+                pos[s] += 1
+    return labels, inl, cuts
+
+
+@njit(cache=True)
+def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """Sums of the rows of ``M (N, K)`` per group ``(N,)`` (``-1`` = none), in row order:
+    ``(n_groups, K)`` float64 (see ``extract._sum_rows``)."""
+    out = np.zeros((n_groups, M.shape[1]), np.float64)
+    for i in range(M.shape[0]):
+        g = groups[i]
+        if g >= 0:
+            for k in range(M.shape[1]):
+                out[g, k] += M[i, k]
+    return out

@@ -252,10 +252,16 @@ def _moment_rows(
 
 
 def _sum_rows(
-    groups: NDArray[np.int64], n_groups: int, M: NDArray[np.float64]
+    groups: NDArray[np.int64], n_groups: int, M: NDArray[np.float64], compiled: bool = False
 ) -> NDArray[np.float64]:
     """Sums of the rows of ``M`` per group (``-1`` = none): ``(n_groups, M.shape[1])``. A one-hot
-    matrix product: ~4x faster than a weighted ``bincount`` per column for a few hundred rows."""
+    matrix product: ~4x faster than a weighted ``bincount`` per column for a few hundred rows;
+    ``compiled``: one loop in row order (:func:`navkit.planes._kernels.sum_rows`, the same sums
+    up to the order of float64 additions)."""
+    if compiled:
+        return _kernels().sum_rows(  # type: ignore[no-any-return]
+            np.ascontiguousarray(groups, dtype=np.int64), n_groups, np.ascontiguousarray(M)
+        )
     onehot = (groups[None, :] == np.arange(n_groups)[:, None]).astype(np.float64)
     return onehot @ M
 
@@ -293,8 +299,11 @@ class _Patches:
     valid: NDArray[np.bool_]  # (Hc, Wc) over the whole patches
     ref: NDArray[np.float32]  # (G, 3) each patch's reference point (its float32 mean)
     M: NDArray[np.float64]  # (G, 13) raw moment rows
-    D: NDArray[np.float32]  # (3, Hc, Wc) coordinates minus their patch's ref, 0 where invalid
-    tol: NDArray[np.float32]  # (Hc, Wc) inlier bound at each pixel's range, -1 where invalid
+    tol_scale: np.float32  # the inlier bound at range r: tol_scale r^2 + tol_base
+    tol_base: np.float32
+    # NumPy path only (the compiled refinement recomputes them for the patches it needs):
+    D: NDArray[np.float32] | None = None  # (3, Hc, Wc) coordinates minus their patch's ref
+    tol: NDArray[np.float32] | None = None  # (Hc, Wc) inlier bound, -1 where invalid
 
 
 def _patch_moments(
@@ -318,14 +327,11 @@ def _patch_moments(
     valid = _WS.get("valid", (Hc, Wc), np.bool_)
     tol_scale = np.float32(s.inlier_factor * s.rms_quadratic)
     tol_base = np.float32(s.inlier_factor * s.rms_base)
-    if compiled and c <= _MAX_CELL:
-        K = _kernels()
-        cnt, ref_g, Sd, SSd6 = K.patch_moments(
-            np.ascontiguousarray(P), hc, wc, c, tol_scale, tol_base, X, r2, valid
-        )
+    if compiled:
+        cnt, ref_g, Sd, SSd6 = _kernels().patch_moments(P, hc, wc, c, valid)
         SSd = SSd6[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
         M = _moment_rows(cnt, ref_g.astype(np.float64), Sd, SSd)
-        return _Patches(P=P, valid=valid, ref=ref_g, M=M, D=X, tol=r2)
+        return _Patches(P, valid, ref_g, M, tol_scale, tol_base)
     for k in range(3):
         X[k] = P[:Hc, :Wc, k]
     x, y, z = X
@@ -359,7 +365,7 @@ def _patch_moments(
     r2 *= tol_scale
     r2 += tol_base
     np.copyto(r2, np.float32(-1), where=invalid)
-    return _Patches(P=P, valid=valid, ref=ref_g, M=M, D=D, tol=r2)
+    return _Patches(P, valid, ref_g, M, tol_scale, tol_base, D=D, tol=r2)
 
 
 def _stride_masks(c: int) -> NDArray[np.bool_]:
@@ -565,9 +571,10 @@ def _refine_border(
     off = nk[..., 0] * ref[:, None, 0] + nk[..., 1] * ref[:, None, 1]
     off += nk[..., 2] * ref[:, None, 2]
     off -= rho32[kc]
-    if compiled and c <= _MAX_CELL:
-        complete, Gall = _kernels().refine_pixels(
-            pt.D, pt.tol, ids, own, cand, np.ascontiguousarray(off), n32, wc, c, label
+    if compiled:
+        stride = _sample_stride(pt.M[ids], c, raster)
+        complete, Gall, cpoints, cregion = _kernels().refine_pixels(
+            pt.P, pt.ref, pt.tol_scale, pt.tol_base, ids, own, cand, off, n32, stride, wc, c, label
         )
         mixed = np.flatnonzero(~complete)
         G = Gall[mixed].reshape(-1, 10)
@@ -587,7 +594,11 @@ def _refine_border(
         Sdd[:, _IU[0], _IU[1]] = g[:, 4:]
         Sdd[:, _IU[1], _IU[0]] = g[:, 4:]
         gref = np.repeat(ref[mixed].astype(np.float64), cm.shape[1], axis=0)[used]
-        M = _sum_rows(cm.ravel()[used], n_reg, _moment_rows(g[:, 0], gref, g[:, 1:4], Sdd))
+        M = _sum_rows(
+            cm.ravel()[used], n_reg, _moment_rows(g[:, 0], gref, g[:, 1:4], Sdd), compiled
+        )
+        if compiled:
+            return _Border(ids, label, complete, M, cpoints, cregion.astype(label.dtype))
         # the pixels of the mixed patches per region for the outlines, every t-th row / column
         # (lattice masks per stride looked up, one index list for all three coordinates)
         t = _sample_stride(pt.M[ids[mixed]], c, raster)
@@ -596,7 +607,7 @@ def _refine_border(
         pr, pq = np.divmod(pix, c)
         point_region = lm.ravel()[flat]
         rows, cols = ci[mixed][bi] * c + pr, cj[mixed][bi] * c + pq
-        points = pt.D[:, rows, cols]
+        points = pt.D[:, rows, cols]  # type: ignore[index]
         points += np.take(np.ascontiguousarray(ref[mixed].T), bi, axis=1)
     return _Border(
         ids=ids, label=label, complete=complete, M=M, points=points, point_region=point_region
@@ -621,6 +632,7 @@ def _refine_border_numpy(
     ``complete (B,)`` and the float64 moments ``(Bm * m, 10)`` of the mixed patches' pixels per
     (patch, candidate slot)."""
     B, m = cand.shape
+    assert pt.D is not None and pt.tol is not None
     d = [pt.D[k].reshape(hc, c, wc, c)[ci, :, cj, :] for k in range(3)]  # (B, c, c) each
     tol = pt.tol.reshape(hc, c, wc, c)[ci, :, cj, :]  # -1 where invalid: never an inlier
     e = (slice(None), None, None)
@@ -704,6 +716,9 @@ def _extract(
     hc, wc = H // c, W // c
     if hc == 0 or wc == 0:
         return ExtractionResult((), -np.ones((H, W), np.int64))
+    compiled = compiled and c <= _MAX_CELL
+    if compiled:
+        P = np.ascontiguousarray(P)  # the kernels' layout (a no-op for a fresh grid)
     # 1. patch moments
     pt = _patch_moments(P, s, hc, wc, compiled)
     # 2.-4. planar patches, region growing, pruning, merging
@@ -725,30 +740,20 @@ def _extract(
     keep = keep[np.argsort(-count[keep], kind="stable")]  # segments by decreasing inlier count
     new_id = np.full(n_reg + 1, -1, np.int64)  # region + 1 -> segment index
     new_id[keep + 1] = np.arange(len(keep))
-    # label image (8- or 16-bit): wholesale patches, then the pixels of the mixed patches
-    small = np.int8 if len(keep) < 127 else np.int16 if len(keep) < 32767 else np.int32
-    lab_cell = new_id[np.where(wholesale, comp, -1) + 1].astype(small).reshape(hc, wc)
-    lab4 = np.where(pt.valid.reshape(hc, c, wc, c), lab_cell[:, None, :, None], small(-1))
     mixed = ~bd.complete
-    if mixed.any():
-        mi, mj = np.divmod(ids[mixed], wc)
-        lab4[mi, :, mj, :] = new_id[bd.label[mixed].astype(np.int64) + 1]
-    Hc, Wc = hc * c, wc * c
-    if (Hc, Wc) == (H, W):
-        lab_small = lab4.reshape(H, W)
-    else:
-        lab_small = np.full((H, W), -1, small)
-        lab_small[:Hc, :Wc] = lab4.reshape(Hc, Wc)
-    labels = lab_small.astype(np.int64)
-    # inliers in raster order per plane: the label image's rows a plane can reach - the patch
-    # rows of its region and one more on each side (a refined border patch next to it) -
-    # searched for its label; ~2x faster than one stable sort of the whole label image
-    kept = count[keep]
     segmap = new_id[cellmap + 1]
-    in_row = (segmap[None] == np.arange(len(keep))[:, None, None]).any(axis=2)  # (K, hc)
-    row_lo = np.maximum(np.argmax(in_row, axis=1) - 1, 0) * c * W
-    row_hi = np.minimum(hc - np.argmax(in_row[:, ::-1], axis=1) + 1, hc) * c * W
-    flat_lab = lab_small.ravel()
+    lab_cell = new_id[np.where(wholesale, comp, -1) + 1].reshape(hc, wc)
+    if compiled:
+        mixed_lab = new_id[bd.label[mixed].astype(np.int64) + 1]
+        labels, inl, cuts = _kernels().label_image(
+            pt.valid, lab_cell, ids[mixed], mixed_lab, H, W, len(keep)
+        )
+        inliers = [inl[cuts[k] : cuts[k + 1]] for k in range(len(keep))]
+    else:
+        labels, inliers = _label_image_numpy(
+            pt.valid, lab_cell, ids, mixed, bd, new_id, segmap, H, W
+        )
+    kept = count[keep]
     planes = []
     for new, k in enumerate(keep):
         n, r = canonical_plane(normal[k], float(rho[k]))
@@ -757,7 +762,7 @@ def _extract(
         )
     outlines = _outlines(
         pt,
-        lab_small,
+        labels,
         wholesale.reshape(hc, wc),
         segmap,
         bd.points,
@@ -769,11 +774,11 @@ def _extract(
     segs = [
         PlaneSegment(
             plane=plane,
-            inliers=np.flatnonzero(flat_lab[row_lo[new] : row_hi[new]] == new) + row_lo[new],
+            inliers=inl_k,
             outline=ol,
             area=area,
         )
-        for new, (plane, (ol, area)) in enumerate(zip(planes, outlines, strict=True))
+        for plane, inl_k, (ol, area) in zip(planes, inliers, outlines, strict=True)
     ]
     log.debug(
         "organised extraction: %d planar patches of %d, %d refined (%d pixel by pixel), %d planes",
@@ -784,6 +789,47 @@ def _extract(
         len(segs),
     )
     return ExtractionResult(tuple(segs), labels)
+
+
+def _label_image_numpy(
+    valid: NDArray[np.bool_],
+    lab_cell: NDArray[np.int64],
+    ids: NDArray[np.int64],
+    mixed: NDArray[np.bool_],
+    bd: _Border,
+    new_id: NDArray[np.int64],
+    segmap: NDArray[np.int64],
+    H: int,
+    W: int,
+) -> tuple[NDArray[np.int64], list[NDArray[np.int64]]]:
+    """NumPy oracle of :func:`navkit.planes._kernels.label_image`: the label image ``(H, W)``
+    and each segment's inliers in raster order."""
+    hc, wc = lab_cell.shape
+    c = valid.shape[0] // hc
+    K = int(new_id.max()) + 1
+    # label image (8- or 16-bit): wholesale patches, then the pixels of the mixed patches
+    small = np.int8 if K < 127 else np.int16 if K < 32767 else np.int32
+    lab4 = np.where(
+        valid.reshape(hc, c, wc, c), lab_cell.astype(small)[:, None, :, None], small(-1)
+    )
+    if mixed.any():
+        mi, mj = np.divmod(ids[mixed], wc)
+        lab4[mi, :, mj, :] = new_id[bd.label[mixed].astype(np.int64) + 1]
+    Hc, Wc = hc * c, wc * c
+    if (Hc, Wc) == (H, W):
+        lab_small = lab4.reshape(H, W)
+    else:
+        lab_small = np.full((H, W), -1, small)
+        lab_small[:Hc, :Wc] = lab4.reshape(Hc, Wc)
+    # inliers in raster order per plane: the label image's rows a plane can reach - the patch
+    # rows of its region and one more on each side (a refined border patch next to it) -
+    # searched for its label; ~2x faster than one stable sort of the whole label image
+    in_row = (segmap[None] == np.arange(K)[:, None, None]).any(axis=2)  # (K, hc)
+    row_lo = np.maximum(np.argmax(in_row, axis=1) - 1, 0) * c * W
+    row_hi = np.minimum(hc - np.argmax(in_row[:, ::-1], axis=1) + 1, hc) * c * W
+    flat_lab = lab_small.ravel()
+    inliers = [np.flatnonzero(flat_lab[row_lo[k] : row_hi[k]] == k) + row_lo[k] for k in range(K)]
+    return lab_small.astype(np.int64), inliers
 
 
 def _outlines(
