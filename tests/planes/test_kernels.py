@@ -37,6 +37,8 @@ def assert_same(P: np.ndarray, s: ExtractionSettings | None = None) -> int:
         assert _rel(x.plane.centroid, y.plane.centroid) <= REL
         assert _rel(x.plane.rms, y.plane.rms) <= 1e-6  # sqrt of a ~1e-6 m^2 difference of sums
         assert _rel(x.area, y.area) <= REL
+        assert x.outline.shape == y.outline.shape
+        assert _rel(x.outline, y.outline) <= REL
     return len(a.segments)
 
 

@@ -348,3 +348,147 @@ def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  #
             for k in range(M.shape[1]):
                 out[g, k] += M[i, k]
     return out
+
+
+@njit(cache=True)
+def outline_points(
+    points: np.ndarray,
+    point_seg: np.ndarray,
+    P: np.ndarray,
+    valid: np.ndarray,
+    bi: np.ndarray,
+    bj: np.ndarray,
+    bt: np.ndarray,
+    bseg: np.ndarray,
+    axes: np.ndarray,
+    off: np.ndarray,
+    c: int,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """The outline points of every segment in its plane (see ``extract._outlines``): the
+    sampled pixels ``points (3, N)`` float32 of the mixed patches (segments ``point_seg``, -1 =
+    none), then the pixels of the wholesale patches ``(bi, bj)`` not drawn as quadrilaterals,
+    every ``bt``-th row and column of their valid pixels (segments ``bseg``), grouped by segment
+    (stable) and projected on the segment's axes ``(K, 2, 3)`` minus ``off (K, 2)``. Returns
+    ``uv (M, 2)`` float64 and the ``(K + 1,)`` cuts between segments."""
+    K = len(axes)
+    n0 = len(point_seg)
+    count = np.zeros(K + 1, np.int64)
+    for n in range(n0):
+        count[point_seg[n] + 1] += 1
+    for b in range(len(bi)):
+        t = bt[b]
+        for r in range(0, c, t):
+            for q in range(0, c, t):
+                if valid[bi[b] * c + r, bj[b] * c + q]:
+                    count[bseg[b] + 1] += 1
+    cuts = np.zeros(K + 1, np.int64)
+    for k in range(K):
+        cuts[k + 1] = cuts[k] + count[k + 1]
+    uv = np.empty((cuts[K], 2), np.float64)
+    pos = cuts[:K].copy()
+    for n in range(n0):
+        k = point_seg[n]
+        if k < 0:
+            continue
+        x = np.float64(points[0, n])
+        y = np.float64(points[1, n])
+        z = np.float64(points[2, n])
+        for a in range(2):
+            uv[pos[k], a] = x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
+        pos[k] += 1
+    for b in range(len(bi)):
+        t = bt[b]
+        k = bseg[b]
+        for r in range(0, c, t):
+            for q in range(0, c, t):
+                yy = bi[b] * c + r
+                xx = bj[b] * c + q
+                if valid[yy, xx]:
+                    x = P[yy, xx, 0]
+                    y = P[yy, xx, 1]
+                    z = P[yy, xx, 2]
+                    for a in range(2):
+                        uv[pos[k], a] = (
+                            x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
+                        )
+                    pos[k] += 1
+    return uv, cuts
+
+
+@njit(cache=True)
+def plane_rows(
+    M: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
+    """TLS planes of raw moment rows ``(G, 13)`` (see ``extract._planes_from_rows``): the
+    smallest eigenpair of each covariance by the closed form of ``extract.smallest_eigenpairs``
+    row by row. Returns normals ``(G, 3)`` away from the origin, rho, RMS, means ``(G, 3)`` and
+    a flag per row whose smallest eigenvalue is repeated (the caller takes LAPACK's vector
+    there)."""
+    G = M.shape[0]
+    normal = np.empty((G, 3), np.float64)
+    rho = np.empty(G, np.float64)
+    rms = np.empty(G, np.float64)
+    mean = np.empty((G, 3), np.float64)
+    rank1 = np.zeros(G, np.bool_)
+    for g in range(G):
+        n = max(M[g, 0], 1.0)
+        mx = M[g, 1] / n
+        my = M[g, 2] / n
+        mz = M[g, 3] / n
+        a00 = M[g, 4] / n - mx * mx
+        a01 = M[g, 5] / n - mx * my
+        a02 = M[g, 6] / n - mx * mz
+        a11 = M[g, 8] / n - my * my
+        a12 = M[g, 9] / n - my * mz
+        a22 = M[g, 12] / n - mz * mz
+        q = (a00 + a11 + a22) / 3.0
+        b00 = a00 - q
+        b11 = a11 - q
+        b22 = a22 - q
+        p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
+        p = np.sqrt(p2)
+        det = (
+            b00 * (b11 * b22 - a12 * a12)
+            - a01 * (a01 * b22 - a12 * a02)
+            + a02 * (a01 * a12 - b11 * a02)
+        )
+        r = det / (2.0 * p * p2) if p > 0 else 0.0
+        r = min(max(r, -1.0), 1.0)
+        phi = np.arccos(r) / 3.0
+        lam = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+        m00 = a00 - lam
+        m11 = a11 - lam
+        m22 = a22 - lam
+        bx, by, bz, bn = 0.0, 0.0, 1.0, 0.0
+        for pair in range(3):
+            if pair == 0:
+                x0, y0, z0, x1, y1, z1 = m00, a01, a02, a01, m11, a12
+            elif pair == 1:
+                x0, y0, z0, x1, y1, z1 = m00, a01, a02, a02, a12, m22
+            else:
+                x0, y0, z0, x1, y1, z1 = a01, m11, a12, a02, a12, m22
+            cx = y0 * z1 - z0 * y1
+            cy = z0 * x1 - x0 * z1
+            cz = x0 * y1 - y0 * x1
+            n2 = cx * cx + cy * cy + cz * cz
+            if n2 > bn:
+                bx, by, bz, bn = cx, cy, cz, n2
+        if bn <= 1e-30 * max(p2 * p2, 1e-300):
+            rank1[g] = True
+            bn = 1.0
+        inv = np.sqrt(bx * bx + by * by + bz * bz)
+        bx /= inv
+        by /= inv
+        bz /= inv
+        d = bx * mx + by * my + bz * mz
+        if d < 0:
+            bx, by, bz = -bx, -by, -bz
+        normal[g, 0] = bx
+        normal[g, 1] = by
+        normal[g, 2] = bz
+        rho[g] = abs(d)
+        rms[g] = np.sqrt(max(lam, 0.0))
+        mean[g, 0] = mx
+        mean[g, 1] = my
+        mean[g, 2] = mz
+    return normal, rho, rms, mean, rank1

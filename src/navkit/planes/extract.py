@@ -47,7 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 from navkit.errors import InputError
 from navkit.geometry import Plane, canonical_plane
 from navkit.planes.extract_cloud import CloudExtractionSettings, extract_planes_cloud
-from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points, plane_frame
+from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points
 
 __all__ = [
     "CloudExtractionSettings",
@@ -267,10 +267,17 @@ def _sum_rows(
 
 
 def _planes_from_rows(
-    M: NDArray[np.float64],
+    M: NDArray[np.float64], compiled: bool = False
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """TLS planes of moment rows: normals ``(G, 3)`` pointing away from the origin, rho ``(G,)``,
-    RMS orthogonal residual ``(G,)`` and means ``(G, 3)`` (metres)."""
+    RMS orthogonal residual ``(G,)`` and means ``(G, 3)`` (metres). ``compiled`` (many rows):
+    the closed form row by row in one loop (:func:`navkit.planes._kernels.plane_rows`; equal
+    to the NumPy closed form up to the last bits of ``arccos`` / ``cos``)."""
+    if compiled and len(M) > 64:
+        normal, rho, rms, mean, rank1 = _kernels().plane_rows(np.ascontiguousarray(M))
+        if rank1.any():  # a repeated smallest eigenvalue: LAPACK's vector, as the NumPy path
+            normal[rank1], rho[rank1], rms[rank1], _ = _planes_from_rows(M[rank1])
+        return normal, rho, rms, mean
     n = np.maximum(M[:, 0], 1.0)
     m = M[:, 1:4] / n[:, None]
     C = M[:, 4:].reshape(-1, 3, 3) / n[:, None, None] - m[:, :, None] * m[:, None, :]
@@ -399,7 +406,7 @@ def _sample_stride(M: NDArray[np.float64], c: int, raster: float) -> NDArray[np.
 
 
 def _grow_regions(
-    M: NDArray[np.float64], hc: int, wc: int, s: ExtractionSettings
+    M: NDArray[np.float64], hc: int, wc: int, s: ExtractionSettings, compiled: bool = False
 ) -> tuple[int, NDArray[np.int64], int]:
     """Steps 2-4: planar patches, region growing, pruning, merging.
 
@@ -408,7 +415,7 @@ def _grow_regions(
     """
     c = int(s.cell)
     G = hc * wc
-    normal, d, rms, mean = _planes_from_rows(M)
+    normal, d, rms, mean = _planes_from_rows(M, compiled)
     bound = s.noise(np.einsum("gi,gi->g", mean, mean))
     planar = (M[:, 0] >= s.min_fill * c * c) & (rms < bound)
     cos_t = np.cos(np.radians(s.angle_deg))
@@ -722,7 +729,7 @@ def _extract(
     # 1. patch moments
     pt = _patch_moments(P, s, hc, wc, compiled)
     # 2.-4. planar patches, region growing, pruning, merging
-    n_reg, comp, n_planar = _grow_regions(pt.M, hc, wc, s)
+    n_reg, comp, n_planar = _grow_regions(pt.M, hc, wc, s, compiled)
     if n_reg == 0:
         return ExtractionResult((), -np.ones((H, W), np.int64))
     # 5. wholesale patches; the others pixel by pixel against the region planes
@@ -770,6 +777,7 @@ def _extract(
         planes,
         c,
         s.outline_cell,
+        compiled,
     )
     segs = [
         PlaneSegment(
@@ -832,6 +840,24 @@ def _label_image_numpy(
     return lab_small.astype(np.int64), inliers
 
 
+def _plane_frames(planes: list[Plane]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Axes ``(K, 2, 3)`` of every plane's 2D frame and the frame's origin in those axes
+    ``(K, 2)``: :func:`navkit.planes.segments.plane_frame` (``Plane.basis``) for all planes at
+    once (the same frames to the last bits of the norm)."""
+    K = len(planes)
+    n = np.array([p.normal for p in planes], np.float64).reshape(K, 3)
+    rho = np.array([p.rho for p in planes], np.float64)
+    use_x = np.abs(n[:, 0]) < 0.9  # the world x axis projected, else the y axis
+    ref = np.zeros((K, 3))
+    ref[use_x, 0] = 1.0
+    ref[~use_x, 1] = 1.0
+    u = ref - np.where(use_x, n[:, 0], n[:, 1])[:, None] * n
+    u /= np.sqrt(np.einsum("ki,ki->k", u, u))[:, None]
+    axes = np.stack([u, np.cross(n, u)], axis=1)
+    off = np.einsum("kai,ki->ka", axes, rho[:, None] * n)
+    return axes, off
+
+
 def _outlines(
     pt: _Patches,
     labels: NDArray[np.signedinteger],
@@ -842,6 +868,7 @@ def _outlines(
     planes: list[Plane],
     c: int,
     cell: float,
+    compiled: bool = False,
 ) -> list[tuple[NDArray[np.float64], float]]:
     """Step 6, outlines: each plane's wholesale patches as quadrilaterals, its other pixels as
     points, rasterised in the plane (:func:`navkit.planes.segments.outline_from_points`).
@@ -866,9 +893,7 @@ def _outlines(
     """
     hc, wc = segmap.shape
     K = len(planes)
-    frames = [plane_frame(p) for p in planes]
-    axes = np.array([f[1] for f in frames]).reshape(K, 2, 3)
-    off = np.array([f[1] @ f[0] for f in frames]).reshape(K, 2)
+    axes, off = _plane_frames(planes)
 
     def project(xyz: list[NDArray], k: NDArray[np.int64]) -> NDArray[np.float64]:
         """``(..., 2)`` in-plane coordinates of points ``xyz`` (3 arrays) in segments ``k``."""
@@ -899,6 +924,20 @@ def _outlines(
     longest = np.sqrt(np.max(np.einsum("qei,qei->qe", edge, edge), axis=1))
     use = np.all(lat_ok | (labels[own_r, own_q] == qseg[:, None]), axis=1)
     use &= longest <= 2.0 * cell * c
+    qcuts = np.searchsorted(qseg, np.arange(K + 1))
+    if compiled:  # grouping and projection in one kernel, the same floats
+        bi, bj = ii[~use], jj[~use]
+        t = _sample_stride(pt.M[bi * wc + bj], c, cell)
+        uv_all, cuts = _kernels().outline_points(
+            points, point_seg, pt.P, pt.valid, bi, bj, t, qseg[~use], axes, off, c
+        )
+        out = []
+        for k in range(K):
+            n_k = cuts[k + 1] - cuts[k]
+            uv = uv_all[cuts[k] : cuts[k + 1] : max(1, n_k // 40_000)]
+            ql, qh = qcuts[k], qcuts[k + 1]
+            out.append(outline_from_points(uv, cell, quads=quads[ql:qh][use[ql:qh]]))
+        return out
     # points: the sampled pixels of the mixed patches, then of the wholesale patches not used
     # as quadrilaterals (every t-th row / column), grouped by segment
     pseg = point_seg
@@ -916,7 +955,6 @@ def _outlines(
     order = np.argsort(pseg.astype(np.int16 if K < 32767 else np.int64), kind="stable")
     pcuts = np.searchsorted(pseg[order], np.arange(K + 1))
     xyz = [x[order] for x in xyz]
-    qcuts = np.searchsorted(qseg, np.arange(K + 1))
     out = []
     for k in range(K):
         n_k = pcuts[k + 1] - pcuts[k]
