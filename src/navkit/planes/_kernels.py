@@ -80,7 +80,9 @@ def patch_moments(
     for i in range(hc):
         for j in range(wc):
             g = i * wc + j
-            # pass 1: coordinates and validity; column sums of the count and coordinates
+            # pass 1: coordinates and validity; column sums of the count and coordinates (the
+            # first row added to 0: the same sums as NumPy's, up to the sign of a zero sum)
+            col[:] = 0.0
             for r in range(c):
                 y = i * c + r
                 for q in range(c):
@@ -91,28 +93,19 @@ def patch_moments(
                     r2 = np.float32(
                         np.float32(np.float32(px * px) + np.float32(py * py)) + np.float32(pz * pz)
                     )
-                    ok = r2 > 0 and r2 < np.inf
+                    ok = (r2 > 0) & (r2 < np.inf)
                     valid[y, x] = ok
-                    if ok:
-                        v = np.float32(1.0)
-                    else:
-                        px = np.float32(0.0)
-                        py = np.float32(0.0)
-                        pz = np.float32(0.0)
-                        v = np.float32(0.0)
+                    v = np.float32(1.0) if ok else np.float32(0.0)
+                    px = px if ok else np.float32(0.0)
+                    py = py if ok else np.float32(0.0)
+                    pz = pz if ok else np.float32(0.0)
                     X[0, r, q] = px
                     X[1, r, q] = py
                     X[2, r, q] = pz
-                    if r == 0:
-                        col[0, q] = v
-                        col[1, q] = px
-                        col[2, q] = py
-                        col[3, q] = pz
-                    else:
-                        col[0, q] = np.float32(col[0, q] + v)
-                        col[1, q] = np.float32(col[1, q] + px)
-                        col[2, q] = np.float32(col[2, q] + py)
-                        col[3, q] = np.float32(col[3, q] + pz)
+                    col[0, q] = np.float32(col[0, q] + v)
+                    col[1, q] = np.float32(col[1, q] + px)
+                    col[2, q] = np.float32(col[2, q] + py)
+                    col[3, q] = np.float32(col[3, q] + pz)
             n = _pairwise32(col[0], c)
             den = max(n, np.float32(1.0))
             mx = np.float32(_pairwise32(col[1], c) / den)
@@ -123,6 +116,7 @@ def patch_moments(
             ref[g, 1] = my
             ref[g, 2] = mz
             # pass 2: centred coordinates (x 0 / 1 validity) and their products
+            col[:] = 0.0
             for r in range(c):
                 y = i * c + r
                 for q in range(c):
@@ -131,32 +125,15 @@ def patch_moments(
                     dx = np.float32(np.float32(X[0, r, q] - mx) * v)
                     dy = np.float32(np.float32(X[1, r, q] - my) * v)
                     dz = np.float32(np.float32(X[2, r, q] - mz) * v)
-                    xx = np.float32(dx * dx)
-                    xy = np.float32(dx * dy)
-                    xz = np.float32(dx * dz)
-                    yy = np.float32(dy * dy)
-                    yz = np.float32(dy * dz)
-                    zz = np.float32(dz * dz)
-                    if r == 0:
-                        col[1, q] = dx
-                        col[2, q] = dy
-                        col[3, q] = dz
-                        col[4, q] = xx
-                        col[5, q] = xy
-                        col[6, q] = xz
-                        col[7, q] = yy
-                        col[8, q] = yz
-                        col[9, q] = zz
-                    else:
-                        col[1, q] = np.float32(col[1, q] + dx)
-                        col[2, q] = np.float32(col[2, q] + dy)
-                        col[3, q] = np.float32(col[3, q] + dz)
-                        col[4, q] = np.float32(col[4, q] + xx)
-                        col[5, q] = np.float32(col[5, q] + xy)
-                        col[6, q] = np.float32(col[6, q] + xz)
-                        col[7, q] = np.float32(col[7, q] + yy)
-                        col[8, q] = np.float32(col[8, q] + yz)
-                        col[9, q] = np.float32(col[9, q] + zz)
+                    col[1, q] = np.float32(col[1, q] + dx)
+                    col[2, q] = np.float32(col[2, q] + dy)
+                    col[3, q] = np.float32(col[3, q] + dz)
+                    col[4, q] = np.float32(col[4, q] + np.float32(dx * dx))
+                    col[5, q] = np.float32(col[5, q] + np.float32(dx * dy))
+                    col[6, q] = np.float32(col[6, q] + np.float32(dx * dz))
+                    col[7, q] = np.float32(col[7, q] + np.float32(dy * dy))
+                    col[8, q] = np.float32(col[8, q] + np.float32(dy * dz))
+                    col[9, q] = np.float32(col[9, q] + np.float32(dz * dz))
             for k in range(3):
                 Sd[g, k] = _pairwise32(col[1 + k], c)
             for k in range(6):
