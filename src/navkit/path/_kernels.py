@@ -200,3 +200,82 @@ def refine_crossings(
         ua0, ua1, ub0, ub1 = nua0[:m], nua1[:m], nub0[:m], nub1[:m]
         n = m
     return fa[:n_found].copy(), fb[:n_found].copy(), fp[:n_found].copy(), truncated
+
+
+@njit(cache=True)
+def power_sums(
+    u: np.ndarray, d: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float]:  # pragma: no cover
+    """``fitting.power_sums`` in one pass: ``S (7,)`` = sums of ``u^p``, ``D (2, 4)`` = sums of
+    ``d u^p``, ``Q`` = sum of ``|d|^2`` (powers by products, sums in point order: equal to the
+    NumPy version to rounding)."""
+    S = np.zeros(7)
+    D = np.zeros((2, 4))
+    Q = 0.0
+    for i in range(len(u)):
+        x = u[i]
+        p = 1.0
+        for k in range(7):
+            S[k] += p
+            if k < 4:
+                D[0, k] += d[i, 0] * p
+                D[1, k] += d[i, 1] * p
+            p *= x
+        Q += d[i, 0] * d[i, 0] + d[i, 1] * d[i, 1]
+    return S, D, Q
+
+
+@njit(cache=True)
+def gauss_legendre_length(
+    ax: np.ndarray, ay: np.ndarray, u: np.ndarray, gx: np.ndarray, gw: np.ndarray
+) -> np.ndarray:  # pragma: no cover - compiled
+    """``spline.gauss_legendre_length`` in one loop (nodes ``gx``, weights ``gw`` on [0, 1])."""
+    out = np.zeros(len(u))
+    acc = 0.0
+    for i in range(1, len(u)):
+        h = u[i] - u[i - 1]
+        tot = 0.0
+        for k in range(len(gx)):
+            t = u[i - 1] + h * gx[k]
+            dx = ax[1] + t * (2.0 * ax[2] + 3.0 * ax[3] * t)
+            dy = ay[1] + t * (2.0 * ay[2] + 3.0 * ay[3] * t)
+            tot += np.hypot(dx, dy) * gw[k]
+        acc += h * tot
+        out[i] = acc
+    return out
+
+
+@njit(cache=True)
+def project(
+    c: np.ndarray, u0: np.ndarray, d: np.ndarray, iterations: int
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """``fitting.project`` point by point (the same Newton steps and formulas)."""
+    n = len(u0)
+    u_out = np.empty(n)
+    dist = np.empty(n)
+    for i in range(n):
+        ui = min(max(u0[i], 0.0), 1.0)
+        u = ui
+        px, py = d[i, 0], d[i, 1]
+        for _ in range(iterations):
+            rx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3])) - px
+            ry = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3])) - py
+            dx = c[0, 1] + u * (2 * c[0, 2] + 3 * c[0, 3] * u)
+            dy = c[1, 1] + u * (2 * c[1, 2] + 3 * c[1, 3] * u)
+            ddx = 2 * c[0, 2] + 6 * c[0, 3] * u
+            ddy = 2 * c[1, 2] + 6 * c[1, 3] * u
+            g = rx * dx + ry * dy
+            H = dx * dx + dy * dy + rx * ddx + ry * ddy
+            step = g / H if H > 1e-300 else 0.0
+            u = min(max(u - step, 0.0), 1.0)
+        cx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3]))
+        cy = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3]))
+        r_new = np.hypot(cx - px, cy - py)
+        cx = c[0, 0] + ui * (c[0, 1] + ui * (c[0, 2] + ui * c[0, 3]))
+        cy = c[1, 0] + ui * (c[1, 1] + ui * (c[1, 2] + ui * c[1, 3]))
+        r_old = np.hypot(cx - px, cy - py)
+        if r_new <= r_old:
+            u_out[i], dist[i] = u, r_new
+        else:
+            u_out[i], dist[i] = ui, r_old
+    return u_out, dist
