@@ -279,3 +279,94 @@ def project(
         else:
             u_out[i], dist[i] = ui, r_old
     return u_out, dist
+
+
+@njit(cache=True)
+def update_tree(lo: np.ndarray, hi: np.ndarray, a: int, b: int) -> None:  # pragma: no cover
+    """Ancestors of the leaves ``[a, b)`` of the box tree (``lo``, ``hi`` ``(2 cap, 2)``, leaves
+    at ``[cap, 2 cap)``, already written): each node the min / max of its two children, level
+    by level (``LoopFreeChain._update_leaves``; exact, the same boxes)."""
+    lo_n, hi_n = a, b - 1
+    while lo_n > 1:
+        lo_n //= 2
+        hi_n //= 2
+        for node in range(lo_n, hi_n + 1):
+            for c in range(2):
+                lo[node, c] = min(lo[2 * node, c], lo[2 * node + 1, c])
+                hi[node, c] = max(hi[2 * node, c], hi[2 * node + 1, c])
+
+
+@njit(cache=True)
+def candidate_pairs(
+    lo: np.ndarray, hi: np.ndarray, cap: int, first: int, n_piece: int
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """``LoopFreeChain._candidate_pairs``: (older, newer) piece pairs whose boxes overlap, newer
+    pieces ``>= first``, by depth-first descent of the box tree (the same pairs in the same
+    order: newer piece, then older piece, increasing)."""
+    out_a = np.empty(64, np.int64)
+    out_b = np.empty(64, np.int64)
+    n = 0
+    stack = np.empty(128, np.int64)
+    for q in range(first, n_piece):
+        leaf = q + cap
+        qlx, qly, qhx, qhy = lo[leaf, 0], lo[leaf, 1], hi[leaf, 0], hi[leaf, 1]
+        top = 0
+        stack[0] = 1
+        top = 1
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            if not (
+                lo[node, 0] <= qhx
+                and lo[node, 1] <= qhy
+                and qlx <= hi[node, 0]
+                and qly <= hi[node, 1]
+            ):
+                continue
+            if node >= cap:
+                older = node - cap
+                if older < q:
+                    if n == len(out_a):
+                        out_a = np.concatenate((out_a, np.empty(n, np.int64)))
+                        out_b = np.concatenate((out_b, np.empty(n, np.int64)))
+                    out_a[n] = older
+                    out_b[n] = q
+                    n += 1
+                continue
+            if top + 2 > len(stack):
+                stack = np.concatenate((stack, np.empty(len(stack), np.int64)))
+            stack[top] = 2 * node + 1  # right child below: the left one is visited first
+            stack[top + 1] = 2 * node
+            top += 2
+    return out_a[:n].copy(), out_b[:n].copy()
+
+
+@njit(cache=True)
+def update_leaves(
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    a: int,
+    b: int,
+    n_piece: int,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    ax: np.ndarray,
+    ay: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """``LoopFreeChain._update_leaves`` once the tree is large enough: the boxes of pieces
+    ``[a, b)`` (end points of each monotone piece; empty boxes beyond ``n_piece``), then their
+    ancestors (:func:`update_tree`)."""
+    for idx in range(a, b):
+        leaf = idx + cap
+        if idx < n_piece:
+            k = pseg[idx]
+            x0, y0 = _cubic(ax[k], pu0[idx]), _cubic(ay[k], pu0[idx])
+            x1, y1 = _cubic(ax[k], pu1[idx]), _cubic(ay[k], pu1[idx])
+            lo[leaf, 0], hi[leaf, 0] = min(x0, x1), max(x0, x1)
+            lo[leaf, 1], hi[leaf, 1] = min(y0, y1), max(y0, y1)
+        else:
+            lo[leaf, 0] = lo[leaf, 1] = np.inf
+            hi[leaf, 0] = hi[leaf, 1] = -np.inf
+    update_tree(lo, hi, a + cap, b + cap)

@@ -308,6 +308,14 @@ class LoopFreeChain:
             self._hi = np.full((2 * cap, 2), _EMPTY_HI)
             a = 0
             b = max(b, self.n_piece)
+        if self.compiled:  # the same boxes, in one compiled loop
+            from navkit.path import _kernels
+
+            _kernels.update_leaves(
+                self._lo, self._hi, self._cap, int(a), int(b), int(self.n_piece),
+                self._pseg.astype(np.int64, copy=False), self._pu0, self._pu1, self._ax, self._ay,
+            )  # fmt: skip
+            return
         idx = np.arange(a, b)
         live = idx < self.n_piece
         leaf = idx + self._cap
@@ -337,6 +345,13 @@ class LoopFreeChain:
         q = np.arange(first_piece, self.n_piece)
         if len(q) == 0:
             return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        if self.compiled:  # depth-first descent per piece: the same pairs in the same order
+            from navkit.path import _kernels
+
+            a, b = _kernels.candidate_pairs(
+                self._lo, self._hi, self._cap, int(first_piece), int(self.n_piece)
+            )
+            return a.astype(np.intp), b.astype(np.intp)
         qlo = self._lo[q + self._cap]
         qhi = self._hi[q + self._cap]
         # start the descent a few levels below the root (at most 64 nodes there): one vectorised
