@@ -449,8 +449,18 @@ class OnlineApproximator:
     ) -> tuple[CubicFit, NDArray[np.float64], NDArray[np.float64]]:
         """The fit over t with its parameter rescaled to the arc length (fallback of step 1.6)."""
         d = self._buf[:n_use] - anchor
-        fit_t = fit_points(variant, self._tau[:n_use], d, tangent=self._tangent)
-        u = self._tau[:n_use] / fit_t.T
+        tau = self._tau[:n_use]
+        if self.compiled:
+            from navkit.path import _kernels as K
+
+            fit_t = self._fit_compiled(variant, tau, d)
+            u = tau / fit_t.T
+            s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u, _GL_X, _GL_W)
+            fit = CubicFit(coef=fit_t.coef, T=float(s[-1]), ssr=fit_t.ssr)
+            u2, dist = K.project(fit.coef, u, d, 3)
+            return fit, u2 * fit.T, dist
+        fit_t = fit_points(variant, tau, d, tangent=self._tangent)
+        u = tau / fit_t.T
         s = gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u)
         fit = CubicFit(coef=fit_t.coef, T=float(s[-1]), ssr=fit_t.ssr)  # same u in [0, 1], T = S
         u2, dist = project(fit, u, d)
