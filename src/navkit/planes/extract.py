@@ -29,6 +29,11 @@ odometry"):
 Temporaries are kept per thread between calls (:class:`_Workspace`); the results never share
 memory with them.
 
+The hot passes - the patch moments, the patches' planes, the border refinement with its outline
+samples, the label image with the inliers, the outline points - run as compiled kernels
+(:mod:`navkit.planes._kernels`, Numba, issue 12); the NumPy versions here are their oracle
+(``_extract(..., compiled=False)``; ``tests/planes/test_kernels.py``, ``docs/kernels.md``).
+
 Unorganised clouds: :mod:`navkit.planes.extract_cloud` (sequential RANSAC with vectorised
 hypotheses, a TLS refit, and the largest connected part of the inliers kept per plane); its names
 are re-exported here.
