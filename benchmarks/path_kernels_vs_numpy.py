@@ -38,8 +38,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument("--quick", action="store_true", help="KITTI 00 gt and TUM fr1_xyz only")
+    parser.add_argument("--only", nargs="*", help="trajectory names (default: all)")
     args = parser.parse_args()
     names = ["KITTI 00 gt", "TUM fr1_xyz gt"] if args.quick else list(TRAJECTORIES)
+    if args.only:
+        names = args.only
     print("trajectory | eps (m) | worst us NumPy -> compiled | mean us NumPy -> compiled")
     for name in names:
         xy = _load(TRAJECTORIES[name])
