@@ -334,8 +334,6 @@ def _patch_moments(
     """
     c = int(s.cell)
     Hc, Wc = hc * c, wc * c
-    X = _WS.get("X", (3, Hc, Wc), np.float32)
-    r2 = _WS.get("r2", (Hc, Wc), np.float32)
     valid = _WS.get("valid", (Hc, Wc), np.bool_)
     tol_scale = np.float32(s.inlier_factor * s.rms_quadratic)
     tol_base = np.float32(s.inlier_factor * s.rms_base)
@@ -344,6 +342,8 @@ def _patch_moments(
         SSd = SSd6[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
         M = _moment_rows(cnt, ref_g.astype(np.float64), Sd, SSd)
         return _Patches(P, valid, ref_g, M, tol_scale, tol_base)
+    X = _WS.get("X", (3, Hc, Wc), np.float32)
+    r2 = _WS.get("r2", (Hc, Wc), np.float32)
     for k in range(3):
         X[k] = P[:Hc, :Wc, k]
     x, y, z = X
