@@ -46,20 +46,32 @@ def _load_revision(rev: str) -> types.ModuleType:
 
 def _same(a: object, b: object) -> str:
     """How two extraction results compare: ``"identical"`` (labels, inliers, planes, outlines and
-    areas bit for bit) or the first difference."""
+    areas bit for bit), ``"same labels, floats within X"`` (labels, inliers and outline sizes
+    identical; the largest relative difference of the normals, rho, centroids, RMS, outlines
+    and areas) or the first structural difference."""
     ra, rb = a.segments, b.segments  # type: ignore[attr-defined]
     if len(ra) != len(rb):
         return f"{len(ra)} vs {len(rb)} planes"
     if not np.array_equal(a.labels, b.labels):  # type: ignore[attr-defined]
         return "labels differ"
+    worst = 0.0
     for k, (x, y) in enumerate(zip(ra, rb, strict=True)):
         if not np.array_equal(x.inliers, y.inliers):
             return f"plane {k}: inliers differ"
-        if not (np.array_equal(x.normal, y.normal) and x.rho == y.rho):
-            return f"plane {k}: plane differs"
-        if not (np.array_equal(x.outline, y.outline) and x.area == y.area):
-            return f"plane {k}: outline / area differ ({x.area:.4f} vs {y.area:.4f} m^2)"
-    return "identical"
+        if x.outline.shape != y.outline.shape:
+            return f"plane {k}: outline sizes differ ({len(x.outline)} vs {len(y.outline)})"
+        for u, v in (
+            (x.normal, y.normal),
+            (x.rho, y.rho),
+            (x.plane.centroid, y.plane.centroid),
+            (x.plane.rms, y.plane.rms),
+            (x.outline, y.outline),
+            (x.area, y.area),
+        ):
+            u, v = np.asarray(u, float), np.asarray(v, float)
+            scale = max(float(np.abs(v).max(initial=0.0)), 1e-300)
+            worst = max(worst, float(np.abs(u - v).max(initial=0.0)) / scale)
+    return "identical" if worst == 0 else f"same labels, floats within {worst:.1e} relative"
 
 
 def main() -> None:

@@ -258,6 +258,7 @@ class _Search:
     """
 
     batch = 2048  # nodes expanded per vectorised step of the depth-first search
+    compiled = True  # scores by navkit.localization._kernels.gather_sums (False: NumPy, the oracle)
     beam = 64  # width of the beam search that seeds the lower bound (see run)
     breadth = 4096  # nodes: levels are expanded whole while they stay this small (see run)
     optimism = 0.03  # the first pass assumes a leaf within this fraction of the top bound
@@ -433,9 +434,13 @@ class _Search:
         self, level: int, k: NDArray[np.intp], shift: NDArray[np.int32]
     ) -> NDArray[np.int64]:
         """As ``_sums`` for nodes covering a rotation group (``FG``, see _group_tables)."""
-        out = np.empty(len(k), dtype=np.int64)
         FG = self.FG[level]
         g = k >> self.a[level]
+        if self.compiled:  # the same integer sums without the (candidates x points) index array
+            from navkit.localization import _kernels
+
+            return _kernels.gather_sums(self.flat_all, FG, g, shift)  # type: ignore[no-any-return]
+        out = np.empty(len(k), dtype=np.int64)
         step = max(1, 4_000_000 // max(FG.shape[1], 1))
         for c in range(0, len(k), step):
             d = min(len(k), c + step)
@@ -446,10 +451,14 @@ class _Search:
 
     def _sums(self, level: int, k: NDArray[np.intp], shift: NDArray[np.int32]) -> NDArray[np.int64]:
         """``sum_i L_level[F[k_c, i] + shift_c]`` per candidate ``c`` (uint8 units), NumPy."""
+        grid = self.flat[level]
+        if self.compiled:  # the same integer sums without the (candidates x points) index array
+            from navkit.localization import _kernels
+
+            return _kernels.gather_sums(grid, self.F, k, shift)  # type: ignore[no-any-return]
         out = np.empty(len(k), dtype=np.int64)
         N = self.F.shape[1]
         step = max(1, 4_000_000 // max(N, 1))
-        grid = self.flat[level]
         for c in range(0, len(k), step):
             d = min(len(k), c + step)
             # one gather over all candidates of the chunk: score[c] = sum_i L[F[k_c, i] + shift_c]

@@ -48,7 +48,7 @@ from navkit.path.fitting import (
     residuals,
 )
 from navkit.path.loops import LoopCut, LoopFreeChain
-from navkit.path.spline import PathSpline, cubic_eval, gauss_legendre_length
+from navkit.path.spline import _GL_W, _GL_X, PathSpline, cubic_eval, gauss_legendre_length
 
 __all__ = ["ApproximationResult", "ApproximatorSettings", "OnlineApproximator", "approximate"]
 
@@ -225,6 +225,9 @@ class OnlineApproximator:
         self._min_step = float(s.min_step)
         self._eps2 = self._eps_fit**2
         self._chain = LoopFreeChain(precision=s.loop_precision, min_loop_length=s.min_loop_length)
+        # the freeze's O(n) passes and the loop search as compiled loops (navkit.path._kernels);
+        # False: the NumPy versions (the oracle the tests compare with)
+        self.compiled = True
         self._raw: list[tuple[NDArray[np.float64], NDArray[np.float64], float]] = []
         self._raw_length = 0.0
         self._loops: list[LoopCut] = []
@@ -397,25 +400,69 @@ class OnlineApproximator:
     def _natural_fit(
         self, variant: str, anchor: NDArray[np.float64], n_use: int
     ) -> tuple[CubicFit, NDArray[np.float64], NDArray[np.float64]]:
-        """Section 4's three steps on buffer rows ``[0, n_use)``: (fit, arc lengths, deviations)."""
+        """Section 4's three steps on buffer rows ``[0, n_use)``: (fit, arc lengths, deviations).
+
+        With ``compiled`` (the default) the O(n) passes - power sums, Gauss-Legendre arc
+        lengths, Newton projection - run as compiled loops (:mod:`navkit.path._kernels`; the
+        same formulas, sums in point order: equal to the NumPy passes to rounding)."""
         d = self._buf[:n_use] - anchor
-        # 1) fit over the polyline length t
-        fit_t = fit_points(variant, self._tau[:n_use], d, tangent=self._tangent)
-        # 2) arc length of that curve at each point (Gauss-Legendre)
-        s = gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], self._tau[:n_use] / fit_t.T)
-        # 3) refit over (s_i, P_i): the stored curve is x(s), y(s)
-        fit_s = fit_points(variant, s, d, tangent=self._tangent)
-        # the guarantee is on the distance to the stored curve (the point's own parameter moved)
-        u, dist = project(fit_s, s / fit_s.T, d)
+        tau = self._tau[:n_use]
+        if not self.compiled:
+            # 1) fit over the polyline length t
+            fit_t = fit_points(variant, tau, d, tangent=self._tangent)
+            # 2) arc length of that curve at each point (Gauss-Legendre)
+            s = gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], tau / fit_t.T)
+            # 3) refit over (s_i, P_i): the stored curve is x(s), y(s)
+            fit_s = fit_points(variant, s, d, tangent=self._tangent)
+            # the guarantee is on the distance to the stored curve (its parameter moved)
+            u, dist = project(fit_s, s / fit_s.T, d)
+            return fit_s, u * fit_s.T, dist
+        from navkit.path import _kernels as K
+
+        fit_t = self._fit_compiled(variant, tau, d)
+        s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], tau / fit_t.T, _GL_X, _GL_W)
+        fit_s = self._fit_compiled(variant, s, d)
+        u, dist = K.project(fit_s.coef, s / fit_s.T, d, 3)
         return fit_s, u * fit_s.T, dist
+
+    def _fit_compiled(
+        self, variant: str, tau: NDArray[np.float64], d: NDArray[np.float64]
+    ) -> CubicFit:
+        """:func:`navkit.path.fitting.fit_points` with the compiled power sums."""
+        from navkit.path import _kernels as K
+
+        T = float(tau[-1])
+        u = tau / T if T > 0 else np.zeros_like(tau)
+        S, D, Q = K.power_sums(u, d)
+        tangent = self._tangent
+        return fit_from_sums(
+            variant,
+            S.tolist(),
+            D.tolist(),
+            float(Q),
+            len(tau) - 1,
+            T,
+            end=d[-1].tolist(),
+            tangent=None if tangent is None else np.asarray(tangent).tolist(),
+        )
 
     def _scaled_t_fit(
         self, variant: str, anchor: NDArray[np.float64], n_use: int
     ) -> tuple[CubicFit, NDArray[np.float64], NDArray[np.float64]]:
         """The fit over t with its parameter rescaled to the arc length (fallback of step 1.6)."""
         d = self._buf[:n_use] - anchor
-        fit_t = fit_points(variant, self._tau[:n_use], d, tangent=self._tangent)
-        u = self._tau[:n_use] / fit_t.T
+        tau = self._tau[:n_use]
+        if self.compiled:
+            from navkit.path import _kernels as K
+
+            fit_t = self._fit_compiled(variant, tau, d)
+            u = tau / fit_t.T
+            s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u, _GL_X, _GL_W)
+            fit = CubicFit(coef=fit_t.coef, T=float(s[-1]), ssr=fit_t.ssr)
+            u2, dist = K.project(fit.coef, u, d, 3)
+            return fit, u2 * fit.T, dist
+        fit_t = fit_points(variant, tau, d, tangent=self._tangent)
+        u = tau / fit_t.T
         s = gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u)
         fit = CubicFit(coef=fit_t.coef, T=float(s[-1]), ssr=fit_t.ssr)  # same u in [0, 1], T = S
         u2, dist = project(fit, u, d)

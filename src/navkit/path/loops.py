@@ -25,8 +25,9 @@ left of the new segment, so a path is loop-free after every segment.
 
 from __future__ import annotations
 
+import functools
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -69,13 +70,25 @@ class LoopCut:
     point : (2,) array
         The crossing.
     polyline : (K, 2) array
-        Samples of the removed loop (for figures).
+        Samples of the removed loop (for figures), every ~1 cm (16 to 2000 samples); computed
+        on first access from the chain's segments as they were before the cut (kept as
+        ``segments``: lengths, x and y coefficients) - sampling it at the cut cost ~0.3 ms, a
+        third of the worst time per point (issue 12).
     """
 
     s_start: float
     s_end: float
     point: NDArray[np.float64]
-    polyline: NDArray[np.float64]
+    segments: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]] = field(
+        repr=False, compare=False
+    )
+
+    @functools.cached_property
+    def polyline(self) -> NDArray[np.float64]:
+        """``(K, 2)`` samples of the removed loop."""
+        n = int(np.clip((self.s_end - self.s_start) / 0.01, 16, 2000))
+        s = np.linspace(self.s_start, self.s_end, n)
+        return PathSpline.from_segments(*self.segments).position(s)
 
     @property
     def length(self) -> float:
@@ -196,6 +209,9 @@ class LoopFreeChain:
                 f"is {split}", field="split", expected="an integer >= 2 (2 = binary search)"
             )
         self.split = int(split)
+        # the refinement passes in one compiled loop (navkit.path._kernels); False: NumPy (the
+        # oracle the tests compare with)
+        self.compiled = True
         # segments (growing arrays, first n_seg rows valid)
         self.n_seg = 0
         self._ax = np.zeros((16, 4))
@@ -292,6 +308,14 @@ class LoopFreeChain:
             self._hi = np.full((2 * cap, 2), _EMPTY_HI)
             a = 0
             b = max(b, self.n_piece)
+        if self.compiled:  # the same boxes, in one compiled loop
+            from navkit.path import _kernels
+
+            _kernels.update_leaves(
+                self._lo, self._hi, self._cap, int(a), int(b), int(self.n_piece),
+                self._pseg.astype(np.int64, copy=False), self._pu0, self._pu1, self._ax, self._ay,
+            )  # fmt: skip
+            return
         idx = np.arange(a, b)
         live = idx < self.n_piece
         leaf = idx + self._cap
@@ -321,6 +345,13 @@ class LoopFreeChain:
         q = np.arange(first_piece, self.n_piece)
         if len(q) == 0:
             return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+        if self.compiled:  # depth-first descent per piece: the same pairs in the same order
+            from navkit.path import _kernels
+
+            a, b = _kernels.candidate_pairs(
+                self._lo, self._hi, self._cap, int(first_piece), int(self.n_piece)
+            )
+            return a.astype(np.intp), b.astype(np.intp)
         qlo = self._lo[q + self._cap]
         qhi = self._hi[q + self._cap]
         # start the descent a few levels below the root (at most 64 nodes there): one vectorised
@@ -369,6 +400,33 @@ class LoopFreeChain:
         ua0, ua1, ub0, ub1 = ua0[ok], ua1[ok], ub0[ok], ub1[ok]
         K = self.split
         f = np.linspace(0.0, 1.0, K + 1)
+        if self.compiled:  # all passes in one compiled loop: the same crossings, same order
+            from navkit.path import _kernels
+
+            A, B, Pt, truncated = _kernels.refine_crossings(
+                sa.astype(np.int64),
+                sb.astype(np.int64),
+                ua0,
+                ua1,
+                ub0,
+                ub1,
+                self._ax[: self.n_seg],
+                self._ay[: self.n_seg],
+                self._s0[: self.n_seg],
+                f,
+                self.precision,
+                self.min_loop_length,
+                self.max_pairs,
+                first_only,
+            )
+            if truncated:
+                log.warning(
+                    "loop search: more than %d overlapping sub-pairs (curves on top of each "
+                    "other?) in %d passes; kept those with the smallest s",
+                    self.max_pairs,
+                    truncated,
+                )
+            return self._crossings(A, B, Pt, first_only)
         found_a: list[NDArray[np.float64]] = []
         found_b: list[NDArray[np.float64]] = []
         found_p: list[NDArray[np.float64]] = []
@@ -440,6 +498,16 @@ class LoopFreeChain:
         if not found_a:
             return []
         A, B, Pt = np.concatenate(found_a), np.concatenate(found_b), np.concatenate(found_p)
+        return self._crossings(A, B, Pt, first_only)
+
+    @staticmethod
+    def _crossings(
+        A: NDArray[np.float64], B: NDArray[np.float64], Pt: NDArray[np.float64], first_only: bool
+    ) -> list[Crossing]:
+        """Crossings from the refinement's ``s_a``, ``s_b`` and points (the first one only:
+        smallest ``s_a``, then largest ``s_b``)."""
+        if len(A) == 0:
+            return []
         if first_only:
             k = int(np.lexsort((-B, A))[0])  # smallest s_a, then largest s_b
             return [Crossing(s_a=float(A[k]), s_b=float(B[k]), point=Pt[k])]
@@ -481,10 +549,10 @@ class LoopFreeChain:
         """Remove ``(s_a, s_b)``; returns the index of the segment holding what follows ``s_b``."""
         ka, ua = self._locate(c.s_a)
         kb, ub = self._locate(c.s_b)
-        s = np.linspace(c.s_a, c.s_b, int(np.clip((c.s_b - c.s_a) / 0.01, 16, 2000)))
-        spl = self.spline()
+        n = kb + 1  # the segments up to the one holding s_b (the polyline is sampled lazily)
+        segments = (self._len[:n].copy(), self._ax[:n].copy(), self._ay[:n].copy())
         self.cuts.append(
-            LoopCut(s_start=c.s_a, s_end=c.s_b, point=np.asarray(c.point), polyline=spl.position(s))
+            LoopCut(s_start=c.s_a, s_end=c.s_b, point=np.asarray(c.point), segments=segments)
         )
         tail = (
             cubic_shift(self._ax[kb], ub),

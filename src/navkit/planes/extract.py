@@ -29,6 +29,11 @@ odometry"):
 Temporaries are kept per thread between calls (:class:`_Workspace`); the results never share
 memory with them.
 
+The hot passes - the patch moments, the patches' planes, the border refinement with its outline
+samples, the label image with the inliers, the outline points - run as compiled kernels
+(:mod:`navkit.planes._kernels`, Numba, issue 12); the NumPy versions here are their oracle
+(``_extract(..., compiled=False)``; ``tests/planes/test_kernels.py``, ``docs/kernels.md``).
+
 Unorganised clouds: :mod:`navkit.planes.extract_cloud` (sequential RANSAC with vectorised
 hypotheses, a TLS refit, and the largest connected part of the inliers kept per plane); its names
 are re-exported here.
@@ -48,7 +53,7 @@ from navkit.errors import InputError
 from navkit.geometry import Plane, canonical_plane
 from navkit.geometry._validate import check_settings
 from navkit.planes.extract_cloud import CloudExtractionSettings, extract_planes_cloud
-from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points, plane_frame
+from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points
 
 __all__ = [
     "CloudExtractionSettings",
@@ -61,6 +66,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 _REFINE_MODES = ("boundary", "full")
+_MAX_CELL = 128  # the compiled kernels' largest patch (navkit.planes._kernels.MAX_CELL)
 # upper-triangle index pairs of a symmetric 3 x 3 matrix: xx, xy, xz, yy, yz, zz
 _IU = (np.array([0, 0, 0, 1, 1, 2]), np.array([0, 1, 2, 1, 2, 2]))
 
@@ -221,6 +227,14 @@ class _Workspace(threading.local):
 _WS = _Workspace()
 
 
+def _kernels():  # type: ignore[no-untyped-def]
+    """The compiled kernels (:mod:`navkit.planes._kernels`), imported on first use so that
+    ``import navkit`` does not load Numba."""
+    from navkit.planes import _kernels
+
+    return _kernels
+
+
 # ------------------------------------------------------------------------------ moments
 
 # a moment row: [n, S (3), SS (3 x 3, row-major)] - count, sums and sums of outer products (raw)
@@ -245,19 +259,32 @@ def _moment_rows(
 
 
 def _sum_rows(
-    groups: NDArray[np.int64], n_groups: int, M: NDArray[np.float64]
+    groups: NDArray[np.int64], n_groups: int, M: NDArray[np.float64], compiled: bool = False
 ) -> NDArray[np.float64]:
     """Sums of the rows of ``M`` per group (``-1`` = none): ``(n_groups, M.shape[1])``. A one-hot
-    matrix product: ~4x faster than a weighted ``bincount`` per column for a few hundred rows."""
+    matrix product: ~4x faster than a weighted ``bincount`` per column for a few hundred rows;
+    ``compiled``: one loop in row order (:func:`navkit.planes._kernels.sum_rows`, the same sums
+    up to the order of float64 additions)."""
+    if compiled:
+        return _kernels().sum_rows(  # type: ignore[no-any-return]
+            np.ascontiguousarray(groups, dtype=np.int64), n_groups, np.ascontiguousarray(M)
+        )
     onehot = (groups[None, :] == np.arange(n_groups)[:, None]).astype(np.float64)
     return onehot @ M
 
 
 def _planes_from_rows(
-    M: NDArray[np.float64],
+    M: NDArray[np.float64], compiled: bool = False
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """TLS planes of moment rows: normals ``(G, 3)`` pointing away from the origin, rho ``(G,)``,
-    RMS orthogonal residual ``(G,)`` and means ``(G, 3)`` (metres)."""
+    RMS orthogonal residual ``(G,)`` and means ``(G, 3)`` (metres). ``compiled`` (many rows):
+    the closed form row by row in one loop (:func:`navkit.planes._kernels.plane_rows`; equal
+    to the NumPy closed form up to the last bits of ``arccos`` / ``cos``)."""
+    if compiled and len(M) > 64:
+        normal, rho, rms, mean, rank1 = _kernels().plane_rows(np.ascontiguousarray(M))
+        if rank1.any():  # a repeated smallest eigenvalue: LAPACK's vector, as the NumPy path
+            normal[rank1], rho[rank1], rms[rank1], _ = _planes_from_rows(M[rank1])
+        return normal, rho, rms, mean
     n = np.maximum(M[:, 0], 1.0)
     m = M[:, 1:4] / n[:, None]
     C = M[:, 4:].reshape(-1, 3, 3) / n[:, None, None] - m[:, :, None] * m[:, None, :]
@@ -286,32 +313,48 @@ class _Patches:
     valid: NDArray[np.bool_]  # (Hc, Wc) over the whole patches
     ref: NDArray[np.float32]  # (G, 3) each patch's reference point (its float32 mean)
     M: NDArray[np.float64]  # (G, 13) raw moment rows
-    D: NDArray[np.float32]  # (3, Hc, Wc) coordinates minus their patch's ref, 0 where invalid
-    tol: NDArray[np.float32]  # (Hc, Wc) inlier bound at each pixel's range, -1 where invalid
+    tol_scale: np.float32  # the inlier bound at range r: tol_scale r^2 + tol_base
+    tol_base: np.float32
+    # NumPy path only (the compiled refinement recomputes them for the patches it needs):
+    D: NDArray[np.float32] | None = None  # (3, Hc, Wc) coordinates minus their patch's ref
+    tol: NDArray[np.float32] | None = None  # (Hc, Wc) inlier bound, -1 where invalid
 
 
-def _patch_moments(P: NDArray[np.float64], s: ExtractionSettings, hc: int, wc: int) -> _Patches:
+def _patch_moments(
+    P: NDArray[np.float64], s: ExtractionSettings, hc: int, wc: int, compiled: bool = True
+) -> _Patches:
     """Step 1: moments of every patch in one pass of block reductions (float32, centred).
 
     A patch's scatter about its mean is ~1e-3 m^2 along the plane and ~1e-6 m^2 across it (the
     thickness), while raw second moments at 5 m are ~25 m^2: in float32 (eps 6e-8) raw moments
     would lose the thickness to cancellation (25 * 6e-8 = 1.5e-6 m^2). Centred on the patch's
     float32 mean, the products are <= ~0.01 m^2 and keep ~1e-9 m^2; the moments about the
-    reference are converted to raw float64 moments for the region sums. The coordinates are
-    centred in place, and one scratch image serves all products (no per-product allocation).
+    reference are converted to raw float64 moments for the region sums. ``compiled``: one
+    fused pass per patch (:func:`navkit.planes._kernels.patch_moments`, same bits); else the
+    NumPy block reductions below (the oracle), where the coordinates are centred in place and
+    one scratch image serves all products.
     """
     c = int(s.cell)
     Hc, Wc = hc * c, wc * c
+    valid = _WS.get("valid", (Hc, Wc), np.bool_)
+    tol_scale = np.float32(s.inlier_factor * s.rms_quadratic)
+    tol_base = np.float32(s.inlier_factor * s.rms_base)
+    if compiled:
+        cnt, ref_g, Sd, SSd6 = _kernels().patch_moments(P, hc, wc, c, valid)
+        SSd = SSd6[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
+        M = _moment_rows(cnt, ref_g.astype(np.float64), Sd, SSd)
+        return _Patches(P, valid, ref_g, M, tol_scale, tol_base)
     X = _WS.get("X", (3, Hc, Wc), np.float32)
+    r2 = _WS.get("r2", (Hc, Wc), np.float32)
     for k in range(3):
         X[k] = P[:Hc, :Wc, k]
     x, y, z = X
-    r2 = np.multiply(x, x, out=_WS.get("r2", (Hc, Wc), np.float32))
+    np.multiply(x, x, out=r2)
     tmp = np.multiply(y, y, out=_WS.get("tmp", (Hc, Wc), np.float32))
     r2 += tmp
     np.multiply(z, z, out=tmp)
     r2 += tmp  # NaN / inf anywhere -> not finite
-    valid = np.greater(r2, 0, out=_WS.get("valid", (Hc, Wc), np.bool_))
+    np.greater(r2, 0, out=valid)
     invalid = np.less(r2, np.inf, out=_WS.get("invalid", (Hc, Wc), np.bool_))
     valid &= invalid
     np.logical_not(valid, out=invalid)
@@ -333,10 +376,10 @@ def _patch_moments(P: NDArray[np.float64], s: ExtractionSettings, hc: int, wc: i
     ref_g = np.ascontiguousarray(ref.reshape(3, -1).T, dtype=np.float32)
     M = _moment_rows(cnt.ravel().astype(np.float64), ref_g.astype(np.float64), Sd, SSd)
     # the refinement's per-pixel bound inlier_factor * noise(r^2), in place of r^2
-    r2 *= np.float32(s.inlier_factor * s.rms_quadratic)
-    r2 += np.float32(s.inlier_factor * s.rms_base)
+    r2 *= tol_scale
+    r2 += tol_base
     np.copyto(r2, np.float32(-1), where=invalid)
-    return _Patches(P=P, valid=valid, ref=ref_g, M=M, D=D, tol=r2)
+    return _Patches(P, valid, ref_g, M, tol_scale, tol_base, D=D, tol=r2)
 
 
 def _stride_masks(c: int) -> NDArray[np.bool_]:
@@ -370,7 +413,7 @@ def _sample_stride(M: NDArray[np.float64], c: int, raster: float) -> NDArray[np.
 
 
 def _grow_regions(
-    M: NDArray[np.float64], hc: int, wc: int, s: ExtractionSettings
+    M: NDArray[np.float64], hc: int, wc: int, s: ExtractionSettings, compiled: bool = False
 ) -> tuple[int, NDArray[np.int64], int]:
     """Steps 2-4: planar patches, region growing, pruning, merging.
 
@@ -379,7 +422,7 @@ def _grow_regions(
     """
     c = int(s.cell)
     G = hc * wc
-    normal, d, rms, mean = _planes_from_rows(M)
+    normal, d, rms, mean = _planes_from_rows(M, compiled)
     bound = s.noise(np.einsum("gi,gi->g", mean, mean))
     planar = (M[:, 0] >= s.min_fill * c * c) & (rms < bound)
     cos_t = np.cos(np.radians(s.angle_deg))
@@ -516,6 +559,7 @@ def _refine_border(
     wc: int,
     c: int,
     raster: float,
+    compiled: bool = True,
 ) -> _Border:
     """Step 5: the pixels of the border patches against their candidate planes.
 
@@ -523,45 +567,34 @@ def _refine_border(
     noise bound at its range. Distances use the centred coordinates: ``n . x - rho =
     n . d + (n . ref - rho)``, one offset per (patch, plane). A region patch whose valid pixels
     all stay in its own region is *complete* (its patch moments stand); the pixels of the other
-    (*mixed*) patches give per-pixel moments, grouped by (patch, plane).
+    (*mixed*) patches give per-pixel moments, grouped by (patch, plane), summed in float64 (the
+    products of the float32 coordinates are exact in float64). ``compiled``: one loop over the
+    border pixels (:func:`navkit.planes._kernels.refine_pixels`); else NumPy passes per
+    candidate slot (the oracle: same labels, moments within float64 rounding).
     """
-    B, m = cand.shape
+    B = len(cand)
     ci, cj = np.divmod(ids, wc)
-    d = [pt.D[k].reshape(hc, c, wc, c)[ci, :, cj, :] for k in range(3)]  # (B, c, c) each
-    tol = pt.tol.reshape(hc, c, wc, c)[ci, :, cj, :]  # -1 where invalid: never an inlier
     ref = pt.ref[ids]  # (B, 3) float32
-    e = (slice(None), None, None)
-    best_d = _WS.get("best_d", (B, c, c), np.float32)
-    best_d.fill(np.inf)
-    label = np.full((B, c, c), -1, np.int16 if n_reg < 32767 else np.int32)
-    dist_ws = _WS.get("dist", (B, c, c), np.float32)
-    tmp_ws = _WS.get("dist_tmp", (B, c, c), np.float32)
-    better_ws = _WS.get("better", (B, c, c), np.bool_)
-    ok_ws = _WS.get("ok", (B, c, c), np.bool_)
     n32 = rn.astype(np.float32)
     rho32 = rd.astype(np.float32)
-    n_with = (cand >= 0).sum(axis=0)  # patches with more than `slot` candidates: a prefix
-    for slot in range(m):
-        b = int(n_with[slot])
-        k = cand[:b, slot]
-        nk = n32[k]
-        off = np.einsum("bi,bi->b", nk, ref[:b]) - rho32[k]
-        dist, tmp, better, ok = dist_ws[:b], tmp_ws[:b], better_ws[:b], ok_ws[:b]
-        np.multiply(d[0][:b], nk[:, 0][e], out=dist)
-        for a in (1, 2):
-            np.multiply(d[a][:b], nk[:, a][e], out=tmp)
-            dist += tmp
-        dist += off[e]
-        np.abs(dist, out=dist)
-        np.less(dist, tol[:b], out=better)
-        better &= np.less(dist, best_d[:b], out=ok)
-        np.copyto(best_d[:b], dist, where=better)
-        np.copyto(label[:b], k.astype(label.dtype)[e], where=better)
     own = comp[ids]
-    complete = (own >= 0) & np.all((label == own[e]) | (tol < 0), axis=(1, 2))
-    # per-pixel moments of the mixed patches per (patch, candidate): one batched product of
-    # the candidate indicators (Bm, m, c^2) with the pixels' [1, d, d d^T] (Bm, c^2, 10)
-    mixed = np.flatnonzero(~complete)
+    label = np.full((B, c, c), -1, np.int16 if n_reg < 32767 else np.int32)
+    # n . ref - rho per (patch, candidate), float32 (-1 slots: unused)
+    kc = np.maximum(cand, 0)
+    nk = n32[kc]  # (B, m, 3)
+    off = nk[..., 0] * ref[:, None, 0] + nk[..., 1] * ref[:, None, 1]
+    off += nk[..., 2] * ref[:, None, 2]
+    off -= rho32[kc]
+    if compiled:
+        stride = _sample_stride(pt.M[ids], c, raster)
+        complete, Gall, cpoints, cregion = _kernels().refine_pixels(
+            pt.P, pt.ref, pt.tol_scale, pt.tol_base, ids, own, cand, off, n32, stride, wc, c, label
+        )
+        mixed = np.flatnonzero(~complete)
+        G = Gall[mixed].reshape(-1, 10)
+    else:
+        complete, G = _refine_border_numpy(pt, ids, ci, cj, own, cand, off, n32, label, hc, wc, c)
+        mixed = np.flatnonzero(~complete)
     M = np.zeros((n_reg, _NM))
     points = np.zeros((3, 0), np.float32)
     point_region = np.zeros(0, label.dtype)
@@ -569,33 +602,92 @@ def _refine_border(
         Bm = len(mixed)
         lm = label[mixed].reshape(Bm, -1)
         cm = cand[mixed]
-        onehot = _WS.get("onehot", (Bm, cm.shape[1], c * c), np.float32)
-        np.equal(lm[:, None, :], cm[:, :, None], out=onehot)  # -1 slots never match
-        dx, dy, dz = (a[mixed].reshape(Bm, -1) for a in d)
-        Q = _WS.get("Q", (10, Bm, c * c), np.float32)  # one contiguous image per quantity
-        Q[0] = 1.0
-        Q[1], Q[2], Q[3] = dx, dy, dz
-        for j, (a_, b_) in enumerate(zip(*_IU, strict=True)):
-            np.multiply(Q[1 + a_], Q[1 + b_], out=Q[4 + j])
-        G = np.matmul(onehot, Q.transpose(1, 2, 0)).astype(np.float64).reshape(-1, 10)
         used = np.flatnonzero(G[:, 0] > 0)
         g = G[used]
         Sdd = np.empty((len(used), 3, 3))
         Sdd[:, _IU[0], _IU[1]] = g[:, 4:]
         Sdd[:, _IU[1], _IU[0]] = g[:, 4:]
         gref = np.repeat(ref[mixed].astype(np.float64), cm.shape[1], axis=0)[used]
-        M = _sum_rows(cm.ravel()[used], n_reg, _moment_rows(g[:, 0], gref, g[:, 1:4], Sdd))
+        M = _sum_rows(
+            cm.ravel()[used], n_reg, _moment_rows(g[:, 0], gref, g[:, 1:4], Sdd), compiled
+        )
+        if compiled:
+            return _Border(ids, label, complete, M, cpoints, cregion.astype(label.dtype))
         # the pixels of the mixed patches per region for the outlines, every t-th row / column
         # (lattice masks per stride looked up, one index list for all three coordinates)
         t = _sample_stride(pt.M[ids[mixed]], c, raster)
         flat = np.flatnonzero((lm >= 0) & _stride_masks(c)[t])
-        bi = flat // (c * c)
+        bi, pix = np.divmod(flat, c * c)
+        pr, pq = np.divmod(pix, c)
         point_region = lm.ravel()[flat]
-        points = np.take(Q[1:4].reshape(3, -1), flat, axis=1)
+        rows, cols = ci[mixed][bi] * c + pr, cj[mixed][bi] * c + pq
+        points = pt.D[:, rows, cols]  # type: ignore[index]
         points += np.take(np.ascontiguousarray(ref[mixed].T), bi, axis=1)
     return _Border(
         ids=ids, label=label, complete=complete, M=M, points=points, point_region=point_region
     )
+
+
+def _refine_border_numpy(
+    pt: _Patches,
+    ids: NDArray[np.int64],
+    ci: NDArray[np.int64],
+    cj: NDArray[np.int64],
+    own: NDArray[np.int64],
+    cand: NDArray[np.int64],
+    off: NDArray[np.float32],
+    n32: NDArray[np.float32],
+    label: NDArray[np.signedinteger],
+    hc: int,
+    wc: int,
+    c: int,
+) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+    """NumPy oracle of :func:`navkit.planes._kernels.refine_pixels`: fills ``label`` and returns
+    ``complete (B,)`` and the float64 moments ``(Bm * m, 10)`` of the mixed patches' pixels per
+    (patch, candidate slot)."""
+    B, m = cand.shape
+    assert pt.D is not None and pt.tol is not None
+    d = [pt.D[k].reshape(hc, c, wc, c)[ci, :, cj, :] for k in range(3)]  # (B, c, c) each
+    tol = pt.tol.reshape(hc, c, wc, c)[ci, :, cj, :]  # -1 where invalid: never an inlier
+    e = (slice(None), None, None)
+    best_d = _WS.get("best_d", (B, c, c), np.float32)
+    best_d.fill(np.inf)
+    dist_ws = _WS.get("dist", (B, c, c), np.float32)
+    tmp_ws = _WS.get("dist_tmp", (B, c, c), np.float32)
+    better_ws = _WS.get("better", (B, c, c), np.bool_)
+    ok_ws = _WS.get("ok", (B, c, c), np.bool_)
+    n_with = (cand >= 0).sum(axis=0)  # patches with more than `slot` candidates: a prefix
+    for slot in range(m):
+        b = int(n_with[slot])
+        k = cand[:b, slot]
+        nk = n32[k]
+        dist, tmp, better, ok = dist_ws[:b], tmp_ws[:b], better_ws[:b], ok_ws[:b]
+        np.multiply(d[0][:b], nk[:, 0][e], out=dist)
+        for a in (1, 2):
+            np.multiply(d[a][:b], nk[:, a][e], out=tmp)
+            dist += tmp
+        dist += off[:b, slot][e]
+        np.abs(dist, out=dist)
+        np.less(dist, tol[:b], out=better)
+        better &= np.less(dist, best_d[:b], out=ok)
+        np.copyto(best_d[:b], dist, where=better)
+        np.copyto(label[:b], k.astype(label.dtype)[e], where=better)
+    complete = (own >= 0) & np.all((label == own[e]) | (tol < 0), axis=(1, 2))
+    # per-pixel moments of the mixed patches per (patch, candidate): one batched product of
+    # the candidate indicators (Bm, m, c^2) with the pixels' [1, d, d d^T] (Bm, c^2, 10)
+    mixed = np.flatnonzero(~complete)
+    Bm = len(mixed)
+    lm = label[mixed].reshape(Bm, c * c)
+    cm = cand[mixed]
+    onehot = np.equal(lm[:, None, :], cm[:, :, None]).astype(np.float64)  # -1 never matches
+    dx, dy, dz = (a[mixed].reshape(Bm, c * c).astype(np.float64) for a in d)
+    Q = np.empty((10, Bm, c * c))  # one contiguous image per quantity
+    Q[0] = 1.0
+    Q[1], Q[2], Q[3] = dx, dy, dz
+    for j, (a_, b_) in enumerate(zip(*_IU, strict=True)):
+        np.multiply(Q[1 + a_], Q[1 + b_], out=Q[4 + j])
+    G = np.matmul(onehot, Q.transpose(1, 2, 0)).reshape(-1, 10)
+    return complete, G
 
 
 # ------------------------------------------------------------------------------ main entry
@@ -619,6 +711,14 @@ def extract_planes_organized(
     ExtractionResult
         ``labels`` is ``(H, W)``; inlier indices are ``row * W + col``, increasing.
     """
+    return _extract(points, settings, compiled=True)
+
+
+def _extract(
+    points: ArrayLike, settings: ExtractionSettings | None, *, compiled: bool
+) -> ExtractionResult:
+    """:func:`extract_planes_organized` with the compiled kernels (``compiled=True``) or their
+    NumPy oracles (the tests compare the two)."""
     s = settings or ExtractionSettings()
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 3 or P.shape[2] != 3:
@@ -630,17 +730,20 @@ def extract_planes_organized(
     hc, wc = H // c, W // c
     if hc == 0 or wc == 0:
         return ExtractionResult((), -np.ones((H, W), np.int64))
+    compiled = compiled and c <= _MAX_CELL
+    if compiled:
+        P = np.ascontiguousarray(P)  # the kernels' layout (a no-op for a fresh grid)
     # 1. patch moments
-    pt = _patch_moments(P, s, hc, wc)
+    pt = _patch_moments(P, s, hc, wc, compiled)
     # 2.-4. planar patches, region growing, pruning, merging
-    n_reg, comp, n_planar = _grow_regions(pt.M, hc, wc, s)
+    n_reg, comp, n_planar = _grow_regions(pt.M, hc, wc, s, compiled)
     if n_reg == 0:
         return ExtractionResult((), -np.ones((H, W), np.int64))
     # 5. wholesale patches; the others pixel by pixel against the region planes
     rn, rd, _, _ = _planes_from_rows(_sum_rows(comp, n_reg, pt.M))
     cellmap = comp.reshape(hc, wc)
     wholesale, ids, cand = _border_patches(cellmap, s.refine == "full")
-    bd = _refine_border(pt, comp, ids, cand, rn, rd, n_reg, hc, wc, c, s.outline_cell)
+    bd = _refine_border(pt, comp, ids, cand, rn, rd, n_reg, hc, wc, c, s.outline_cell, compiled)
     wholesale = wholesale.ravel()
     wholesale[ids[bd.complete]] = True
     # 6. final planes from the moments of their inliers: wholesale patches + mixed pixels
@@ -651,30 +754,20 @@ def extract_planes_organized(
     keep = keep[np.argsort(-count[keep], kind="stable")]  # segments by decreasing inlier count
     new_id = np.full(n_reg + 1, -1, np.int64)  # region + 1 -> segment index
     new_id[keep + 1] = np.arange(len(keep))
-    # label image (8- or 16-bit): wholesale patches, then the pixels of the mixed patches
-    small = np.int8 if len(keep) < 127 else np.int16 if len(keep) < 32767 else np.int32
-    lab_cell = new_id[np.where(wholesale, comp, -1) + 1].astype(small).reshape(hc, wc)
-    lab4 = np.where(pt.valid.reshape(hc, c, wc, c), lab_cell[:, None, :, None], small(-1))
     mixed = ~bd.complete
-    if mixed.any():
-        mi, mj = np.divmod(ids[mixed], wc)
-        lab4[mi, :, mj, :] = new_id[bd.label[mixed].astype(np.int64) + 1]
-    Hc, Wc = hc * c, wc * c
-    if (Hc, Wc) == (H, W):
-        lab_small = lab4.reshape(H, W)
-    else:
-        lab_small = np.full((H, W), -1, small)
-        lab_small[:Hc, :Wc] = lab4.reshape(Hc, Wc)
-    labels = lab_small.astype(np.int64)
-    # inliers in raster order per plane: the label image's rows a plane can reach - the patch
-    # rows of its region and one more on each side (a refined border patch next to it) -
-    # searched for its label; ~2x faster than one stable sort of the whole label image
-    kept = count[keep]
     segmap = new_id[cellmap + 1]
-    in_row = (segmap[None] == np.arange(len(keep))[:, None, None]).any(axis=2)  # (K, hc)
-    row_lo = np.maximum(np.argmax(in_row, axis=1) - 1, 0) * c * W
-    row_hi = np.minimum(hc - np.argmax(in_row[:, ::-1], axis=1) + 1, hc) * c * W
-    flat_lab = lab_small.ravel()
+    lab_cell = new_id[np.where(wholesale, comp, -1) + 1].reshape(hc, wc)
+    if compiled:
+        mixed_lab = new_id[bd.label[mixed].astype(np.int64) + 1]
+        labels, inl, cuts = _kernels().label_image(
+            pt.valid, lab_cell, ids[mixed], mixed_lab, H, W, len(keep)
+        )
+        inliers = [inl[cuts[k] : cuts[k + 1]] for k in range(len(keep))]
+    else:
+        labels, inliers = _label_image_numpy(
+            pt.valid, lab_cell, ids, mixed, bd, new_id, segmap, H, W
+        )
+    kept = count[keep]
     planes = []
     for new, k in enumerate(keep):
         n, r = canonical_plane(normal[k], float(rho[k]))
@@ -683,7 +776,7 @@ def extract_planes_organized(
         )
     outlines = _outlines(
         pt,
-        lab_small,
+        labels,
         wholesale.reshape(hc, wc),
         segmap,
         bd.points,
@@ -691,15 +784,16 @@ def extract_planes_organized(
         planes,
         c,
         s.outline_cell,
+        compiled,
     )
     segs = [
         PlaneSegment(
             plane=plane,
-            inliers=np.flatnonzero(flat_lab[row_lo[new] : row_hi[new]] == new) + row_lo[new],
+            inliers=inl_k,
             outline=ol,
             area=area,
         )
-        for new, (plane, (ol, area)) in enumerate(zip(planes, outlines, strict=True))
+        for plane, inl_k, (ol, area) in zip(planes, inliers, outlines, strict=True)
     ]
     log.debug(
         "organised extraction: %d planar patches of %d, %d refined (%d pixel by pixel), %d planes",
@@ -712,6 +806,65 @@ def extract_planes_organized(
     return ExtractionResult(tuple(segs), labels)
 
 
+def _label_image_numpy(
+    valid: NDArray[np.bool_],
+    lab_cell: NDArray[np.int64],
+    ids: NDArray[np.int64],
+    mixed: NDArray[np.bool_],
+    bd: _Border,
+    new_id: NDArray[np.int64],
+    segmap: NDArray[np.int64],
+    H: int,
+    W: int,
+) -> tuple[NDArray[np.int64], list[NDArray[np.int64]]]:
+    """NumPy oracle of :func:`navkit.planes._kernels.label_image`: the label image ``(H, W)``
+    and each segment's inliers in raster order."""
+    hc, wc = lab_cell.shape
+    c = valid.shape[0] // hc
+    K = int(new_id.max()) + 1
+    # label image (8- or 16-bit): wholesale patches, then the pixels of the mixed patches
+    small = np.int8 if K < 127 else np.int16 if K < 32767 else np.int32
+    lab4 = np.where(
+        valid.reshape(hc, c, wc, c), lab_cell.astype(small)[:, None, :, None], small(-1)
+    )
+    if mixed.any():
+        mi, mj = np.divmod(ids[mixed], wc)
+        lab4[mi, :, mj, :] = new_id[bd.label[mixed].astype(np.int64) + 1]
+    Hc, Wc = hc * c, wc * c
+    if (Hc, Wc) == (H, W):
+        lab_small = lab4.reshape(H, W)
+    else:
+        lab_small = np.full((H, W), -1, small)
+        lab_small[:Hc, :Wc] = lab4.reshape(Hc, Wc)
+    # inliers in raster order per plane: the label image's rows a plane can reach - the patch
+    # rows of its region and one more on each side (a refined border patch next to it) -
+    # searched for its label; ~2x faster than one stable sort of the whole label image
+    in_row = (segmap[None] == np.arange(K)[:, None, None]).any(axis=2)  # (K, hc)
+    row_lo = np.maximum(np.argmax(in_row, axis=1) - 1, 0) * c * W
+    row_hi = np.minimum(hc - np.argmax(in_row[:, ::-1], axis=1) + 1, hc) * c * W
+    flat_lab = lab_small.ravel()
+    inliers = [np.flatnonzero(flat_lab[row_lo[k] : row_hi[k]] == k) + row_lo[k] for k in range(K)]
+    return lab_small.astype(np.int64), inliers
+
+
+def _plane_frames(planes: list[Plane]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Axes ``(K, 2, 3)`` of every plane's 2D frame and the frame's origin in those axes
+    ``(K, 2)``: :func:`navkit.planes.segments.plane_frame` (``Plane.basis``) for all planes at
+    once (the same frames to the last bits of the norm)."""
+    K = len(planes)
+    n = np.array([p.normal for p in planes], np.float64).reshape(K, 3)
+    rho = np.array([p.rho for p in planes], np.float64)
+    use_x = np.abs(n[:, 0]) < 0.9  # the world x axis projected, else the y axis
+    ref = np.zeros((K, 3))
+    ref[use_x, 0] = 1.0
+    ref[~use_x, 1] = 1.0
+    u = ref - np.where(use_x, n[:, 0], n[:, 1])[:, None] * n
+    u /= np.sqrt(np.einsum("ki,ki->k", u, u))[:, None]
+    axes = np.stack([u, np.cross(n, u)], axis=1)
+    off = np.einsum("kai,ki->ka", axes, rho[:, None] * n)
+    return axes, off
+
+
 def _outlines(
     pt: _Patches,
     labels: NDArray[np.signedinteger],
@@ -722,6 +875,7 @@ def _outlines(
     planes: list[Plane],
     c: int,
     cell: float,
+    compiled: bool = False,
 ) -> list[tuple[NDArray[np.float64], float]]:
     """Step 6, outlines: each plane's wholesale patches as quadrilaterals, its other pixels as
     points, rasterised in the plane (:func:`navkit.planes.segments.outline_from_points`).
@@ -746,9 +900,7 @@ def _outlines(
     """
     hc, wc = segmap.shape
     K = len(planes)
-    frames = [plane_frame(p) for p in planes]
-    axes = np.array([f[1] for f in frames]).reshape(K, 2, 3)
-    off = np.array([f[1] @ f[0] for f in frames]).reshape(K, 2)
+    axes, off = _plane_frames(planes)
 
     def project(xyz: list[NDArray], k: NDArray[np.int64]) -> NDArray[np.float64]:
         """``(..., 2)`` in-plane coordinates of points ``xyz`` (3 arrays) in segments ``k``."""
@@ -779,6 +931,20 @@ def _outlines(
     longest = np.sqrt(np.max(np.einsum("qei,qei->qe", edge, edge), axis=1))
     use = np.all(lat_ok | (labels[own_r, own_q] == qseg[:, None]), axis=1)
     use &= longest <= 2.0 * cell * c
+    qcuts = np.searchsorted(qseg, np.arange(K + 1))
+    if compiled:  # grouping and projection in one kernel, the same floats
+        bi, bj = ii[~use], jj[~use]
+        t = _sample_stride(pt.M[bi * wc + bj], c, cell)
+        uv_all, cuts = _kernels().outline_points(
+            points, point_seg, pt.P, pt.valid, bi, bj, t, qseg[~use], axes, off, c
+        )
+        out = []
+        for k in range(K):
+            n_k = cuts[k + 1] - cuts[k]
+            uv = uv_all[cuts[k] : cuts[k + 1] : max(1, n_k // 40_000)]
+            ql, qh = qcuts[k], qcuts[k + 1]
+            out.append(outline_from_points(uv, cell, quads=quads[ql:qh][use[ql:qh]]))
+        return out
     # points: the sampled pixels of the mixed patches, then of the wholesale patches not used
     # as quadrilaterals (every t-th row / column), grouped by segment
     pseg = point_seg
@@ -796,7 +962,6 @@ def _outlines(
     order = np.argsort(pseg.astype(np.int16 if K < 32767 else np.int64), kind="stable")
     pcuts = np.searchsorted(pseg[order], np.arange(K + 1))
     xyz = [x[order] for x in xyz]
-    qcuts = np.searchsorted(qseg, np.arange(K + 1))
     out = []
     for k in range(K):
         n_k = pcuts[k + 1] - pcuts[k]

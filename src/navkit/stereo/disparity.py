@@ -226,7 +226,7 @@ def _run(
 
 
 def lr_consistency(
-    disp_left: ArrayLike, disp_right: ArrayLike, max_diff: float = 1.0
+    disp_left: ArrayLike, disp_right: ArrayLike, max_diff: float = 1.0, *, compiled: bool = True
 ) -> NDArray[np.bool_]:
     """Pixels whose left disparity agrees with the right disparity at ``x - d`` (within ``max_diff``).
 
@@ -236,9 +236,18 @@ def lr_consistency(
         Left disparity, pixels (NaN invalid).
     disp_right : (H, W) array
         Right disparity, pixels, positive, ``x_right + d = x_left`` (NaN invalid).
+    compiled : bool
+        One compiled pass (:func:`navkit.stereo._kernels.lr_consistency`, the same mask); False:
+        the NumPy passes below (the oracle).
     """
     dl = np.asarray(disp_left, dtype=np.float64)
     dr = np.asarray(disp_right, dtype=np.float64)
+    if compiled and dl.ndim == 2 and dl.shape == dr.shape:
+        from navkit.stereo import _kernels
+
+        return _kernels.lr_consistency(  # type: ignore[no-any-return]
+            np.ascontiguousarray(dl), np.ascontiguousarray(dr), float(max_diff)
+        )
     H, W = dl.shape
     x = np.arange(W)[None, :]
     xr = np.rint(x - np.nan_to_num(dl, nan=-1e9)).astype(np.int64)
@@ -343,12 +352,18 @@ def refine_subpixel(
     return np.where(valid, d0 - bias, np.nan)
 
 
-def fill_background(disparity: ArrayLike) -> NDArray[np.float64]:
+def fill_background(disparity: ArrayLike, *, compiled: bool = True) -> NDArray[np.float64]:
     """Fill NaN pixels with the smaller of the nearest valid disparities left and right in the row.
 
-    Rows without any valid pixel stay NaN. Vectorised with running maxima of valid indices.
+    Rows without any valid pixel stay NaN. ``compiled``: one pass per row
+    (:func:`navkit.stereo._kernels.fill_background`, the same result); False: vectorised with
+    running maxima of valid indices (the oracle).
     """
     d = np.asarray(disparity, dtype=np.float64)
+    if compiled and d.ndim == 2:
+        from navkit.stereo import _kernels
+
+        return _kernels.fill_background(np.ascontiguousarray(d))  # type: ignore[no-any-return]
     H, W = d.shape
     valid = np.isfinite(d)
     idx = np.where(valid, np.arange(W)[None, :], -1)

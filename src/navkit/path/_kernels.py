@@ -1,0 +1,372 @@
+"""Compiled kernel of the loop search (:meth:`navkit.path.loops.LoopFreeChain.find_crossings`).
+
+The refinement passes that close a segment are the approximator's worst case per point (issue
+12): ~30 NumPy calls per pass on a few dozen pairs. :func:`refine_crossings` runs all passes in
+one compiled loop with the same arithmetic, pair by pair in the order NumPy's ``nonzero`` gives
+them, so it finds the same crossings in the same order (the NumPy version stays in ``loops.py``
+as the oracle, ``tests/path/test_kernels.py``). Numba, ``cache=True``; imported on first use.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _cubic(c: np.ndarray, u: float) -> float:  # pragma: no cover - compiled
+    return c[0] + u * (c[1] + u * (c[2] + u * c[3]))
+
+
+@njit(cache=True)
+def _cubic2(c: np.ndarray, u: float) -> float:  # pragma: no cover - compiled
+    return 2.0 * c[2] + 6.0 * c[3] * u
+
+
+@njit(cache=True)
+def _clip01(x: float) -> float:  # pragma: no cover - compiled
+    return min(max(x, 0.0), 1.0)
+
+
+@njit(cache=True)
+def _segment_distance(
+    p1x: float,
+    p1y: float,
+    q1x: float,
+    q1y: float,
+    p2x: float,
+    p2y: float,
+    q2x: float,
+    q2y: float,
+) -> float:  # pragma: no cover - compiled
+    """``loops._segment_distance`` for one pair of segments (same formulas)."""
+    d1x, d1y = q1x - p1x, q1y - p1y
+    d2x, d2y = q2x - p2x, q2y - p2y
+    rx, ry = p1x - p2x, p1y - p2y
+    a = d1x * d1x + d1y * d1y
+    e = d2x * d2x + d2y * d2y
+    f = d2x * rx + d2y * ry
+    c = d1x * rx + d1y * ry
+    b = d1x * d2x + d1y * d2y
+    tiny = 1e-300
+    a_ok, e_ok = a > tiny, e > tiny
+    safe_a = a if a_ok else 1.0
+    safe_e = e if e_ok else 1.0
+    denom = a * e - b * b
+    s = _clip01((b * f - c * e) / denom) if denom > tiny else 0.0
+    if not a_ok:
+        s = 0.0
+    t = (b * s + f) / safe_e if e_ok else 0.0
+    if t < 0.0:
+        s = _clip01(-c / safe_a)
+    elif t > 1.0:
+        s = _clip01((b - c) / safe_a)
+    if not e_ok:
+        s = _clip01(-c / safe_a)
+    if not a_ok:
+        s = 0.0
+    t = _clip01(t) if e_ok else 0.0
+    vx = p1x + d1x * s - p2x - d2x * t
+    vy = p1y + d1y * s - p2y - d2y * t
+    return np.sqrt(vx * vx + vy * vy)
+
+
+@njit(cache=True)
+def refine_crossings(
+    sa: np.ndarray,
+    sb: np.ndarray,
+    ua0: np.ndarray,
+    ua1: np.ndarray,
+    ub0: np.ndarray,
+    ub1: np.ndarray,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    s0: np.ndarray,
+    f: np.ndarray,
+    precision: float,
+    min_loop_length: float,
+    max_pairs: int,
+    first_only: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:  # pragma: no cover - compiled
+    """All refinement passes of ``find_crossings`` on the candidate pairs (segments ``sa``,
+    ``sb``, parameter intervals ``[ua0, ua1]``, ``[ub0, ub1]``; segment coefficients ``ax``,
+    ``ay`` ``(n_seg, 4)``, starts ``s0``; ``f`` the ``K + 1`` split fractions). Returns the
+    crossings' ``s_a``, ``s_b``, points ``(N, 2)`` in the NumPy version's order and the number
+    of passes that had to drop pairs beyond ``max_pairs``."""
+    K = len(f) - 1
+    n = len(sa)
+    cap_found = 64
+    fa = np.empty(cap_found)
+    fb = np.empty(cap_found)
+    fp = np.empty((cap_found, 2))
+    n_found = 0
+    truncated = 0
+    best = np.inf
+    Ua = np.empty(K + 1)
+    Ub = np.empty(K + 1)
+    Pa = np.empty((K + 1, 2))
+    Pb = np.empty((K + 1, 2))
+    acc_a = np.empty(K + 1)
+    acc_b = np.empty(K + 1)
+    for _ in range(100):
+        if n == 0:
+            break
+        if n * K * K > max_pairs:
+            keep = max(1, max_pairs // (K * K))
+            order = np.argsort(s0[sa] + ua0, kind="mergesort")[:keep]
+            sa, sb = sa[order], sb[order]
+            ua0, ua1, ub0, ub1 = ua0[order], ua1[order], ub0[order], ub1[order]
+            n = len(sa)
+            truncated += 1
+        m_cap = n * K * K
+        nsa = np.empty(m_cap, np.int64)
+        nsb = np.empty(m_cap, np.int64)
+        nua0 = np.empty(m_cap)
+        nua1 = np.empty(m_cap)
+        nub0 = np.empty(m_cap)
+        nub1 = np.empty(m_cap)
+        nga = np.empty(m_cap)  # ga + ua[i] of each surviving sub-pair (first_only pruning)
+        m = 0
+        pass_best = best
+        for p in range(n):
+            ka, kb = sa[p], sb[p]
+            da, db = ua1[p] - ua0[p], ub1[p] - ub0[p]
+            for k in range(K + 1):
+                Ua[k] = ua0[p] + da * f[k]
+                Ub[k] = ub0[p] + db * f[k]
+                Pa[k, 0] = _cubic(ax[ka], Ua[k])
+                Pa[k, 1] = _cubic(ay[ka], Ua[k])
+                Pb[k, 0] = _cubic(ax[kb], Ub[k])
+                Pb[k, 1] = _cubic(ay[kb], Ub[k])
+                x2, y2 = _cubic2(ax[ka], Ua[k]), _cubic2(ay[ka], Ua[k])
+                acc_a[k] = np.sqrt(x2 * x2 + y2 * y2)
+                x2, y2 = _cubic2(ax[kb], Ub[k]), _cubic2(ay[kb], Ub[k])
+                acc_b[k] = np.sqrt(x2 * x2 + y2 * y2)
+            ga, gb = s0[ka], s0[kb]
+            dua = Ua[1] - Ua[0]
+            dub = Ub[1] - Ub[0]
+            for i in range(K):
+                alox = min(Pa[i, 0], Pa[i + 1, 0])
+                ahix = max(Pa[i, 0], Pa[i + 1, 0])
+                aloy = min(Pa[i, 1], Pa[i + 1, 1])
+                ahiy = max(Pa[i, 1], Pa[i + 1, 1])
+                ext_a = max(ahix - alox, ahiy - aloy)
+                delta_a = dua**2 / 8.0 * max(acc_a[i], acc_a[i + 1])
+                for j in range(K):
+                    blox = min(Pb[j, 0], Pb[j + 1, 0])
+                    bhix = max(Pb[j, 0], Pb[j + 1, 0])
+                    bloy = min(Pb[j, 1], Pb[j + 1, 1])
+                    bhiy = max(Pb[j, 1], Pb[j + 1, 1])
+                    if not (alox <= bhix and aloy <= bhiy and blox <= ahix and bloy <= ahiy):
+                        continue
+                    if (gb + Ub[j + 1]) - (ga + Ua[i]) < min_loop_length:
+                        continue
+                    gap = _segment_distance(
+                        Pa[i, 0], Pa[i, 1], Pa[i + 1, 0], Pa[i + 1, 1],
+                        Pb[j, 0], Pb[j, 1], Pb[j + 1, 0], Pb[j + 1, 1],
+                    )  # fmt: skip
+                    delta_b = dub**2 / 8.0 * max(acc_b[j], acc_b[j + 1])
+                    if not gap <= delta_a + delta_b + 1e-12:
+                        continue
+                    ext_b = max(bhix - blox, bhiy - bloy)
+                    if max(ext_a, ext_b) <= precision:
+                        if n_found == len(fa):
+                            fa = np.concatenate((fa, np.empty(len(fa))))
+                            fb = np.concatenate((fb, np.empty(len(fb))))
+                            fp = np.concatenate((fp, np.empty((len(fp), 2))))
+                        s_a = ga + 0.5 * (Ua[i] + Ua[i + 1])
+                        fa[n_found] = s_a
+                        fb[n_found] = gb + 0.5 * (Ub[j] + Ub[j + 1])
+                        fp[n_found, 0] = 0.25 * (Pa[i, 0] + Pa[i + 1, 0] + Pb[j, 0] + Pb[j + 1, 0])
+                        fp[n_found, 1] = 0.25 * (Pa[i, 1] + Pa[i + 1, 1] + Pb[j, 1] + Pb[j + 1, 1])
+                        n_found += 1
+                        pass_best = min(pass_best, s_a)
+                    else:
+                        nsa[m], nsb[m] = ka, kb
+                        nua0[m], nua1[m] = Ua[i], Ua[i + 1]
+                        nub0[m], nub1[m] = Ub[j], Ub[j + 1]
+                        nga[m] = ga + Ua[i]
+                        m += 1
+        best = pass_best
+        if first_only and n_found > 0:  # a later-starting pair cannot give a smaller s_a
+            w = 0
+            for q in range(m):
+                if nga[q] <= best:
+                    nsa[w], nsb[w] = nsa[q], nsb[q]
+                    nua0[w], nua1[w], nub0[w], nub1[w] = nua0[q], nua1[q], nub0[q], nub1[q]
+                    w += 1
+            m = w
+        sa, sb = nsa[:m], nsb[:m]
+        ua0, ua1, ub0, ub1 = nua0[:m], nua1[:m], nub0[:m], nub1[:m]
+        n = m
+    return fa[:n_found].copy(), fb[:n_found].copy(), fp[:n_found].copy(), truncated
+
+
+@njit(cache=True)
+def power_sums(
+    u: np.ndarray, d: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, float]:  # pragma: no cover
+    """``fitting.power_sums`` in one pass: ``S (7,)`` = sums of ``u^p``, ``D (2, 4)`` = sums of
+    ``d u^p``, ``Q`` = sum of ``|d|^2`` (powers by products, sums in point order: equal to the
+    NumPy version to rounding)."""
+    S = np.zeros(7)
+    D = np.zeros((2, 4))
+    Q = 0.0
+    for i in range(len(u)):
+        x = u[i]
+        p = 1.0
+        for k in range(7):
+            S[k] += p
+            if k < 4:
+                D[0, k] += d[i, 0] * p
+                D[1, k] += d[i, 1] * p
+            p *= x
+        Q += d[i, 0] * d[i, 0] + d[i, 1] * d[i, 1]
+    return S, D, Q
+
+
+@njit(cache=True)
+def gauss_legendre_length(
+    ax: np.ndarray, ay: np.ndarray, u: np.ndarray, gx: np.ndarray, gw: np.ndarray
+) -> np.ndarray:  # pragma: no cover - compiled
+    """``spline.gauss_legendre_length`` in one loop (nodes ``gx``, weights ``gw`` on [0, 1])."""
+    out = np.zeros(len(u))
+    acc = 0.0
+    for i in range(1, len(u)):
+        h = u[i] - u[i - 1]
+        tot = 0.0
+        for k in range(len(gx)):
+            t = u[i - 1] + h * gx[k]
+            dx = ax[1] + t * (2.0 * ax[2] + 3.0 * ax[3] * t)
+            dy = ay[1] + t * (2.0 * ay[2] + 3.0 * ay[3] * t)
+            tot += np.hypot(dx, dy) * gw[k]
+        acc += h * tot
+        out[i] = acc
+    return out
+
+
+@njit(cache=True)
+def project(
+    c: np.ndarray, u0: np.ndarray, d: np.ndarray, iterations: int
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """``fitting.project`` point by point (the same Newton steps and formulas)."""
+    n = len(u0)
+    u_out = np.empty(n)
+    dist = np.empty(n)
+    for i in range(n):
+        ui = min(max(u0[i], 0.0), 1.0)
+        u = ui
+        px, py = d[i, 0], d[i, 1]
+        for _ in range(iterations):
+            rx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3])) - px
+            ry = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3])) - py
+            dx = c[0, 1] + u * (2 * c[0, 2] + 3 * c[0, 3] * u)
+            dy = c[1, 1] + u * (2 * c[1, 2] + 3 * c[1, 3] * u)
+            ddx = 2 * c[0, 2] + 6 * c[0, 3] * u
+            ddy = 2 * c[1, 2] + 6 * c[1, 3] * u
+            g = rx * dx + ry * dy
+            H = dx * dx + dy * dy + rx * ddx + ry * ddy
+            step = g / H if H > 1e-300 else 0.0
+            u = min(max(u - step, 0.0), 1.0)
+        cx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3]))
+        cy = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3]))
+        r_new = np.hypot(cx - px, cy - py)
+        cx = c[0, 0] + ui * (c[0, 1] + ui * (c[0, 2] + ui * c[0, 3]))
+        cy = c[1, 0] + ui * (c[1, 1] + ui * (c[1, 2] + ui * c[1, 3]))
+        r_old = np.hypot(cx - px, cy - py)
+        if r_new <= r_old:
+            u_out[i], dist[i] = u, r_new
+        else:
+            u_out[i], dist[i] = ui, r_old
+    return u_out, dist
+
+
+@njit(cache=True)
+def update_tree(lo: np.ndarray, hi: np.ndarray, a: int, b: int) -> None:  # pragma: no cover
+    """Ancestors of the leaves ``[a, b)`` of the box tree (``lo``, ``hi`` ``(2 cap, 2)``, leaves
+    at ``[cap, 2 cap)``, already written): each node the min / max of its two children, level
+    by level (``LoopFreeChain._update_leaves``; exact, the same boxes)."""
+    lo_n, hi_n = a, b - 1
+    while lo_n > 1:
+        lo_n //= 2
+        hi_n //= 2
+        for node in range(lo_n, hi_n + 1):
+            for c in range(2):
+                lo[node, c] = min(lo[2 * node, c], lo[2 * node + 1, c])
+                hi[node, c] = max(hi[2 * node, c], hi[2 * node + 1, c])
+
+
+@njit(cache=True)
+def candidate_pairs(
+    lo: np.ndarray, hi: np.ndarray, cap: int, first: int, n_piece: int
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """``LoopFreeChain._candidate_pairs``: (older, newer) piece pairs whose boxes overlap, newer
+    pieces ``>= first``, by depth-first descent of the box tree (the same pairs in the same
+    order: newer piece, then older piece, increasing)."""
+    out_a = np.empty(64, np.int64)
+    out_b = np.empty(64, np.int64)
+    n = 0
+    stack = np.empty(128, np.int64)
+    for q in range(first, n_piece):
+        leaf = q + cap
+        qlx, qly, qhx, qhy = lo[leaf, 0], lo[leaf, 1], hi[leaf, 0], hi[leaf, 1]
+        top = 0
+        stack[0] = 1
+        top = 1
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            if not (
+                lo[node, 0] <= qhx
+                and lo[node, 1] <= qhy
+                and qlx <= hi[node, 0]
+                and qly <= hi[node, 1]
+            ):
+                continue
+            if node >= cap:
+                older = node - cap
+                if older < q:
+                    if n == len(out_a):
+                        out_a = np.concatenate((out_a, np.empty(n, np.int64)))
+                        out_b = np.concatenate((out_b, np.empty(n, np.int64)))
+                    out_a[n] = older
+                    out_b[n] = q
+                    n += 1
+                continue
+            if top + 2 > len(stack):
+                stack = np.concatenate((stack, np.empty(len(stack), np.int64)))
+            stack[top] = 2 * node + 1  # right child below: the left one is visited first
+            stack[top + 1] = 2 * node
+            top += 2
+    return out_a[:n].copy(), out_b[:n].copy()
+
+
+@njit(cache=True)
+def update_leaves(
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    a: int,
+    b: int,
+    n_piece: int,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    ax: np.ndarray,
+    ay: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """``LoopFreeChain._update_leaves`` once the tree is large enough: the boxes of pieces
+    ``[a, b)`` (end points of each monotone piece; empty boxes beyond ``n_piece``), then their
+    ancestors (:func:`update_tree`)."""
+    for idx in range(a, b):
+        leaf = idx + cap
+        if idx < n_piece:
+            k = pseg[idx]
+            x0, y0 = _cubic(ax[k], pu0[idx]), _cubic(ay[k], pu0[idx])
+            x1, y1 = _cubic(ax[k], pu1[idx]), _cubic(ay[k], pu1[idx])
+            lo[leaf, 0], hi[leaf, 0] = min(x0, x1), max(x0, x1)
+            lo[leaf, 1], hi[leaf, 1] = min(y0, y1), max(y0, y1)
+        else:
+            lo[leaf, 0] = lo[leaf, 1] = np.inf
+            hi[leaf, 0] = hi[leaf, 1] = -np.inf
+    update_tree(lo, hi, a + cap, b + cap)

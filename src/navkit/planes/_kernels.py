@@ -1,0 +1,471 @@
+"""Compiled kernels of the organised plane extraction (:mod:`navkit.planes.extract`).
+
+Each kernel fuses what several NumPy passes over a 640 x 480 grid do in
+:mod:`navkit.planes.extract`; the NumPy versions stay there as the oracle the tests compare
+with (``tests/planes/test_kernels.py``). The float32 block sums reproduce NumPy's summation order
+exactly - rows of a patch added one after the other per column, then the ``c`` column sums by
+NumPy's pairwise summation (eight running sums, combined as ``((r0 + r1) + (r2 + r3)) + ((r4 +
+r5) + (r6 + r7))``, then the remainder) - so the patch moments, the planar test and the region
+growing get the same bits with either backend.
+
+Compiled with Numba (``@njit(cache=True)``: machine code cached on disk beside this module, or
+in ``NUMBA_CACHE_DIR``); imported lazily by :mod:`navkit.planes.extract` on the first organised
+extraction, so ``import navkit`` does not pay for Numba.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+MAX_CELL = 128  # NumPy's PW_BLOCKSIZE: a patch's row sums are one pairwise block up to it
+
+
+@njit(cache=True)
+def _pairwise32(a: np.ndarray, n: int) -> np.float32:  # pragma: no cover - compiled
+    """NumPy's pairwise float32 sum of ``a[:n]``, ``n <= 128`` (same order, same bits)."""
+    if n < 8:
+        res = np.float32(0.0)
+        for i in range(n):
+            res = np.float32(res + a[i])
+        return res
+    r0 = a[0]
+    r1 = a[1]
+    r2 = a[2]
+    r3 = a[3]
+    r4 = a[4]
+    r5 = a[5]
+    r6 = a[6]
+    r7 = a[7]
+    i = 8
+    while i < n - (n % 8):
+        r0 = np.float32(r0 + a[i])
+        r1 = np.float32(r1 + a[i + 1])
+        r2 = np.float32(r2 + a[i + 2])
+        r3 = np.float32(r3 + a[i + 3])
+        r4 = np.float32(r4 + a[i + 4])
+        r5 = np.float32(r5 + a[i + 5])
+        r6 = np.float32(r6 + a[i + 6])
+        r7 = np.float32(r7 + a[i + 7])
+        i += 8
+    res = np.float32(
+        np.float32(np.float32(r0 + r1) + np.float32(r2 + r3))
+        + np.float32(np.float32(r4 + r5) + np.float32(r6 + r7))
+    )
+    while i < n:
+        res = np.float32(res + a[i])
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def patch_moments(
+    P: np.ndarray, hc: int, wc: int, c: int, valid: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Step 1 of the extraction in one pass per patch (see ``extract._patch_moments``).
+
+    Fills ``valid (hc c, wc c)`` (finite, non-zero range) and returns per patch the count
+    ``(G,)``, the float32 mean ``(G, 3)``, the sums of the coordinates minus that mean ``(G, 3)``
+    and of their products ``(G, 6)`` (xx, xy, xz, yy, yz, zz), float32 sums as float64. The
+    centred coordinates themselves are not stored: :func:`refine_pixels` recomputes them for
+    the few patches it needs (writing them for the whole grid cost more memory traffic).
+    """
+    G = hc * wc
+    cnt = np.empty(G, np.float64)
+    ref = np.empty((G, 3), np.float32)
+    Sd = np.empty((G, 3), np.float64)
+    SSd = np.empty((G, 6), np.float64)
+    col = np.empty((10, c), np.float32)  # per-column sums of one patch
+    X = np.empty((3, c, c), np.float32)  # one patch's float32 coordinates, 0 where invalid
+    for i in range(hc):
+        for j in range(wc):
+            g = i * wc + j
+            # pass 1: coordinates and validity; column sums of the count and coordinates (the
+            # first row added to 0: the same sums as NumPy's, up to the sign of a zero sum)
+            col[:] = 0.0
+            for r in range(c):
+                y = i * c + r
+                for q in range(c):
+                    x = j * c + q
+                    px = np.float32(P[y, x, 0])
+                    py = np.float32(P[y, x, 1])
+                    pz = np.float32(P[y, x, 2])
+                    r2 = np.float32(
+                        np.float32(np.float32(px * px) + np.float32(py * py)) + np.float32(pz * pz)
+                    )
+                    ok = (r2 > 0) & (r2 < np.inf)
+                    valid[y, x] = ok
+                    v = np.float32(1.0) if ok else np.float32(0.0)
+                    px = px if ok else np.float32(0.0)
+                    py = py if ok else np.float32(0.0)
+                    pz = pz if ok else np.float32(0.0)
+                    X[0, r, q] = px
+                    X[1, r, q] = py
+                    X[2, r, q] = pz
+                    col[0, q] = np.float32(col[0, q] + v)
+                    col[1, q] = np.float32(col[1, q] + px)
+                    col[2, q] = np.float32(col[2, q] + py)
+                    col[3, q] = np.float32(col[3, q] + pz)
+            n = _pairwise32(col[0], c)
+            den = max(n, np.float32(1.0))
+            mx = np.float32(_pairwise32(col[1], c) / den)
+            my = np.float32(_pairwise32(col[2], c) / den)
+            mz = np.float32(_pairwise32(col[3], c) / den)
+            cnt[g] = n
+            ref[g, 0] = mx
+            ref[g, 1] = my
+            ref[g, 2] = mz
+            # pass 2: centred coordinates (x 0 / 1 validity) and their products
+            col[:] = 0.0
+            for r in range(c):
+                y = i * c + r
+                for q in range(c):
+                    x = j * c + q
+                    v = np.float32(1.0) if valid[y, x] else np.float32(0.0)
+                    dx = np.float32(np.float32(X[0, r, q] - mx) * v)
+                    dy = np.float32(np.float32(X[1, r, q] - my) * v)
+                    dz = np.float32(np.float32(X[2, r, q] - mz) * v)
+                    col[1, q] = np.float32(col[1, q] + dx)
+                    col[2, q] = np.float32(col[2, q] + dy)
+                    col[3, q] = np.float32(col[3, q] + dz)
+                    col[4, q] = np.float32(col[4, q] + np.float32(dx * dx))
+                    col[5, q] = np.float32(col[5, q] + np.float32(dx * dy))
+                    col[6, q] = np.float32(col[6, q] + np.float32(dx * dz))
+                    col[7, q] = np.float32(col[7, q] + np.float32(dy * dy))
+                    col[8, q] = np.float32(col[8, q] + np.float32(dy * dz))
+                    col[9, q] = np.float32(col[9, q] + np.float32(dz * dz))
+            for k in range(3):
+                Sd[g, k] = _pairwise32(col[1 + k], c)
+            for k in range(6):
+                SSd[g, k] = _pairwise32(col[4 + k], c)
+    return cnt, ref, Sd, SSd
+
+
+@njit(cache=True)
+def refine_pixels(
+    P: np.ndarray,
+    ref: np.ndarray,
+    tol_scale: np.float32,
+    tol_base: np.float32,
+    ids: np.ndarray,
+    own: np.ndarray,
+    cand: np.ndarray,
+    off: np.ndarray,
+    n32: np.ndarray,
+    stride: np.ndarray,
+    wc: int,
+    c: int,
+    label: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Step 5, the border patches pixel by pixel (see ``extract._refine_border``).
+
+    ``P (H, W, 3)`` the points, ``ref (G, 3)`` the patches' float32 means, ``tol_scale r^2 +
+    tol_base`` the inlier bound, ``ids (B,)`` patches, ``own (B,)`` their regions (-1 = none),
+    ``cand (B, m)`` candidate regions (-1 padded), ``off (B, m)`` float32 ``n . ref - rho`` per
+    (patch, candidate), ``n32 (n_reg, 3)`` float32 normals. The centred float32 coordinates and
+    the bound are recomputed exactly as :func:`patch_moments` / the NumPy path define them.
+    Fills ``label (B, c, c)`` (closest candidate within the bound, -1 = none; ties keep the
+    earlier slot). Returns ``complete (B,)`` and the float64 moments ``(B, m, 10)`` - count,
+    sums of d, sums of d d^T (xx, xy, xz, yy, yz, zz) - of the pixels of each (incomplete
+    patch, candidate) (zero for complete patches) - and the outline samples of the incomplete
+    patches: their labelled pixels on every ``stride[b]``-th row and column, ``float32(d + ref)``
+    ``(3, K)``, and their regions ``(K,)`` (patch by patch, raster order within one).
+    """
+    B, m = cand.shape
+    complete = np.empty(B, np.bool_)
+    G = np.zeros((B, m, 10), np.float64)
+    d = np.empty((3, c, c), np.float32)
+    pts = np.empty((3, B * c * c), np.float32)
+    preg = np.empty(B * c * c, np.int64)
+    n_pts = 0
+    for b in range(B):
+        i = ids[b] // wc
+        j = ids[b] - i * wc
+        g = ids[b]
+        mx = ref[g, 0]
+        my = ref[g, 1]
+        mz = ref[g, 2]
+        ok = own[b] >= 0
+        for r in range(c):
+            y = i * c + r
+            for q in range(c):
+                x = j * c + q
+                px = np.float32(P[y, x, 0])
+                py = np.float32(P[y, x, 1])
+                pz = np.float32(P[y, x, 2])
+                r2 = np.float32(
+                    np.float32(np.float32(px * px) + np.float32(py * py)) + np.float32(pz * pz)
+                )
+                if r2 > 0 and r2 < np.inf:
+                    t = np.float32(np.float32(r2 * tol_scale) + tol_base)
+                    dx = np.float32(px - mx)
+                    dy = np.float32(py - my)
+                    dz = np.float32(pz - mz)
+                else:  # never an inlier
+                    t = np.float32(-1.0)
+                    dx = np.float32(0.0)
+                    dy = np.float32(0.0)
+                    dz = np.float32(0.0)
+                d[0, r, q] = dx
+                d[1, r, q] = dy
+                d[2, r, q] = dz
+                best = np.float32(np.inf)
+                lab = -1
+                for s in range(m):
+                    k = cand[b, s]
+                    if k < 0:
+                        break
+                    dist = np.float32(
+                        np.float32(
+                            np.float32(np.float32(dx * n32[k, 0]) + np.float32(dy * n32[k, 1]))
+                            + np.float32(dz * n32[k, 2])
+                        )
+                        + off[b, s]
+                    )
+                    dist = abs(dist)
+                    if dist < t and dist < best:
+                        best = dist
+                        lab = k
+                label[b, r, q] = lab
+                if ok and lab != own[b] and t >= 0:
+                    ok = False
+        complete[b] = ok
+        if ok:
+            continue
+        for r in range(c):
+            for q in range(c):
+                lab = label[b, r, q]
+                if lab < 0:
+                    continue
+                s = 0
+                while cand[b, s] != lab:
+                    s += 1
+                ex = np.float64(d[0, r, q])
+                ey = np.float64(d[1, r, q])
+                ez = np.float64(d[2, r, q])
+                if r % stride[b] == 0 and q % stride[b] == 0:
+                    pts[0, n_pts] = np.float32(d[0, r, q] + mx)
+                    pts[1, n_pts] = np.float32(d[1, r, q] + my)
+                    pts[2, n_pts] = np.float32(d[2, r, q] + mz)
+                    preg[n_pts] = lab
+                    n_pts += 1
+                G[b, s, 0] += 1.0
+                G[b, s, 1] += ex
+                G[b, s, 2] += ey
+                G[b, s, 3] += ez
+                G[b, s, 4] += ex * ex
+                G[b, s, 5] += ex * ey
+                G[b, s, 6] += ex * ez
+                G[b, s, 7] += ey * ey
+                G[b, s, 8] += ey * ez
+                G[b, s, 9] += ez * ez
+    return complete, G, pts[:, :n_pts].copy(), preg[:n_pts].copy()
+
+
+@njit(cache=True)
+def label_image(
+    valid: np.ndarray,
+    lab_cell: np.ndarray,
+    mixed_ids: np.ndarray,
+    mixed_label: np.ndarray,
+    H: int,
+    W: int,
+    K: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """The label image and the inliers of each segment in raster order (see
+    ``extract._extract``): ``valid (hc c, wc c)``, ``lab_cell (hc, wc)`` the segment of each
+    wholesale patch (-1 = none), ``mixed_ids (Bm,)`` the patches refined pixel by pixel and
+    ``mixed_label (Bm, c, c)`` their pixels' segments. Returns ``labels (H, W)`` int64 (-1 =
+    none), the inlier indices ``row * W + col`` of all segments one after the other and the
+    ``(K + 1,)`` cuts between segments."""
+    hc, wc = lab_cell.shape
+    c = valid.shape[0] // hc
+    labels = np.full((H, W), -1, np.int64)
+    for i in range(hc):
+        for j in range(wc):
+            s = lab_cell[i, j]
+            if s < 0:
+                continue
+            for r in range(c):
+                for q in range(c):
+                    if valid[i * c + r, j * c + q]:
+                        labels[i * c + r, j * c + q] = s
+    for b in range(len(mixed_ids)):
+        i = mixed_ids[b] // wc
+        j = mixed_ids[b] - i * wc
+        for r in range(c):
+            for q in range(c):
+                labels[i * c + r, j * c + q] = mixed_label[b, r, q]
+    count = np.zeros(K + 1, np.int64)
+    for y in range(H):
+        for x in range(W):
+            count[labels[y, x] + 1] += 1
+    cuts = np.zeros(K + 1, np.int64)
+    for k in range(K):
+        cuts[k + 1] = cuts[k] + count[k + 1]
+    inl = np.empty(cuts[K], np.int64)
+    pos = cuts[:K].copy()
+    for y in range(H):
+        for x in range(W):
+            s = labels[y, x]
+            if s >= 0:
+                inl[pos[s]] = y * W + x
+                pos[s] += 1
+    return labels, inl, cuts
+
+
+@njit(cache=True)
+def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """Sums of the rows of ``M (N, K)`` per group ``(N,)`` (``-1`` = none), in row order:
+    ``(n_groups, K)`` float64 (see ``extract._sum_rows``)."""
+    out = np.zeros((n_groups, M.shape[1]), np.float64)
+    for i in range(M.shape[0]):
+        g = groups[i]
+        if g >= 0:
+            for k in range(M.shape[1]):
+                out[g, k] += M[i, k]
+    return out
+
+
+@njit(cache=True)
+def outline_points(
+    points: np.ndarray,
+    point_seg: np.ndarray,
+    P: np.ndarray,
+    valid: np.ndarray,
+    bi: np.ndarray,
+    bj: np.ndarray,
+    bt: np.ndarray,
+    bseg: np.ndarray,
+    axes: np.ndarray,
+    off: np.ndarray,
+    c: int,
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """The outline points of every segment in its plane (see ``extract._outlines``): the
+    sampled pixels ``points (3, N)`` float32 of the mixed patches (segments ``point_seg``, -1 =
+    none), then the pixels of the wholesale patches ``(bi, bj)`` not drawn as quadrilaterals,
+    every ``bt``-th row and column of their valid pixels (segments ``bseg``), grouped by segment
+    (stable) and projected on the segment's axes ``(K, 2, 3)`` minus ``off (K, 2)``. Returns
+    ``uv (M, 2)`` float64 and the ``(K + 1,)`` cuts between segments."""
+    K = len(axes)
+    n0 = len(point_seg)
+    count = np.zeros(K + 1, np.int64)
+    for n in range(n0):
+        count[point_seg[n] + 1] += 1
+    for b in range(len(bi)):
+        t = bt[b]
+        for r in range(0, c, t):
+            for q in range(0, c, t):
+                if valid[bi[b] * c + r, bj[b] * c + q]:
+                    count[bseg[b] + 1] += 1
+    cuts = np.zeros(K + 1, np.int64)
+    for k in range(K):
+        cuts[k + 1] = cuts[k] + count[k + 1]
+    uv = np.empty((cuts[K], 2), np.float64)
+    pos = cuts[:K].copy()
+    for n in range(n0):
+        k = point_seg[n]
+        if k < 0:
+            continue
+        x = np.float64(points[0, n])
+        y = np.float64(points[1, n])
+        z = np.float64(points[2, n])
+        for a in range(2):
+            uv[pos[k], a] = x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
+        pos[k] += 1
+    for b in range(len(bi)):
+        t = bt[b]
+        k = bseg[b]
+        for r in range(0, c, t):
+            for q in range(0, c, t):
+                yy = bi[b] * c + r
+                xx = bj[b] * c + q
+                if valid[yy, xx]:
+                    x = P[yy, xx, 0]
+                    y = P[yy, xx, 1]
+                    z = P[yy, xx, 2]
+                    for a in range(2):
+                        uv[pos[k], a] = (
+                            x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
+                        )
+                    pos[k] += 1
+    return uv, cuts
+
+
+@njit(cache=True)
+def plane_rows(
+    M: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
+    """TLS planes of raw moment rows ``(G, 13)`` (see ``extract._planes_from_rows``): the
+    smallest eigenpair of each covariance by the closed form of ``extract.smallest_eigenpairs``
+    row by row. Returns normals ``(G, 3)`` away from the origin, rho, RMS, means ``(G, 3)`` and
+    a flag per row whose smallest eigenvalue is repeated (the caller takes LAPACK's vector
+    there)."""
+    G = M.shape[0]
+    normal = np.empty((G, 3), np.float64)
+    rho = np.empty(G, np.float64)
+    rms = np.empty(G, np.float64)
+    mean = np.empty((G, 3), np.float64)
+    rank1 = np.zeros(G, np.bool_)
+    for g in range(G):
+        n = max(M[g, 0], 1.0)
+        mx = M[g, 1] / n
+        my = M[g, 2] / n
+        mz = M[g, 3] / n
+        a00 = M[g, 4] / n - mx * mx
+        a01 = M[g, 5] / n - mx * my
+        a02 = M[g, 6] / n - mx * mz
+        a11 = M[g, 8] / n - my * my
+        a12 = M[g, 9] / n - my * mz
+        a22 = M[g, 12] / n - mz * mz
+        q = (a00 + a11 + a22) / 3.0
+        b00 = a00 - q
+        b11 = a11 - q
+        b22 = a22 - q
+        p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
+        p = np.sqrt(p2)
+        det = (
+            b00 * (b11 * b22 - a12 * a12)
+            - a01 * (a01 * b22 - a12 * a02)
+            + a02 * (a01 * a12 - b11 * a02)
+        )
+        r = det / (2.0 * p * p2) if p > 0 else 0.0
+        r = min(max(r, -1.0), 1.0)
+        phi = np.arccos(r) / 3.0
+        lam = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+        m00 = a00 - lam
+        m11 = a11 - lam
+        m22 = a22 - lam
+        bx, by, bz, bn = 0.0, 0.0, 1.0, 0.0
+        for pair in range(3):
+            if pair == 0:
+                x0, y0, z0, x1, y1, z1 = m00, a01, a02, a01, m11, a12
+            elif pair == 1:
+                x0, y0, z0, x1, y1, z1 = m00, a01, a02, a02, a12, m22
+            else:
+                x0, y0, z0, x1, y1, z1 = a01, m11, a12, a02, a12, m22
+            cx = y0 * z1 - z0 * y1
+            cy = z0 * x1 - x0 * z1
+            cz = x0 * y1 - y0 * x1
+            n2 = cx * cx + cy * cy + cz * cz
+            if n2 > bn:
+                bx, by, bz, bn = cx, cy, cz, n2
+        if bn <= 1e-30 * max(p2 * p2, 1e-300):
+            rank1[g] = True
+            bn = 1.0
+        inv = np.sqrt(bx * bx + by * by + bz * bz)
+        bx /= inv
+        by /= inv
+        bz /= inv
+        d = bx * mx + by * my + bz * mz
+        if d < 0:
+            bx, by, bz = -bx, -by, -bz
+        normal[g, 0] = bx
+        normal[g, 1] = by
+        normal[g, 2] = bz
+        rho[g] = abs(d)
+        rms[g] = np.sqrt(max(lam, 0.0))
+        mean[g, 0] = mx
+        mean[g, 1] = my
+        mean[g, 2] = mz
+    return normal, rho, rms, mean, rank1
