@@ -76,7 +76,7 @@ def test_odometry_cli_two_planes(tmp_path, cli):
 def test_bad_input_exits_2(tmp_path, cli):
     res = cli("planes", "extract", tmp_path, "--out", tmp_path / "o")
     assert res.exit_code == 2
-    assert "rgb.txt nor color" in res.output
+    assert "rgb.txt, color/ nor frame-NNNNNN" in res.output
 
 
 def test_extract_cape_and_pcd(cli, data_path, tmp_path):

@@ -190,3 +190,13 @@ def test_seven_scenes_real(data_path):
     valid = np.isfinite(f.depth)
     assert 0.8 < valid.mean() < 0.95  # 10.8 % of frame 0 has no depth
     assert 0.7 < np.nanmin(f.depth) and np.nanmax(f.depth) < 4.0
+
+
+def test_seven_scenes_reference_is_orthonormal(data_path):
+    seq = open_rgbd_sequence(data_path("rgbd/7scenes-tsdf"))
+    R = seq.reference[:, :3, :3]
+    np.testing.assert_allclose(
+        np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), atol=1e-12
+    )
+    raw = np.loadtxt(data_path("rgbd/7scenes-tsdf/frame-000050.pose.txt"))
+    np.testing.assert_allclose(seq.reference[50], raw, atol=2e-4)  # the projection moves < 2e-4
