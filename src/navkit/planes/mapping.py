@@ -145,6 +145,13 @@ class OdometrySettings:
         The dense step aligns each frame with the current *keyframe* (not the previous
         frame: drift grows per keyframe, not per frame); a tracked frame whose overlap with
         the keyframe falls below this fraction becomes the next keyframe.
+    revisit_distance, revisit_angle_deg : float
+        **Revisits**: when the frame's start pose is within these (metres, degrees) of a
+        keyframe at least 3 keyframes older than the current one, it is aligned with that old
+        keyframe first: back where it started, the camera is measured against what it saw
+        then, and the error does not grow with the way there and back.
+    max_keyframes : int
+        Keyframes kept for revisits (a pyramid is ~4 MB at 640 x 480; the first one is kept).
     """
 
     motion: MotionSettings = field(default_factory=MotionSettings)
@@ -159,6 +166,9 @@ class OdometrySettings:
     dense: DenseSettings | None = field(default_factory=DenseSettings)
     gates: DenseGates = field(default_factory=lambda: DenseGates())
     keyframe_overlap: float = 0.85
+    revisit_distance: float = 0.15
+    revisit_angle_deg: float = 10.0
+    max_keyframes: int = 200
 
 
 @dataclass
@@ -471,6 +481,7 @@ class PlaneOdometry:
         # dense step: (index, pyramid, T_world_frame) of the keyframe and of the last tracked
         self._keyframe: tuple[int, DenseFrame, NDArray[np.float64]] | None = None
         self._last_good: tuple[int, DenseFrame, NDArray[np.float64]] | None = None
+        self._keyframes: list[tuple[int, DenseFrame, NDArray[np.float64]]] = []
         self._dense_reason = ""
         self._plane_overlap = 0.0
 
@@ -573,15 +584,7 @@ class PlaneOdometry:
             self._anchor = (obs, T)
             if dframe is not None:
                 self._last_good = (idx, dframe, T)
-                if (
-                    self._keyframe is None
-                    or dense_res is None
-                    or (
-                        ref_idx == self._keyframe[0]
-                        and dense_res.overlap < self.settings.keyframe_overlap
-                    )
-                ):
-                    self._keyframe = (idx, dframe, T)
+                self._update_keyframe(idx, dframe, T, dense_res, ref_idx)
         self._prev = obs
         res = FrameResult(
             idx,
@@ -655,6 +658,42 @@ class PlaneOdometry:
             return None
         return DenseFrame.build(obs.gray, P[..., 2], obs.camera, ds)
 
+    def _update_keyframe(self, idx, dframe, T, dense_res: DenseResult | None, ref_idx: int) -> None:
+        """Keep the reference keyframe while the overlap lasts; a tracked frame whose overlap
+        fell below ``keyframe_overlap`` becomes a new keyframe (and joins the list that
+        :meth:`_revisit` searches); an old keyframe the frame was aligned with becomes the
+        reference again when the overlap is good."""
+        s = self.settings
+        ref = next((k for k in self._keyframes if k[0] == ref_idx), None)
+        if self._keyframe is None or dense_res is None:
+            new = (idx, dframe, T)
+        elif dense_res.overlap < s.keyframe_overlap:
+            new = (idx, dframe, T)
+        elif ref is not None:
+            self._keyframe = ref
+            return
+        else:
+            return
+        self._keyframe = new
+        self._keyframes.append(new)
+        if len(self._keyframes) > s.max_keyframes:
+            self._keyframes.pop(1)  # the first keyframe (the world frame) stays
+
+    def _revisit(self, T_start: NDArray[np.float64]):
+        """The oldest keyframe within ``revisit_distance`` / ``revisit_angle_deg`` of
+        ``T_start`` that is at least 3 keyframes older than the current one (else None)."""
+        s = self.settings
+        if self._keyframe is None or len(self._keyframes) < 4:
+            return None
+        current = next(
+            (n for n, k in enumerate(self._keyframes) if k[0] == self._keyframe[0]),
+            len(self._keyframes),
+        )
+        for k in self._keyframes[: max(current - 2, 0)]:
+            if not _differs(k[2], T_start, s.revisit_distance, s.revisit_angle_deg):
+                return k
+        return None
+
     def _dense(
         self,
         dframe: DenseFrame,
@@ -680,6 +719,9 @@ class PlaneOdometry:
         if all(_differs(T0, T_still, 0.02, 1.0) for _, T0 in starts):
             starts.append(("prediction", T_still))
         refs = [self._keyframe]
+        old = self._revisit(starts[0][1])
+        if old is not None:  # the camera is back where an old keyframe was: align with it
+            refs.insert(0, old)
         if self._last_good is not None and self._last_good[0] != self._keyframe[0]:
             refs.append(self._last_good)
         reasons = []
