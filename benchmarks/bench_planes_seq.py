@@ -200,6 +200,7 @@ def sequence_rows(quick: bool) -> tuple[list[Row], list[str]]:
                 f"{s['rpe_r_max']:.2f} | {s['ate']:.2f} | {s['failures']} | {s['silent']} | "
                 f"{s['cpu_ms']:.0f} |"
             )
+            print(table[-1], flush=True)
         nk, hy, ci = res["navkit"], res["Open3D hybrid"], res["Open3D colored ICP"]
         for key, unit, label in (
             ("rpe_t_med", "cm", "RPE translation median"),
@@ -252,6 +253,7 @@ def slambook_rows(quick: bool) -> tuple[list[Row], list[str]]:
                 f"| slambook {a + 1} -> {b + 1} | {name} | {100 * et[0]:.1f} cm / {er[0]:.2f} deg "
                 f"| {status} {src} | {cpu[0]:.0f} |"
             )
+            print(table[-1], flush=True)
             if name == "navkit":
                 rows.append(
                     Row(

@@ -12,8 +12,14 @@
 4. **frame-to-frame** against the previous frame when the map gives less (fewer plane
    directions, a texture step the depth check rejects, or nothing): the better-determined
    result wins (measured before prior-filled, then more plane directions, then the map);
-5. chain onto the trajectory (``T_world_frame``; the first frame is the world);
-6. merge the frame's planes into the map: the same physical plane (normal, distance and overlap
+5. **dense refinement and verification** (registered RGB-D frames, ``OdometrySettings.dense``):
+   the plane solution - and the prediction when the planes give nothing or disagree with it
+   - is refined by a dense photometric + point-to-plane alignment with the current keyframe
+   (or an old keyframe the camera is back at, :meth:`PlaneOdometry._revisit`) and accepted
+   only when it passes :class:`DenseGates`; otherwise the frame is an explicit failure
+   (``FrameResult.reason``), never a silent pose;
+6. chain onto the trajectory (``T_world_frame``; the first frame is the world);
+7. merge the frame's planes into the map: the same physical plane (normal, distance and overlap
    agree in the world frame) becomes one map plane whose extent (a sample of its inlier points)
    and texture (running mean of brightness on a fixed lattice of the plane) are fused.
 
@@ -484,6 +490,7 @@ class PlaneOdometry:
         self._keyframes: list[tuple[int, DenseFrame, NDArray[np.float64]]] = []
         self._dense_reason = ""
         self._plane_overlap = 0.0
+        self._depth_note = ""
 
     def register_frame(
         self, obs: PlaneObservation, prior: MotionPrior | ArrayLike | None = None
@@ -538,12 +545,14 @@ class PlaneOdometry:
                     plane is not None
                     and not plane[1].prior_dof
                     and self._plane_overlap < self.settings.gates.min_overlap
+                    and self._depth_agrees(obs, plane[2])
                 ):
                     # a large motion: the frames share too few pixels for the dense step to
                     # judge; the plane solution stands on the planes' own checks (depth
                     # consistency, association) and says so
                     reason = (
-                        f"dense check inconclusive (overlap {self._plane_overlap:.2f}): planes only"
+                        f"dense check inconclusive (overlap {self._plane_overlap:.2f}): "
+                        f"planes only, depth check {self._depth_note}"
                     )
                 else:
                     why = self._dense_reason
@@ -621,6 +630,15 @@ class PlaneOdometry:
         f2f_prior: MotionPrior | NDArray[np.float64] | None = (
             mprior if mprior is not None else (step_pred if predicted else None)
         )
+        # frame-to-frame against the last *tracked* frame: after a failure the previous
+        # frame's pose is a prediction, and a motion from it would be chained onto a guess
+        ref_obs, T_ref = self._prev, T_prev
+        if self._anchor is not None and self._anchor[0] is not self._prev:
+            ref_obs, T_ref = self._anchor
+            if isinstance(f2f_prior, MotionPrior):
+                f2f_prior = replace(f2f_prior, T=se3_inverse(T_ref) @ T_pred)
+            elif f2f_prior is not None:
+                f2f_prior = se3_inverse(T_ref) @ T_pred
         found: list[tuple[str, MotionEstimate, NDArray[np.float64]]] = []
         failure: MotionFailure | None = None
         if self.settings.frame_to_map and self.map.planes:  # 3
@@ -631,11 +649,11 @@ class PlaneOdometry:
                 failure = r_map
         if not found or found[0][1].prior_dof or found[0][1].case < self._rank(obs):  # 4
             try:
-                r_f = estimate_motion(self._prev, obs, f2f_prior, self.settings.motion)
+                r_f = estimate_motion(ref_obs, obs, f2f_prior, self.settings.motion)
             except NavkitError as exc:
                 r_f = MotionFailure(0, ("rotation", "translation"), f"frame-to-frame: {exc}")
             if isinstance(r_f, MotionEstimate):
-                found.append(("frame", r_f, T_prev @ r_f.T))
+                found.append(("frame", r_f, T_ref @ r_f.T))
             else:
                 failure = r_f
         if not found:
@@ -657,6 +675,18 @@ class PlaneOdometry:
         ):
             return None
         return DenseFrame.build(obs.gray, P[..., 2], obs.camera, ds)
+
+    def _depth_agrees(self, obs: PlaneObservation, T_world: NDArray[np.float64]) -> bool:
+        """Does ``T_world`` put *all* the frame's points where the last tracked frame sees
+        them (:func:`~navkit.planes.motion.depth_consistency`, same threshold as for texture
+        steps)? The only evidence left for a large motion the dense step cannot judge."""
+        if self._anchor is None:
+            return False
+        a_obs, a_T = self._anchor
+        m = self.settings.motion
+        chk = depth_consistency(a_obs, obs, se3_inverse(a_T) @ T_world, [])
+        self._depth_note = f"{100 * chk.violation:.0f} % of {chk.tested} points in free space"
+        return bool(chk.tested >= m.min_depth_points and chk.violation <= m.max_depth_violation)
 
     def _update_keyframe(self, idx, dframe, T, dense_res: DenseResult | None, ref_idx: int) -> None:
         """Keep the reference keyframe while the overlap lasts; a tracked frame whose overlap
