@@ -156,7 +156,7 @@ def _open_rgbd(path: Path, cam: CameraOverride):
     ):
         raise DataNotFoundError(
             f"{path / 'camera.yaml'}: not found, and no --intrinsics given; give the camera as "
-            "--intrinsics FX,FY,CX,CY (pixels) [--depth-scale, default 1000] or write "
+            "--intrinsics FX,FY,CX,CY (pixels; and --depth-scale when not 1000) or write "
             "camera.yaml with fx, fy, cx, cy, depth_scale"
         )
     if not (path / "rgb.txt").is_file():
