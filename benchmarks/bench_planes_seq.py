@@ -267,6 +267,33 @@ def slambook_rows(quick: bool) -> tuple[list[Row], list[str]]:
     return rows, table
 
 
+def colour_depth_offset(frames: list, search: int = 30) -> list[tuple[int, int, float]]:
+    """Per frame, the shift ``(dx, dy)`` (pixels) of the colour image against the depth image
+    that best aligns colour edges with depth edges (normalised cross-correlation of blurred
+    edge maps, ``cv2.matchTemplate``), and the median depth of the depth edges (m).
+
+    Colour pixel ``p + (dx, dy)`` shows what depth pixel ``p`` measures. Registered RGB-D
+    gives (0, 0); 7-Scenes does not (docs/planes.md, "7-Scenes")."""
+    import cv2
+
+    from navkit.planes.texture import to_gray
+
+    out = []
+    for f in frames:
+        d = np.nan_to_num(f.depth, nan=0.0).astype(np.float32)
+        g = to_gray(f.color)
+        ed = np.hypot(cv2.Sobel(d, cv2.CV_32F, 1, 0), cv2.Sobel(d, cv2.CV_32F, 0, 1))
+        ed = ((ed > 0.5) & (d > 0)).astype(np.float32)  # depth steps > ~6 cm per pixel
+        eg = np.hypot(cv2.Sobel(g, cv2.CV_32F, 1, 0), cv2.Sobel(g, cv2.CV_32F, 0, 1))
+        ed, eg = cv2.GaussianBlur(ed, (0, 0), 1.5), cv2.GaussianBlur(eg, (0, 0), 1.5)
+        tpl = ed[search:-search, search:-search]
+        score = cv2.matchTemplate(eg, tpl, cv2.TM_CCORR_NORMED)
+        _, _, _, (x, y) = cv2.minMaxLoc(score)
+        z = float(np.nanmedian(f.depth[ed > 0.2]))
+        out.append((x - search, y - search, z))
+    return out
+
+
 def run(quick: bool = False) -> list[Row]:
     from navkit.errors import DataNotFoundError
 
@@ -282,6 +309,29 @@ def run(quick: bool = False) -> list[Row]:
         print("\n".join(table))
     except DataNotFoundError as exc:
         rows.append(Row(AREA, "7-Scenes sequence", "-", None, note=f"skipped: {exc}"))
+    try:
+        from navkit import datasets
+        from navkit.io.rgbd import open_rgbd_sequence
+
+        seq = open_rgbd_sequence(datasets.find(SEQ))
+        offs = np.array(colour_depth_offset([seq.frame(i) for i in range(0, len(seq), 10)]))
+        for (dx, dy, z), i in zip(offs, range(0, len(seq), 10), strict=True):
+            print(
+                f"7-Scenes frame {i}: colour offset against depth ({dx:+.0f}, {dy:+.0f}) px "
+                f"at {z:.2f} m"
+            )
+        rows.append(
+            Row(
+                AREA,
+                "7-Scenes colour vs depth offset (median |shift|, frames 0, 10, ..., 90)",
+                "px",
+                float(np.median(np.hypot(offs[:, 0], offs[:, 1]))),
+                note=f"dx {np.median(offs[:, 0]):+.0f}, dy {np.median(offs[:, 1]):+.0f} px; "
+                "registered RGB-D would be 0",
+            )
+        )
+    except DataNotFoundError as exc:
+        rows.append(Row(AREA, "7-Scenes colour offset", "-", None, note=f"skipped: {exc}"))
     try:
         r, table = slambook_rows(quick)
         rows += r
