@@ -95,7 +95,7 @@ def test_tum_folder(tmp_path):
 
 
 def test_unknown_folder(tmp_path):
-    with pytest.raises(InputError, match=r"rgb\.txt nor color"):
+    with pytest.raises(InputError, match=r"rgb\.txt, color/ nor frame-NNNNNN"):
         open_rgbd_sequence(tmp_path)
 
 
@@ -129,3 +129,74 @@ def test_cape_calibration_and_frame(data_path, tmp_path):
     bad.write_text("not xml at all")
     with pytest.raises(FormatError):
         read_cape_calibration(bad)
+
+
+# ------------------------------------------------------------------------------------------------
+# 7-Scenes layout
+
+
+def write_seven_scenes(root, n=3, pose=True, intrinsics=True):
+    root.mkdir(parents=True, exist_ok=True)
+    for k in range(n):
+        cv2.imwrite(str(root / f"frame-{k:06d}.color.png"), np.full((8, 10, 3), 10 * k, np.uint8))
+        d = np.full((8, 10), 1500, np.uint16)
+        d[0, 0] = 0
+        d[0, 1] = 65535
+        cv2.imwrite(str(root / f"frame-{k:06d}.depth.png"), d)
+        if pose:
+            T = np.eye(4)
+            T[0, 3] = 0.1 * k
+            np.savetxt(root / f"frame-{k:06d}.pose.txt", T)
+    if intrinsics:
+        np.savetxt(root / "camera-intrinsics.txt", [[5.0, 0, 4.5], [0, 6.0, 3.5], [0, 0, 1]])
+
+
+def test_seven_scenes_layout(tmp_path):
+    write_seven_scenes(tmp_path)
+    seq = open_rgbd_sequence(tmp_path)
+    assert len(seq) == 3
+    assert (seq.camera.fx, seq.camera.fy, seq.camera.cx, seq.camera.cy) == (5.0, 6.0, 4.5, 3.5)
+    np.testing.assert_allclose(seq.timestamps, [0, 1 / 30, 2 / 30])
+    assert seq.reference is not None
+    np.testing.assert_allclose(seq.reference[:, 0, 3], [0.0, 0.1, 0.2])
+    f = seq.frame(1)
+    assert np.isnan(f.depth[0, 0]) and np.isnan(f.depth[0, 1])  # 0 and 65535: no measurement
+    assert f.depth[1, 1] == pytest.approx(1.5)
+
+
+def test_seven_scenes_without_intrinsics_or_poses(tmp_path):
+    write_seven_scenes(tmp_path, pose=False, intrinsics=False)
+    with pytest.raises(DataNotFoundError, match="intrinsics"):
+        open_rgbd_sequence(tmp_path)
+    seq = open_rgbd_sequence(tmp_path, {"fx": 5, "fy": 5, "cx": 4.5, "cy": 3.5})
+    assert seq.reference is None
+
+
+def test_seven_scenes_broken_pose(tmp_path):
+    write_seven_scenes(tmp_path)
+    (tmp_path / "frame-000001.pose.txt").write_text("1 0 0\n0 1 0\n")
+    with pytest.raises(FormatError) as exc:
+        open_rgbd_sequence(tmp_path)
+    assert "frame-000001.pose.txt" in str(exc.value)
+
+
+def test_seven_scenes_real(data_path):
+    root = data_path("rgbd/7scenes-tsdf")
+    seq = open_rgbd_sequence(root)
+    assert len(seq) == 100
+    assert seq.camera.fx == 585.0 and seq.camera.cx == 320.0
+    assert seq.reference is not None and seq.reference.shape == (100, 4, 4)
+    f = seq.frame(0)
+    valid = np.isfinite(f.depth)
+    assert 0.8 < valid.mean() < 0.95  # 10.8 % of frame 0 has no depth
+    assert 0.7 < np.nanmin(f.depth) and np.nanmax(f.depth) < 4.0
+
+
+def test_seven_scenes_reference_is_orthonormal(data_path):
+    seq = open_rgbd_sequence(data_path("rgbd/7scenes-tsdf"))
+    R = seq.reference[:, :3, :3]
+    np.testing.assert_allclose(
+        np.einsum("nji,njk->nik", R, R), np.broadcast_to(np.eye(3), R.shape), atol=1e-12
+    )
+    raw = np.loadtxt(data_path("rgbd/7scenes-tsdf/frame-000050.pose.txt"))
+    np.testing.assert_allclose(seq.reference[50], raw, atol=2e-4)  # the projection moves < 2e-4

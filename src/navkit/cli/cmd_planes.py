@@ -4,13 +4,13 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import typer
 
-from navkit.cli.common import cli_errors, expand_inputs, progress, write_run_files
+from navkit.cli.common import check_out_dir, cli_errors, expand_inputs, progress, write_run_files
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +37,8 @@ class CameraOverride:
 
 @dataclass(frozen=True)
 class PlanesRunSettings:
-    """Resolved settings of a ``navkit planes`` run (written to ``settings.toml``)."""
+    """Resolved settings of a ``navkit planes`` run (written to ``settings.toml``; the same
+    keys are read from ``--config FILE.toml``, top level or a ``[planes]`` table)."""
 
     input: str = ""
     frame: int = 0
@@ -48,8 +49,97 @@ class PlanesRunSettings:
     reference: str = ""
 
 
-def _camera_opts(fx, fy, cx, cy, depth_scale) -> CameraOverride:
-    return CameraOverride(fx or 0.0, fy or 0.0, cx or 0.0, cy or 0.0, depth_scale or 0.0)
+_CONFIG_KEYS = {"nu": float, "cell": int, "max_frames": int, "frame": int}
+
+
+def _config(path: Path | None) -> dict[str, Any]:
+    """Settings from ``--config`` (a TOML file with the keys of :class:`PlanesRunSettings`)."""
+    if path is None:
+        return {}
+    import tomllib
+
+    from navkit.errors import ConfigError, DataNotFoundError
+
+    if not path.is_file():
+        raise DataNotFoundError(f"{path}: config file not found")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"not valid TOML ({exc})", source=path, expected="TOML") from None
+    table = data.get("planes", data)
+    out: dict[str, Any] = {}
+    for key, kind in _CONFIG_KEYS.items():
+        if key in table:
+            try:
+                out[key] = kind(table[key])
+            except (TypeError, ValueError):
+                raise ConfigError(
+                    f"{key} = {table[key]!r}", source=path, field=key, expected=kind.__name__
+                ) from None
+    cam = table.get("camera", {})
+    if isinstance(cam, dict):
+        out["camera"] = {k: float(v) for k, v in cam.items() if float(v) > 0}
+    return out
+
+
+def _opt(conf: dict[str, Any], key: str, value: float, default: float) -> float:
+    """An option's value: the command line's when given (not its default), else the config's."""
+    return float(conf.get(key, value)) if value == default else value
+
+
+def _intrinsics(text: str | None, depth_scale: float | None, config: dict) -> CameraOverride:
+    """``--intrinsics FX,FY,CX,CY`` (pixels) and ``--depth-scale`` over the config's camera."""
+    from navkit.errors import InputError
+
+    vals = dict(config.get("camera", {}))
+    if text:
+        try:
+            fx, fy, cx, cy = (float(v) for v in text.split(","))
+        except ValueError:
+            raise InputError(
+                f"got {text!r}", field="--intrinsics", expected="FX,FY,CX,CY in pixels"
+            ) from None
+        if min(fx, fy) <= 0:
+            raise InputError(f"got {text!r}", field="--intrinsics", expected="FX, FY > 0")
+        vals.update(fx=fx, fy=fy, cx=cx, cy=cy)
+    if depth_scale is not None:
+        if depth_scale <= 0:
+            raise InputError(f"got {depth_scale}", field="--depth-scale", expected="> 0")
+        vals["depth_scale"] = depth_scale
+    return CameraOverride(**{k: float(v) for k, v in vals.items() if k in _CAMERA_KEYS})
+
+
+_CAMERA_KEYS = ("fx", "fy", "cx", "cy", "depth_scale")
+DEFAULT_DEPTH_SCALE = 1000.0
+"""Raw depth units per metre when neither ``--depth-scale`` nor the folder says (millimetres;
+a TUM folder keeps its format's 5000)."""
+
+
+INTRINSICS_HELP = "Camera intrinsics FX,FY,CX,CY (pixels); overrides the folder's."
+DEPTH_SCALE_HELP = (
+    "Raw depth units per metre (default 1000: millimetres; TUM folders 5000 as the format says)."
+)
+
+
+def _open_rgbd(path: Path, cam: CameraOverride):
+    """An RGB-D folder; a simple layout without ``camera.yaml`` needs ``--intrinsics``."""
+    from navkit.errors import DataNotFoundError
+    from navkit.io.rgbd import open_rgbd_sequence
+
+    given = cam.as_dict()
+    if (
+        (path / "color").is_dir()
+        and not (path / "camera.yaml").is_file()
+        and not all(k in given for k in ("fx", "fy", "cx", "cy"))
+    ):
+        raise DataNotFoundError(
+            f"{path / 'camera.yaml'}: not found, and no --intrinsics given; give the camera as "
+            "--intrinsics FX,FY,CX,CY (pixels; and --depth-scale when not 1000) or write "
+            "camera.yaml with fx, fy, cx, cy, depth_scale"
+        )
+    if not (path / "rgb.txt").is_file():
+        given.setdefault("depth_scale", DEFAULT_DEPTH_SCALE)
+    return open_rgbd_sequence(path, given)
 
 
 def _load_observation(path: Path, frame: int, cam: CameraOverride, cell: int):
@@ -82,9 +172,7 @@ def _load_observation(path: Path, frame: int, cam: CameraOverride, cell: int):
             None,
         )
     if path.is_dir():
-        from navkit.io.rgbd import open_rgbd_sequence
-
-        seq = open_rgbd_sequence(path, cam.as_dict())
+        seq = _open_rgbd(path, cam)
         if not 0 <= frame < len(seq):
             raise InputError(
                 f"frame {frame} of {len(seq)}",
@@ -122,23 +210,22 @@ def _load_observation(path: Path, frame: int, cam: CameraOverride, cell: int):
 @planes_app.command("extract")
 def extract_cmd(
     input: Path = typer.Argument(
-        ..., help="RGB-D folder (TUM or color/+depth/+camera.yaml), CAPE folder, .pcd or .ply."
+        ...,
+        help="RGB-D folder (TUM, color/+depth/+camera.yaml, 7-Scenes), CAPE folder, .pcd or .ply.",
     ),
-    out: Path = typer.Option(Path("out/planes"), "--out", "-o", help="Output folder."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace earlier outputs in --out."),
+    config: Path | None = typer.Option(None, "--config", help="Settings from a TOML file."),
     frame: int = typer.Option(0, "--frame", help="Frame index in a sequence folder."),
-    nu: float = typer.Option(0.01, "--nu", help="Texture pixel size [m]."),
-    cell: int = typer.Option(20, "--cell", help="Patch size of the organised extraction [px]."),
-    fx: float | None = typer.Option(
-        None, "--fx", help="Focal length x [px] (overrides camera.yaml)."
-    ),
-    fy: Optional[float] = typer.Option(None, "--fy", help="Focal length y [px]."),  # noqa: UP045
-    cx: Optional[float] = typer.Option(None, "--cx", help="Principal point x [px]."),  # noqa: UP045
-    cy: Optional[float] = typer.Option(None, "--cy", help="Principal point y [px]."),  # noqa: UP045
-    depth_scale: float | None = typer.Option(
-        None, "--depth-scale", help="Raw depth units per metre."
-    ),
+    nu: float = typer.Option(0.01, "--nu", help="Texture pixel size (m)."),
+    cell: int = typer.Option(20, "--cell", help="Patch size of the organised extraction (px)."),
+    intrinsics: str | None = typer.Option(None, "--intrinsics", help=INTRINSICS_HELP),
+    depth_scale: float | None = typer.Option(None, "--depth-scale", help=DEPTH_SCALE_HELP),
 ) -> None:
-    """Extract planes: planes.json, one texture PNG per plane, overlay.png."""
+    """Extract planes: planes.json, one texture PNG per plane, overlay.png.
+
+    Example: navkit planes extract ../shared/data/rgbd/slambook-ch5 --intrinsics 518,519,325.5,253.5 -o out/slambook-planes
+    """
     with cli_errors():
         import numpy as np
 
@@ -147,12 +234,15 @@ def extract_cmd(
         from navkit.planes import plane_frame
         from navkit.viz.planes import extraction_overlay, texture_to_uint8
 
-        cam = _camera_opts(fx, fy, cx, cy, depth_scale)
+        conf = _config(config)
+        nu, cell = _opt(conf, "nu", nu, 0.01), int(_opt(conf, "cell", cell, 20))
+        frame = int(_opt(conf, "frame", frame, 0))
+        cam = _intrinsics(intrinsics, depth_scale, conf)
+        out = check_out_dir(out, overwrite)
         settings = PlanesRunSettings(input=str(input), frame=frame, nu=nu, cell=cell, camera=cam)
         t0 = time.perf_counter()
         obs, color, kind, gray = _load_observation(input, frame, cam, cell)
         ms = 1000 * (time.perf_counter() - t0)
-        out.mkdir(parents=True, exist_ok=True)
         planes: list[dict[str, Any]] = []
         for k, seg in enumerate(progress(obs.segments, "textures")):
             origin, axes = plane_frame(seg.plane)
@@ -235,49 +325,126 @@ def _reference_poses(path: Path, n: int):
     return se3_from_xyz_quat(tab[:n, :3], tab[:n, 3:])
 
 
+def _reference_folder(path: Path, n: int):
+    """``T_world_camera`` from a folder of 7-Scenes ``frame-N.pose.txt`` files."""
+    import numpy as np
+
+    from navkit.errors import FormatError
+    from navkit.io.rgbd import read_pose_matrix
+
+    files = sorted(path.glob("frame-*.pose.txt"))
+    if len(files) < n:
+        raise FormatError(
+            f"{len(files)} pose files", source=path, field="reference", expected=f">= {n}"
+        )
+    return np.stack([read_pose_matrix(f) for f in files[:n]])
+
+
+def _open_sequence(sequence: list[str], cam: CameraOverride, cell: int, max_frames: int):
+    """``(n, stamps, observe(i), reference poses or None)`` of an RGB-D folder or .pcd files."""
+    import numpy as np
+
+    from navkit.planes import ExtractionSettings, observe_points, observe_rgbd
+
+    es = ExtractionSettings(cell=cell)
+    first = Path(sequence[0])
+    if len(sequence) == 1 and first.is_dir() and not any(first.glob("*.pcd")):
+        seq = _open_rgbd(first, cam)
+        n = len(seq) if max_frames <= 0 else min(max_frames, len(seq))
+        ref = None if seq.reference is None else seq.reference[:n]
+        return (
+            n,
+            np.asarray(seq.timestamps[:n], float),
+            lambda i: observe_rgbd(seq.frame(i), es),
+            ref,
+        )
+    from navkit.io.pointcloud import read_pcd
+
+    files = expand_inputs(sequence, (".pcd",))
+    n = len(files) if max_frames <= 0 else min(max_frames, len(files))
+
+    def observe(i: int):
+        cloud = read_pcd(files[i])
+        return observe_points(
+            cloud.grid() if cloud.is_organized else cloud.points, organized_settings=es
+        )
+
+    return n, np.arange(n, dtype=np.float64), observe, None
+
+
+def _frame_row(i: int, stamp: float, r, t_extract: float) -> dict[str, Any]:
+    return {
+        "index": i,
+        "timestamp": stamp,
+        "status": "tracked" if r.tracked else "failed",
+        "source": r.source or ("first" if r.status == "first" else "prediction (not written)"),
+        "reason": r.reason,
+        "detail": r.status,
+        "case": r.case,
+        "planes": r.n_planes,
+        "extract_ms": t_extract,
+        "motion_ms": r.ms,
+        "dof_sources": r.dof_sources,
+        "texture_dof": list(getattr(r.motion, "texture_dof", ())),
+        "free_dof": list(getattr(r.motion, "free_dof", ())),
+        "prior_dof": list(getattr(r.motion, "prior_dof", ())),
+    }
+
+
+def _write_frames_csv(path: Path, frames: list[dict[str, Any]]) -> None:
+    """``frames.csv``: one row per input frame - index, timestamp, status, source, reason."""
+    import csv
+    import io
+
+    from navkit.io.atomic import write_text
+
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["index", "timestamp", "status", "source", "reason"])
+    for f in frames:
+        w.writerow([f["index"], f"{f['timestamp']:.6f}", f["status"], f["source"], f["reason"]])
+    write_text(path, buf.getvalue())
+
+
 @planes_app.command("odometry")
 def odometry_cmd(
     sequence: list[str] = typer.Argument(
-        ..., help="RGB-D folder (TUM or color/+depth/), or organised .pcd files / a folder of them."
+        ..., help="RGB-D folder (TUM, color/+depth/, 7-Scenes), or organised .pcd files."
     ),
-    out: Path = typer.Option(Path("out/planes-odometry"), "--out", "-o", help="Output folder."),
+    out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace earlier outputs in --out."),
+    config: Path | None = typer.Option(None, "--config", help="Settings from a TOML file."),
     max_frames: int = typer.Option(
         0, "--max-frames", help="Use at most this many frames (0 = all)."
     ),
-    cell: int = typer.Option(20, "--cell", help="Patch size of the organised extraction [px]."),
-    nu: float = typer.Option(0.01, "--nu", help="Texture pixel size [m]."),
+    cell: int = typer.Option(20, "--cell", help="Patch size of the organised extraction (px)."),
+    nu: float = typer.Option(0.01, "--nu", help="Texture pixel size (m)."),
     reference: Path | None = typer.Option(
-        None, "--reference", help="Reference poses (TUM, or slambook pose.txt) for ATE / RPE."
+        None,
+        "--reference",
+        help="Reference poses for ATE / RPE: TUM, slambook pose.txt, or a folder of 7-Scenes "
+        "frame-N.pose.txt (a 7-Scenes input folder is its own reference).",
     ),
-    fx: Optional[float] = typer.Option(None, "--fx", help="Focal length x [px]."),  # noqa: UP045
-    fy: Optional[float] = typer.Option(None, "--fy", help="Focal length y [px]."),  # noqa: UP045
-    cx: Optional[float] = typer.Option(None, "--cx", help="Principal point x [px]."),  # noqa: UP045
-    cy: Optional[float] = typer.Option(None, "--cy", help="Principal point y [px]."),  # noqa: UP045
-    depth_scale: float | None = typer.Option(
-        None, "--depth-scale", help="Raw depth units per metre."
-    ),
+    intrinsics: str | None = typer.Option(None, "--intrinsics", help=INTRINSICS_HELP),
+    depth_scale: float | None = typer.Option(None, "--depth-scale", help=DEPTH_SCALE_HELP),
 ) -> None:
-    """Track a sequence: trajectory.tum, map.json, map.ply, map.png, summary.json."""
+    """Track a sequence: trajectory.tum (tracked frames only), frames.csv (every frame: status,
+    source, reason), map.json, map.ply, map.png, summary.json.
+
+    Example: navkit planes odometry ../shared/data/rgbd/7scenes-tsdf -o out/7scenes
+    """
     with cli_errors():
         import numpy as np
 
-        from navkit.geometry import se3_inverse
-        from navkit.io.atomic import write_json
-        from navkit.io.pointcloud import write_ply
-        from navkit.io.trajectory import Trajectory, write_tum
-        from navkit.planes import (
-            ExtractionSettings,
-            OdometrySettings,
-            PlaneOdometry,
-            observe_points,
-            observe_rgbd,
-        )
-        from navkit.planes.metrics import ate, rpe
+        from navkit.planes import OdometrySettings, PlaneOdometry
         from navkit.planes.motion import MotionSettings
         from navkit.planes.solve import SolverSettings
-        from navkit.viz.planes import plot_map
 
-        cam = _camera_opts(fx, fy, cx, cy, depth_scale)
+        conf = _config(config)
+        nu, cell = _opt(conf, "nu", nu, 0.01), int(_opt(conf, "cell", cell, 20))
+        max_frames = int(_opt(conf, "max_frames", max_frames, 0))
+        cam = _intrinsics(intrinsics, depth_scale, conf)
+        out = check_out_dir(out, overwrite)
         settings = PlanesRunSettings(
             input=" ".join(sequence),
             nu=nu,
@@ -286,30 +453,7 @@ def odometry_cmd(
             max_frames=max_frames,
             reference=str(reference or ""),
         )
-        es = ExtractionSettings(cell=cell)
-        first = Path(sequence[0])
-        if len(sequence) == 1 and first.is_dir() and not any(first.glob("*.pcd")):
-            from navkit.io.rgbd import open_rgbd_sequence
-
-            seq = open_rgbd_sequence(first, cam.as_dict())
-            n = len(seq) if max_frames <= 0 else min(max_frames, len(seq))
-            stamps = np.asarray(seq.timestamps[:n], dtype=np.float64)
-
-            def observe(i: int):
-                return observe_rgbd(seq.frame(i), es)
-        else:
-            from navkit.io.pointcloud import read_pcd
-
-            files = expand_inputs(sequence, (".pcd",))
-            n = len(files) if max_frames <= 0 else min(max_frames, len(files))
-            stamps = np.arange(n, dtype=np.float64)
-
-            def observe(i: int):
-                cloud = read_pcd(files[i])
-                return observe_points(
-                    cloud.grid() if cloud.is_organized else cloud.points, organized_settings=es
-                )
-
+        n, stamps, observe, ref = _open_sequence(sequence, cam, cell, max_frames)
         if len(np.unique(stamps)) != len(stamps) or np.any(np.diff(stamps) <= 0):
             stamps = np.arange(n, dtype=np.float64)  # repeated files (A -> B -> A): index as time
         odo = PlaneOdometry(OdometrySettings(motion=MotionSettings(solver=SolverSettings(nu=nu))))
@@ -318,52 +462,70 @@ def odometry_cmd(
             t0 = time.perf_counter()
             obs = observe(i)
             t_extract = 1000 * (time.perf_counter() - t0)
-            r = odo.register_frame(obs)
-            frames.append(
-                {
-                    "index": i,
-                    "timestamp": float(stamps[i]),
-                    "status": r.status,
-                    "case": r.case,
-                    "planes": r.n_planes,
-                    "extract_ms": t_extract,
-                    "motion_ms": r.ms,
-                    "texture_dof": list(getattr(r.motion, "texture_dof", ())),
-                    "free_dof": list(getattr(r.motion, "free_dof", ())),
-                    "prior_dof": list(getattr(r.motion, "prior_dof", ())),
-                    "source": r.source,
-                }
-            )
-        poses = odo.trajectory
-        out.mkdir(parents=True, exist_ok=True)
-        write_tum(out / "trajectory.tum", Trajectory(stamps, poses))
-        mp = odo.map.to_dict()
-        write_json(out / "map.json", mp)
-        V, C, F = odo.map.mesh()
-        write_ply(out / "map.ply", V, colors=C, faces=F if len(F) else None)
-        summary: dict[str, Any] = {
-            "frames": n,
-            "ok": sum(str(f["status"]).startswith("ok") for f in frames),
-            "failed": sum(str(f["status"]).startswith("failed") for f in frames),
-            "cases": {str(c): sum(f["case"] == c for f in frames[1:]) for c in (1, 2, 3)},
-            "map_planes": len(mp["planes"]),
-            "mean_extract_ms": float(np.mean([f["extract_ms"] for f in frames])),
-            "mean_motion_ms": float(np.mean([f["motion_ms"] for f in frames[1:]]))
-            if n > 1
-            else None,
-            "per_frame": frames,
-        }
-        truth = None
+            frames.append(_frame_row(i, float(stamps[i]), odo.register_frame(obs), t_extract))
         if reference is not None:
-            Q = _reference_poses(reference, n)
-            truth = se3_inverse(Q[0]) @ Q  # reference relative to the first frame
-            t_rmse, r_rmse = rpe(poses, truth)
-            summary.update(ate_m=ate(poses, truth), rpe_trans_m=t_rmse, rpe_rot_deg=r_rmse)
-        plot_map(out / "map.png", mp["planes"], poses, truth=truth)
+            ref = (
+                _reference_folder(reference, n)
+                if reference.is_dir()
+                else _reference_poses(reference, n)
+            )
+            settings = replace(settings, reference=str(reference))
+        elif ref is not None:
+            settings = replace(settings, reference=f"{sequence[0]} (frame-N.pose.txt)")
+        summary = _write_odometry(out, odo, stamps, frames, ref)
         write_run_files(out, settings, summary)
         typer.echo(
-            f"{n} frames, {summary['ok']} tracked, {summary['failed']} failed, {len(mp['planes'])} map planes -> {out}"
+            f"{n} frames, {summary['tracked']} tracked, {summary['failed']} failed "
+            f"(frames.csv), {summary['map_planes']} map planes -> {out}"
         )
+
+
+def _write_odometry(out: Path, odo, stamps, frames: list[dict[str, Any]], ref) -> dict[str, Any]:
+    """Trajectory (tracked frames only), frames.csv, the map files; the summary."""
+    import numpy as np
+
+    from navkit.geometry import se3_inverse
+    from navkit.io.atomic import write_json
+    from navkit.io.pointcloud import write_ply
+    from navkit.io.trajectory import Trajectory, write_tum
+    from navkit.planes.metrics import ate, rpe
+    from navkit.viz.planes import plot_map
+
+    poses, ok = odo.trajectory, odo.tracked
+    n = len(frames)
+    # a failed frame is never written as a pose: its pose is the prediction, not a measurement
+    write_tum(out / "trajectory.tum", Trajectory(stamps[ok], poses[ok]))
+    _write_frames_csv(out / "frames.csv", frames)
+    mp = odo.map.to_dict()
+    write_json(out / "map.json", mp)
+    V, C, F = odo.map.mesh()
+    write_ply(out / "map.ply", V, colors=C, faces=F if len(F) else None)
+    summary: dict[str, Any] = {
+        "frames": n,
+        "tracked": int(ok.sum()),
+        "failed": int(n - ok.sum()),
+        "failed_frames": [f["index"] for f in frames if f["status"] == "failed"],
+        "sources": {
+            s: sum(f["source"] == s for f in frames) for s in sorted({f["source"] for f in frames})
+        },
+        "cases": {str(c): sum(f["case"] == c for f in frames[1:]) for c in (1, 2, 3)},
+        "map_planes": len(mp["planes"]),
+        "mean_extract_ms": float(np.mean([f["extract_ms"] for f in frames])),
+        "mean_motion_ms": float(np.mean([f["motion_ms"] for f in frames[1:]])) if n > 1 else None,
+        "per_frame": frames,
+    }
+    truth = None
+    if ref is not None:
+        truth = se3_inverse(ref[0]) @ ref  # reference relative to the first frame
+        t_rmse, r_rmse = rpe(poses[ok], truth[ok])
+        summary.update(
+            metrics_over="tracked frames (RPE between consecutive tracked frames)",
+            ate_m=ate(poses[ok], truth[ok]),
+            rpe_trans_m=t_rmse,
+            rpe_rot_deg=r_rmse,
+        )
+    plot_map(out / "map.png", mp["planes"], poses[ok], truth=truth)
+    return summary
 
 
 def register(app: typer.Typer) -> None:

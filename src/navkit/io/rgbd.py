@@ -17,6 +17,14 @@ CAPE (Proenca & Gao) ``calib_params.xml``
     OpenCV FileStorage with ``RGB_intrinsic_params``, ``RGB_distortion_coefficients``,
     ``IR_intrinsic_params``, ``IR_distortion_coefficients``, ``Rotation``, ``Translation`` (mm):
     ``X_rgb = R X_ir + T``. Depth (``depth_N.png``, mm) is in the IR camera.
+7-Scenes (Shotton et al. 2013; Microsoft's layout, also used by tsdf-fusion-python)
+    ``frame-NNNNNN.color.jpg`` (or ``.png``), ``frame-NNNNNN.depth.png`` (16-bit, millimetres,
+    0 and 65535 = invalid), ``frame-NNNNNN.pose.txt`` (4 x 4 ``T_world_camera``, the reference:
+    KinectFusion tracking) and ``camera-intrinsics.txt`` (3 x 3 ``K`` of the depth camera).
+    Frames are recorded at 30 Hz: timestamps are ``N / 30`` s. **Colour and depth are not
+    registered** in this dataset (no calibration between the two Kinect cameras is published):
+    the reader pairs them pixel for pixel with the depth camera's ``K``, so colour is only
+    approximately aligned with depth (docs/planes.md, "7-Scenes").
 """
 
 from __future__ import annotations
@@ -43,6 +51,7 @@ __all__ = [
     "read_camera_yaml",
     "read_cape_calibration",
     "read_cape_frame",
+    "read_seven_scenes",
     "read_simple_rgbd",
     "read_tum_rgbd",
 ]
@@ -115,6 +124,10 @@ class RGBDSequence:
         ``metres = raw / depth_scale``.
     source : Path
         The folder.
+    reference : (N, 4, 4) array or None
+        Reference poses ``T_world_camera`` shipped with the sequence (7-Scenes), else None.
+    invalid_raw : int or None
+        A raw depth value that also means "no measurement" besides 0 (65535 in 7-Scenes).
     """
 
     color_paths: tuple[Path, ...]
@@ -123,6 +136,8 @@ class RGBDSequence:
     camera: PinholeCamera
     depth_scale: float
     source: Path
+    reference: NDArray[np.float64] | None = None
+    invalid_raw: int | None = None
 
     def __len__(self) -> int:
         return len(self.color_paths)
@@ -133,6 +148,8 @@ class RGBDSequence:
 
         color = _read_color(self.color_paths[i])
         depth = read_depth(self.depth_paths[i], self.depth_scale)
+        if self.invalid_raw is not None:
+            depth[depth >= self.invalid_raw / self.depth_scale - 1e-9] = np.nan
         shape = (self.camera.height, self.camera.width)
         for name, arr, p in (
             ("color", color, self.color_paths[i]),
@@ -298,10 +315,127 @@ def open_rgbd_sequence(path: str | Path, camera: dict[str, float] | None = None)
         return read_tum_rgbd(root, camera)
     if (root / "color").is_dir():
         return read_simple_rgbd(root, camera)
+    if any(root.glob("frame-*.depth.png")):
+        return read_seven_scenes(root, camera)
     raise InputError(
-        "neither rgb.txt nor color/ found",
+        "neither rgb.txt, color/ nor frame-NNNNNN.depth.png files found",
         source=root,
-        expected="a TUM RGB-D folder or color/ + depth/ + camera.yaml",
+        expected="a TUM RGB-D folder, color/ + depth/ + camera.yaml, or a 7-Scenes folder",
+    )
+
+
+_SEVEN_SCENES = re.compile(r"^frame-(\d+)\.depth\.png$")
+
+
+def read_pose_matrix(path: str | Path) -> NDArray[np.float64]:
+    """A 4 x 4 pose matrix written as 4 lines of 4 numbers (7-Scenes ``frame-N.pose.txt``).
+
+    Raises
+    ------
+    FormatError
+        When the file is not 16 finite numbers whose last row is ``0 0 0 1``.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise DataNotFoundError(f"{p}: pose file not found")
+    try:
+        M = np.loadtxt(p, ndmin=2)
+    except ValueError as exc:
+        raise FormatError(f"not numeric ({exc})", source=p, expected="4 x 4 numbers") from None
+    if M.shape != (4, 4) or not np.all(np.isfinite(M)) or not np.allclose(M[3], [0, 0, 0, 1]):
+        raise FormatError(
+            f"holds a {M.shape} table",
+            source=p,
+            field="pose",
+            expected="a 4 x 4 rigid transform (last row 0 0 0 1)",
+        )
+    return M
+
+
+def read_seven_scenes(
+    folder: str | Path,
+    camera: dict[str, float] | None = None,
+    depth_scale: float = 1000.0,
+    rate_hz: float = 30.0,
+) -> RGBDSequence:
+    """A 7-Scenes folder (see module docstring) with its poses as ``reference``.
+
+    Parameters
+    ----------
+    folder : path
+    camera : dict, optional
+        ``fx, fy, cx, cy`` (pixels) and ``depth_scale`` overriding ``camera-intrinsics.txt``
+        (which is required when ``camera`` does not give all four intrinsics).
+    depth_scale : float
+        Raw depth units per metre (7-Scenes: millimetres).
+    rate_hz : float
+        Frame rate giving the timestamps ``N / rate_hz``.
+    """
+    root = Path(folder)
+    frames = sorted(
+        (int(m.group(1)), p)
+        for p in root.iterdir()
+        if (m := _SEVEN_SCENES.match(p.name)) is not None
+    )
+    if not frames:
+        raise DataNotFoundError(f"{root}: no frame-NNNNNN.depth.png files (7-Scenes layout)")
+    color_paths, depth_paths = [], []
+    for n, dp in frames:
+        stem = dp.name[: -len(".depth.png")]
+        cp = next(
+            (
+                root / f"{stem}.color{e}"
+                for e in (".jpg", ".png")
+                if (root / f"{stem}.color{e}").is_file()
+            ),
+            None,
+        )
+        if cp is None:
+            raise DataNotFoundError(f"{root / stem}.color.jpg: not found (colour of frame {n})")
+        color_paths.append(cp)
+        depth_paths.append(dp)
+    values: dict[str, float] = {"depth_scale": depth_scale}
+    kfile = root / "camera-intrinsics.txt"
+    given = camera or {}
+    if not all(k in given for k in ("fx", "fy", "cx", "cy")):
+        if not kfile.is_file():
+            raise DataNotFoundError(
+                f"{kfile}: not found; give the intrinsics instead (--intrinsics FX,FY,CX,CY)"
+            )
+        try:
+            K = np.loadtxt(kfile, ndmin=2)
+        except ValueError as exc:
+            raise FormatError(f"not numeric ({exc})", source=kfile, expected="a 3 x 3 K") from None
+        if K.shape != (3, 3):
+            raise FormatError(
+                f"holds a {K.shape} table", source=kfile, field="K", expected="a 3 x 3 matrix"
+            )
+        values.update(fx=float(K[0, 0]), fy=float(K[1, 1]), cx=float(K[0, 2]), cy=float(K[1, 2]))
+    values.update(given)
+    poses = [root / f"{dp.name[: -len('.depth.png')]}.pose.txt" for _, dp in frames]
+    reference = None
+    if all(p.is_file() for p in poses):
+        reference = np.stack([read_pose_matrix(p) for p in poses])
+        # 7-Scenes rotations are not orthonormal (det 0.99985, R^T R off by 1.4e-4 on the
+        # shared frames): a relative rotation error computed from them would read ~1 deg for
+        # an exact estimate. Projected onto SO(3) (nearest rotation, SVD).
+        U, _, Vt = np.linalg.svd(reference[:, :3, :3])
+        D = np.ones((len(reference), 3))
+        D[:, 2] = np.sign(np.linalg.det(U @ Vt))
+        reference[:, :3, :3] = (U * D[:, None, :]) @ Vt
+    elif any(p.is_file() for p in poses):
+        log.warning("%s: some frames have no pose.txt; no reference poses", root)
+    cam = _camera(values, _image_size(depth_paths[0]), root)
+    stamps = np.array([n for n, _ in frames], dtype=np.float64) / rate_hz
+    return RGBDSequence(
+        tuple(color_paths),
+        tuple(depth_paths),
+        stamps,
+        cam,
+        float(values["depth_scale"]),
+        root,
+        reference=reference,
+        invalid_raw=65535,
     )
 
 

@@ -14,6 +14,7 @@ Everything works on NumPy arrays; readers for files are in :mod:`navkit.io.rgbd`
 """
 
 from navkit.planes.associate import AssociationSettings, associate, associate_global
+from navkit.planes.dense import DenseFrame, DenseResult, DenseSettings, dense_align
 from navkit.planes.extract import (
     CloudExtractionSettings,
     ExtractionSettings,
@@ -21,7 +22,14 @@ from navkit.planes.extract import (
     extract_planes_organized,
 )
 from navkit.planes.frame import PlaneObservation, observe_points, observe_rgbd
-from navkit.planes.mapping import FrameResult, MapPlane, OdometrySettings, PlaneMap, PlaneOdometry
+from navkit.planes.mapping import (
+    DenseGates,
+    FrameResult,
+    MapPlane,
+    OdometrySettings,
+    PlaneMap,
+    PlaneOdometry,
+)
 from navkit.planes.motion import MotionPrior, MotionSettings, estimate_motion
 from navkit.planes.quaternion import euler_zxy_from_quat
 from navkit.planes.segments import ExtractionResult, PlaneSegment, plane_frame
@@ -38,6 +46,10 @@ from navkit.planes.texture import PlaneTexture, texture_from_camera, texture_fro
 __all__ = [
     "AssociationSettings",
     "CloudExtractionSettings",
+    "DenseFrame",
+    "DenseGates",
+    "DenseResult",
+    "DenseSettings",
     "ExtractionResult",
     "ExtractionSettings",
     "FrameResult",
@@ -55,6 +67,7 @@ __all__ = [
     "SolverSettings",
     "associate",
     "associate_global",
+    "dense_align",
     "estimate_motion",
     "euler_zxy_from_quat",
     "extract_planes_cloud",

@@ -12,8 +12,14 @@
 4. **frame-to-frame** against the previous frame when the map gives less (fewer plane
    directions, a texture step the depth check rejects, or nothing): the better-determined
    result wins (measured before prior-filled, then more plane directions, then the map);
-5. chain onto the trajectory (``T_world_frame``; the first frame is the world);
-6. merge the frame's planes into the map: the same physical plane (normal, distance and overlap
+5. **dense refinement and verification** (registered RGB-D frames, ``OdometrySettings.dense``):
+   the plane solution - and the prediction when the planes give nothing or disagree with it
+   - is refined by a dense photometric + point-to-plane alignment with the current keyframe
+   (or an old keyframe the camera is back at, :meth:`PlaneOdometry._revisit`) and accepted
+   only when it passes :class:`DenseGates`; otherwise the frame is an explicit failure
+   (``FrameResult.reason``), never a silent pose;
+6. chain onto the trajectory (``T_world_frame``; the first frame is the world);
+7. merge the frame's planes into the map: the same physical plane (normal, distance and overlap
    agree in the world frame) becomes one map plane whose extent (a sample of its inlier points)
    and texture (running mean of brightness on a fixed lattice of the plane) are fused.
 
@@ -40,6 +46,7 @@ from navkit.errors import InputError, NavkitError
 from navkit.geometry import Plane, canonical_plane, points_in_polygon, se3_inverse
 from navkit.geometry._validate import check_settings
 from navkit.geometry.linalg import rows_matmul
+from navkit.planes.dense import DenseFrame, DenseResult, DenseSettings, dense_align, rigid
 from navkit.planes.frame import PlaneObservation
 from navkit.planes.motion import (
     MotionPrior,
@@ -52,9 +59,65 @@ from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_
 from navkit.planes.solve import MotionEstimate, MotionFailure, normal_rank
 from navkit.planes.texture import PlaneTexture
 
-__all__ = ["FrameResult", "MapPlane", "MapView", "OdometrySettings", "PlaneMap", "PlaneOdometry"]
+__all__ = [
+    "DenseGates",
+    "FrameResult",
+    "MapPlane",
+    "MapView",
+    "OdometrySettings",
+    "PlaneMap",
+    "PlaneOdometry",
+]
 
 log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class DenseGates:
+    """When a densely refined motion (:func:`~navkit.planes.dense.dense_align`) is accepted.
+
+    All must hold at the finest level, else the frame becomes an explicit failure (never a
+    silent pose). Calibrated on the shared 7-Scenes frames (``docs/planes.md``, "Never a silent
+    wrong motion"): the dense step (default settings, photometric weight 0.5) was started from
+    the reference motion perturbed by 0, 10, 20, 40 and 80 cm (and 0-20 deg) on 30 pairs 1 and
+    10 frames apart; of the 150 results, the 103 within 3 cm / 1.5 deg of the reference had a
+    photometric RMS <= 0.082, a geometric RMS <= 7.5 mm, an overlap >= 0.82 and inliers >=
+    0.67 (all pass); each of the 46 off by more than 5 cm or 2 deg fails at least one gate (the
+    lowest photometric RMS among them, 0.094, had a geometric RMS of 3.3 cm and an overlap of
+    0.02; the next, 0.107-0.110, fail the photometric gate).
+
+    Attributes
+    ----------
+    max_rms_photometric : float
+        Brightness RMS of the inliers (brightness in [0, 1]).
+    max_rms_geometric : float
+        Point-to-plane RMS of the inliers, metres.
+    min_overlap : float
+        Fraction of the frame's points landing on the reference frame with agreeing depth.
+    min_inliers : float
+        Fraction of those within 3 robust sigmas.
+    """
+
+    max_rms_photometric: float = 0.10
+    max_rms_geometric: float = 0.012
+    min_overlap: float = 0.3
+    min_inliers: float = 0.6
+
+    def check(self, r: DenseResult) -> str:
+        """Empty when ``r`` passes, else the reason."""
+        bad = []
+        if not r.rms_photometric <= self.max_rms_photometric:
+            bad.append(f"photometric rms {r.rms_photometric:.3f} > {self.max_rms_photometric}")
+        if not r.rms_geometric <= self.max_rms_geometric:
+            bad.append(
+                f"geometric rms {100 * r.rms_geometric:.1f} cm > "
+                f"{100 * self.max_rms_geometric:.1f} cm"
+            )
+        if not r.overlap >= self.min_overlap:
+            bad.append(f"overlap {r.overlap:.2f} < {self.min_overlap}")
+        if not r.inliers >= self.min_inliers:
+            bad.append(f"inliers {r.inliers:.2f} < {self.min_inliers}")
+        return "; ".join(bad)
 
 
 @dataclass(frozen=True)
@@ -81,6 +144,23 @@ class OdometrySettings:
     map_texture_pixels : int
         Largest side of a map texture window handed to the texture steps, pixels of the
         solver's ``nu`` (the window is centred on where the frame sees the plane).
+    dense : DenseSettings or None
+        Dense photometric + geometric refinement and verification of every motion
+        (:mod:`navkit.planes.dense`) when the frames are registered RGB-D images; None = the
+        planes alone (the former behaviour).
+    gates : DenseGates
+        When a densely refined motion counts as measured (else the frame fails).
+    keyframe_overlap : float
+        The dense step aligns each frame with the current *keyframe* (not the previous
+        frame: drift grows per keyframe, not per frame); a tracked frame whose overlap with
+        the keyframe falls below this fraction becomes the next keyframe.
+    revisit_distance, revisit_angle_deg : float
+        **Revisits**: when the frame's start pose is within these (metres, degrees) of a
+        keyframe at least 3 keyframes older than the current one, it is aligned with that old
+        keyframe first: back where it started, the camera is measured against what it saw
+        then, and the error does not grow with the way there and back.
+    max_keyframes : int
+        Keyframes kept for revisits (a pyramid is ~4 MB at 640 x 480; the first one is kept).
     """
 
     motion: MotionSettings = field(default_factory=MotionSettings)
@@ -92,6 +172,12 @@ class OdometrySettings:
     min_map_plane_points: int = 3000
     frame_to_map: bool = True
     map_texture_pixels: int = 400
+    dense: DenseSettings | None = field(default_factory=DenseSettings)
+    gates: DenseGates = field(default_factory=lambda: DenseGates())
+    keyframe_overlap: float = 0.85
+    revisit_distance: float = 0.15
+    revisit_angle_deg: float = 10.0
+    max_keyframes: int = 200
 
     def __post_init__(self) -> None:
         check_settings(self)
@@ -353,8 +439,23 @@ class FrameResult:
         Wall time of association + motion + map update, milliseconds.
     n_planes : int
     source : str
-        Where the motion came from: ``"map"`` (frame-to-map), ``"frame"`` (frame-to-frame),
-        ``""`` (first frame, or failed: the prediction).
+        Where the motion came from: ``"map"`` (planes, frame-to-map), ``"frame"`` (planes,
+        frame-to-frame), with ``"+dense"`` when the dense step refined and verified it;
+        ``"prediction+dense"`` when the planes gave nothing the pixels agree with and the
+        dense step started from the constant-velocity prediction (or the prior); ``""``
+        (first frame, or failed: the pose is the prediction and is not a measurement).
+    reason : str
+        Why a frame failed; for a tracked frame a note (e.g. the dense check was
+        inconclusive: too little overlap for the pixels to judge a large motion).
+    dof_sources : dict
+        For each degree of freedom (``tx ty tz rx ry rz``, frame axes): what fixed it -
+        ``"planes"`` / ``"planes+texture"`` (plane geometry / texture, when no dense step
+        ran) or the dense terms ``"depth"``, ``"image"``, ``"depth+image"``
+        (:attr:`~navkit.planes.dense.DenseResult.dof_sources`).
+    dense : DenseResult or None
+        The accepted dense refinement (None without one).
+    reference : int
+        Index of the frame the dense step aligned with (keyframe or previous), -1 if none.
     """
 
     index: int
@@ -365,6 +466,15 @@ class FrameResult:
     ms: float
     n_planes: int
     source: str = ""
+    reason: str = ""
+    dof_sources: dict[str, str] = field(default_factory=dict)
+    dense: DenseResult | None = None
+    reference: int = -1
+
+    @property
+    def tracked(self) -> bool:
+        """The pose is a measurement (first frame or a motion that passed every check)."""
+        return self.status == "first" or self.status.startswith("ok")
 
 
 class PlaneOdometry:
@@ -380,6 +490,13 @@ class PlaneOdometry:
         self._velocity = np.eye(4)
         self._velocity_known = False  # a measured motion, not the start or a failure
         self._anchor: tuple[PlaneObservation, NDArray[np.float64]] | None = None  # last merged
+        # dense step: (index, pyramid, T_world_frame) of the keyframe and of the last tracked
+        self._keyframe: tuple[int, DenseFrame, NDArray[np.float64]] | None = None
+        self._last_good: tuple[int, DenseFrame, NDArray[np.float64]] | None = None
+        self._keyframes: list[tuple[int, DenseFrame, NDArray[np.float64]]] = []
+        self._dense_reason = ""
+        self._plane_overlap = 0.0
+        self._depth_note = ""
 
     def register_frame(
         self, obs: PlaneObservation, prior: MotionPrior | ArrayLike | None = None
@@ -401,7 +518,11 @@ class PlaneOdometry:
         t0 = time.perf_counter()
         idx = len(self.poses)
         motion: MotionEstimate | MotionFailure | None = None
-        source = ""
+        source, reason = "", ""
+        dof_sources: dict[str, str] = {}
+        dense_res: DenseResult | None = None
+        ref_idx = -1
+        dframe = self._dense_frame(obs)
         if self._prev is None:
             T = np.eye(4)
             status, case = "first", 0
@@ -410,53 +531,75 @@ class PlaneOdometry:
             step_pred = self._velocity if mprior is None else mprior.T  # 2
             T_prev = self.poses[-1]
             T_pred = T_prev @ step_pred
-            # without a prior and a measured last motion (second frame, after a failure) the
-            # prediction is weak: frame-to-frame then uses the global (prior-free)
-            # association, whose solution is verified on the points; the map is still tried
-            # (it is what recovers the pose after a failed frame)
-            predicted = mprior is not None or self._velocity_known
-            f2f_prior: MotionPrior | NDArray[np.float64] | None = (
-                mprior if mprior is not None else (step_pred if predicted else None)
-            )
-            found: list[tuple[str, MotionEstimate, NDArray[np.float64]]] = []
-            failure: MotionFailure | None = None
-            if self.settings.frame_to_map and self.map.planes:  # 3
-                r_map = self._track_map(obs, T_pred, mprior)
-                if isinstance(r_map, MotionEstimate):
-                    found.append(("map", r_map, T_pred @ r_map.T))
+            plane, failure = self._planes(obs, T_prev, T_pred, step_pred, mprior)  # 3-4
+            if dframe is not None and self._keyframe is not None:  # dense: refine and verify
+                T_plane = None if plane is None else plane[2]
+                d = self._dense(dframe, T_plane, T_pred, plane is not None)
+                if d is not None:
+                    src, dense_res, T, ref_idx = d
+                    source = ("prediction" if src == "prediction" else plane[0]) + "+dense"  # type: ignore[index]
+                    base = plane[1] if (plane is not None and src != "prediction") else None
+                    step = se3_inverse(T_prev) @ T
+                    motion = (
+                        replace(base, T=step, prior_dof=())
+                        if base is not None
+                        else MotionEstimate(step, 0, (), ())
+                    )
+                    status, case = "ok", (base.case if base is not None else 0)
+                    dof_sources = dict(dense_res.dof_sources)
+                elif (
+                    plane is not None
+                    and not plane[1].prior_dof
+                    and self._plane_overlap < self.settings.gates.min_overlap
+                    and self._depth_agrees(obs, plane[2])
+                ):
+                    # a large motion: the frames share too few pixels for the dense step to
+                    # judge; the plane solution stands on the planes' own checks (depth
+                    # consistency, association) and says so
+                    reason = (
+                        f"dense check inconclusive (overlap {self._plane_overlap:.2f}): "
+                        f"planes only, depth check {self._depth_note}"
+                    )
                 else:
-                    failure = r_map
-            if not found or found[0][1].prior_dof or found[0][1].case < self._rank(obs):  # 4
-                r_f = estimate_motion(self._prev, obs, f2f_prior, self.settings.motion)
-                if isinstance(r_f, MotionEstimate):
-                    found.append(("frame", r_f, T_prev @ r_f.T))
-                else:
-                    failure = r_f
-            if found:
-                source, est, T = max(
-                    found, key=lambda f: (not f[1].prior_dof, f[1].case, f[0] == "map")
-                )
+                    why = self._dense_reason
+                    if plane is not None:
+                        why = f"the {plane[0]} plane solution disagrees with the pixels ({why})"
+                    elif failure is not None:
+                        why = f"{failure.reason}; dense from the prediction: {why}"
+                    failure = MotionFailure(
+                        failure.case if failure is not None else 0,
+                        ("rotation", "translation"),
+                        why,
+                    )
+                    plane = None
+            if motion is None and plane is not None:  # planes only (no dense data)
+                source, est, T = plane
                 step = se3_inverse(T_prev) @ T
                 motion = replace(est, T=step)  # always reported as T_prev_curr
                 status, case = "ok", est.case
                 if est.prior_dof:
                     status = f"ok (from the prior: {', '.join(est.prior_dof)})"
-            else:
+                dof_sources = _plane_dof_sources(est)
+            elif motion is None:
                 assert failure is not None
                 motion, step, T = failure, step_pred, T_pred
-                status, case = f"failed: {failure.reason}", failure.case
+                status, case, reason = f"failed: {failure.reason}", failure.case, failure.reason
                 log.warning(
                     "frame %d: motion not determined (%s); using the prediction",
                     idx,
                     failure.reason,
                 )
-            self._velocity = step  # 5
+            self._velocity = rigid(step)  # 5
             self._velocity_known = status.startswith("ok")
+        T = rigid(T)  # chained products stay rotations
         self.poses.append(T)
         measured = isinstance(motion, MotionEstimate) and not motion.prior_dof
         if status == "first" or measured:  # a predicted pose is not good enough for the map
             self._merge(obs, T, idx)  # 6
             self._anchor = (obs, T)
+            if dframe is not None:
+                self._last_good = (idx, dframe, T)
+                self._update_keyframe(idx, dframe, T, dense_res, ref_idx)
         self._prev = obs
         res = FrameResult(
             idx,
@@ -467,9 +610,176 @@ class PlaneOdometry:
             1000 * (time.perf_counter() - t0),
             len(obs.segments),
             source,
+            reason,
+            dof_sources,
+            dense_res,
+            ref_idx,
         )
         self.results.append(res)
         return res
+
+    def _planes(
+        self,
+        obs: PlaneObservation,
+        T_prev: NDArray[np.float64],
+        T_pred: NDArray[np.float64],
+        step_pred: NDArray[np.float64],
+        mprior: MotionPrior | None,
+    ) -> tuple[tuple[str, MotionEstimate, NDArray[np.float64]] | None, MotionFailure | None]:
+        """Stages 3-4: the plane solution (source, estimate, ``T_world_frame``) or a failure."""
+        # without a prior and a measured last motion (second frame, after a failure) the
+        # prediction is weak: frame-to-frame then uses the global (prior-free) association,
+        # whose solution is verified on the points; the map is still tried (it is what
+        # recovers the pose after a failed frame)
+        assert self._prev is not None
+        predicted = mprior is not None or self._velocity_known
+        f2f_prior: MotionPrior | NDArray[np.float64] | None = (
+            mprior if mprior is not None else (step_pred if predicted else None)
+        )
+        # frame-to-frame against the last *tracked* frame: after a failure the previous
+        # frame's pose is a prediction, and a motion from it would be chained onto a guess
+        ref_obs, T_ref = self._prev, T_prev
+        if self._anchor is not None and self._anchor[0] is not self._prev:
+            ref_obs, T_ref = self._anchor
+            if isinstance(f2f_prior, MotionPrior):
+                f2f_prior = replace(f2f_prior, T=se3_inverse(T_ref) @ T_pred)
+            elif f2f_prior is not None:
+                f2f_prior = se3_inverse(T_ref) @ T_pred
+        found: list[tuple[str, MotionEstimate, NDArray[np.float64]]] = []
+        failure: MotionFailure | None = None
+        if self.settings.frame_to_map and self.map.planes:  # 3
+            r_map = self._track_map(obs, T_pred, mprior)
+            if isinstance(r_map, MotionEstimate):
+                found.append(("map", r_map, T_pred @ r_map.T))
+            else:
+                failure = r_map
+        if not found or found[0][1].prior_dof or found[0][1].case < self._rank(obs):  # 4
+            try:
+                r_f = estimate_motion(ref_obs, obs, f2f_prior, self.settings.motion)
+            except NavkitError as exc:
+                r_f = MotionFailure(0, ("rotation", "translation"), f"frame-to-frame: {exc}")
+            if isinstance(r_f, MotionEstimate):
+                found.append(("frame", r_f, T_ref @ r_f.T))
+            else:
+                failure = r_f
+        if not found:
+            return None, failure
+        best = max(found, key=lambda f: (not f[1].prior_dof, f[1].case, f[0] == "map"))
+        return best, failure
+
+    def _dense_frame(self, obs: PlaneObservation) -> DenseFrame | None:
+        """The frame's dense pyramid, or None when the dense step cannot run (no dense
+        settings, no camera image, not a registered organised RGB-D frame)."""
+        ds = self.settings.dense
+        P = np.asarray(obs.points)
+        if (
+            ds is None
+            or obs.gray is None
+            or obs.camera is None
+            or obs.T_camera_sensor is not None
+            or P.shape != (obs.camera.height, obs.camera.width, 3)
+        ):
+            return None
+        return DenseFrame.build(obs.gray, P[..., 2], obs.camera, ds)
+
+    def _depth_agrees(self, obs: PlaneObservation, T_world: NDArray[np.float64]) -> bool:
+        """Does ``T_world`` put *all* the frame's points where the last tracked frame sees
+        them (:func:`~navkit.planes.motion.depth_consistency`, same threshold as for texture
+        steps)? The only evidence left for a large motion the dense step cannot judge."""
+        if self._anchor is None:
+            return False
+        a_obs, a_T = self._anchor
+        m = self.settings.motion
+        chk = depth_consistency(a_obs, obs, se3_inverse(a_T) @ T_world, [])
+        self._depth_note = f"{100 * chk.violation:.0f} % of {chk.tested} points in free space"
+        return bool(chk.tested >= m.min_depth_points and chk.violation <= m.max_depth_violation)
+
+    def _update_keyframe(self, idx, dframe, T, dense_res: DenseResult | None, ref_idx: int) -> None:
+        """Keep the reference keyframe while the overlap lasts; a tracked frame whose overlap
+        fell below ``keyframe_overlap`` becomes a new keyframe (and joins the list that
+        :meth:`_revisit` searches); an old keyframe the frame was aligned with becomes the
+        reference again when the overlap is good."""
+        s = self.settings
+        ref = next((k for k in self._keyframes if k[0] == ref_idx), None)
+        if self._keyframe is None or dense_res is None:
+            new = (idx, dframe, T)
+        elif dense_res.overlap < s.keyframe_overlap:
+            new = (idx, dframe, T)
+        elif ref is not None:
+            self._keyframe = ref
+            return
+        else:
+            return
+        self._keyframe = new
+        self._keyframes.append(new)
+        if len(self._keyframes) > s.max_keyframes:
+            self._keyframes.pop(1)  # the first keyframe (the world frame) stays
+
+    def _revisit(self, T_start: NDArray[np.float64]):
+        """The oldest keyframe within ``revisit_distance`` / ``revisit_angle_deg`` of
+        ``T_start`` that is at least 3 keyframes older than the current one (else None)."""
+        s = self.settings
+        if self._keyframe is None or len(self._keyframes) < 4:
+            return None
+        current = next(
+            (n for n, k in enumerate(self._keyframes) if k[0] == self._keyframe[0]),
+            len(self._keyframes),
+        )
+        for k in self._keyframes[: max(current - 2, 0)]:
+            if not _differs(k[2], T_start, s.revisit_distance, s.revisit_angle_deg):
+                return k
+        return None
+
+    def _dense(
+        self,
+        dframe: DenseFrame,
+        T_plane: NDArray[np.float64] | None,
+        T_pred: NDArray[np.float64],
+        planes_found: bool,
+    ) -> tuple[str, DenseResult, NDArray[np.float64], int] | None:
+        """Dense refinement against the keyframe (then the last tracked frame), started from
+        the plane solution and - when it is missing or disagrees with the prediction by more
+        than 2 cm / 1 deg - from the prediction (constant velocity, or the prior) and from the
+        previous pose; of the starts that pass the gates the lowest photometric RMS wins.
+        None (and ``self._dense_reason``) when no start passes."""
+        ds, gates = self.settings.dense, self.settings.gates
+        assert ds is not None and self._keyframe is not None
+        starts: list[tuple[str, NDArray[np.float64]]] = []
+        if T_plane is not None:
+            starts.append(("planes", T_plane))
+        if T_plane is None or _differs(T_plane, T_pred, 0.02, 1.0):
+            starts.append(("prediction", T_pred))
+        # the previous pose (no motion since the last frame): inside the dense step's basin
+        # for any hand-held motion at video rate, when both others are off
+        T_still = self.poses[-1]
+        if all(_differs(T0, T_still, 0.02, 1.0) for _, T0 in starts):
+            starts.append(("prediction", T_still))
+        refs = [self._keyframe]
+        old = self._revisit(starts[0][1])
+        if old is not None:  # the camera is back where an old keyframe was: align with it
+            refs.insert(0, old)
+        if self._last_good is not None and self._last_good[0] != self._keyframe[0]:
+            refs.append(self._last_good)
+        reasons = []
+        self._plane_overlap = 0.0
+        for ridx, rframe, T_ref in refs:
+            best: tuple[str, DenseResult] | None = None
+            for name, T0 in starts:
+                r = dense_align(rframe, dframe, se3_inverse(T_ref) @ T0, ds)
+                if name == "planes":
+                    self._plane_overlap = max(self._plane_overlap, r.overlap)
+                why = gates.check(r)
+                if why:
+                    reasons.append(f"from the {name} vs frame {ridx}: {why}")
+                    continue
+                if best is None or r.rms_photometric < best[1].rms_photometric:
+                    # the plane start keeps the credit when both end in the same basin
+                    if best is None or best[0] != "planes" or _differs(best[1].T, r.T, 0.01, 0.5):
+                        best = (name, r)
+            if best is not None:
+                return best[0], best[1], T_ref @ best[1].T, ridx
+        self._dense_reason = "; ".join(reasons) if reasons else "no reference frame"
+        return None
 
     def _rank(self, obs: PlaneObservation) -> int:
         """Plane directions among the frame's own solver-sized planes: the most any solution
@@ -627,6 +937,11 @@ class PlaneOdometry:
         _, mp.area = outline_from_points(uv, 0.1)
 
     @property
+    def tracked(self) -> NDArray[np.bool_]:
+        """``(N,)`` True where the pose is a measurement (see :attr:`FrameResult.tracked`)."""
+        return np.array([r.tracked for r in self.results], dtype=bool)
+
+    @property
     def trajectory(self) -> NDArray[np.float64]:
         """``(N, 4, 4)`` poses ``T_world_frame``."""
         return np.array(self.poses).reshape(-1, 4, 4)
@@ -634,3 +949,19 @@ class PlaneOdometry:
     def relative(self, i: int, j: int) -> NDArray[np.float64]:
         """``T_i_j`` from the chained poses."""
         return se3_inverse(self.poses[i]) @ self.poses[j]
+
+
+def _differs(Ta: NDArray[np.float64], Tb: NDArray[np.float64], dist: float, deg: float) -> bool:
+    """Poses further apart than ``dist`` metres or ``deg`` degrees."""
+    E = se3_inverse(Ta) @ Tb
+    c = np.clip((np.trace(E[:3, :3]) - 1) / 2, -1.0, 1.0)
+    return bool(np.linalg.norm(E[:3, 3]) > dist or np.degrees(np.arccos(c)) > deg)
+
+
+def _plane_dof_sources(est: MotionEstimate) -> dict[str, str]:
+    """What fixed each DoF of a plane-only estimate: ``planes``, ``texture`` or ``prior``
+    (the solver names DoFs in its own terms; listed as the solver gives them)."""
+    out = {d: "planes" for d in est.geometry_dof}
+    out.update({d: "texture" for d in est.texture_dof})
+    out.update({d: "prior" for d in est.prior_dof})
+    return out

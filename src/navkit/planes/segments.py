@@ -69,10 +69,13 @@ def outline_from_points(
     parts = [a for a in (uT, qT) if a.shape[1]]  # bounding box of points and corners: (2,)
     lo = np.min([a.min(axis=1) for a in parts], axis=0) - cell
     hi = np.max([a.max(axis=1) for a in parts], axis=0)
-    shape = ((hi - lo) * (1.0 / cell)).astype(np.int64) + 2
-    if shape[0] * shape[1] > 4_000_000:  # keep the raster bounded for huge, sparse planes
-        scale = np.sqrt(shape[0] * shape[1] / 4_000_000)
+    # the raster size in floating point first: a far outlier (a wrong motion merged into a map
+    # plane) made the int64 cast overflow to a negative size ("negative dimensions")
+    extent = (hi - lo) * (1.0 / cell) + 2.0
+    if float(extent[0]) * float(extent[1]) > 4_000_000:  # bounded raster for huge planes
+        scale = np.sqrt(float(extent[0]) * float(extent[1]) / 4_000_000) * 1.01
         return outline_from_points(uT.T, cell * scale, quads=Q)
+    shape = extent.astype(np.int64)
     grid = np.zeros((int(shape[1]), int(shape[0])), np.uint8)
     ii = ((uT[0] - lo[0]) * (1.0 / cell)).astype(np.int64)  # >= 0: floor == truncation
     jj = ((uT[1] - lo[1]) * (1.0 / cell)).astype(np.int64)

@@ -1,0 +1,368 @@
+"""Dense photometric + geometric alignment of two RGB-D frames (the last millimetres).
+
+The planes give a motion that is robust to large displacements but limited by the planes' own
+noise (a Kinect wall's normal differs by 1-5 deg between frames). This module refines such a
+motion with the data the planes do not use: every pixel with depth. It minimises, over the
+motion ``T_1_2`` (frame 2 -> frame 1), the sum of
+
+- a **geometric** residual: point-to-plane distance of frame 2's point moved into frame 1 to
+  frame 1's surface at the pixel it projects to (projective association, as KinectFusion /
+  Open3D's point-to-plane ICP), ``r_G = n_1 . (R x_2 + t - X_1(pi(R x_2 + t)))``;
+- a **photometric** residual: brightness difference ``r_I = I_1(pi(R x_2 + t)) - I_2(x_2)``
+  (Kerl, Sturm, Cremers 2013; Open3D's hybrid term, Park et al. 2017),
+
+each divided by its robust scale (1.4826 x MAD of the residuals at the current level) and
+weighted by Huber's function, by Gauss-Newton on an image pyramid (coarse to fine). The
+perturbation is applied on the left: ``T <- exp(xi) T`` with ``xi = (v, w)`` in frame 1.
+
+Decisions
+---------
+- Levels: 1/8, 1/4 and 1/2 of the input resolution (80 x 60 ... 320 x 240 for a 640 x 480
+  Kinect frame); full resolution adds CPU, not accuracy, on the 7-Scenes frames (measured:
+  ``python -m benchmarks planes_seq``).
+- Depth is resampled by nearest neighbour (no mixing of foreground and background depth at
+  edges), brightness by ``cv2.pyrDown``.
+- Correspondences whose depth disagrees by more than ``max_depth_diff`` (scaled with the level)
+  are outliers of both terms (occlusions, moving objects).
+- Which degree of freedom each term fixed is reported (:attr:`DenseResult.dof_sources`): the
+  marginal information ``1 / (H^-1)_kk`` of each term alone about each axis of ``xi``.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from navkit.sensors import PinholeCamera
+
+__all__ = ["DENSE_DOF", "DenseFrame", "DenseResult", "DenseSettings", "dense_align", "rigid"]
+
+log = logging.getLogger(__name__)
+
+DENSE_DOF = ("tx", "ty", "tz", "rx", "ry", "rz")
+"""The six axes of the perturbation ``xi`` (translation then rotation, frame 1's axes)."""
+
+
+@dataclass(frozen=True)
+class DenseSettings:
+    """Settings of :func:`dense_align`.
+
+    Attributes
+    ----------
+    levels : tuple of int
+        Pyramid levels used, coarse to fine (level ``l`` = input size / ``2**l``).
+    iterations : tuple of int
+        Gauss-Newton iterations per level (same length as ``levels``).
+    photometric_weight : float
+        Weight of the normalised photometric term relative to the normalised geometric one.
+        0.5 (decision, measured on the shared 7-Scenes frames with ``PlaneOdometry``, RPE
+        median at steps 1 / 5 / 10 / 20): 0.204 / 0.37 / 0.65 / 0.63 cm; weight 1: 0.214 /
+        0.48 / 0.54 / 0.65 cm; weight 2: 0.245 cm at step 1. The colour is not registered with
+        the depth in that dataset (docs/planes.md), which argues for the lower weight.
+    max_depth_diff : float
+        Largest depth difference (metres, at level 0; doubled per level) for a correspondence.
+    huber : float
+        Huber threshold on normalised residuals.
+    min_depth, max_depth : float
+        Depth range used, metres.
+    finest_stride : int
+        Source points of the finest level taken every ``finest_stride`` rows and columns
+        (the target images stay whole).
+    """
+
+    levels: tuple[int, ...] = (3, 2, 1)
+    iterations: tuple[int, ...] = (10, 8, 5)
+    photometric_weight: float = 0.5
+    max_depth_diff: float = 0.04
+    huber: float = 1.345
+    min_depth: float = 0.3
+    max_depth: float = 4.0
+    finest_stride: int = 2
+
+
+@dataclass(frozen=True)
+class _Level:
+    gray: NDArray[np.float32]
+    gx: NDArray[np.float32]
+    gy: NDArray[np.float32]
+    G3: NDArray[np.float32]  # (H, W, 3): brightness and its x / y gradients, gathered at once
+    V: NDArray[np.float32]  # (H, W, 3) vertex map, NaN = none
+    N: NDArray[np.float32]  # (H, W, 3) normal map, NaN = none
+    K: tuple[float, float, float, float]
+    src: NDArray[np.float64]  # (M, 3) valid points of this frame (as source)
+    src_gray: NDArray[np.float64]  # (M,) their brightness
+
+
+@dataclass(frozen=True)
+class DenseFrame:
+    """The image pyramid of one RGB-D frame (built once, used as target and as source)."""
+
+    levels: dict[int, _Level] = field(default_factory=dict)
+
+    @classmethod
+    def build(
+        cls,
+        gray: NDArray[np.floating],
+        depth: NDArray[np.floating],
+        camera: PinholeCamera,
+        settings: DenseSettings | None = None,
+    ) -> DenseFrame:
+        """Pyramid of ``gray`` ((H, W) in [0, 1]) and ``depth`` ((H, W) metres, NaN = none)."""
+        s = settings or DenseSettings()
+        g = np.asarray(gray, dtype=np.float32)
+        d = np.asarray(depth, dtype=np.float32)
+        d = np.where((d >= s.min_depth) & (d <= s.max_depth), d, np.nan).astype(np.float32)
+        fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
+        out: dict[int, _Level] = {}
+        for lev in range(max(s.levels) + 1):
+            if lev > 0:
+                g = np.asarray(cv2.pyrDown(g), dtype=np.float32)
+                d = d[::2, ::2][: g.shape[0], : g.shape[1]]
+                fx, fy = fx / 2, fy / 2
+                cx, cy = (cx + 0.5) / 2 - 0.5, (cy + 0.5) / 2 - 0.5
+            if lev not in s.levels:
+                continue
+            stride = s.finest_stride if lev == min(s.levels) else 1
+            out[lev] = _make_level(g, d, (fx, fy, cx, cy), stride)
+        return cls(out)
+
+
+def _make_level(g, d, K, stride: int = 1) -> _Level:
+    fx, fy, cx, cy = K
+    H, W = d.shape
+    u, v = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    V = np.stack([(u - cx) / fx * d, (v - cy) / fy * d, d], axis=-1).astype(np.float32)
+    N = np.full_like(V, np.nan)
+    dx = V[1:-1, 2:] - V[1:-1, :-2]
+    dy = V[2:, 1:-1] - V[:-2, 1:-1]
+    n = np.cross(dx, dy)
+    nn = np.linalg.norm(n, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        N[1:-1, 1:-1] = n / nn
+    # a normal across a depth edge is meaningless: both differences must be short
+    span = np.maximum(np.linalg.norm(dx, axis=-1), np.linalg.norm(dy, axis=-1))
+    bad = ~(span < 0.1 * np.maximum(d[1:-1, 1:-1], 0.5))
+    N[1:-1, 1:-1][bad] = np.nan
+    gx = (cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8).astype(np.float32)
+    gy = (cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) / 8).astype(np.float32)
+    ok = np.isfinite(V[..., 2])
+    ok[0, :] = ok[-1, :] = ok[:, 0] = ok[:, -1] = False
+    if stride > 1:  # a regular subsample of the source points (finest level: CPU)
+        sub = np.zeros_like(ok)
+        sub[::stride, ::stride] = True
+        ok &= sub
+    G3 = np.ascontiguousarray(np.dstack([g, gx, gy]))
+    return _Level(g, gx, gy, G3, V, N, K, V[ok].astype(np.float64), g[ok].astype(np.float64))
+
+
+@dataclass(frozen=True)
+class DenseResult:
+    """Outcome of :func:`dense_align`.
+
+    Attributes
+    ----------
+    T : (4, 4) array
+        Refined ``T_1_2``.
+    overlap : float
+        Fraction of frame 2's points (finest level) that land on a valid pixel of frame 1 with
+        agreeing depth.
+    inliers : float
+        Fraction of those whose geometric residual is within 3 robust sigmas.
+    rms_geometric : float
+        RMS of the inliers' point-to-plane residuals, metres.
+    rms_photometric : float
+        RMS of the inliers' brightness residuals (brightness in [0, 1]).
+    iterations : int
+    converged : bool
+        The last update at the finest level was below 2e-5 (m and rad).
+    dof_sources : dict
+        For each of :data:`DENSE_DOF`: ``"depth"``, ``"image"`` or ``"depth+image"`` - the
+        term that carries at least 80 % of the information about that axis (else both).
+    """
+
+    T: NDArray[np.float64]
+    overlap: float
+    inliers: float
+    rms_geometric: float
+    rms_photometric: float
+    iterations: int
+    converged: bool
+    dof_sources: dict[str, str]
+
+
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Row-wise ``a x b`` of two ``(M, 3)`` arrays (np.cross is 3x slower on rows)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
+def _bilinear(img: NDArray[np.float32], u: NDArray, v: NDArray) -> NDArray[np.float64]:
+    """Bilinear samples of the ``(H, W, C)`` image ``img`` at ``(u, v)``: ``(M, C)``."""
+    u0 = u.astype(np.int64)  # u, v >= 0: truncation is floor
+    v0 = v.astype(np.int64)
+    a = (u - u0)[:, None]
+    b = (v - v0)[:, None]
+    W = img.shape[1]
+    flat = img.reshape(-1, img.shape[2])
+    i = v0 * W + u0
+    top = flat[i] * (1 - a) + flat[i + 1] * a
+    bot = flat[i + W] * (1 - a) + flat[i + W + 1] * a
+    return top * (1 - b) + bot * b
+
+
+def rigid(T: NDArray[np.floating]) -> NDArray[np.float64]:
+    """``T`` with its rotation block projected onto SO(3) (nearest rotation, SVD).
+
+    Plane solutions can carry a slightly non-orthonormal rotation (float32 texture steps,
+    chained products); chained over a sequence that shrank the poses' determinant to 0.7 in 60
+    frames. Every pose that enters or leaves the dense step is made rigid here."""
+    out = np.array(T, dtype=np.float64)
+    U, _, Vt = np.linalg.svd(out[:3, :3])
+    if np.linalg.det(U @ Vt) < 0:
+        U[:, 2] = -U[:, 2]
+    out[:3, :3] = U @ Vt
+    out[3] = (0.0, 0.0, 0.0, 1.0)
+    return out
+
+
+def _exp_se3(xi: NDArray[np.float64]) -> NDArray[np.float64]:
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(xi[3:].reshape(3, 1))[0]
+    T[:3, 3] = xi[:3]
+    return T
+
+
+def _robust_scale(r: NDArray[np.float64], floor: float) -> float:
+    """1.4826 x MAD (from a regular subsample of at most ~4000 residuals), at least ``floor``."""
+    if len(r) == 0:
+        return floor
+    r = r[:: max(1, len(r) // 4000)]
+    return max(1.4826 * float(np.median(np.abs(r - np.median(r)))), floor)
+
+
+def _terms(tgt: _Level, src: _Level, T, s: DenseSettings, lev: int):
+    """Residuals and Jacobians of both terms at one level for the current ``T``."""
+    fx, fy, cx, cy = tgt.K
+    H, W = tgt.gray.shape
+    Y = src.src @ T[:3, :3].T + T[:3, 3]
+    z = Y[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = fx * Y[:, 0] / z + cx
+        v = fy * Y[:, 1] / z + cy
+    inside = (z > 0.1) & (u >= 0) & (v >= 0) & (u < W - 1) & (v < H - 1)
+    idx = np.nonzero(inside)[0]
+    Y, u, v, z = Y[idx], u[idx], v[idx], z[idx]
+    ui, vi = np.rint(u).astype(np.int64), np.rint(v).astype(np.int64)
+    V1 = tgt.V[vi, ui].astype(np.float64)
+    N1 = tgt.N[vi, ui].astype(np.float64)
+    good = np.isfinite(V1[:, 2]) & np.isfinite(N1[:, 0])
+    good &= np.abs(V1[:, 2] - z) < s.max_depth_diff * (2**lev)
+    Y, u, v, z, V1, N1, idx = Y[good], u[good], v[good], z[good], V1[good], N1[good], idx[good]
+    rG = np.einsum("ij,ij->i", N1, Y - V1)
+    JG = np.hstack([N1, _cross(Y, N1)])
+    S = _bilinear(tgt.G3, u, v)
+    gxs, gys = S[:, 1] * fx, S[:, 2] * fy
+    rI = S[:, 0] - src.src_gray[idx]
+    iz = 1.0 / z
+    Jy = np.stack([gxs * iz, gys * iz, -(gxs * Y[:, 0] + gys * Y[:, 1]) * iz * iz], axis=1)
+    JI = np.hstack([Jy, _cross(Y, Jy)])
+    return rG, JG, rI, JI, len(src.src)
+
+
+def _huber(r: NDArray[np.float64], k: float) -> NDArray[np.float64]:
+    a = np.abs(r)
+    return np.where(a <= k, 1.0, k / np.maximum(a, 1e-12))
+
+
+def dense_align(
+    frame1: DenseFrame,
+    frame2: DenseFrame,
+    T_init: NDArray[np.float64],
+    settings: DenseSettings | None = None,
+) -> DenseResult:
+    """Refine ``T_1_2`` (frame 2 -> frame 1) by dense photometric + geometric alignment.
+
+    Parameters
+    ----------
+    frame1, frame2 : DenseFrame
+        Target (frame 1) and source (frame 2) pyramids, built with the same settings.
+    T_init : (4, 4) array
+        Starting motion (the plane solution, or a prediction).
+    settings : DenseSettings, optional
+
+    Returns
+    -------
+    DenseResult
+        Always a result; its ``overlap``, ``inliers`` and residuals say how much to trust it
+        (the caller gates on them).
+    """
+    s = settings or DenseSettings()
+    T = rigid(T_init)
+    its = 0
+    converged = False
+    H_G = H_I = np.zeros((6, 6))
+    for lev, n_it in zip(s.levels, s.iterations, strict=True):
+        tgt, src = frame1.levels[lev], frame2.levels[lev]
+        for _ in range(n_it):
+            its += 1
+            rG, JG, rI, JI, _ = _terms(tgt, src, T, s, lev)
+            if len(rG) < 50:
+                break
+            sG = _robust_scale(rG, 1e-4)
+            sI = _robust_scale(rI, 1e-3)
+            wG = _huber(rG / sG, s.huber) / sG**2
+            wI = s.photometric_weight * _huber(rI / sI, s.huber) / sI**2
+            H_G = (JG * wG[:, None]).T @ JG
+            H_I = (JI * wI[:, None]).T @ JI
+            g = (JG * wG[:, None]).T @ rG + (JI * wI[:, None]).T @ rI
+            Hm = H_G + H_I
+            try:
+                xi = -np.linalg.solve(Hm + 1e-6 * np.trace(Hm) / 6 * np.eye(6), g)
+            except np.linalg.LinAlgError:
+                break
+            T = _exp_se3(xi) @ T
+            converged = bool(np.abs(xi).max() < 2e-5)
+            if converged:
+                break
+    # quality at the finest level
+    lev = s.levels[-1]
+    rG, JG, rI, JI, n_src = _terms(frame1.levels[lev], frame2.levels[lev], T, s, lev)
+    overlap = len(rG) / max(n_src, 1)
+    sG = _robust_scale(rG, 1e-4)
+    inl = np.abs(rG) < 3 * sG
+    return DenseResult(
+        T=T,
+        overlap=float(overlap),
+        inliers=float(inl.mean()) if len(rG) else 0.0,
+        rms_geometric=float(np.sqrt(np.mean(rG[inl] ** 2))) if inl.any() else float("nan"),
+        rms_photometric=float(np.sqrt(np.mean(rI[inl] ** 2))) if inl.any() else float("nan"),
+        iterations=its,
+        converged=converged,
+        dof_sources=_dof_sources(H_G, H_I),
+    )
+
+
+def _marginal_information(H: NDArray[np.float64]) -> NDArray[np.float64]:
+    try:
+        C = np.linalg.inv(H + 1e-12 * np.trace(H) * np.eye(6))
+    except np.linalg.LinAlgError:
+        return np.zeros(6)
+    d = np.diag(C)
+    return np.where(d > 0, 1.0 / np.maximum(d, 1e-300), 0.0)
+
+
+def _dof_sources(H_G: NDArray[np.float64], H_I: NDArray[np.float64]) -> dict[str, str]:
+    iG, iI = _marginal_information(H_G), _marginal_information(H_I)
+    out = {}
+    for k, name in enumerate(DENSE_DOF):
+        tot = iG[k] + iI[k]
+        frac = iG[k] / tot if tot > 0 else 0.5
+        out[name] = "depth" if frac >= 0.8 else ("image" if frac <= 0.2 else "depth+image")
+    return out
