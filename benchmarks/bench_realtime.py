@@ -173,7 +173,7 @@ def _stereo(quick: bool) -> list[Row]:
 
 def _path(quick: bool) -> list[Row]:
     from navkit import datasets
-    from navkit.cli.cmd_path import load_planar_track
+    from navkit.io.trajectory import load_planar_track
     from navkit.path import ApproximatorSettings, approximate
 
     _, xy, _, _ = load_planar_track(datasets.find("trajectories/KITTI_00_gt.txt"))

@@ -91,7 +91,7 @@ def test_all_crossings_of_a_chain_match():
     ],
 )
 def test_recorded_trajectories(data_path, relative):
-    from navkit.cli.cmd_path import load_planar_track
+    from navkit.io.trajectory import load_planar_track
 
     _, xy, _, _ = load_planar_track(data_path(relative))
     xy = xy[:15000]  # MRCLAM: the first 150 s (its loops are in them)
