@@ -264,6 +264,13 @@ def test_wall_map_from_scans_and_poses(carmen, cli):
     assert len(got["walls"]) == len(ref["walls"])
     grids = [m for m in read_messages(out / "results.mcap") if m.topic == "/navkit/wall_map"]
     assert len(grids) == 1 and grids[0].msgtype == "nav_msgs/msg/OccupancyGrid"
+    np.testing.assert_allclose(
+        [w["start"] for w in got["walls"]], [w["start"] for w in ref["walls"]], atol=1e-4
+    )
+    # the CARMEN log itself, streamed scan by scan: the same map (float64 ranges: exactly)
+    assert cli("run", d / "first.log", "--out", d / "wallmap_log").exit_code == 0
+    log_map = json.loads((d / "wallmap_log" / "wall_map" / "map.json").read_text())
+    assert log_map["walls"] == ref["walls"]
 
 
 def _strip(rec: dict) -> dict:

@@ -25,6 +25,7 @@ segments into one indexed, chunked file.
 
 from __future__ import annotations
 
+import functools
 import logging
 import os
 from collections.abc import Iterable, Iterator, Sequence
@@ -57,7 +58,9 @@ ROS_TYPES = {
 }
 
 
+@functools.cache
 def _typestore() -> Any:
+    """rosbags' ROS 2 type store (built once: each build makes new message classes)."""
     ts = require_module("rosbags.typesys", "ros", "writing results.mcap")
     return ts.get_typestore(ts.Stores.LATEST)
 
@@ -206,6 +209,11 @@ class _Builder:
         )
 
 
+@functools.cache
+def _builder() -> _Builder:
+    return _Builder()
+
+
 @dataclass(frozen=True)
 class ResultRecord:
     """One message read back: topic, ROS type, log time (ns) and the decoded message."""
@@ -251,7 +259,7 @@ class ResultsWriter:
             chunk_size=1 << 20,
         )
         self._w.start(profile="ros2", library="navkit")
-        self._b = _Builder()
+        self._b = _builder()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self.n_messages = 0

@@ -140,9 +140,12 @@ class PathConfig:
 class RunConfig:
     """``capabilities``: which to run (default all that the topics allow); a checkpoint every
     ``checkpoint_every`` source items; ``write_frames``: per-frame files of today's commands
-    (obstacles ``labels.npy`` + ``obstacles.json``)."""
+    (obstacles ``labels.npy`` + ``obstacles.json``); ``max_items``: stop after this many source
+    items (0 = all); ``max_pending``: messages waiting for a pose before they are processed with
+    the latest pose."""
 
     capabilities: tuple[str, ...] = ()
+    max_items: int = 0
     checkpoint_every: int = 50
     write_frames: bool = True
     max_pending: int = 200

@@ -311,6 +311,9 @@ def run_recording(
     item = state.next_item - 1
     try:
         for item, msgs in source.messages(skip=state.next_item):
+            if pipe.run.max_items and item >= pipe.run.max_items:
+                item -= 1
+                break
             for msg in msgs:
                 run.feed(msg, item)
             run.end_item(item)

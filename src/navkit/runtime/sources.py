@@ -347,7 +347,7 @@ class RGBDSource:
             cam = None
             if self.intrinsics is not None:
                 fx, fy, cx, cy = self.intrinsics
-                cam = {"fx": fx, "fy": fy, "cx": cx, "cy": cy}
+                cam = {"fx": fx, "fy": fy, "cx": cx, "cy": cy, "depth_scale": self.depth_scale}
             seq = open_rgbd_sequence(self.path, cam)
             self.color, self.depth = list(seq.color_paths), list(seq.depth_paths)
             self.times = np.asarray(seq.timestamps, dtype=np.float64)
@@ -388,7 +388,7 @@ class RGBDSource:
         return None
 
     def messages(self, skip: int = 0) -> Iterator[tuple[int, list[Message]]]:
-        from navkit.io.images import read_image
+        from navkit.io.images import read_depth, read_image
 
         for k in range(skip, len(self.color)):
             st = _ns(self.times[k])
@@ -402,12 +402,12 @@ class RGBDSource:
                 T = self.poses[k]
             if T is not None:
                 out.append(Message("/ground_truth", "pose", st, "world", T, "camera"))
-            raw = read_image(self.depth[k])
-            depth = raw.astype(np.float64) / self.depth_scale
-            depth[~(depth > 0)] = np.nan
+            depth = read_depth(self.depth[k], self.depth_scale)
             color = read_image(self.color[k])
             if color.ndim == 2:
                 color = np.repeat(color[..., None], 3, axis=2)
+            if color.dtype != np.uint8:
+                color = (color.astype(np.float64) / 257.0).round().astype(np.uint8)
             out.append(Message("/camera/depth", "depth", st, "camera", depth))
             out.append(Message("/camera/color", "color", st, "camera", color[..., :3]))
             yield k, out
