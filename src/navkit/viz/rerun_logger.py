@@ -6,7 +6,9 @@ never branches on whether anything is viewed (kiss-icp style). One timeline, ``r
 
 - ``world/obstacles/points``: the classified cloud, coloured by class (green ground, grey
   unreliable, red obstacle, orange / purple shadows), ``class_ids`` kept;
-- ``world/obstacles/shapes``, ``world/walls``, ``world/planes``: outlines (line strips);
+- ``world/obstacles/shapes/<name>``, ``world/walls``, ``world/planes``: outlines (line strips;
+  of the bounding shapes only ``shapes``, default A1 and A6 as ``navkit obstacles detect``'s
+  PNG: twelve overlapping outlines per obstacle hide the scene; ``results.mcap`` has them all);
 - ``world/<topic>/grid``: occupancy grids as the occupied cells' centres;
 - ``world/path``: the stored path; ``world/<topic>``: poses (fixes, plane odometry, input poses)
   as transforms with a short axis triad.
@@ -51,6 +53,7 @@ class RerunLogger:
         spawn: bool = False,
         save: str | os.PathLike[str] | None = None,
         application_id: str = "navkit",
+        shapes: tuple[str, ...] = ("A1", "A6"),
     ) -> None:
         rr = require_module("rerun", "rerun", "viewing a run in Rerun (--rerun / --rerun-save)")
         self.rr = rr
@@ -61,10 +64,26 @@ class RerunLogger:
         if spawn:
             self.rec.spawn(connect=save is None)
         self.save = save
+        self.shapes = set(shapes)
         self._lut = np.zeros((256, 3), dtype=np.uint8)
         for k, c in CLASS_COLORS.items():
             self._lut[k & 0xFF] = c
         self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self.rec.send_blueprint(self.blueprint())
+
+    def blueprint(self) -> Any:
+        """One 3D view of ``world``; of the bounding shapes A1 and A6 are shown (the others are
+        in the recording: add them in the viewer's blueprint panel)."""
+        import rerun.blueprint as rrb
+
+        hidden = [f"- /world/obstacles/shapes/{n}" for n in ("A2", "A3", "A4", "A5", "MEC", "MVEE")]
+        return rrb.Blueprint(
+            rrb.Spatial3DView(
+                origin="/world",
+                contents=["+ /world/**", "- /world/obstacles/shapes/A7/**", *hidden],
+            ),
+            collapse_panels=True,
+        )
 
     def set_time(self, stamp_ns: int) -> None:
         """Move the ``recording`` timeline to ``stamp_ns``."""
