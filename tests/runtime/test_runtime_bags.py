@@ -128,6 +128,25 @@ def test_results_mcap_kitti(kitti, cli):
     ]["obstacles"]["map_cells_occupied"]
     path = by_topic["/navkit/path"][-1]
     assert path.msgtype == "nav_msgs/msg/Path" and len(path.message.poses) >= 2
+    # the standard tooling reads it too: mcap's indexed reader and mcap-ros2-support's decoder
+    # (which parses the ros2msg schemas navkit wrote)
+    pytest.importorskip("mcap_ros2", reason="mcap-ros2-support (extra 'ros') not installed")
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with open(out / "results.mcap", "rb") as fh:
+        reader = make_reader(fh, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics.message_count == len(msgs)
+        assert {s.name for s in summary.schemas.values()} == {
+            "sensor_msgs/msg/PointCloud2",
+            "visualization_msgs/msg/MarkerArray",
+            "nav_msgs/msg/OccupancyGrid",
+            "nav_msgs/msg/Path",
+        }
+        decoded = list(reader.iter_decoded_messages(topics=["/navkit/obstacles/points"]))
+    assert [d.message.log_time for d in decoded] == stamps
+    assert decoded[0].decoded_message.width == len(np.fromfile(bins[0], dtype="<f4")) // 4
 
 
 def test_rerun_recording_loads(kitti, tmp_path):

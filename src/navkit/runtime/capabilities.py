@@ -55,6 +55,7 @@ SHAPE_COLORS: dict[str, tuple[float, float, float, float]] = {
 }
 A7_COLOR = (1.0, 0.4, 0.7, 1.0)
 WALL_COLOR = (0.1, 0.1, 0.9, 1.0)
+CORNER_COLOR = (0.0, 0.7, 0.7, 1.0)
 
 
 @dataclass
@@ -270,12 +271,17 @@ class ObstaclesStage:
 
 
 # --------------------------------------------------------------------------- laser: wall map
-def wall_lines(walls: Any) -> list[Polyline]:
-    """Wall segments as open two-point polylines (z = 0)."""
-    return [
+def wall_lines(walls: Any, corners: Any = ()) -> list[Polyline]:
+    """Wall segments as open two-point polylines and corners as 0.3 m squares (z = 0)."""
+    out = [
         Polyline("walls", k, np.array([[*w.start, 0.0], [*w.end, 0.0]]), WALL_COLOR, closed=False)
         for k, w in enumerate(walls)
     ]
+    sq = 0.15 * np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    for k, c in enumerate(corners):
+        P = np.asarray(c.point, dtype=np.float64)[:2] + sq
+        out.append(Polyline("corners", k, np.c_[P, np.zeros(4)], CORNER_COLOR))
+    return out
 
 
 class LaserMappingStage:
@@ -354,7 +360,9 @@ class LaserMappingStage:
                 self.frame,
                 (np.asarray(wm.occupancy, np.int8), wm.resolution, np.asarray(wm.origin)),
             ),
-            Output("/navkit/walls", "markers", stamp_ns, self.frame, wall_lines(wm.walls)),
+            Output(
+                "/navkit/walls", "markers", stamp_ns, self.frame, wall_lines(wm.walls, wm.corners)
+            ),
         ]
         return StageResult(
             outs,
@@ -430,7 +438,11 @@ class LaserLocalizationStage:
             self.published_map = True
             outs.append(
                 Output(
-                    "/navkit/walls", "markers", msg.stamp_ns, "map", wall_lines(self.wall_map.walls)
+                    "/navkit/walls",
+                    "markers",
+                    msg.stamp_ns,
+                    "map",
+                    wall_lines(self.wall_map.walls, self.wall_map.corners),
                 )
             )
         if len(pts) < 3:
