@@ -84,7 +84,7 @@ def run_cmd(
     config: Path | None = typer.Option(
         None,
         "--config",
-        help="Pipeline TOML: [topics], [obstacles], [laser], [planes], [path], [run].",
+        help="Pipeline TOML with the tables topics, obstacles, laser, planes, path and run.",
     ),
     overwrite: bool = typer.Option(
         False, "--overwrite", help="Replace earlier outputs in the folder."
