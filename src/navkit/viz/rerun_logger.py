@@ -72,18 +72,10 @@ class RerunLogger:
         self.rec.send_blueprint(self.blueprint())
 
     def blueprint(self) -> Any:
-        """One 3D view of ``world``; of the bounding shapes A1 and A6 are shown (the others are
-        in the recording: add them in the viewer's blueprint panel)."""
+        """One 3D view of ``world`` with the side panels collapsed."""
         import rerun.blueprint as rrb
 
-        hidden = [f"- /world/obstacles/shapes/{n}" for n in ("A2", "A3", "A4", "A5", "MEC", "MVEE")]
-        return rrb.Blueprint(
-            rrb.Spatial3DView(
-                origin="/world",
-                contents=["+ /world/**", "- /world/obstacles/shapes/A7/**", *hidden],
-            ),
-            collapse_panels=True,
-        )
+        return rrb.Blueprint(rrb.Spatial3DView(origin="/world"), collapse_panels=True)
 
     def set_time(self, stamp_ns: int) -> None:
         """Move the ``recording`` timeline to ``stamp_ns``."""
@@ -116,17 +108,25 @@ class RerunLogger:
                     np.asarray(pts, np.float32),
                     colors=self._lut[cls.astype(np.uint8)],
                     class_ids=cls.astype(np.int16),
-                    radii=0.03,
+                    radii=rr.Radius.ui_points(1.5),
                 ),
             )
         elif o.kind == "markers":
-            strips = []
-            colors = []
-            for line in o.data:
+            self.rec.log(ent, rr.Clear(recursive=True))  # this array replaces the last one
+            groups: dict[str, tuple[list[Any], list[Any]]] = {}
+            for line in o.data:  # one entity per outline kind (shape name, walls, corners, planes)
+                if line.ns.startswith("shape/") and line.ns[len("shape/") :] not in self.shapes:
+                    continue
                 P = np.asarray(line.points, np.float32)
+                name = line.ns.split("/")[-1].replace(":", "/")
+                strips, colors = groups.setdefault(name, ([], []))
                 strips.append(np.vstack([P, P[:1]]) if line.closed and len(P) > 1 else P)
                 colors.append([int(255 * c) for c in line.color])
-            self.rec.log(ent, rr.LineStrips3D(strips, colors=colors if colors else None))
+            for name, (strips, colors) in groups.items():
+                sub = ent if name == ent.rsplit("/", 1)[-1] else f"{ent}/{name}"
+                self.rec.log(
+                    sub, rr.LineStrips3D(strips, colors=colors, radii=rr.Radius.ui_points(1.5))
+                )
         elif o.kind == "grid":
             occ, res, origin = o.data
             rows, cols = np.nonzero(np.asarray(occ) == 100)
