@@ -31,12 +31,20 @@ from navkit.errors import DataNotFoundError, FormatError, require_module
 from navkit.io.pointcloud import PointCloud
 
 __all__ = [
+    "BagInfo",
     "BagMessage",
+    "bag_info",
+    "camera_info_from_msg",
     "image_from_msg",
     "iter_images",
     "iter_pointclouds",
+    "iter_raw_messages",
+    "laserscan_from_msg",
     "list_topics",
     "pointcloud_from_msg",
+    "pose_from_msg",
+    "stamp_ns",
+    "transforms_from_msg",
 ]
 
 log = logging.getLogger(__name__)
@@ -45,6 +53,12 @@ PathLike = str | os.PathLike[str]
 
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 IMAGE = "sensor_msgs/msg/Image"
+LASERSCAN = "sensor_msgs/msg/LaserScan"
+CAMERAINFO = "sensor_msgs/msg/CameraInfo"
+ODOMETRY = "nav_msgs/msg/Odometry"
+POSESTAMPED = "geometry_msgs/msg/PoseStamped"
+POSECOVSTAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
+TFMESSAGE = "tf2_msgs/msg/TFMessage"
 
 # sensor_msgs/PointField datatypes
 _POINTFIELD_TYPES = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}
@@ -275,3 +289,145 @@ def iter_images(path: PathLike, topics: Sequence[str] | str | None = None) -> It
         yield BagMessage(
             topic, _stamp(msg, bag_ns), str(msg.header.frame_id), img, str(msg.encoding)
         )
+
+
+# --------------------------------------------------------------------------- streaming access
+@dataclass(frozen=True)
+class BagInfo:
+    """What a bag holds: ``{topic: (type, count)}``, first / last message time (ns), total count."""
+
+    topics: dict[str, tuple[str, int]]
+    start_ns: int
+    end_ns: int
+    n_messages: int
+
+
+def bag_info(path: PathLike) -> BagInfo:
+    """Topics, types, counts and time span of a ROS1 bag, ROS2 bag folder or ``.mcap`` file."""
+    with _open_reader(path) as reader:
+        topics: dict[str, tuple[str, int]] = {}
+        for c in reader.connections:
+            typ, cnt = topics.get(c.topic, (c.msgtype, 0))
+            topics[c.topic] = (typ, cnt + int(c.msgcount))
+        n = sum(cnt for _, cnt in topics.values())
+        return BagInfo(topics, int(reader.start_time), int(reader.end_time), n)
+
+
+def iter_raw_messages(
+    path: PathLike, topics: Sequence[str] | None = None, skip: int = 0
+) -> Iterator[tuple[str, str, int, Any]]:
+    """Deserialised messages of a bag in time order: ``(topic, type, bag time ns, message)``.
+
+    ``skip`` messages (of the selected topics) are passed over without being deserialised, so a
+    resumed run starts where it stopped at the cost of reading the raw bytes only.
+    """
+    with _open_reader(path) as reader:
+        conns = [c for c in reader.connections if topics is None or c.topic in topics]
+        for k, (conn, bag_ns, raw) in enumerate(reader.messages(connections=conns)):
+            if k < skip:
+                continue
+            yield conn.topic, conn.msgtype, int(bag_ns), reader.deserialize(raw, conn.msgtype)
+
+
+def stamp_ns(msg: Any, bag_ns: int) -> int:
+    """Header stamp of a message in ns (the bag's receive time when the stamp is zero)."""
+    st = getattr(getattr(msg, "header", None), "stamp", None)
+    if st is not None:
+        sec = int(getattr(st, "sec", 0))
+        nsec = int(getattr(st, "nanosec", getattr(st, "nsec", 0)))
+        if sec or nsec:
+            return sec * 1_000_000_000 + nsec
+    return int(bag_ns)
+
+
+def laserscan_from_msg(
+    msg: Any, source: str = "LaserScan"
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
+    """``(ranges (B,), bearings (B,), range_max)`` of a ``sensor_msgs/LaserScan``.
+
+    Ranges outside ``[range_min, range_max]`` and non-finite ones become NaN (no return);
+    bearings are ``angle_min + k * angle_increment`` (radians, 0 forward, positive left).
+    """
+    r = np.asarray(msg.ranges, dtype=np.float64).copy()
+    if r.ndim != 1 or len(r) == 0:
+        raise FormatError(
+            f"has {r.size} ranges", source=source, field="ranges", expected="at least one range"
+        )
+    inc = float(msg.angle_increment)
+    if not np.isfinite(inc) or inc == 0.0:
+        raise FormatError(
+            f"angle_increment = {inc}",
+            source=source,
+            field="angle_increment",
+            expected="a finite non-zero angle step (rad)",
+        )
+    rmin, rmax = float(msg.range_min), float(msg.range_max)
+    with np.errstate(invalid="ignore"):
+        bad = ~np.isfinite(r) | (r < rmin) | (r > rmax) | (r <= 0)
+    r[bad] = np.nan
+    bearings = float(msg.angle_min) + inc * np.arange(len(r), dtype=np.float64)
+    return r, bearings, rmax
+
+
+def _pose_matrix(position: Any, orientation: Any) -> NDArray[np.float64]:
+    from scipy.spatial.transform import Rotation
+
+    q = np.array([orientation.x, orientation.y, orientation.z, orientation.w], dtype=np.float64)
+    n = float(np.linalg.norm(q))
+    T = np.eye(4)
+    T[:3, :3] = np.eye(3) if n < 1e-12 else Rotation.from_quat(q / n).as_matrix()
+    T[:3, 3] = [position.x, position.y, position.z]
+    return T
+
+
+def pose_from_msg(msg: Any, msgtype: str, source: str = "pose") -> tuple[NDArray[np.float64], str]:
+    """``(T_parent_child (4, 4), child frame id)`` of an Odometry / PoseStamped /
+    PoseWithCovarianceStamped message (the parent frame is the header's ``frame_id``)."""
+    if msgtype == ODOMETRY:
+        p = msg.pose.pose
+        child = str(msg.child_frame_id)
+    elif msgtype == POSESTAMPED:
+        p = msg.pose
+        child = ""
+    elif msgtype == POSECOVSTAMPED:
+        p = msg.pose.pose
+        child = ""
+    else:
+        raise FormatError(
+            f"message type {msgtype}",
+            source=source,
+            field="type",
+            expected="nav_msgs/Odometry, geometry_msgs/PoseStamped or PoseWithCovarianceStamped",
+        )
+    return _pose_matrix(p.position, p.orientation), child
+
+
+def transforms_from_msg(msg: Any) -> list[tuple[int, str, str, NDArray[np.float64]]]:
+    """``[(stamp ns, parent frame, child frame, T_parent_child)]`` of a ``tf2_msgs/TFMessage``."""
+    out = []
+    for t in msg.transforms:
+        tr = t.transform
+        out.append(
+            (
+                stamp_ns(t, 0),
+                str(t.header.frame_id),
+                str(t.child_frame_id),
+                _pose_matrix(tr.translation, tr.rotation),
+            )
+        )
+    return out
+
+
+def camera_info_from_msg(
+    msg: Any, source: str = "CameraInfo"
+) -> tuple[float, float, float, float, int, int]:
+    """``(fx, fy, cx, cy, width, height)`` of a ``sensor_msgs/CameraInfo`` (``k`` or ROS1 ``K``)."""
+    K = getattr(msg, "k", None)
+    if K is None:
+        K = getattr(msg, "K", None)
+    K = np.asarray(K, dtype=np.float64).reshape(-1)
+    if K.size != 9 or K[0] <= 0 or K[4] <= 0:
+        raise FormatError(
+            f"K = {K.tolist()}", source=source, field="k", expected="3x3 intrinsics, fx, fy > 0"
+        )
+    return float(K[0]), float(K[4]), float(K[2]), float(K[5]), int(msg.width), int(msg.height)

@@ -1,0 +1,375 @@
+"""``results.mcap``: navkit's results as standard ROS 2 messages (CDR), for Foxglove, RViz, rosbag2.
+
+Message types (schemas ``ros2msg``, encoding ``cdr``; needs the extra ``ros``: ``rosbags`` for the
+CDR serialisation, ``mcap`` for the container):
+
+===================================  ===========================================================
+``sensor_msgs/msg/PointCloud2``      classified clouds: ``x y z`` float32 + ``class`` int8 per
+                                     point (0 ground, -1 unreliable, -2 obstacle, -3 side shadow,
+                                     -4 shadow behind)
+``visualization_msgs/msg/MarkerArray``  outlines (bounding shapes A1-A7, planes, walls) as
+                                     LINE_STRIP markers, after a DELETEALL marker so each array
+                                     replaces the previous one
+``nav_msgs/msg/OccupancyGrid``       obstacle map, wall map (-1 unknown, 0 free, 100 occupied)
+``nav_msgs/msg/Path``                the stored path, sampled
+``geometry_msgs/msg/PoseStamped``    localization fixes, plane odometry
+===================================  ===========================================================
+
+Header stamps and frame ids are the recording's; each message's log time is its stamp.
+
+Crash safety: :class:`ResultsWriter` can write *unchunked* (each message record goes straight to
+the file, flushed by :meth:`ResultsWriter.flush`), so a killed writer leaves every flushed message
+readable with :func:`read_messages` (which stops at a truncated tail). :func:`merge_mcap` joins such
+segments into one indexed, chunked file.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from navkit.errors import FormatError, InputError, require_module
+
+__all__ = [
+    "ROS_TYPES",
+    "ResultRecord",
+    "ResultsWriter",
+    "merge_mcap",
+    "read_messages",
+]
+
+log = logging.getLogger(__name__)
+
+PathLike = str | os.PathLike[str]
+
+ROS_TYPES = {
+    "classified_cloud": "sensor_msgs/msg/PointCloud2",
+    "markers": "visualization_msgs/msg/MarkerArray",
+    "grid": "nav_msgs/msg/OccupancyGrid",
+    "path": "nav_msgs/msg/Path",
+    "pose": "geometry_msgs/msg/PoseStamped",
+}
+
+
+@functools.cache
+def _typestore() -> Any:
+    """rosbags' ROS 2 type store (built once: each build makes new message classes)."""
+    ts = require_module("rosbags.typesys", "ros", "writing results.mcap")
+    return ts.get_typestore(ts.Stores.LATEST)
+
+
+class _Builder:
+    """Builds rosbags message objects from navkit outputs."""
+
+    def __init__(self) -> None:
+        self.ts = _typestore()
+        T = self.ts.types
+        self.Time = T["builtin_interfaces/msg/Time"]
+        self.Duration = T["builtin_interfaces/msg/Duration"]
+        self.Header = T["std_msgs/msg/Header"]
+        self.Point = T["geometry_msgs/msg/Point"]
+        self.Quaternion = T["geometry_msgs/msg/Quaternion"]
+        self.Pose = T["geometry_msgs/msg/Pose"]
+        self.PoseStamped = T["geometry_msgs/msg/PoseStamped"]
+        self.Vector3 = T["geometry_msgs/msg/Vector3"]
+        self.ColorRGBA = T["std_msgs/msg/ColorRGBA"]
+        self.Marker = T["visualization_msgs/msg/Marker"]
+        self.MarkerArray = T["visualization_msgs/msg/MarkerArray"]
+        self.MeshFile = T["visualization_msgs/msg/MeshFile"]
+        self.CompressedImage = T["sensor_msgs/msg/CompressedImage"]
+        self.PointField = T["sensor_msgs/msg/PointField"]
+        self.PointCloud2 = T["sensor_msgs/msg/PointCloud2"]
+        self.OccupancyGrid = T["nav_msgs/msg/OccupancyGrid"]
+        self.MapMetaData = T["nav_msgs/msg/MapMetaData"]
+        self.Path = T["nav_msgs/msg/Path"]
+
+    def header(self, stamp_ns: int, frame_id: str) -> Any:
+        return self.Header(
+            stamp=self.Time(
+                sec=int(stamp_ns // 1_000_000_000), nanosec=int(stamp_ns % 1_000_000_000)
+            ),
+            frame_id=frame_id,
+        )
+
+    def pose(self, T: Any) -> Any:
+        from scipy.spatial.transform import Rotation
+
+        T = np.asarray(T, dtype=np.float64)
+        q = Rotation.from_matrix(T[:3, :3]).as_quat()
+        return self.Pose(
+            position=self.Point(x=float(T[0, 3]), y=float(T[1, 3]), z=float(T[2, 3])),
+            orientation=self.Quaternion(x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])),
+        )
+
+    def identity(self) -> Any:
+        return self.Pose(
+            position=self.Point(x=0.0, y=0.0, z=0.0),
+            orientation=self.Quaternion(x=0.0, y=0.0, z=0.0, w=1.0),
+        )
+
+    def build(self, kind: str, stamp_ns: int, frame_id: str, data: Any) -> Any:
+        h = self.header(stamp_ns, frame_id)
+        if kind == "pose":
+            return self.PoseStamped(header=h, pose=self.pose(data))
+        if kind == "path":
+            P = np.asarray(data, dtype=np.float64).reshape(-1, 3)
+            poses = []
+            for p in P:
+                T = np.eye(4)
+                T[:3, 3] = p
+                poses.append(self.PoseStamped(header=h, pose=self.pose(T)))
+            return self.Path(header=h, poses=poses)
+        if kind == "grid":
+            occ, res, origin = data
+            occ = np.asarray(occ, dtype=np.int8)
+            T = np.eye(4)
+            T[:2, 3] = np.asarray(origin, dtype=np.float64)[:2]
+            info = self.MapMetaData(
+                map_load_time=h.stamp,
+                resolution=float(res),
+                width=int(occ.shape[1]),
+                height=int(occ.shape[0]),
+                origin=self.pose(T),
+            )
+            return self.OccupancyGrid(
+                header=h, info=info, data=np.ascontiguousarray(occ).reshape(-1)
+            )
+        if kind == "classified_cloud":
+            pts, classes = data
+            pts = np.asarray(pts, dtype=np.float32).reshape(-1, 3)
+            rec = np.zeros(
+                len(pts),
+                dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("class", "i1"), ("pad", "V3")],
+            )
+            rec["x"], rec["y"], rec["z"] = pts[:, 0], pts[:, 1], pts[:, 2]
+            rec["class"] = np.asarray(classes, dtype=np.int8).reshape(-1)
+            fields = [
+                self.PointField(name="x", offset=0, datatype=7, count=1),
+                self.PointField(name="y", offset=4, datatype=7, count=1),
+                self.PointField(name="z", offset=8, datatype=7, count=1),
+                self.PointField(name="class", offset=12, datatype=1, count=1),
+            ]
+            return self.PointCloud2(
+                header=h,
+                height=1,
+                width=len(pts),
+                fields=fields,
+                is_bigendian=False,
+                point_step=16,
+                row_step=16 * len(pts),
+                data=rec.view(np.uint8).reshape(-1),
+                is_dense=False,
+            )
+        if kind == "markers":
+            zero = self.Duration(sec=0, nanosec=0)
+            empty_mesh = self.MeshFile(filename="", data=np.zeros(0, np.uint8))
+            empty_tex = self.CompressedImage(header=h, format="", data=np.zeros(0, np.uint8))
+
+            def marker(ns: str, mid: int, typ: int, action: int, pts: Any, color: Any) -> Any:
+                return self.Marker(
+                    header=h,
+                    ns=ns,
+                    id=int(mid),
+                    type=typ,
+                    action=action,
+                    pose=self.identity(),
+                    scale=self.Vector3(x=0.05, y=0.05, z=0.05),
+                    color=self.ColorRGBA(
+                        r=float(color[0]), g=float(color[1]), b=float(color[2]), a=float(color[3])
+                    ),
+                    lifetime=zero,
+                    frame_locked=False,
+                    points=[self.Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in pts],
+                    colors=[],
+                    texture_resource="",
+                    texture=empty_tex,
+                    uv_coordinates=[],
+                    text="",
+                    mesh_resource="",
+                    mesh_file=empty_mesh,
+                    mesh_use_embedded_materials=False,
+                )
+
+            markers = [marker("", 0, 0, 3, [], (0, 0, 0, 0))]  # DELETEALL: replaces the last array
+            for line in data:
+                P = np.asarray(line.points, dtype=np.float64)
+                if line.closed and len(P) > 1:
+                    P = np.vstack([P, P[:1]])
+                markers.append(marker(line.ns, line.id, 4, 0, P, line.color))
+            return self.MarkerArray(markers=markers)
+        raise InputError(
+            f"unknown output kind {kind!r}", field="kind", expected=f"one of {sorted(ROS_TYPES)}"
+        )
+
+
+@functools.cache
+def _builder() -> _Builder:
+    return _Builder()
+
+
+@dataclass(frozen=True)
+class ResultRecord:
+    """One message read back: topic, ROS type, log time (ns) and the decoded message."""
+
+    topic: str
+    msgtype: str
+    log_time_ns: int
+    message: Any
+
+
+def _compression() -> Any:
+    from mcap.writer import CompressionType
+
+    try:
+        import zstandard  # noqa: F401
+    except ImportError:
+        return CompressionType.NONE
+    return CompressionType.ZSTD
+
+
+class ResultsWriter:
+    """Writes navkit outputs to an MCAP file as ROS 2 messages.
+
+    Parameters
+    ----------
+    path : path
+        The ``.mcap`` file (created or truncated).
+    chunked : bool
+        True: indexed, compressed chunks (a finished file). False: each message record written
+        directly and made durable by :meth:`flush` (a crash-safe segment; merge later).
+    """
+
+    def __init__(self, path: PathLike, chunked: bool = True) -> None:
+        require_module("mcap", "ros", "writing results.mcap")
+        from mcap.writer import CompressionType, Writer
+
+        self.path = Path(path)
+        self._fh = open(self.path, "wb")
+        self._w = Writer(
+            self._fh,
+            compression=_compression() if chunked else CompressionType.NONE,
+            use_chunking=chunked,
+            chunk_size=1 << 20,
+        )
+        self._w.start(profile="ros2", library="navkit")
+        self._b = _builder()
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self.n_messages = 0
+
+    def _channel(self, topic: str, msgtype: str, msgdef: bytes | None = None) -> int:
+        if topic not in self._channels:
+            if msgtype not in self._schemas:
+                if msgdef is None:
+                    msgdef = self._b.ts.generate_msgdef(msgtype, ros_version=2)[0].encode()
+                self._schemas[msgtype] = self._w.register_schema(msgtype, "ros2msg", msgdef)
+            self._channels[topic] = self._w.register_channel(topic, "cdr", self._schemas[msgtype])
+        return self._channels[topic]
+
+    def write(self, topic: str, kind: str, stamp_ns: int, frame_id: str, data: Any) -> None:
+        """Write one output (see :class:`navkit.runtime.messages.Output` for ``data``)."""
+        msgtype = ROS_TYPES.get(kind)
+        if msgtype is None:
+            raise InputError(
+                f"unknown output kind {kind!r}",
+                field="kind",
+                expected=f"one of {sorted(ROS_TYPES)}",
+            )
+        msg = self._b.build(kind, stamp_ns, frame_id, data)
+        raw = bytes(self._b.ts.serialize_cdr(msg, msgtype))
+        self.write_raw(topic, msgtype, stamp_ns, raw)
+
+    def write_raw(
+        self, topic: str, msgtype: str, log_time_ns: int, raw: bytes, msgdef: bytes | None = None
+    ) -> None:
+        """Write an already serialised CDR message."""
+        ch = self._channel(topic, msgtype, msgdef)
+        self._w.add_message(ch, log_time=int(log_time_ns), data=raw, publish_time=int(log_time_ns))
+        self.n_messages += 1
+
+    def flush(self, sync: bool = False) -> None:
+        """Hand everything written so far to the OS (survives a killed process); ``sync``: also
+        to the disk (survives a power cut)."""
+        self._fh.flush()
+        if sync:
+            os.fsync(self._fh.fileno())
+
+    def close(self) -> None:
+        """Write the summary and footer and close the file."""
+        if not self._fh.closed:
+            self._w.finish()
+            self._fh.close()
+
+    def __enter__(self) -> ResultsWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _iter_raw(path: Path) -> Iterator[tuple[str, str, bytes, int, bytes]]:
+    """``(topic, msgtype, msgdef, log time, data)`` of every complete message record, in file
+    order; stops quietly at a truncated tail (a killed writer)."""
+    from mcap.exceptions import McapError
+    from mcap.records import Channel, Message, Schema
+    from mcap.stream_reader import StreamReader
+
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    with open(path, "rb") as fh:
+        reader = StreamReader(fh, skip_magic=False, emit_chunks=False)
+        try:
+            for rec in reader.records:
+                if isinstance(rec, Schema):
+                    schemas[rec.id] = rec
+                elif isinstance(rec, Channel):
+                    channels[rec.id] = rec
+                elif isinstance(rec, Message):
+                    ch = channels[rec.channel_id]
+                    sc = schemas[ch.schema_id]
+                    yield ch.topic, sc.name, sc.data, rec.log_time, rec.data
+        except (McapError, EOFError, ValueError, KeyError) as exc:
+            log.info("%s: stopped at a truncated or damaged record (%s)", path, exc)
+
+
+def read_messages(path: PathLike, topics: Sequence[str] | None = None) -> Iterator[ResultRecord]:
+    """Decode the messages of a results MCAP (finished or a killed run's segment), in file order.
+
+    Raises
+    ------
+    FormatError
+        If the file is not MCAP.
+    """
+    p = Path(path)
+    with open(p, "rb") as fh:
+        if fh.read(8) != b"\x89MCAP0\r\n":
+            raise FormatError(
+                "is not an MCAP file", source=p, field="magic", expected="MCAP magic bytes"
+            )
+    ts = _typestore()
+    for topic, msgtype, _, t, raw in _iter_raw(p):
+        if topics is not None and topic not in topics:
+            continue
+        yield ResultRecord(topic, msgtype, t, ts.deserialize_cdr(raw, msgtype))
+
+
+def merge_mcap(segments: Iterable[PathLike], dest: PathLike) -> int:
+    """Copy the messages of ``segments`` (in order) into one chunked, indexed MCAP; returns the
+    message count. Messages are copied as raw CDR, one at a time (bounded memory)."""
+    n = 0
+    w = ResultsWriter(dest, chunked=True)
+    try:
+        for seg in segments:
+            for topic, msgtype, msgdef, t, raw in _iter_raw(Path(seg)):
+                w.write_raw(topic, msgtype, t, raw, msgdef)
+                n += 1
+    finally:
+        w.close()
+    return n

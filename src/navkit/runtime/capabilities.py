@@ -1,0 +1,700 @@
+"""One small adapter per capability: it holds the capability's online object(s) and turns
+messages into calls and results into :class:`~navkit.runtime.messages.Output` records.
+
+Each stage has the same three methods, so the run loop never knows which capability it feeds:
+
+- ``handle(msg, poses) -> StageResult``: one message (``poses`` answers "where was the sensor
+  at this stamp"); returns outputs to publish and a per-frame record (``frames.jsonl``).
+- ``finish(out) -> StageResult``: end of the recording: final maps / paths, files of today's
+  commands, summary figures.
+- the stage's state is plain Python / NumPy, so a checkpoint pickles it as is.
+
+Today's APIs are used (``obstacles.detect_obstacles_in_grid``, ``mission.ObstacleGrid``,
+``localization.build_map_from_scans`` / ``match_scan``, ``planes.PlaneOdometry``,
+``path.OnlineApproximator``); when the online objects of the architecture issue land
+(``obstacles.ObstacleMapper``, ``localization.Localizer``, ``path.Return``), only the inside of
+the matching stage changes.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from navkit.runtime.messages import CameraData, Message, Output, Polyline, ScanData
+from navkit.runtime.pipeline import Pipeline
+
+__all__ = [
+    "LaserLocalizationStage",
+    "LaserMappingStage",
+    "ObstaclesStage",
+    "PathStage",
+    "PlanesStage",
+    "PoseBuffer",
+    "StageResult",
+    "build_stages",
+]
+
+log = logging.getLogger(__name__)
+
+SHAPE_COLORS: dict[str, tuple[float, float, float, float]] = {
+    "A1": (0.9, 0.1, 0.1, 1.0),
+    "A2": (0.1, 0.6, 0.9, 1.0),
+    "A3": (0.2, 0.8, 0.2, 1.0),
+    "A4": (0.9, 0.6, 0.1, 1.0),
+    "A5": (0.7, 0.2, 0.8, 1.0),
+    "A6": (0.9, 0.9, 0.1, 1.0),
+    "MEC": (0.5, 0.5, 0.5, 1.0),
+    "MVEE": (0.3, 0.3, 0.3, 1.0),
+}
+A7_COLOR = (1.0, 0.4, 0.7, 1.0)
+WALL_COLOR = (0.1, 0.1, 0.9, 1.0)
+CORNER_COLOR = (0.0, 0.7, 0.7, 1.0)
+
+
+@dataclass
+class StageResult:
+    """Outputs to publish and an optional per-frame record (plain JSON)."""
+
+    outputs: list[Output] = field(default_factory=list)
+    record: dict[str, Any] | None = None
+
+
+def planar(T: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(x, y, yaw)`` of a ``(4, 4)`` pose (yaw of its x axis in the world plane)."""
+    return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
+
+
+class PoseBuffer:
+    """The recent poses of each pose topic, bounded, interpolated at a stamp.
+
+    ``at(topic, stamp)`` interpolates linearly (translation) and by slerp (rotation) between the
+    two poses around the stamp; before the first / after the last pose it holds the nearest one.
+    """
+
+    def __init__(self, maxlen: int = 256) -> None:
+        self.maxlen = maxlen
+        self.poses: dict[str, deque[tuple[int, NDArray[np.float64]]]] = {}
+        self.frames: dict[str, str] = {}
+
+    def add(self, msg: Message) -> None:
+        buf = self.poses.setdefault(msg.topic, deque(maxlen=self.maxlen))
+        if buf and msg.stamp_ns < buf[-1][0]:
+            log.warning(
+                "%s: pose at %d ns older than the last one, ignored", msg.topic, msg.stamp_ns
+            )
+            return
+        buf.append((msg.stamp_ns, np.asarray(msg.data, dtype=np.float64)))
+        self.frames[msg.topic] = msg.frame_id
+
+    def latest_stamp(self, topic: str) -> int | None:
+        buf = self.poses.get(topic)
+        return buf[-1][0] if buf else None
+
+    def at(self, topic: str, stamp_ns: int) -> NDArray[np.float64] | None:
+        buf = self.poses.get(topic)
+        if not topic or not buf:
+            return None
+        stamps = [s for s, _ in buf]
+        i = int(np.searchsorted(stamps, stamp_ns))
+        if i < len(stamps) and stamps[i] == stamp_ns:
+            return buf[i][1]
+        if i == 0:
+            return buf[0][1]
+        if i >= len(stamps):
+            return buf[-1][1]
+        (s0, T0), (s1, T1) = buf[i - 1], buf[i]
+        w = (stamp_ns - s0) / (s1 - s0)
+        from scipy.spatial.transform import Rotation, Slerp
+
+        rot = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([T0[:3, :3], T1[:3, :3]])))([w])
+        T = np.eye(4)
+        T[:3, :3] = rot.as_matrix()[0]
+        T[:3, 3] = (1 - w) * T0[:3, 3] + w * T1[:3, 3]
+        return T
+
+
+# --------------------------------------------------------------------------- obstacles
+class ObstaclesStage:
+    """Paper 1 on every ``PointCloud2``: per-point classes, bounding shapes A1-A7, and (with a
+    pose topic) the fused 2D obstacle map (``mission.ObstacleGrid``, a fixed window)."""
+
+    name = "obstacles"
+
+    def __init__(self, pipe: Pipeline, out: Path, with_map: bool) -> None:
+        from navkit.obstacles import Mounting, ObstacleSettings
+
+        c = pipe.obstacles
+        self.cfg = c
+        self.settings = ObstacleSettings.from_dict(dict(c.detector), source="[obstacles.detector]")
+        self.mounting = Mounting(
+            height_m=c.sensor_height_m, roll_deg=c.roll_deg, pitch_deg=c.pitch_deg
+        )
+        self.with_map = with_map
+        self.pose_topic = pipe.topics.pose
+        self.write_frames = pipe.run.write_frames
+        self.out = out / "obstacles"
+        self.grid: Any = None
+        self.map_frame = "map"
+        self.n = 0
+
+    def _map(self, T: NDArray[np.float64]) -> Any:
+        if self.grid is None:
+            from navkit.mission.obstacle_map import ObstacleGrid
+
+            c = self.cfg
+            centre = T[:2, 3]
+            self.grid = ObstacleGrid(
+                centre - c.map_half_extent_m,
+                centre + c.map_half_extent_m,
+                c.map_resolution_m,
+                min_hits=c.map_min_hits,
+                min_ratio=c.map_min_ratio,
+            )
+        return self.grid
+
+    def grid_output(self, stamp_ns: int) -> Output:
+        g = self.grid
+        occ = np.full(g.shape, -1, dtype=np.int8)
+        occ[g.seen > 0] = 0
+        occ[g.occupied] = 100
+        return Output(
+            "/navkit/obstacle_map",
+            "grid",
+            stamp_ns,
+            self.map_frame,
+            (occ, g.resolution, g.origin.copy()),
+        )
+
+    def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
+        from navkit.io.atomic import atomic_path, write_json
+        from navkit.obstacles import OBSTACLE, cloud_to_grid, detect_obstacles_in_grid
+
+        c = self.cfg
+        src = f"{msg.topic}@{msg.stamp_ns}"
+        grid = cloud_to_grid(
+            msg.data, n_rings=c.rings, n_columns=c.columns, ring_method=c.ring_method, source=src
+        )
+        det = detect_obstacles_in_grid(grid, self.mounting, self.settings, source=src)
+        labels = grid.per_point(det.vertex_labels).astype(np.int8)
+        seq = self.n
+        self.n += 1
+        outs = [
+            Output(
+                "/navkit/obstacles/points",
+                "classified_cloud",
+                msg.stamp_ns,
+                msg.frame_id,
+                (msg.data, labels),
+            )
+        ]
+        z = -self.mounting.height_m  # shapes lie on the ground, in the level body frame
+        lines = []
+        for ob in det.obstacles:
+            for name, shp in ob.shapes.items():
+                xy = shp.outline(36)
+                lines.append(
+                    Polyline(
+                        f"shape/{name}",
+                        ob.id,
+                        np.c_[xy, np.full(len(xy), z)],
+                        SHAPE_COLORS.get(name, (1, 1, 1, 1)),
+                    )
+                )
+            for name, shp in ob.guaranteed.items():
+                xy = shp.outline(36)
+                lines.append(
+                    Polyline(f"shape/A7:{name}", ob.id, np.c_[xy, np.full(len(xy), z)], A7_COLOR)
+                )
+        outs.append(
+            Output("/navkit/obstacles/shapes", "markers", msg.stamp_ns, msg.frame_id, lines)
+        )
+        record: dict[str, Any] = {
+            "seq": seq,
+            "n_points": int(labels.size),
+            "n_obstacles": len(det.obstacles),
+            "counts": {
+                str(k): int(v) for k, v in zip(*np.unique(labels, return_counts=True), strict=True)
+            },
+            "triangles": det.counts,
+        }
+        if self.write_frames:
+            d = self.out / f"{seq:06d}"
+            d.mkdir(parents=True, exist_ok=True)
+            with atomic_path(d / "labels.npy") as tmp:
+                np.save(tmp, labels)
+            write_json(
+                d / "obstacles.json",
+                {
+                    "topic": msg.topic,
+                    "stamp_ns": msg.stamp_ns,
+                    "frame": "body (x forward, y left, z up, origin on the ground under the sensor)",
+                    "sensor": det.sensor_origin,
+                    "obstacles": [ob.to_dict() for ob in det.obstacles],
+                },
+            )
+        T = poses.at(self.pose_topic, msg.stamp_ns) if self.with_map else None
+        if T is not None:
+            self.map_frame = poses.frames.get(self.pose_topic, "map") or "map"
+            P = msg.data
+            near = np.linalg.norm(P[:, :2], axis=1) <= c.map_max_range_m
+            W = P @ T[:3, :3].T + T[:3, 3]
+            g = self._map(T)
+            g.add_scan(W[near & (labels == OBSTACLE), :2], W[near & (labels == 0), :2])
+            if self.n % max(c.map_every, 1) == 0:
+                outs.append(self.grid_output(msg.stamp_ns))
+        return StageResult(outs, record)
+
+    def finish(self, out: Path, stamp_ns: int) -> StageResult:
+        if self.grid is None:
+            return StageResult(record={"frames": self.n})
+        from navkit.io.maps import write_occupancy_grid
+
+        o = self.grid_output(stamp_ns)
+        occ, res, origin = o.data
+        self.out.mkdir(parents=True, exist_ok=True)
+        write_occupancy_grid(self.out / "obstacle_map", occ, res, origin)
+        return StageResult(
+            [o],
+            {
+                "frames": self.n,
+                "map_cells_occupied": int((occ == 100).sum()),
+                "map_scans": int(self.grid.n_scans),
+            },
+        )
+
+
+# --------------------------------------------------------------------------- laser: wall map
+def wall_lines(walls: Any, corners: Any = ()) -> list[Polyline]:
+    """Wall segments as open two-point polylines and corners as 0.3 m squares (z = 0)."""
+    out = [
+        Polyline("walls", k, np.array([[*w.start, 0.0], [*w.end, 0.0]]), WALL_COLOR, closed=False)
+        for k, w in enumerate(walls)
+    ]
+    sq = 0.15 * np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    for k, c in enumerate(corners):
+        P = np.asarray(c.point, dtype=np.float64)[:2] + sq
+        out.append(Polyline("corners", k, np.c_[P, np.zeros(4)], CORNER_COLOR))
+    return out
+
+
+class LaserMappingStage:
+    """Paper 3's wall map from ``LaserScan`` + poses: keyframes (bounded, see
+    :class:`~navkit.runtime.pipeline.LaserConfig`), the map built at the end as ``navkit map build``."""
+
+    name = "wall_map"
+
+    def __init__(self, pipe: Pipeline, out: Path) -> None:
+        self.cfg = pipe.laser
+        self.pose_topic = pipe.topics.pose
+        self.out = out / "wall_map"
+        self.ranges: list[NDArray[np.float64]] = []
+        self.poses: list[NDArray[np.float64]] = []
+        self.bearings: NDArray[np.float64] | None = None
+        self.dist = self.cfg.keyframe_distance_m
+        self.angle = np.radians(self.cfg.keyframe_angle_deg)
+        self.n = 0
+        self.frame = "map"
+
+    def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
+        scan: ScanData = msg.data
+        T = poses.at(self.pose_topic, msg.stamp_ns)
+        self.n += 1
+        if T is None:
+            return StageResult(record={"used": False, "reason": "no pose yet"})
+        if self.bearings is None:
+            self.bearings = scan.bearings
+        elif len(scan.bearings) != len(self.bearings) or not np.allclose(
+            scan.bearings, self.bearings
+        ):
+            return StageResult(
+                record={"used": False, "reason": "beam layout differs from the first scan"}
+            )
+        self.frame = poses.frames.get(self.pose_topic, "map") or "map"
+        x = planar(T)
+        if self.poses:
+            last = self.poses[-1]
+            moved = np.hypot(*(x[:2] - last[:2])) >= self.dist
+            turned = abs(np.angle(np.exp(1j * (x[2] - last[2])))) >= self.angle
+            if not (moved or turned):
+                return StageResult(record={"used": False, "reason": "not a keyframe"})
+        self.ranges.append(np.asarray(scan.ranges, dtype=np.float64))
+        self.poses.append(x)
+        if len(self.ranges) > self.cfg.max_keyframes:
+            self.ranges, self.poses = self.ranges[::2], self.poses[::2]
+            self.dist, self.angle = max(2 * self.dist, 0.05), max(2 * self.angle, np.radians(2.0))
+            log.info("wall map: keyframes thinned to %d", len(self.ranges))
+        return StageResult(record={"used": True, "keyframes": len(self.ranges)})
+
+    def finish(self, out: Path, stamp_ns: int) -> StageResult:
+        if not self.ranges or self.bearings is None:
+            return StageResult(record={"scans": self.n, "keyframes": 0, "walls": 0})
+        from navkit.io.atomic import write_json
+        from navkit.io.maps import write_occupancy_grid
+        from navkit.localization import MapSettings, build_map_from_scans
+
+        wm = build_map_from_scans(
+            np.stack(self.ranges),
+            self.bearings,
+            np.stack(self.poses),
+            MapSettings(resolution=self.cfg.map_resolution_m),
+            max_range=self.cfg.max_range_m,
+        )
+        self.out.mkdir(parents=True, exist_ok=True)
+        assert wm.occupancy is not None
+        write_occupancy_grid(self.out / "map", wm.occupancy, wm.resolution, wm.origin)
+        write_json(
+            self.out / "map.json", {**wm.to_dict(), "grid": "map.yaml", "source": "navkit run"}
+        )
+        outs = [
+            Output(
+                "/navkit/wall_map",
+                "grid",
+                stamp_ns,
+                self.frame,
+                (np.asarray(wm.occupancy, np.int8), wm.resolution, np.asarray(wm.origin)),
+            ),
+            Output(
+                "/navkit/walls", "markers", stamp_ns, self.frame, wall_lines(wm.walls, wm.corners)
+            ),
+        ]
+        return StageResult(
+            outs,
+            {
+                "scans": self.n,
+                "keyframes": len(self.ranges),
+                "walls": len(wm.walls),
+                "corners": len(wm.corners),
+            },
+        )
+
+
+# --------------------------------------------------------------------------- laser: localization
+def load_wall_map(path: Path) -> Any:
+    """A :class:`~navkit.localization.WallMap` from ``map.json`` (+ its occupancy grid)."""
+    import dataclasses
+    import json
+
+    from navkit.errors import DataNotFoundError, FormatError
+    from navkit.localization import WallMap
+
+    if not path.is_file():
+        raise DataNotFoundError(f"{path}: no such map file")
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise FormatError(
+            f"not JSON: {exc}", source=path, expected="a map.json written by navkit map build"
+        ) from None
+    wm = WallMap.from_dict(data, source=str(path))
+    grid = data.get("grid")
+    if grid and (path.parent / grid).is_file():
+        from navkit.io.maps import read_occupancy_grid
+
+        g = read_occupancy_grid(path.parent / grid)
+        wm = dataclasses.replace(
+            wm, occupancy=g.occupancy, resolution=g.resolution, origin=g.origin_xy
+        )
+    return wm
+
+
+class LaserLocalizationStage:
+    """Paper 3's localization of each ``LaserScan`` in a wall map (``--map``), like
+    ``navkit map locate --prior odometry``: the last fix moved by the odometry increment is the
+    prior (the first fix is global); errors against the reference topic when there is one."""
+
+    name = "localization"
+
+    def __init__(self, pipe: Pipeline, out: Path) -> None:
+        from navkit.localization import MatcherSettings
+
+        self.cfg = pipe.laser
+        self.odom_topic = pipe.topics.odometry if pipe.laser.prior == "odometry" else ""
+        self.ref_topic = pipe.topics.reference
+        self.wall_map = load_wall_map(Path(pipe.map))
+        self.field = self.wall_map.likelihood_field(self.cfg.sigma_m)
+        self.settings = MatcherSettings()
+        self.last: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None  # (odom, fix)
+        self.errors: deque[tuple[float, float]] = deque(maxlen=100000)
+        self.n = self.n_ok = self.n_success = 0
+        self.out = out / "localization"
+        self.published_map = False
+
+    def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
+        from navkit.geometry import se2_compose, se2_from_xytheta, se2_inverse, se2_to_xytheta
+        from navkit.localization import match_scan
+
+        scan: ScanData = msg.data
+        pts = scan.points(self.cfg.max_range_m)
+        self.n += 1
+        outs: list[Output] = []
+        if not self.published_map:
+            self.published_map = True
+            outs.append(
+                Output(
+                    "/navkit/walls",
+                    "markers",
+                    msg.stamp_ns,
+                    "map",
+                    wall_lines(self.wall_map.walls, self.wall_map.corners),
+                )
+            )
+        if len(pts) < 3:
+            return StageResult(outs, {"ok": False, "reason": "no points"})
+        To = poses.at(self.odom_topic, msg.stamp_ns) if self.odom_topic else None
+        odom = planar(To) if To is not None else None
+        guess = None
+        if self.last is not None and odom is not None:
+            delta = se2_compose(
+                se2_inverse(se2_from_xytheta(*self.last[0])), se2_from_xytheta(*odom)
+            )
+            guess = se2_to_xytheta(se2_compose(se2_from_xytheta(*self.last[1]), delta))
+        fix = match_scan(self.field, pts, guess, self.settings)
+        if odom is not None:
+            self.last = (odom, fix.pose)
+        c, s = np.cos(fix.pose[2]), np.sin(fix.pose[2])
+        T = np.eye(4)
+        T[:2, :2] = [[c, -s], [s, c]]
+        T[:2, 3] = fix.pose[:2]
+        outs.append(Output("/navkit/localization/pose", "pose", msg.stamp_ns, "map", T))
+        a = fix.ambiguity
+        rec: dict[str, Any] = {
+            "x": float(fix.pose[0]),
+            "y": float(fix.pose[1]),
+            "theta": float(fix.pose[2]),
+            "score": float(fix.score),
+            "ok": bool(fix.ok),
+            "ambiguous": bool(a.ambiguous),
+            "reason": a.reason,
+            "ms": 1e3 * fix.seconds,
+            "global": guess is None,
+        }
+        self.n_ok += bool(fix.ok)
+        Tr = poses.at(self.ref_topic, msg.stamp_ns) if self.ref_topic else None
+        if Tr is not None:
+            r = planar(Tr)
+            pe = float(np.hypot(*(fix.pose[:2] - r[:2])))
+            he = float(np.degrees(abs(np.angle(np.exp(1j * (fix.pose[2] - r[2]))))))
+            rec.update(position_error_m=pe, heading_error_deg=he)
+            self.errors.append((pe, he))
+            self.n_success += pe <= self.cfg.success_m and he <= self.cfg.success_deg
+        return StageResult(outs, rec)
+
+    def finish(self, out: Path, stamp_ns: int) -> StageResult:
+        rec: dict[str, Any] = {"fixes": self.n, "ok_rate": self.n_ok / max(self.n, 1)}
+        if self.errors:
+            e = np.array(self.errors)
+            rec.update(
+                position_error_m_median=float(np.median(e[:, 0])),
+                position_error_m_p95=float(np.percentile(e[:, 0], 95)),
+                heading_error_deg_median=float(np.median(e[:, 1])),
+                success_rate=self.n_success / max(self.n, 1),
+                reference=self.ref_topic,
+            )
+        return StageResult(record=rec)
+
+
+# --------------------------------------------------------------------------- planes
+class PlanesStage:
+    """Paper 2's plane odometry on depth (+ colour) frames with ``CameraInfo``
+    (``planes.PlaneOdometry.register_frame``); publishes the camera pose and the frame's planes."""
+
+    name = "planes"
+
+    def __init__(self, pipe: Pipeline, out: Path) -> None:
+        from navkit.planes import ExtractionSettings, OdometrySettings, PlaneOdometry
+        from navkit.planes.motion import MotionSettings
+        from navkit.planes.solve import SolverSettings
+
+        self.cfg = pipe.planes
+        self.topics = pipe.topics
+        self.es = ExtractionSettings(cell=self.cfg.cell)
+        self.odo = PlaneOdometry(
+            OdometrySettings(motion=MotionSettings(solver=SolverSettings(nu=self.cfg.nu)))
+        )
+        self.camera: CameraData | None = None
+        self.depth: Message | None = None
+        self.color: Message | None = None
+        self.n = self.n_ok = 0
+        self.out = out / "planes"
+        self.trajectory: list[tuple[int, NDArray[np.float64]]] = []
+
+    def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
+        if msg.kind == "camera_info":
+            self.camera = msg.data
+            return StageResult()
+        if msg.kind == "depth":
+            self.depth = msg
+        else:
+            self.color = msg
+        d, c = self.depth, self.color
+        if d is None or self.camera is None:
+            return StageResult()
+        tol = int(self.cfg.max_time_offset_s * 1e9)
+        paired = c is not None and abs(c.stamp_ns - d.stamp_ns) <= tol
+        if not paired and self.topics.color and msg.kind == "depth":
+            return StageResult()  # wait for the colour of this depth frame
+        return self._frame(d, c if paired else None)
+
+    def _frame(self, d: Message, c: Message | None) -> StageResult:
+        from navkit.planes import observe_rgbd
+        from navkit.sensors import PinholeCamera, RGBDFrame
+
+        cam = self.camera
+        assert cam is not None
+        depth = d.data
+        color = (
+            c.data
+            if c is not None and c.data.shape[:2] == depth.shape
+            else np.zeros((*depth.shape, 3), np.uint8)
+        )
+        pc = PinholeCamera(cam.fx, cam.fy, cam.cx, cam.cy, depth.shape[1], depth.shape[0])
+        self.depth = self.color = None
+        obs = observe_rgbd(RGBDFrame(color, depth, pc, d.stamp), self.es)
+        r = self.odo.register_frame(obs)
+        self.n += 1
+        self.n_ok += str(r.status).startswith(("ok", "first"))
+        self.trajectory.append((d.stamp_ns, r.T_world_frame.copy()))
+        outs = [Output("/navkit/planes/pose", "pose", d.stamp_ns, "planes_odom", r.T_world_frame)]
+        lines = []
+        R, t = r.T_world_frame[:3, :3], r.T_world_frame[:3, 3]
+        for k, seg in enumerate(obs.extraction.segments):
+            P = np.asarray(seg.outline_3d(), dtype=np.float64)  # camera frame
+            if P.ndim == 2 and len(P) >= 3:
+                lines.append(Polyline("planes", k, P @ R.T + t, (0.2, 0.7, 0.3, 1.0)))
+        if lines:
+            outs.append(
+                Output("/navkit/planes/outlines", "markers", d.stamp_ns, "planes_odom", lines)
+            )
+        return StageResult(
+            outs,
+            {
+                "status": r.status,
+                "case": r.case,
+                "planes": r.n_planes,
+                "motion_ms": r.ms,
+                "source": r.source,
+            },
+        )
+
+    def finish(self, out: Path, stamp_ns: int) -> StageResult:
+        if not self.trajectory:
+            return StageResult(record={"frames": 0})
+        from navkit.io.atomic import write_json
+        from navkit.io.trajectory import Trajectory, write_tum
+
+        self.out.mkdir(parents=True, exist_ok=True)
+        t = np.array([s for s, _ in self.trajectory]) * 1e-9
+        P = np.stack([T for _, T in self.trajectory])
+        keep = np.r_[True, np.diff(t) > 0]
+        write_tum(self.out / "trajectory.tum", Trajectory(t[keep], P[keep]))
+        write_json(self.out / "map.json", self.odo.map.to_dict())
+        return StageResult(
+            record={"frames": self.n, "tracked": self.n_ok, "map_planes": len(self.odo.map.planes)}
+        )
+
+
+# --------------------------------------------------------------------------- path memory
+class PathStage:
+    """Paper 4's path memory of the pose topic (``path.OnlineApproximator``): the stored spline,
+    sampled every 0.1 m, is published every ``publish_every`` accepted poses and at the end
+    (``path.json`` as ``navkit path record`` writes it)."""
+
+    name = "path"
+
+    def __init__(self, pipe: Pipeline, out: Path) -> None:
+        from navkit.path import ApproximatorSettings, OnlineApproximator
+
+        self.cfg = pipe.path
+        self.rec = OnlineApproximator(ApproximatorSettings(tolerance=self.cfg.tolerance_m))
+        self.n_accepted = 0
+        self.frame = "map"
+        self.out = out / "path"
+
+    def _path_output(self, spline: Any, stamp_ns: int) -> Output:
+        if spline.n_segments == 0:
+            xy = np.zeros((0, 2))
+        else:
+            _, xy = spline.sample(0.1)
+        return Output("/navkit/path", "path", stamp_ns, self.frame, np.c_[xy, np.zeros(len(xy))])
+
+    def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
+        self.frame = msg.frame_id or "map"
+        T = msg.data
+        if not self.rec.add(T[:2, 3]):
+            return StageResult()
+        self.n_accepted += 1
+        if self.n_accepted % max(self.cfg.publish_every, 1) == 0:
+            return StageResult([self._path_output(self.rec.spline, msg.stamp_ns)])
+        return StageResult()
+
+    def finish(self, out: Path, stamp_ns: int) -> StageResult:
+        from navkit.io.pathjson import write_path_json
+
+        res = self.rec.finish()
+        self.out.mkdir(parents=True, exist_ok=True)
+        write_path_json(self.out / "path.json", res.spline)
+        return StageResult(
+            [self._path_output(res.spline, stamp_ns)],
+            {
+                "poses": self.rec.n_input,
+                "accepted": self.n_accepted,
+                "segments": res.spline.n_segments,
+                "length_m": float(res.spline.total_length),
+            },
+        )
+
+
+def build_stages(pipe: Pipeline, out: Path) -> dict[str, Any]:
+    """The stages of a pipeline, by capability name (obstacle map = the obstacles stage)."""
+    caps = set(pipe.capabilities)
+    stages: dict[str, Any] = {}
+    if "obstacles" in caps or "obstacle_map" in caps:
+        stages["obstacles"] = ObstaclesStage(pipe, out, with_map="obstacle_map" in caps)
+    if "wall_map" in caps:
+        stages["wall_map"] = LaserMappingStage(pipe, out)
+    if "localization" in caps:
+        stages["localization"] = LaserLocalizationStage(pipe, out)
+    if "planes" in caps:
+        stages["planes"] = PlanesStage(pipe, out)
+    if "path" in caps:
+        stages["path"] = PathStage(pipe, out)
+    return stages
+
+
+def route(pipe: Pipeline, stages: dict[str, Any], msg: Message) -> list[Any]:
+    """The stages a message goes to."""
+    t = pipe.topics
+    out = []
+    if msg.kind == "cloud" and msg.topic in t.clouds and "obstacles" in stages:
+        out.append(stages["obstacles"])
+    elif msg.kind == "scan" and msg.topic in t.scans:
+        for name in ("wall_map", "localization"):
+            if name in stages:
+                out.append(stages[name])
+    elif msg.kind in ("depth", "color", "camera_info") and "planes" in stages:
+        if msg.topic in (t.depth, t.color, t.camera_info):
+            out.append(stages["planes"])
+    elif msg.kind == "pose" and msg.topic == t.pose and "path" in stages:
+        out.append(stages["path"])
+    return out
+
+
+def needs_pose(pipe: Pipeline, stages: dict[str, Any], msg: Message) -> list[str]:
+    """Pose topics whose value at the message's stamp the message's stages need."""
+    t = pipe.topics
+    need = []
+    if msg.kind == "cloud" and "obstacle_map" in pipe.capabilities and t.pose:
+        need.append(t.pose)
+    if msg.kind == "scan":
+        if "wall_map" in stages and t.pose:
+            need.append(t.pose)
+        if "localization" in stages:
+            need += [x for x in (stages["localization"].odom_topic, t.reference) if x]
+    return need

@@ -1,0 +1,148 @@
+"""Live and recorded 3D viewing of a ``navkit run`` with Rerun (``rerun-sdk``, extra ``rerun``).
+
+:class:`RerunLogger` has the interface of :class:`navkit.runtime.run.NullLogger`, so the run loop
+never branches on whether anything is viewed (kiss-icp style). One timeline, ``recording``
+(the messages' stamps, seconds); entities:
+
+- ``world/obstacles/points``: the classified cloud, coloured by class (green ground, grey
+  unreliable, red obstacle, orange / purple shadows), ``class_ids`` kept;
+- ``world/obstacles/shapes/<name>``, ``world/walls``, ``world/planes``: outlines (line strips;
+  of the bounding shapes only ``shapes``, default A1 and A6 as ``navkit obstacles detect``'s
+  PNG: twelve overlapping outlines per obstacle hide the scene; ``results.mcap`` has them all);
+- ``world/<topic>/grid``: occupancy grids as the occupied cells' centres;
+- ``world/path``: the stored path; ``world/<topic>``: poses (fixes, plane odometry, input poses)
+  as transforms with a short axis triad.
+
+Everything is drawn in the frame of its message; frames are not chained (the recording's world
+frame and the sensor frames are shown side by side, as the MCAP holds them).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from navkit.errors import require_module
+
+__all__ = ["CLASS_COLORS", "RerunLogger"]
+
+log = logging.getLogger(__name__)
+
+CLASS_COLORS = {
+    0: (60, 180, 75),  # ground
+    -1: (150, 150, 150),  # unreliable
+    -2: (230, 25, 75),  # obstacle
+    -3: (245, 130, 48),  # side shadow
+    -4: (145, 30, 180),  # shadow behind
+}
+
+
+def _entity(topic: str) -> str:
+    return "world/" + topic.strip("/").replace("navkit/", "")
+
+
+class RerunLogger:
+    """Send a run to the Rerun viewer (``spawn``) and/or record it to an ``.rrd`` file (``save``)."""
+
+    def __init__(
+        self,
+        spawn: bool = False,
+        save: str | os.PathLike[str] | None = None,
+        application_id: str = "navkit",
+        shapes: tuple[str, ...] = ("A1", "A6"),
+    ) -> None:
+        rr = require_module("rerun", "rerun", "viewing a run in Rerun (--rerun / --rerun-save)")
+        self.rr = rr
+        self.rec = rr.RecordingStream(application_id)
+        if save is not None:
+            Path(save).parent.mkdir(parents=True, exist_ok=True)
+            self.rec.save(str(save))
+        if spawn:
+            self.rec.spawn(connect=save is None)
+        self.save = save
+        self.shapes = set(shapes)
+        self._lut = np.zeros((256, 3), dtype=np.uint8)
+        for k, c in CLASS_COLORS.items():
+            self._lut[k & 0xFF] = c
+        self.rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_UP, static=True)
+        self.rec.send_blueprint(self.blueprint())
+
+    def blueprint(self) -> Any:
+        """One 3D view of ``world`` with the side panels collapsed."""
+        import rerun.blueprint as rrb
+
+        return rrb.Blueprint(rrb.Spatial3DView(origin="/world"), collapse_panels=True)
+
+    def set_time(self, stamp_ns: int) -> None:
+        """Move the ``recording`` timeline to ``stamp_ns``."""
+        self.rec.set_time("recording", timestamp=stamp_ns * 1e-9)
+
+    def log_message(self, msg: Any) -> None:
+        """Input poses as transforms (clouds are shown classified, by their output)."""
+        if msg.kind == "pose":
+            self._pose(_entity(msg.topic), msg.data)
+
+    def _pose(self, entity: str, T: Any) -> None:
+        rr = self.rr
+        T = np.asarray(T, dtype=np.float64)
+        self.rec.log(entity, rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]))
+        self.rec.log(
+            entity + "/axes",
+            rr.Arrows3D(vectors=np.eye(3) * 0.5, colors=[(255, 0, 0), (0, 255, 0), (0, 0, 255)]),
+        )
+
+    def log_output(self, o: Any) -> None:
+        """Show one :class:`~navkit.runtime.messages.Output`."""
+        rr = self.rr
+        ent = _entity(o.topic)
+        if o.kind == "classified_cloud":
+            pts, cls = o.data
+            cls = np.asarray(cls, dtype=np.int8)
+            self.rec.log(
+                ent,
+                rr.Points3D(
+                    np.asarray(pts, np.float32),
+                    colors=self._lut[cls.astype(np.uint8)],
+                    class_ids=cls.astype(np.int16),
+                    radii=rr.Radius.ui_points(1.5),
+                ),
+            )
+        elif o.kind == "markers":
+            self.rec.log(ent, rr.Clear(recursive=True))  # this array replaces the last one
+            groups: dict[str, tuple[list[Any], list[Any]]] = {}
+            for line in o.data:  # one entity per outline kind (shape name, walls, corners, planes)
+                if line.ns.startswith("shape/") and line.ns[len("shape/") :] not in self.shapes:
+                    continue
+                P = np.asarray(line.points, np.float32)
+                name = line.ns.split("/")[-1].replace(":", "/")
+                strips, colors = groups.setdefault(name, ([], []))
+                strips.append(np.vstack([P, P[:1]]) if line.closed and len(P) > 1 else P)
+                colors.append([int(255 * c) for c in line.color])
+            for name, (strips, colors) in groups.items():
+                sub = ent if name == ent.rsplit("/", 1)[-1] else f"{ent}/{name}"
+                self.rec.log(
+                    sub, rr.LineStrips3D(strips, colors=colors, radii=rr.Radius.ui_points(1.5))
+                )
+        elif o.kind == "grid":
+            occ, res, origin = o.data
+            rows, cols = np.nonzero(np.asarray(occ) == 100)
+            xy = np.asarray(origin)[:2] + (np.c_[cols, rows] + 0.5) * res
+            self.rec.log(
+                ent, rr.Points3D(np.c_[xy, np.zeros(len(xy))], colors=(40, 40, 40), radii=0.5 * res)
+            )
+        elif o.kind == "path":
+            self.rec.log(
+                ent, rr.LineStrips3D([np.asarray(o.data, np.float32)], colors=(0, 120, 255))
+            )
+        elif o.kind == "pose":
+            self._pose(ent, o.data)
+
+    def close(self) -> None:
+        """Flush and close the recording (the ``.rrd`` is complete after this)."""
+        self.rec.flush()
+        if self.save is not None:
+            self.rec.disconnect()

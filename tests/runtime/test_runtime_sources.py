@@ -1,0 +1,113 @@
+"""The folder formats as streams (KITTI, CARMEN, RGB-D, trajectories), the pipeline's topic
+mapping and its errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from navkit.errors import ConfigError, InputError
+from navkit.runtime import open_source, resolve_pipeline, run_recording
+
+pytest.importorskip("mcap", reason="mcap (extra 'ros') not installed")
+pytest.importorskip("rosbags", reason="rosbags (extra 'ros') not installed")
+
+
+def test_auto_topics_and_errors():
+    topics = {"/points": "cloud", "/scan": "scan", "/odom": "pose", "/ground_truth": "pose"}
+    p = resolve_pipeline("rec", topics)
+    assert p.topics.pose == p.topics.reference == "/ground_truth"
+    assert p.topics.odometry == "/odom"
+    assert set(p.capabilities) == {"obstacles", "obstacle_map", "wall_map", "path"}
+    p = resolve_pipeline("rec", topics, map_path="map.json")
+    assert "localization" in p.capabilities and "wall_map" not in p.capabilities
+    p = resolve_pipeline(
+        "rec", topics, {"topics": {"pose": "/odom"}, "run": {"capabilities": ["path"]}}
+    )
+    assert p.topics.pose == "/odom" and p.capabilities == ("path",)
+    with pytest.raises(ConfigError, match=r"topics\.pose.*'/scan' is scan"):
+        resolve_pipeline("rec", topics, {"topics": {"pose": "/scan"}})
+    with pytest.raises(ConfigError, match=r"unknown keys \['resolution'\]"):
+        resolve_pipeline("rec", topics, {"laser": {"resolution": 1}})
+    with pytest.raises(ConfigError, match=r"planes.*no input"):
+        resolve_pipeline("rec", topics, {"run": {"capabilities": ["planes"]}})
+    with pytest.raises(ConfigError, match=r"laser\.sigma_m.*a number"):
+        resolve_pipeline("rec", topics, {"laser": {"sigma_m": "wide"}})
+
+
+def test_cli_refuses_to_overwrite_and_bad_input(cli, tmp_path):
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "x.txt").write_text("earlier result")
+    traj = tmp_path / "t.tum"
+    traj.write_text("".join(f"{k * 0.1:.1f} {k * 0.1} 0 0 0 0 0 1\n" for k in range(20)))
+    r = cli("run", traj, "--out", tmp_path / "out")
+    assert r.exit_code == 2 and "--overwrite" in r.output
+    assert cli("run", traj, "--out", tmp_path / "out", "--overwrite").exit_code == 0
+    r = cli("run", tmp_path / "nothing.xyz", "--out", tmp_path / "o2")
+    assert r.exit_code == 2 and "no such recording" in r.output
+    (tmp_path / "junk.bin").write_bytes(b"x")
+    with pytest.raises(InputError, match="not a recording"):
+        open_source(tmp_path / "junk.bin")
+    r = cli("run", traj, "--out", tmp_path / "o3", "--resume")
+    assert r.exit_code == 2 and "checkpoint" in r.output
+
+
+def test_trajectory_file_path_memory(data_path, tmp_path):
+    """A TUM trajectory streamed pose by pose: path.json is the recorder's result on the same
+    points (the online path memory sees them in the same order)."""
+    from navkit.io.pathjson import read_path_json
+    from navkit.io.trajectory import read_trajectory
+    from navkit.path import ApproximatorSettings, OnlineApproximator
+
+    f = data_path("trajectories/freiburg1_xyz-groundtruth.txt")
+    s = run_recording(f, tmp_path / "o")
+    tr = read_trajectory(f)
+    rec = OnlineApproximator(ApproximatorSettings(tolerance=0.05))
+    for p in tr.poses[:, :2, 3]:
+        rec.add(p)
+    want = rec.finish().spline
+    got = read_path_json(tmp_path / "o" / "path" / "path.json")
+    assert got.n_segments == want.n_segments == s["capabilities"]["path"]["segments"]
+    np.testing.assert_allclose(got.total_length, want.total_length, rtol=1e-12)
+
+
+def test_kitti_folder_equals_obstacles_detect(data_path, tmp_path, cli):
+    folder = data_path("lidar/semantickitti-seq00")
+    bins = sorted(folder.glob("*.bin"))[:2]
+    assert cli("obstacles", "detect", *bins, "--out", tmp_path / "ref").exit_code == 0
+    s = run_recording(folder, tmp_path / "run", {"run": {"max_items": 2}})
+    assert s["capabilities"]["obstacles"]["messages"] == 2
+    for k, b in enumerate(bins):
+        np.testing.assert_array_equal(
+            np.load(tmp_path / "run" / "obstacles" / f"{k:06d}" / "labels.npy"),
+            np.load(tmp_path / "ref" / b.stem / "labels.npy"),
+        )
+
+
+def test_rgbd_folder_plane_odometry(data_path, tmp_path):
+    """The slambook RGB-D folder through plane odometry: the same poses as PlaneOdometry on the
+    frames read by ``io.rgbd`` (the runtime pairs colour and depth by stamp)."""
+    from navkit.io.rgbd import open_rgbd_sequence
+    from navkit.io.trajectory import read_tum
+    from navkit.planes import ExtractionSettings, OdometrySettings, PlaneOdometry, observe_rgbd
+
+    folder = data_path("rgbd/slambook-ch5")
+    cam = {"fx": 518.0, "fy": 519.0, "cx": 325.5, "cy": 253.5, "depth_scale": 1000.0}
+    s = run_recording(folder, tmp_path / "o", intrinsics=(518.0, 519.0, 325.5, 253.5))
+    assert s["capabilities"]["planes"]["frames"] == 3
+    seq = open_rgbd_sequence(folder, cam)
+    odo = PlaneOdometry(OdometrySettings())
+    want = np.stack(
+        [
+            odo.register_frame(
+                observe_rgbd(seq.frame(i), ExtractionSettings(cell=20))
+            ).T_world_frame
+            for i in range(3)
+        ]
+    )
+    got = read_tum(tmp_path / "o" / "planes" / "trajectory.tum").poses
+    np.testing.assert_allclose(got, want, atol=1e-6)
+    recs = [json.loads(x) for x in (tmp_path / "o" / "frames.jsonl").read_text().splitlines()]
+    assert next(r["status"].split(" ")[0] for r in recs if r["capability"] == "planes") == "first"
