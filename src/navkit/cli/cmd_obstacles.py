@@ -198,54 +198,7 @@ def detect(
           --sensor hdl64e-kitti -o out/kitti
     """
     with cli_errors():
-        from navkit.geometry.shapes import SHAPES
-        from navkit.obstacles import ObstacleSettings
-
-        cfg = _load_config(config, ctx)
-        given = {k for k in ctx.params if _given(ctx, k)}
-        if c0_deg is not None:
-            cfg["detector"]["c0_deg"] = c0_deg
-        if shapes is not None:
-            cfg["detector"]["shapes"] = _names(shapes, SHAPES, "--shapes")
-        settings = ObstacleSettings.from_dict(cfg["detector"], source=str(config or "options"))
-        cli_inputs = {
-            "sensor": sensor, "sensor_height_m": sensor_height, "roll_deg": roll_deg,
-            "pitch_deg": pitch_deg, "gravity": _parse_floats(gravity, 3, "--gravity"),
-            "rings": rings, "columns": columns, "ring_method": ring_method,
-            "intrinsics": _parse_floats(intrinsics, 4, "--intrinsics"), "depth_scale": depth_scale,
-        }  # fmt: skip
-        option_of = {"sensor_height_m": "sensor_height", "intrinsics": "intrinsics"}
-        merged = {**cfg["inputs"]}
-        for key, val in cli_inputs.items():
-            if option_of.get(key, key) in given or key not in merged:
-                merged[key] = val
-        opts, _ = _with_preset(InputOptions(**merged))
-        geo = (
-            _parse_floats(origin, 3, "--origin")
-            if origin and origin.count(",") == 2
-            else (_parse_floats(origin, 2, "--origin") if origin else None)
-        )
-        cli_map: dict[str, Any] = {
-            "outputs": _names(outputs, OUTPUTS, "--outputs"), "resolution_m": resolution,
-            "extent_m": extent, "png_shapes": _names(plot_shapes, SHAPES, "--plot-shapes"),
-            "origin": geo,
-        }  # fmt: skip
-        map_option = {
-            "resolution_m": "resolution",
-            "extent_m": "extent",
-            "png_shapes": "plot_shapes",
-        }
-        mcfg: dict[str, Any] = dict(cfg["map"])
-        for key, val in cli_map.items():
-            if map_option.get(key, key) in given or key not in mcfg:
-                mcfg[key] = val
-        mcfg = {k: tuple(v) if isinstance(v, list) else v for k, v in mcfg.items()}
-        mcfg["outputs"] = _check_geo(
-            _names(",".join(mcfg["outputs"]), OUTPUTS, "outputs"),
-            mcfg.get("origin"),
-            "outputs" in given or "outputs" in cfg["map"],
-        )
-        mopts = MapOptions(**mcfg)
+        settings, opts, mopts = _resolve_settings(ctx, config)
         files = expand_inputs(inputs, _suffixes())
         check_out_dir(out, overwrite or resume)
         if workers or scheduler or resume:
@@ -283,6 +236,54 @@ def detect(
         )
     if failed and (workers or scheduler or resume):
         exit_if_failed({"failed": len(failed)})
+
+
+def _resolve_settings(ctx: typer.Context, config: Path | None) -> tuple[Any, Any, Any]:
+    """The detector settings, input options and map options of a run: the ``--config`` tables,
+    with the options given on the command line on top (read from click's context)."""
+    from navkit.geometry.shapes import SHAPES
+    from navkit.obstacles import ObstacleSettings
+
+    o = ctx.params
+    cfg = _load_config(config, ctx)
+    given = {k for k in o if _given(ctx, k)}
+    if o["c0_deg"] is not None:
+        cfg["detector"]["c0_deg"] = o["c0_deg"]
+    if o["shapes"] is not None:
+        cfg["detector"]["shapes"] = _names(o["shapes"], SHAPES, "--shapes")
+    settings = ObstacleSettings.from_dict(cfg["detector"], source=str(config or "options"))
+    cli_inputs = {
+        "sensor": o["sensor"], "sensor_height_m": o["sensor_height"], "roll_deg": o["roll_deg"],
+        "pitch_deg": o["pitch_deg"], "gravity": _parse_floats(o["gravity"], 3, "--gravity"),
+        "rings": o["rings"], "columns": o["columns"], "ring_method": o["ring_method"],
+        "intrinsics": _parse_floats(o["intrinsics"], 4, "--intrinsics"),
+        "depth_scale": o["depth_scale"],
+    }  # fmt: skip
+    option_of = {"sensor_height_m": "sensor_height", "intrinsics": "intrinsics"}
+    merged = {**cfg["inputs"]}
+    for key, val in cli_inputs.items():
+        if option_of.get(key, key) in given or key not in merged:
+            merged[key] = val
+    opts, _ = _with_preset(InputOptions(**merged))
+    origin = o["origin"]
+    geo = _parse_floats(origin, 3 if origin.count(",") == 2 else 2, "--origin") if origin else None
+    cli_map: dict[str, Any] = {
+        "outputs": _names(o["outputs"], OUTPUTS, "--outputs"), "resolution_m": o["resolution"],
+        "extent_m": o["extent"], "png_shapes": _names(o["plot_shapes"], SHAPES, "--plot-shapes"),
+        "origin": geo,
+    }  # fmt: skip
+    map_option = {"resolution_m": "resolution", "extent_m": "extent", "png_shapes": "plot_shapes"}
+    mcfg: dict[str, Any] = dict(cfg["map"])
+    for key, val in cli_map.items():
+        if map_option.get(key, key) in given or key not in mcfg:
+            mcfg[key] = val
+    mcfg = {k: tuple(v) if isinstance(v, list) else v for k, v in mcfg.items()}
+    mcfg["outputs"] = _check_geo(
+        _names(",".join(mcfg["outputs"]), OUTPUTS, "outputs"),
+        mcfg.get("origin"),
+        "outputs" in given or "outputs" in cfg["map"],
+    )
+    return settings, opts, MapOptions(**mcfg)
 
 
 def _run_frames(

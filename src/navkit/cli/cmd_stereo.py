@@ -14,6 +14,7 @@ import logging
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -93,9 +94,9 @@ def disparity_cmd(
     with cli_errors():
         import numpy as np
 
-        from navkit.io.images import read_image, read_pfm, write_image, write_pfm
+        from navkit.io.images import read_image, write_image, write_pfm
         from navkit.io.pointcloud import write_ply
-        from navkit.io.stereo import read_middlebury_calib, read_stereo_calib
+        from navkit.io.stereo import read_stereo_calib
         from navkit.stereo import (
             DisparitySettings,
             bad_pixel_rate,
@@ -116,13 +117,8 @@ def disparity_cmd(
                 field="size",
                 expected="the calibrated image size",
             )
-        nd = num_disparities
-        if nd <= 0:
-            try:
-                ndisp = read_middlebury_calib(calib)[1].get("ndisp", 0.0)
-            except Exception:  # not a Middlebury file
-                ndisp = 0.0
-            nd = int(16 * np.ceil(ndisp / 16)) if ndisp > 0 else 128
+        nd = num_disparities if num_disparities > 0 else _calib_num_disparities(calib)
+        G, M = _read_reference(gt, mask)  # every input read before anything is written
         bs = block_size or (9 if matcher == MatcherChoice.bm else 3)
         settings = DisparitySettings(
             matcher=matcher.value,
@@ -149,13 +145,7 @@ def disparity_cmd(
             "points": int(ok.sum()),
             "rig": {"fx": rig.camera.fx, "baseline_m": rig.baseline, "doffs": rig.doffs},
         }
-        if gt is not None:
-            G = read_pfm(gt).astype(np.float64)
-            G[~np.isfinite(G)] = np.nan
-            M = None
-            if mask is not None:
-                m = read_image(mask)
-                M = (m if m.ndim == 2 else m[..., 0]) == 255
+        if G is not None:
             for t in (2.0, 4.0):
                 bad, bad_valid = bad_pixel_rate(res.disparity, G, t, M)
                 summary[f"bad_{t:.1f}_percent"] = bad
@@ -175,6 +165,37 @@ def disparity_cmd(
             + (f", bad-2.0 {summary['bad_2.0_percent']:.2f}%" if gt is not None else "")
             + f" -> {out}"
         )
+
+
+def _calib_num_disparities(calib: Path) -> int:
+    """The calibration's disparity range (Middlebury ``ndisp``) rounded up to a multiple of 16,
+    or 128 when the file does not say."""
+    import numpy as np
+
+    from navkit.io.stereo import read_middlebury_calib
+
+    try:
+        ndisp = read_middlebury_calib(calib)[1].get("ndisp", 0.0)
+    except Exception:  # not a Middlebury file
+        ndisp = 0.0
+    return int(16 * np.ceil(ndisp / 16)) if ndisp > 0 else 128
+
+
+def _read_reference(gt: Path | None, mask: Path | None) -> tuple[Any, Any]:
+    """Ground-truth disparity (NaN where unknown) and the non-occluded mask (255), or None."""
+    import numpy as np
+
+    from navkit.io.images import read_image, read_pfm
+
+    if gt is None:
+        return None, None
+    G = read_pfm(gt).astype(np.float64)
+    G[~np.isfinite(G)] = np.nan
+    M = None
+    if mask is not None:
+        m = read_image(mask)
+        M = (m if m.ndim == 2 else m[..., 0]) == 255
+    return G, M
 
 
 @stereo_app.command("simulate")
