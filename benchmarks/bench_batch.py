@@ -42,6 +42,61 @@ def _tasks(quick: bool):  # type: ignore[no-untyped-def]
     return tasks
 
 
+def _obstacle_tasks(quick: bool):  # type: ignore[no-untyped-def]
+    """The 3 SemanticKITTI frames, each 4 times (2 when quick): one task per frame."""
+    from navkit import datasets
+    from navkit.batch import BatchTask
+    from navkit.batch.obstacle_frames import InputOptions, MapOptions, obstacles_frame_job
+    from navkit.obstacles import ObstacleSettings
+    from navkit.obstacles.mounting import SensorHeight
+
+    height = SensorHeight(1.73, "given")
+    tasks = []
+    for copy in range(2 if quick else 4):
+        for f in ("000000", "000001", "000002"):
+            p = datasets.find(f"lidar/semantickitti-seq00/{f}.bin")
+            kwargs = {"path": str(p), "settings": ObstacleSettings(), "opts": InputOptions(),
+                      "mopts": MapOptions(), "height": height}  # fmt: skip
+            tasks.append(BatchTask(f"{f}-{copy}", obstacles_frame_job, kwargs, ""))
+    return tasks
+
+
+def _throughput(name: str, tasks: list, rows: list[Row]) -> None:  # type: ignore[type-arg]
+    """Inputs per second in process, on 1 and on 2 workers (clusters started beforehand)."""
+    import distributed
+
+    from navkit.batch import BatchSettings, local_cluster, run_batch
+
+    def timed(settings: BatchSettings) -> float:
+        with tempfile.TemporaryDirectory() as tmp:
+            t0 = time.perf_counter()
+            res = run_batch(tasks, tmp, settings)
+            wall = time.perf_counter() - t0
+            assert res.n_failed == 0, res.rows
+        return wall
+
+    walls = {"in process": timed(BatchSettings())}
+    for n in (1, 2):
+        with local_cluster(n) as cluster, distributed.Client(cluster):
+            timed(BatchSettings(scheduler=cluster.scheduler_address))  # warm the workers
+            walls[f"{n} worker{'s' * (n > 1)}"] = timed(
+                BatchSettings(scheduler=cluster.scheduler_address)
+            )
+    for label, wall in walls.items():
+        rows.append(
+            Row("batch", f"{name} x{len(tasks)}: {label}", "inputs/s", len(tasks) / wall,
+                note="cluster running, workers warm")
+        )  # fmt: skip
+    rows.append(
+        Row("batch", f"{name}: speed-up, 2 workers vs 1", "x",
+            walls["1 worker"] / walls["2 workers"], note="2-core machine; ideal 2.0")
+    )  # fmt: skip
+    rows.append(
+        Row("batch", f"{name}: seconds per input, in process", "s",
+            walls["in process"] / len(tasks), note="the per-input cost of docs/scale.md")
+    )  # fmt: skip
+
+
 def run(quick: bool = False) -> list[Row]:
     import cloudpickle
 
@@ -50,6 +105,14 @@ def run(quick: bool = False) -> list[Row]:
     cloudpickle.register_pickle_by_value(sys.modules[__name__])
     tasks = _tasks(quick)
     rows: list[Row] = []
+    _throughput("obstacles detect, KITTI frames", _obstacle_tasks(quick), rows)
+    from navkit.batch import mission_sweep_tasks
+
+    _throughput(
+        "mission sweep, yard --small",
+        mission_sweep_tasks("yard", list(range(2 if quick else 4)), small=True),
+        rows,
+    )
     walls: dict[str, float] = {}
     import distributed
 
