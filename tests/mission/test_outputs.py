@@ -63,6 +63,15 @@ def test_report_and_metrics_exist_and_agree(outputs):
     assert rec == pytest.approx(ob["recall"], abs=5e-4) and rec_large == pytest.approx(
         ob["recall_larger_than_robot"], abs=5e-4
     )
+    # the plane and room maps say what they compare, with the run's own figures
+    html_text = (out / "report.html").read_text()
+    room = saved["room"]
+    assert "compared with the true walls" in html_text
+    assert f"{room['fixes_used']} of {room['fixes_attempted']} fixes used" in html_text
+    if "corner_error_mean_m" in room:
+        assert f"corner error mean {100 * room['corner_error_mean_m']:.1f} cm" in html_text
+    planes = saved["planes"]
+    assert f"{planes['ok']} of {planes['pairs']} frame pairs gave a plane motion" in html_text
     # every capability's time per step is reported
     for key in ("obstacles_detect", "planes_motion", "localize", "path_record", "return_control"):
         assert saved["timing"][key]["calls"] > 0 and saved["timing"][key]["mean_ms"] > 0
