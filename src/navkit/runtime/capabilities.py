@@ -137,10 +137,9 @@ class ObstaclesStage:
         c = pipe.obstacles
         self.cfg = c
         self.settings = ObstacleSettings.from_dict(dict(c.detector), source="[obstacles.detector]")
-        self.mounting = Mounting(
-            height_m=c.sensor_height_m, roll_deg=c.roll_deg, pitch_deg=c.pitch_deg
-        )
-        self.T_sensor_body = np.linalg.inv(self.mounting.T_body_sensor)
+        # the height is set on the first cloud (given, or measured on its ground)
+        self.mounting = Mounting(height_m=0.0, roll_deg=c.roll_deg, pitch_deg=c.pitch_deg)
+        self.height: Any = None
         self.with_map = with_map
         self.pose_topic = pipe.topics.pose
         self.write_frames = pipe.run.write_frames
@@ -148,6 +147,24 @@ class ObstaclesStage:
         self.mapper: Any = None
         self.map_frame = "map"
         self.n = 0
+
+    def _set_height(self, points: NDArray[np.float64], src: str) -> None:
+        """The run's sensor height, once: given, or measured on this cloud's ground (as
+        ``navkit obstacles detect``: :func:`~navkit.obstacles.mounting.choose_sensor_height`)."""
+        import dataclasses
+
+        from navkit.obstacles.mounting import choose_sensor_height
+
+        self.height = choose_sensor_height(
+            points,
+            self.mounting.R_body_sensor,
+            given_m=self.cfg.sensor_height_m,
+            source=src,
+        )
+        if self.height.source != "given":
+            log.info("sensor height %.3f m (%s)", self.height.height_m, self.height.source)
+        self.mounting = dataclasses.replace(self.mounting, height_m=self.height.height_m)
+        self.T_sensor_body = np.linalg.inv(self.mounting.T_body_sensor)
 
     def _mapper(self, T: NDArray[np.float64]) -> Any:
         if self.mapper is None:
@@ -189,6 +206,8 @@ class ObstaclesStage:
         grid = cloud_to_grid(
             msg.data, n_rings=c.rings, n_columns=c.columns, ring_method=c.ring_method, source=src
         )
+        if self.height is None:
+            self._set_height(grid.points, src)
         det = detect_obstacles_in_grid(grid, self.mounting, self.settings, source=src)
         labels = grid.per_point(det.vertex_labels).astype(np.int8)
         seq = self.n
@@ -256,8 +275,9 @@ class ObstaclesStage:
         return StageResult(outs, record)
 
     def finish(self, out: Path, stamp_ns: int) -> StageResult:
+        height = {} if self.height is None else {"sensor_height": self.height.to_dict()}
         if self.mapper is None:
-            return StageResult(record={"frames": self.n})
+            return StageResult(record={"frames": self.n, **height})
         from navkit.io.maps import write_occupancy_grid
 
         o = self.grid_output(stamp_ns)
@@ -268,6 +288,7 @@ class ObstaclesStage:
             [o],
             {
                 "frames": self.n,
+                **height,
                 "map_cells_occupied": int((occ == 100).sum()),
                 "map_scans": int(self.mapper.n_scans),
                 "map_obstacles": len(self.mapper.obstacles()),
