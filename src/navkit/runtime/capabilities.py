@@ -9,11 +9,10 @@ Each stage has the same three methods, so the run loop never knows which capabil
   commands, summary figures.
 - the stage's state is plain Python / NumPy, so a checkpoint pickles it as is.
 
-Today's APIs are used (``obstacles.detect_obstacles_in_grid``, ``mission.ObstacleGrid``,
-``localization.build_map_from_scans`` / ``match_scan``, ``planes.PlaneOdometry``,
-``path.OnlineApproximator``); when the online objects of the architecture issue land
-(``obstacles.ObstacleMapper``, ``localization.Localizer``, ``path.Return``), only the inside of
-the matching stage changes.
+The online objects of the capabilities are used, the same ones the CLI commands and the
+mission use: ``obstacles.detect_obstacles_in_grid`` + ``obstacles.ObstacleMapper``,
+``localization.build_map_from_scans`` (wall map) and ``localization.Localizer``,
+``planes.PlaneOdometry``, ``path.OnlineApproximator``.
 """
 
 from __future__ import annotations
@@ -123,7 +122,12 @@ class PoseBuffer:
 # --------------------------------------------------------------------------- obstacles
 class ObstaclesStage:
     """Paper 1 on every ``PointCloud2``: per-point classes, bounding shapes A1-A7, and (with a
-    pose topic) the fused 2D obstacle map (``mission.ObstacleGrid``, a fixed window)."""
+    pose topic) the fused 2D obstacle map (:class:`navkit.obstacles.ObstacleMapper`, the object
+    the mission uses, on a fixed window around the first pose).
+
+    The pose topic gives ``T_world_sensor``; the detection's points are in the level body frame
+    (:class:`~navkit.obstacles.Mounting`), so the mapper gets
+    ``T_world_sensor @ inv(T_body_sensor)``."""
 
     name = "obstacles"
 
@@ -133,34 +137,55 @@ class ObstaclesStage:
         c = pipe.obstacles
         self.cfg = c
         self.settings = ObstacleSettings.from_dict(dict(c.detector), source="[obstacles.detector]")
-        self.mounting = Mounting(
-            height_m=c.sensor_height_m, roll_deg=c.roll_deg, pitch_deg=c.pitch_deg
-        )
+        # the height is set on the first cloud (given, or measured on its ground)
+        self.mounting = Mounting(height_m=0.0, roll_deg=c.roll_deg, pitch_deg=c.pitch_deg)
+        self.height: Any = None
         self.with_map = with_map
         self.pose_topic = pipe.topics.pose
         self.write_frames = pipe.run.write_frames
         self.out = out / "obstacles"
-        self.grid: Any = None
+        self.mapper: Any = None
         self.map_frame = "map"
         self.n = 0
 
-    def _map(self, T: NDArray[np.float64]) -> Any:
-        if self.grid is None:
-            from navkit.mission.obstacle_map import ObstacleGrid
+    def _set_height(self, points: NDArray[np.float64], src: str) -> None:
+        """The run's sensor height, once: given, or measured on this cloud's ground (as
+        ``navkit obstacles detect``: :func:`~navkit.obstacles.mounting.choose_sensor_height`)."""
+        import dataclasses
+
+        from navkit.obstacles.mounting import choose_sensor_height
+
+        self.height = choose_sensor_height(
+            points,
+            self.mounting.R_body_sensor,
+            given_m=self.cfg.sensor_height_m,
+            source=src,
+        )
+        if self.height.source != "given":
+            log.info("sensor height %.3f m (%s)", self.height.height_m, self.height.source)
+        self.mounting = dataclasses.replace(self.mounting, height_m=self.height.height_m)
+        self.T_sensor_body = np.linalg.inv(self.mounting.T_body_sensor)
+
+    def _mapper(self, T: NDArray[np.float64]) -> Any:
+        if self.mapper is None:
+            from navkit.obstacles import MapperSettings, ObstacleMapper
 
             c = self.cfg
             centre = T[:2, 3]
-            self.grid = ObstacleGrid(
+            self.mapper = ObstacleMapper(
                 centre - c.map_half_extent_m,
                 centre + c.map_half_extent_m,
-                c.map_resolution_m,
-                min_hits=c.map_min_hits,
-                min_ratio=c.map_min_ratio,
+                MapperSettings(
+                    resolution=c.map_resolution_m,
+                    min_hits=c.map_min_hits,
+                    min_ratio=c.map_min_ratio,
+                    max_range=c.map_max_range_m,
+                ),
             )
-        return self.grid
+        return self.mapper
 
     def grid_output(self, stamp_ns: int) -> Output:
-        g = self.grid
+        g = self.mapper.grid()
         occ = np.full(g.shape, -1, dtype=np.int8)
         occ[g.seen > 0] = 0
         occ[g.occupied] = 100
@@ -169,18 +194,20 @@ class ObstaclesStage:
             "grid",
             stamp_ns,
             self.map_frame,
-            (occ, g.resolution, g.origin.copy()),
+            (occ, g.resolution, g.origin),
         )
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
         from navkit.io.atomic import atomic_path, write_json
-        from navkit.obstacles import OBSTACLE, cloud_to_grid, detect_obstacles_in_grid
+        from navkit.obstacles import cloud_to_grid, detect_obstacles_in_grid
 
         c = self.cfg
         src = f"{msg.topic}@{msg.stamp_ns}"
         grid = cloud_to_grid(
             msg.data, n_rings=c.rings, n_columns=c.columns, ring_method=c.ring_method, source=src
         )
+        if self.height is None:
+            self._set_height(grid.points, src)
         det = detect_obstacles_in_grid(grid, self.mounting, self.settings, source=src)
         labels = grid.per_point(det.vertex_labels).astype(np.int8)
         seq = self.n
@@ -242,18 +269,15 @@ class ObstaclesStage:
         T = poses.at(self.pose_topic, msg.stamp_ns) if self.with_map else None
         if T is not None:
             self.map_frame = poses.frames.get(self.pose_topic, "map") or "map"
-            P = msg.data
-            near = np.linalg.norm(P[:, :2], axis=1) <= c.map_max_range_m
-            W = P @ T[:3, :3].T + T[:3, 3]
-            g = self._map(T)
-            g.add_scan(W[near & (labels == OBSTACLE), :2], W[near & (labels == 0), :2])
+            self._mapper(T).add_scan(det, T @ self.T_sensor_body)
             if self.n % max(c.map_every, 1) == 0:
                 outs.append(self.grid_output(msg.stamp_ns))
         return StageResult(outs, record)
 
     def finish(self, out: Path, stamp_ns: int) -> StageResult:
-        if self.grid is None:
-            return StageResult(record={"frames": self.n})
+        height = {} if self.height is None else {"sensor_height": self.height.to_dict()}
+        if self.mapper is None:
+            return StageResult(record={"frames": self.n, **height})
         from navkit.io.maps import write_occupancy_grid
 
         o = self.grid_output(stamp_ns)
@@ -264,8 +288,10 @@ class ObstaclesStage:
             [o],
             {
                 "frames": self.n,
+                **height,
                 "map_cells_occupied": int((occ == 100).sum()),
-                "map_scans": int(self.grid.n_scans),
+                "map_scans": int(self.mapper.n_scans),
+                "map_obstacles": len(self.mapper.obstacles()),
             },
         )
 
@@ -376,62 +402,52 @@ class LaserMappingStage:
 
 
 # --------------------------------------------------------------------------- laser: localization
-def load_wall_map(path: Path) -> Any:
-    """A :class:`~navkit.localization.WallMap` from ``map.json`` (+ its occupancy grid)."""
-    import dataclasses
-    import json
-
-    from navkit.errors import DataNotFoundError, FormatError
-    from navkit.localization import WallMap
-
-    if not path.is_file():
-        raise DataNotFoundError(f"{path}: no such map file")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise FormatError(
-            f"not JSON: {exc}", source=path, expected="a map.json written by navkit map build"
-        ) from None
-    wm = WallMap.from_dict(data, source=str(path))
-    grid = data.get("grid")
-    if grid and (path.parent / grid).is_file():
-        from navkit.io.maps import read_occupancy_grid
-
-        g = read_occupancy_grid(path.parent / grid)
-        wm = dataclasses.replace(
-            wm, occupancy=g.occupancy, resolution=g.resolution, origin=g.origin_xy
-        )
-    return wm
-
-
 class LaserLocalizationStage:
-    """Paper 3's localization of each ``LaserScan`` in a wall map (``--map``), like
-    ``navkit map locate --prior odometry``: the last fix moved by the odometry increment is the
-    prior (the first fix is global); errors against the reference topic when there is one."""
+    """Paper 3's localization of each ``LaserScan`` in a wall map (``--map``) with
+    :class:`navkit.localization.Localizer`, the object ``navkit map locate`` and the mission use,
+    like ``navkit map locate --prior odometry``: the body-frame odometry increment between
+    consecutive scans (from the odometry topic) moves the last estimate into the next tracking
+    window; the first scan, and every scan without an odometry pose, is searched globally.
+
+    Only accepted fixes are published (``/navkit/localization/pose``); a
+    :class:`~navkit.localization.LocalizationFailure` is a per-frame record with its reason (and
+    the rejected candidate), never a pose. Errors against the reference topic, when there is
+    one, are summarised as ``map locate`` does (:func:`~navkit.localization.evaluate_fixes`):
+    medians over the accepted fixes, a success is an accepted fix within ``success_m`` and
+    ``success_deg``.
+    """
 
     name = "localization"
 
     def __init__(self, pipe: Pipeline, out: Path) -> None:
-        from navkit.localization import MatcherSettings
+        from navkit.io.wallmap import read_wall_map
+        from navkit.localization import Localizer, LocalizerSettings
 
         self.cfg = pipe.laser
         self.odom_topic = pipe.topics.odometry if pipe.laser.prior == "odometry" else ""
         self.ref_topic = pipe.topics.reference
-        self.wall_map = load_wall_map(Path(pipe.map))
-        self.field = self.wall_map.likelihood_field(self.cfg.sigma_m)
-        self.settings = MatcherSettings()
-        self.last: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None  # (odom, fix)
+        self.wall_map = read_wall_map(Path(pipe.map))
+        self.localizer = Localizer(self.wall_map, LocalizerSettings(sigma=self.cfg.sigma_m))
+        self.last_odom: NDArray[np.float64] | None = None
         self.errors: deque[tuple[float, float]] = deque(maxlen=100000)
-        self.n = self.n_ok = self.n_success = 0
+        self.n = self.n_ok = self.n_success = self.n_ref = 0
         self.out = out / "localization"
         self.published_map = False
 
-    def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
+    def _odometry_delta(self, odom: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
+        """Body-frame increment since the previous scan's odometry (None: unknown)."""
         from navkit.geometry import se2_compose, se2_from_xytheta, se2_inverse, se2_to_xytheta
-        from navkit.localization import match_scan
+
+        last, self.last_odom = self.last_odom, odom
+        if last is None or odom is None:
+            return None
+        a, b = se2_from_xytheta(*last), se2_from_xytheta(*odom)
+        return se2_to_xytheta(se2_compose(se2_inverse(a), b))
+
+    def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
+        from navkit.localization import Fix
 
         scan: ScanData = msg.data
-        pts = scan.points(self.cfg.max_range_m)
         self.n += 1
         outs: list[Output] = []
         if not self.published_map:
@@ -445,57 +461,51 @@ class LaserLocalizationStage:
                     wall_lines(self.wall_map.walls, self.wall_map.corners),
                 )
             )
-        if len(pts) < 3:
-            return StageResult(outs, {"ok": False, "reason": "no points"})
         To = poses.at(self.odom_topic, msg.stamp_ns) if self.odom_topic else None
-        odom = planar(To) if To is not None else None
-        guess = None
-        if self.last is not None and odom is not None:
-            delta = se2_compose(
-                se2_inverse(se2_from_xytheta(*self.last[0])), se2_from_xytheta(*odom)
-            )
-            guess = se2_to_xytheta(se2_compose(se2_from_xytheta(*self.last[1]), delta))
-        fix = match_scan(self.field, pts, guess, self.settings)
-        if odom is not None:
-            self.last = (odom, fix.pose)
-        c, s = np.cos(fix.pose[2]), np.sin(fix.pose[2])
-        T = np.eye(4)
-        T[:2, :2] = [[c, -s], [s, c]]
-        T[:2, 3] = fix.pose[:2]
-        outs.append(Output("/navkit/localization/pose", "pose", msg.stamp_ns, "map", T))
-        a = fix.ambiguity
+        delta = self._odometry_delta(planar(To) if To is not None else None)
+        r = self.localizer.register(scan.points(self.cfg.max_range_m), odometry_delta=delta)
+        ok = isinstance(r, Fix)
+        pose = r.pose if isinstance(r, Fix) else r.candidate
         rec: dict[str, Any] = {
-            "x": float(fix.pose[0]),
-            "y": float(fix.pose[1]),
-            "theta": float(fix.pose[2]),
-            "score": float(fix.score),
-            "ok": bool(fix.ok),
-            "ambiguous": bool(a.ambiguous),
-            "reason": a.reason,
-            "ms": 1e3 * fix.seconds,
-            "global": guess is None,
+            "ok": ok,
+            "method": r.method,
+            "score": float(r.score),
+            "ambiguous": bool(r.ambiguous),
+            "reason": r.reason,
+            "ms": 1e3 * r.seconds,
         }
-        self.n_ok += bool(fix.ok)
+        if ok:
+            rec.update(x=float(pose[0]), y=float(pose[1]), theta=float(pose[2]))
+            c, s = np.cos(pose[2]), np.sin(pose[2])
+            T = np.eye(4)
+            T[:2, :2] = [[c, -s], [s, c]]
+            T[:2, 3] = pose[:2]
+            outs.append(Output("/navkit/localization/pose", "pose", msg.stamp_ns, "map", T))
+        elif np.all(np.isfinite(pose)):
+            rec["candidate"] = [float(v) for v in pose]
+        self.n_ok += ok
         Tr = poses.at(self.ref_topic, msg.stamp_ns) if self.ref_topic else None
-        if Tr is not None:
-            r = planar(Tr)
-            pe = float(np.hypot(*(fix.pose[:2] - r[:2])))
-            he = float(np.degrees(abs(np.angle(np.exp(1j * (fix.pose[2] - r[2]))))))
+        self.n_ref += Tr is not None
+        if Tr is not None and np.all(np.isfinite(pose)):
+            ref = planar(Tr)
+            pe = float(np.hypot(*(pose[:2] - ref[:2])))
+            he = float(np.degrees(abs(np.angle(np.exp(1j * (pose[2] - ref[2]))))))
             rec.update(position_error_m=pe, heading_error_deg=he)
-            self.errors.append((pe, he))
-            self.n_success += pe <= self.cfg.success_m and he <= self.cfg.success_deg
+            if ok:
+                self.errors.append((pe, he))
+                self.n_success += pe <= self.cfg.success_m and he <= self.cfg.success_deg
         return StageResult(outs, rec)
 
     def finish(self, out: Path, stamp_ns: int) -> StageResult:
         rec: dict[str, Any] = {"fixes": self.n, "ok_rate": self.n_ok / max(self.n, 1)}
+        if self.n_ref:
+            rec.update(success_rate=self.n_success / max(self.n, 1), reference=self.ref_topic)
         if self.errors:
             e = np.array(self.errors)
             rec.update(
                 position_error_m_median=float(np.median(e[:, 0])),
                 position_error_m_p95=float(np.percentile(e[:, 0], 95)),
                 heading_error_deg_median=float(np.median(e[:, 1])),
-                success_rate=self.n_success / max(self.n, 1),
-                reference=self.ref_topic,
             )
         return StageResult(record=rec)
 

@@ -72,14 +72,15 @@ class TopicsConfig:
 class ObstaclesConfig:
     """Obstacle detection on point clouds and the 2D obstacle map fused with the poses.
 
-    ``sensor_height_m`` etc. are the mounting (as ``navkit obstacles detect``); the map is a
+    ``sensor_height_m`` etc. are the mounting (as ``navkit obstacles detect``; no height given:
+    measured once on the first cloud's ground, never a silent 0); the map is a
     fixed window of ``2 map_half_extent_m`` around the first pose (memory does not grow with the
     drive); a cell is an obstacle when ``map_min_hits`` scans saw one there and at least
     ``map_min_ratio`` of the scans that saw the cell. Obstacles farther than ``map_max_range_m``
     from the sensor are not fused. The grid is published every ``map_every`` clouds.
     """
 
-    sensor_height_m: float = 0.0
+    sensor_height_m: float | None = None
     roll_deg: float = 0.0
     pitch_deg: float = 0.0
     rings: int | None = None
@@ -203,7 +204,7 @@ def _from_table(cls: Any, table: Any, source: str, section: str) -> Any:
                 raise ConfigError(
                     f"= {val!r}", source=source, field=f"{section}.{key}", expected="true or false"
                 )
-        elif isinstance(default, float):
+        elif isinstance(default, float) or (default is None and key == "sensor_height_m"):
             if isinstance(val, bool) or not isinstance(val, int | float):
                 raise ConfigError(
                     f"= {val!r}", source=source, field=f"{section}.{key}", expected="a number"
