@@ -279,7 +279,7 @@ _ONE_THREAD = {
 
 
 def local_cluster(workers: int):  # type: ignore[no-untyped-def]
-    """A ``LocalCluster`` of ``workers`` single-threaded processes (no dashboard).
+    """A ``LocalCluster`` of ``workers`` single-threaded processes (its HTTP server on a free port).
 
     Each worker's maths libraries get one thread: with one worker per core, more threads only
     fight over the same cores.
@@ -289,7 +289,7 @@ def local_cluster(workers: int):  # type: ignore[no-untyped-def]
         n_workers=workers,
         threads_per_worker=1,
         processes=True,
-        dashboard_address=None,
+        dashboard_address=":0",  # any free port: never clashes with another cluster
         env=_ONE_THREAD,
     )
 

@@ -5,13 +5,12 @@ key."""
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 from pathlib import Path
 from typing import Any
 
-from navkit.errors import DataNotFoundError, FormatError
-from navkit.io.atomic import write_json
+from navkit.errors import FormatError
+from navkit.io.atomic import read_json, write_json
 from navkit.localization.mapping import WallMap
 
 __all__ = ["read_map_truth", "read_wall_map", "write_wall_map"]
@@ -30,14 +29,7 @@ def read_wall_map(path: str | os.PathLike[str]) -> WallMap:
     from navkit.io.maps import read_occupancy_grid
 
     p = Path(path)
-    if not p.is_file():
-        raise DataNotFoundError(f"{p}: no such map file")
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise FormatError(
-            f"not JSON: {exc}", source=p, expected="a map.json written by navkit map build"
-        ) from None
+    data = read_json(p, what="a map.json written by navkit map build")
     wall_map = WallMap.from_dict(data, source=str(p))
     grid = data.get("grid") if isinstance(data, dict) else None
     if grid and (p.parent / grid).is_file():
@@ -68,10 +60,7 @@ def read_map_truth(folder: str | os.PathLike[str]) -> dict[str, Any] | None:
     p = Path(folder) / "truth.json"
     if not p.is_file():
         return None
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise FormatError(f"not JSON: {exc}", source=p, expected="navkit's truth.json") from None
+    data = read_json(p, what="navkit's truth.json")
     if not isinstance(data, dict) or not {"walls", "corners", "size"} <= set(data):
         raise FormatError(
             "missing keys", source=p, field="walls/corners/size", expected="navkit's truth.json"
