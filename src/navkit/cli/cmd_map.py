@@ -54,19 +54,9 @@ class BuildInput:
 
 
 def _read_toml(path: Path) -> dict[str, Any]:
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib  # type: ignore[no-redef]
+    from navkit.io.textfiles import load_toml_file
 
-    from navkit.errors import ConfigError, DataNotFoundError
-
-    if not path.is_file():
-        raise DataNotFoundError(f"{path}: no such settings file")
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"is not valid TOML: {exc}", source=path) from None
+    return load_toml_file(path, "a settings TOML file")
 
 
 @map_app.command("build")
@@ -85,7 +75,7 @@ def build_cmd(
 ) -> None:
     """Build a wall map (JSON, occupancy grid PGM + YAML, PNG) from scans or stereo frames with poses.
 
-    Example: navkit map build ../shared/data/laser2d/aces-corrected.log.gz --every 4 -o out/aces
+    Example: navkit map build "$NAVKIT_DATA"/laser2d/aces-corrected.log.gz --every 4 -o out/aces
     """
     with cli_errors():
         import time
@@ -188,7 +178,7 @@ def locate_cmd(
 ) -> None:
     """Localize scans / frames in a wall map (navkit.localization.Localizer); poses as TUM, fixes as CSV.
 
-    Example: navkit map locate out/aces/map.json ../shared/data/laser2d/aces-corrected.log.gz --prior odometry --every 20 -o out/aces-locate
+    Example: navkit map locate out/aces/map.json "$NAVKIT_DATA"/laser2d/aces-corrected.log.gz --prior odometry --every 20 -o out/aces-locate
     """
     with cli_errors():
         from navkit.batch.locate import LocateInput, locate_input

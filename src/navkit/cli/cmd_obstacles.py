@@ -90,16 +90,10 @@ def _load_config(config: Path | None, ctx: typer.Context) -> dict[str, dict[str,
     of an earlier run works), without the keys given on the command line."""
     if config is None:
         return {"detector": {}, "inputs": {}, "map": {}}
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib  # type: ignore[no-redef]
     from navkit.errors import ConfigError
+    from navkit.io.textfiles import load_toml_file
 
-    try:
-        data = tomllib.loads(config.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"is not valid TOML: {exc}", source=config) from exc
+    data = load_toml_file(config, "a settings TOML file")
     tables = {"detector", "inputs", "map"}
     if not tables & set(data):  # a bare table of detector settings
         data = {"detector": data}

@@ -56,16 +56,10 @@ def _config(path: Path | None) -> dict[str, Any]:
     """Settings from ``--config`` (a TOML file with the keys of :class:`PlanesRunSettings`)."""
     if path is None:
         return {}
-    import tomllib
+    from navkit.errors import ConfigError
+    from navkit.io.textfiles import load_toml_file
 
-    from navkit.errors import ConfigError, DataNotFoundError
-
-    if not path.is_file():
-        raise DataNotFoundError(f"{path}: config file not found")
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"not valid TOML ({exc})", source=path, expected="TOML") from None
+    data = load_toml_file(path, "a settings TOML file")
     table = data.get("planes", data)
     out: dict[str, Any] = {}
     for key, kind in _CONFIG_KEYS.items():
@@ -224,7 +218,7 @@ def extract_cmd(
 ) -> None:
     """Extract planes: planes.json, one texture PNG per plane, overlay.png.
 
-    Example: navkit planes extract ../shared/data/rgbd/slambook-ch5 --intrinsics 518,519,325.5,253.5 -o out/slambook-planes
+    Example: navkit planes extract "$NAVKIT_DATA"/rgbd/slambook-ch5 --intrinsics 518,519,325.5,253.5 -o out/slambook-planes
     """
     with cli_errors():
         import numpy as np
@@ -431,7 +425,7 @@ def odometry_cmd(
     """Track a sequence: trajectory.tum (tracked frames only), frames.csv (every frame: status,
     source, reason), map.json, map.ply, map.png, summary.json.
 
-    Example: navkit planes odometry ../shared/data/rgbd/7scenes-tsdf -o out/7scenes
+    Example: navkit planes odometry "$NAVKIT_DATA"/rgbd/7scenes-tsdf -o out/7scenes
     """
     with cli_errors():
         import numpy as np

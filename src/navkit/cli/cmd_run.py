@@ -10,44 +10,17 @@ from typing import Any
 
 import typer
 
-from navkit.cli.common import STATE, cli_errors
+from navkit.cli.common import STATE, check_out_dir, cli_errors
 
 log = logging.getLogger(__name__)
-
-
-def _check_out_dir(out: Path, overwrite: bool) -> None:
-    """Refuse to overwrite earlier results in ``out`` unless asked (the shared convention)."""
-    try:
-        from navkit.cli.common import check_out_dir  # type: ignore[attr-defined]
-    except ImportError:  # until the shared helper lands
-        from navkit.errors import InputError
-
-        if out.is_dir() and any(out.iterdir()) and not overwrite:
-            raise InputError(
-                "already holds outputs",
-                source=out,
-                field="--out",
-                expected="an empty or new folder, or --overwrite (or --resume to continue a run)",
-            ) from None
-        return
-    check_out_dir(out, overwrite)
 
 
 def _read_config(path: Path | None) -> dict[str, Any]:
     if path is None:
         return {}
-    try:
-        import tomllib
-    except ModuleNotFoundError:  # Python 3.10
-        import tomli as tomllib  # type: ignore[no-redef]
-    from navkit.errors import ConfigError, DataNotFoundError
+    from navkit.io.textfiles import load_toml_file
 
-    if not path.is_file():
-        raise DataNotFoundError(f"{path}: no such config file")
-    try:
-        return tomllib.loads(path.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise ConfigError(f"is not valid TOML: {exc}", source=path) from None
+    return load_toml_file(path, "a pipeline TOML file")
 
 
 def _intrinsics(text: str | None) -> tuple[float, float, float, float] | None:
@@ -109,13 +82,13 @@ def run_cmd(
 ) -> None:
     """Stream a recording through the online capabilities; results.mcap, frames.jsonl, summary.json.
 
-    Example: navkit run ../shared/data/lidar/semantickitti-seq00 --out out/run-kitti
+    Example: navkit run "$NAVKIT_DATA/lidar/semantickitti-seq00" --out out/run-kitti
     """
     with cli_errors():
         from navkit.runtime import run_recording
 
         if not resume:
-            _check_out_dir(out, overwrite)
+            check_out_dir(out, overwrite)
         logger = None
         if rerun or rerun_save is not None:
             from navkit.viz.rerun_logger import RerunLogger
