@@ -1,4 +1,4 @@
-"""The dependency rule of /work/shared/ARCHITECTURE.md and docs/architecture.md, checked on the
+"""The dependency rule of the shared ARCHITECTURE.md and docs/architecture.md, checked on the
 source: every import anywhere in a module (top level or inside a function, absolute or relative)
 counts. Layers, bottom up: core (errors, geometry, sensors, ...) <- capabilities <- io, sim <- viz
 <- mission, experiments <- runtime, batch <- cli; the mission never imports viz (the CLI joins
