@@ -110,6 +110,35 @@ def _load_config(config: Path | None, ctx: typer.Context) -> dict[str, dict[str,
     return {k: dict(data.get(k, {})) for k in tables}
 
 
+OUTPUTS_OPTION = typer.Option(
+    DEFAULT_OUTPUTS,
+    "--outputs",
+    help="What to write per frame, comma-separated: labels, obstacles, grid (map_server "
+    "PGM + YAML), png (figure), geojson (WGS84; needs --origin, which adds it).",
+)
+
+SENSOR_OPTION = typer.Option(
+    None,
+    "--sensor",
+    help="Sensor preset: hdl64e-kitti, vlp16, os1-64, os1-128, livox-mid360, kinect-v1-tum, "
+    "realsense-d435 (beam layout, intrinsics, plausible height).",
+)
+
+SENSOR_HEIGHT_OPTION = typer.Option(
+    None,
+    "--sensor-height",
+    help="Sensor height above the ground (m). Default: the .npz's, else measured from the "
+    "ground in the first frame and reported in summary.json.",
+)
+
+ORIGIN_OPTION = typer.Option(
+    None,
+    "--origin",
+    help="Georeference LAT,LON[,HEADING] (deg; heading of x, clockwise from north): "
+    "writes map.geojson in WGS84.",
+)
+
+
 @obstacles_app.command("detect")
 def detect(
     ctx: typer.Context,
@@ -120,27 +149,12 @@ def detect(
         ..., "--out", "-o", help="Output folder (one sub-folder per input, named after its stem)."
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace outputs already in --out."),
-    outputs: str = typer.Option(
-        DEFAULT_OUTPUTS,
-        "--outputs",
-        help="What to write per frame, comma-separated: labels, obstacles, grid (map_server "
-        "PGM + YAML), png (figure), geojson (WGS84; needs --origin, which adds it).",
-    ),
+    outputs: str = OUTPUTS_OPTION,
     config: Path | None = typer.Option(
         None, "--config", help="TOML with [detector], [inputs] and [map] tables (as settings.toml)."
     ),
-    sensor: str | None = typer.Option(
-        None,
-        "--sensor",
-        help="Sensor preset: hdl64e-kitti, vlp16, os1-64, os1-128, livox-mid360, kinect-v1-tum, "
-        "realsense-d435 (beam layout, intrinsics, plausible height).",
-    ),
-    sensor_height: float | None = typer.Option(
-        None,
-        "--sensor-height",
-        help="Sensor height above the ground (m). Default: the .npz's, else measured from the "
-        "ground in the first frame and reported in summary.json.",
-    ),
+    sensor: str | None = SENSOR_OPTION,
+    sensor_height: float | None = SENSOR_HEIGHT_OPTION,
     roll_deg: float = typer.Option(0.0, "--roll-deg", help="Sensor roll in the level frame (deg)."),
     pitch_deg: float = typer.Option(
         0.0, "--pitch-deg", help="Sensor pitch, positive looking down (deg)."
@@ -172,12 +186,7 @@ def detect(
     plot_shapes: str = typer.Option(
         "A1,A6", "--plot-shapes", help="Shapes in map.png and map.geojson, comma-separated."
     ),
-    origin: str | None = typer.Option(
-        None,
-        "--origin",
-        help="Georeference LAT,LON[,HEADING] (deg; heading of x, clockwise from north): "
-        "writes map.geojson in WGS84.",
-    ),
+    origin: str | None = ORIGIN_OPTION,
     workers: int | None = WORKERS,
     scheduler: str | None = SCHEDULER,
     resume: bool = RESUME,

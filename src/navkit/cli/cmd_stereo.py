@@ -92,18 +92,9 @@ def disparity_cmd(
           --gt $D/disp0GT.pfm --mask $D/mask0nocc.png -o out/motorcycle
     """
     with cli_errors():
-        import numpy as np
-
-        from navkit.io.images import read_image, write_image, write_pfm
-        from navkit.io.pointcloud import write_ply
+        from navkit.io.images import read_image
         from navkit.io.stereo import read_stereo_calib
-        from navkit.stereo import (
-            DisparitySettings,
-            bad_pixel_rate,
-            compute_disparity,
-            disparity_to_points,
-        )
-        from navkit.viz.maps import colorize_disparity
+        from navkit.stereo import DisparitySettings, compute_disparity
 
         L = read_image(left)
         R = read_image(right)
@@ -129,27 +120,7 @@ def disparity_cmd(
         )
         check_out_dir(out, overwrite)
         res = compute_disparity(L, R, settings)
-        write_pfm(
-            out / "disparity.pfm",
-            np.where(np.isfinite(res.disparity), res.disparity, np.inf).astype(np.float32),
-        )
-        write_image(out / "disparity.png", colorize_disparity(res.disparity))
-        P = disparity_to_points(res.checked, rig)
-        ok = np.all(np.isfinite(P), axis=-1) & (P[..., 2] <= max_depth)
-        colors = L[ok] if L.ndim == 3 else np.repeat(L[ok][:, None], 3, axis=1)
-        write_ply(out / "points.ply", P[ok], colors=colors)
-        summary = {
-            "ms": 1e3 * res.seconds,
-            "density": res.density,
-            "density_before_fill": float(np.isfinite(res.checked).mean()),
-            "points": int(ok.sum()),
-            "rig": {"fx": rig.camera.fx, "baseline_m": rig.baseline, "doffs": rig.doffs},
-        }
-        if G is not None:
-            for t in (2.0, 4.0):
-                bad, bad_valid = bad_pixel_rate(res.disparity, G, t, M)
-                summary[f"bad_{t:.1f}_percent"] = bad
-                summary[f"bad_{t:.1f}_valid_percent"] = bad_valid
+        summary = _write_disparity(out, L, res, rig, max_depth, G, M)
         write_run_files(
             out,
             {
@@ -165,6 +136,42 @@ def disparity_cmd(
             + (f", bad-2.0 {summary['bad_2.0_percent']:.2f}%" if gt is not None else "")
             + f" -> {out}"
         )
+
+
+def _write_disparity(
+    out: Path, L: Any, res: Any, rig: Any, max_depth: float, G: Any, M: Any
+) -> dict[str, Any]:
+    """Write ``disparity.pfm``, ``disparity.png`` and ``points.ply`` (points nearer than
+    ``max_depth``); returns the summary, with bad-2.0 / bad-4.0 against ``G`` when given."""
+    import numpy as np
+
+    from navkit.io.images import write_image, write_pfm
+    from navkit.io.pointcloud import write_ply
+    from navkit.stereo import bad_pixel_rate, disparity_to_points
+    from navkit.viz.maps import colorize_disparity
+
+    write_pfm(
+        out / "disparity.pfm",
+        np.where(np.isfinite(res.disparity), res.disparity, np.inf).astype(np.float32),
+    )
+    write_image(out / "disparity.png", colorize_disparity(res.disparity))
+    P = disparity_to_points(res.checked, rig)
+    ok = np.all(np.isfinite(P), axis=-1) & (P[..., 2] <= max_depth)
+    colors = L[ok] if L.ndim == 3 else np.repeat(L[ok][:, None], 3, axis=1)
+    write_ply(out / "points.ply", P[ok], colors=colors)
+    summary: dict[str, Any] = {
+        "ms": 1e3 * res.seconds,
+        "density": res.density,
+        "density_before_fill": float(np.isfinite(res.checked).mean()),
+        "points": int(ok.sum()),
+        "rig": {"fx": rig.camera.fx, "baseline_m": rig.baseline, "doffs": rig.doffs},
+    }
+    if G is not None:
+        for t in (2.0, 4.0):
+            bad, bad_valid = bad_pixel_rate(res.disparity, G, t, M)
+            summary[f"bad_{t:.1f}_percent"] = bad
+            summary[f"bad_{t:.1f}_valid_percent"] = bad_valid
+    return summary
 
 
 def _calib_num_disparities(calib: Path) -> int:
