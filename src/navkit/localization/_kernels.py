@@ -29,3 +29,167 @@ def gather_sums(
             acc += grid[F[r, i] + s]
         out[c] = acc
     return out
+
+
+@njit(cache=True)
+def window_offsets(
+    c: np.ndarray,
+    s: np.ndarray,
+    pts: np.ndarray,
+    base_x: float,
+    base_y: float,
+    origin_x: float,
+    origin_y: float,
+    res: float,
+    pad: int,
+    Wp: int,
+    lim_x: int,
+    lim_y: int,
+) -> np.ndarray:  # pragma: no cover - compiled
+    """The look-up table of a search window on the padded pyramid (``_Search.__init__``):
+    point ``i`` rotated by ``(c[k], s[k])``, shifted to the window's base, its cell
+    ``floor(((q + base) - origin) / res)``, flattened into the padded grid - or the all-zero
+    corner (0) when a look-up over the window would leave the padded grid. The same float
+    operations in the same order as the NumPy version: the same table exactly."""
+    K = len(c)
+    N = pts.shape[0]
+    F = np.empty((K, N), np.int32)
+    for k in range(K):
+        ck = c[k]
+        sk = s[k]
+        for i in range(N):
+            x = pts[i, 0]
+            y = pts[i, 1]
+            ox = np.floor(((ck * x - sk * y + base_x) - origin_x) / res)
+            oy = np.floor(((sk * x + ck * y + base_y) - origin_y) / res)
+            if ox >= -pad and ox <= lim_x and oy >= -pad and oy <= lim_y:
+                F[k, i] = (int(oy) + pad) * Wp + int(ox) + pad
+            else:
+                F[k, i] = 0
+    return F
+
+
+@njit(cache=True)
+def cubic_pose_scores(
+    V: np.ndarray,
+    origin_x: float,
+    origin_y: float,
+    res: float,
+    pts: np.ndarray,
+    poses: np.ndarray,
+    c: np.ndarray,
+    s: np.ndarray,
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Mean bicubic (Catmull-Rom) field value of the scan at each pose (``matcher.
+    _fine_scores``): ``V`` the field with two zero cells around it, ``(c, s)`` the poses'
+    cosines and sines (from NumPy). Per point: the rotated and shifted point, its padded index
+    coordinates ``(p - origin) / res + 1.5``, the 4 x 4 stencil weighted row by row
+    (``((w0 g0 + w1 g1) + w2 g2) + w3 g3`` across, then the same down), zero beyond the
+    padding; the points summed in order. The NumPy version does the same operations in the
+    same order: the same scores exactly."""
+    Hp, Wp = V.shape
+    M = poses.shape[0]
+    N = pts.shape[0]
+    out = np.empty(M)
+    wx = np.empty(4)
+    wy = np.empty(4)
+    for m in range(M):
+        cm = c[m]
+        sm = s[m]
+        px = poses[m, 0]
+        py = poses[m, 1]
+        acc = 0.0
+        for i in range(N):
+            x = pts[i, 0]
+            y = pts[i, 1]
+            ux = ((cm * x - sm * y + px) - origin_x) / res + 1.5
+            uy = ((sm * x + cm * y + py) - origin_y) / res + 1.5
+            fx = np.floor(ux)
+            fy = np.floor(uy)
+            if fx < 1 or fx > Wp - 3 or fy < 1 or fy > Hp - 3:
+                acc += 0.0
+                continue
+            _catmull_rom(ux - fx, wx)
+            _catmull_rom(uy - fy, wy)
+            x0 = int(fx)
+            y0 = int(fy)
+            v = 0.0
+            for a in range(4):
+                r = y0 - 1 + a
+                row = wx[0] * V[r, x0 - 1] + wx[1] * V[r, x0]
+                row = row + wx[2] * V[r, x0 + 1]
+                row = row + wx[3] * V[r, x0 + 2]
+                if a == 0:
+                    v = wy[0] * row
+                else:
+                    v = v + wy[a] * row
+            acc += v
+        out[m] = acc / N
+    return out
+
+
+@njit(cache=True)
+def _catmull_rom(t: float, w: np.ndarray) -> None:  # pragma: no cover - compiled
+    """``field._catmull_rom`` for one offset, into ``w``."""
+    t2 = t * t
+    t3 = t2 * t
+    w[0] = 0.5 * (-t3 + 2.0 * t2 - t)
+    w[1] = 0.5 * (3.0 * t3 - 5.0 * t2 + 2.0)
+    w[2] = 0.5 * (-3.0 * t3 + 4.0 * t2 + t)
+    w[3] = 0.5 * (t3 - t2)
+
+
+@njit(cache=True)
+def bilinear_pose_scores(
+    values: np.ndarray,
+    origin_x: float,
+    origin_y: float,
+    res: float,
+    pts: np.ndarray,
+    poses: np.ndarray,
+    c: np.ndarray,
+    s: np.ndarray,
+) -> np.ndarray:  # pragma: no cover - compiled
+    """Mean bilinear field value of the scan at each pose (``matcher._bilinear_scores``, the
+    values of ``LikelihoodField.interpolate``): cell centres at ``origin + (i + 0.5) res``,
+    zero outside the grid, ``v00 (1 - fx)(1 - fy) + v10 fx (1 - fy) + v01 (1 - fx) fy +
+    v11 fx fy`` in that order, the points summed in order."""
+    H, W = values.shape
+    M = poses.shape[0]
+    N = pts.shape[0]
+    out = np.empty(M)
+    for m in range(M):
+        cm = c[m]
+        sm = s[m]
+        px = poses[m, 0]
+        py = poses[m, 1]
+        acc = 0.0
+        for i in range(N):
+            x = pts[i, 0]
+            y = pts[i, 1]
+            ux = ((cm * x - sm * y + px) - origin_x) / res - 0.5
+            uy = ((sm * x + cm * y + py) - origin_y) / res - 0.5
+            x0 = int(np.floor(ux))
+            y0 = int(np.floor(uy))
+            fx = ux - x0
+            fy = uy - y0
+            v00 = _at(values, x0, y0, W, H)
+            v10 = _at(values, x0 + 1, y0, W, H)
+            v01 = _at(values, x0, y0 + 1, W, H)
+            v11 = _at(values, x0 + 1, y0 + 1, W, H)
+            val = (
+                v00 * (1 - fx) * (1 - fy)
+                + v10 * fx * (1 - fy)
+                + v01 * (1 - fx) * fy
+                + v11 * fx * fy
+            )
+            acc += val
+        out[m] = acc / N
+    return out
+
+
+@njit(cache=True)
+def _at(g: np.ndarray, ix: int, iy: int, W: int, H: int) -> float:  # pragma: no cover
+    if ix < 0 or ix >= W or iy < 0 or iy >= H:
+        return 0.0
+    return np.float64(g[iy, ix])

@@ -279,8 +279,6 @@ class _Search:
         self.thetas = thetas
         self.base = base
         self.n = n_cells
-        Q = _rotate(thetas, pts)  # (K, N, 2)
-        off = np.floor((Q + base - fld.origin) / fld.resolution).astype(np.int64)  # (K, N, 2)
         H, W = fld.shape
         levels = len(fld.pyramid) if levels is None else levels
         self.evaluated = 0
@@ -288,6 +286,11 @@ class _Search:
         # rotations; a = 0 everywhere is the plain search (one rotation per node).
         self.a = [0] * levels
         self.FG: dict[int, NDArray[np.int64]] = {}
+        if cache is None and n_cells <= _PAD_WINDOW and levels <= len(fld.pyramid):
+            self._padded_window(pts, levels)
+            return
+        Q = _rotate(thetas, pts)  # (K, N, 2)
+        off = np.floor((Q + base - fld.origin) / fld.resolution).astype(np.int64)  # (K, N, 2)
         grouped = rot_groups > 0 and cache is not None and len(thetas) > 1 and levels > 1
         extra = _GROUP_EXTRA_LEVELS if grouped else 0
         if grouped:
@@ -306,24 +309,6 @@ class _Search:
             for h in range(levels - 2, -1, -1):
                 self.a[h] = min(h - 1, self.a[h + 1]) if h >= _ROT_START else 0
             dmax = dil(self.a[levels - 1])
-        if cache is None and n_cells <= _PAD_WINDOW and levels <= len(fld.pyramid):
-            # A window searched around a prior (tracking, the global fine stage, the peak
-            # analysis): the per-map padded pyramid, built once (LikelihoodField.
-            # padded_pyramid_u8), instead of a pyramid of this search's region per fix.
-            lv = len(fld.pyramid)
-            pad = _PAD_WINDOW + 2 ** (lv - 1)
-            flat_all, Wp = fld.padded_pyramid_u8(lv, pad)
-            # A point whose look-ups over the window would leave the padded grid on some axis
-            # sees only zeros there (with this pad: beyond the grid, or more than 2^(lv-1)
-            # cells before it, where no block reaches the grid): it is sent to the padded
-            # corner, an all-zero n x n block at every level.
-            lim = np.array([W, H]) + pad - n_cells
-            inside = np.all((off >= -pad) & (off <= lim), axis=-1)  # (K, N)
-            F = (off[..., 1] + pad) * Wp + off[..., 0] + pad
-            self.F = np.where(inside, F, 0).astype(np.int32)
-            self.Wp = Wp
-            self.flat = flat_all[:levels]
-            return
         # The region of cells any look-up of this search can touch: [lo, hi) per axis. The
         # pyramid is pooled on this region (zeros outside the map), so a block that starts
         # outside the map but reaches into it keeps its true maximum; the look-up is then one
@@ -372,6 +357,40 @@ class _Search:
         self.flat = flat
         if grouped:
             self._group_tables(pts, lo, dth, levels)
+
+    def _padded_window(self, pts: NDArray[np.float64], levels: int) -> None:
+        """The look-up table of a window searched around a prior (tracking, the global fine
+        stage, the peak analysis) on the per-map padded pyramid, built once
+        (:meth:`LikelihoodField.padded_pyramid_u8`), instead of a pyramid of this search's
+        region per fix.
+
+        A point whose look-ups over the window would leave the padded grid on some axis sees
+        only zeros there (with this pad: beyond the grid, or more than ``2^(lv-1)`` cells
+        before it, where no block reaches the grid): it is sent to the padded corner, an
+        all-zero ``n x n`` block at every level. Compiled: one loop
+        (:func:`navkit.localization._kernels.window_offsets`, the same table exactly).
+        """
+        fld, n_cells = self.f, self.n
+        H, W = fld.shape
+        lv = len(fld.pyramid)
+        pad = _PAD_WINDOW + 2 ** (lv - 1)
+        flat_all, Wp = fld.padded_pyramid_u8(lv, pad)
+        lim = np.array([W, H]) + pad - n_cells
+        self.Wp = Wp
+        self.flat = flat_all[:levels]
+        if self.compiled:
+            from navkit.localization import _kernels
+
+            self.F = _kernels.window_offsets(
+                np.cos(self.thetas), np.sin(self.thetas), np.ascontiguousarray(pts),
+                float(self.base[0]), float(self.base[1]), float(fld.origin[0]),
+                float(fld.origin[1]), float(fld.resolution), pad, Wp, int(lim[0]), int(lim[1]),
+            )  # fmt: skip
+            return
+        off = np.floor((_rotate(self.thetas, pts) + self.base - fld.origin) / fld.resolution)
+        inside = np.all((off >= -pad) & (off <= lim), axis=-1)  # (K, N)
+        F = (off[..., 1].astype(np.int64) + pad) * Wp + off[..., 0].astype(np.int64) + pad
+        self.F = np.where(inside, F, 0).astype(np.int32)
 
     def _group_tables(
         self, pts: NDArray[np.float64], lo: NDArray[np.int64], dth: float, levels: int
@@ -650,10 +669,85 @@ def score_poses(fld: LikelihoodField, points: ArrayLike, poses: ArrayLike) -> ND
 def _fine_scores(
     fld: LikelihoodField, pts: NDArray[np.float64], poses: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """Mean sub-cell (bicubic) field values of the scan at poses ``(M, 3)``."""
-    W = _rotate(poses[:, 2], pts) + poses[:, None, :2]
-    v = fld.interpolate_cubic(W.reshape(-1, 2))
-    return v.reshape(len(poses), -1).mean(axis=1)
+    """Mean sub-cell (bicubic, :meth:`LikelihoodField.interpolate_cubic`) field values of the
+    scan at poses ``(M, 3)``.
+
+    Compiled (``_Search.compiled``): :func:`navkit.localization._kernels.cubic_pose_scores`,
+    one loop over poses and points. The NumPy version below is its oracle: the same operations
+    in the same order (the stencil summed row by row, the points in order - ``cumsum``, not
+    NumPy's pairwise sum), so the scores are identical.
+    """
+    V = fld.cubic_grid()
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    if _Search.compiled:
+        from navkit.localization import _kernels
+
+        return _kernels.cubic_pose_scores(  # type: ignore[no-any-return]
+            V, float(fld.origin[0]), float(fld.origin[1]), float(fld.resolution),
+            np.ascontiguousarray(pts), np.ascontiguousarray(poses), c, s,
+        )  # fmt: skip
+    Hp, Wp = V.shape
+    x, y = pts[None, :, 0], pts[None, :, 1]
+    c, s = c[:, None], s[:, None]
+    ux = ((c * x - s * y + poses[:, None, 0]) - fld.origin[0]) / fld.resolution + 1.5
+    uy = ((s * x + c * y + poses[:, None, 1]) - fld.origin[1]) / fld.resolution + 1.5
+    fx, fy = np.floor(ux), np.floor(uy)
+    inside = (fx >= 1) & (fx <= Wp - 3) & (fy >= 1) & (fy <= Hp - 3)
+    wx, wy = _catmull_rom_rows(ux - fx), _catmull_rom_rows(uy - fy)
+    x0 = np.clip(fx, 1, Wp - 3).astype(np.intp)
+    y0 = np.clip(fy, 1, Hp - 3).astype(np.intp)
+    flat = V.ravel()
+    v = np.zeros(ux.shape)
+    for a in range(4):
+        at = (y0 - 1 + a) * Wp + x0
+        row = wx[0] * flat[at - 1] + wx[1] * flat[at]
+        row = row + wx[2] * flat[at + 1]
+        row = row + wx[3] * flat[at + 2]
+        v = wy[0] * row if a == 0 else v + wy[a] * row
+    v = np.where(inside, v, 0.0)
+    return np.asarray(np.cumsum(v, axis=1)[:, -1] / pts.shape[0], dtype=np.float64)
+
+
+def _catmull_rom_rows(t: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+    """The four Catmull-Rom weights of offsets ``t`` (as ``field._catmull_rom``), one array each."""
+    t2 = t * t
+    t3 = t2 * t
+    return [
+        0.5 * (-t3 + 2.0 * t2 - t),
+        0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+        0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+        0.5 * (t3 - t2),
+    ]
+
+
+def _bilinear_scores(
+    fld: LikelihoodField, pts: NDArray[np.float64], poses: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """Mean bilinear field values (:meth:`LikelihoodField.interpolate`) of the scan at poses
+    ``(M, 3)``; compiled: :func:`navkit.localization._kernels.bilinear_pose_scores`, the NumPy
+    version below its oracle (the same operations in the same order: identical scores)."""
+    c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    if _Search.compiled:
+        from navkit.localization import _kernels
+
+        return _kernels.bilinear_pose_scores(  # type: ignore[no-any-return]
+            fld.values, float(fld.origin[0]), float(fld.origin[1]), float(fld.resolution),
+            np.ascontiguousarray(pts), np.ascontiguousarray(poses), c, s,
+        )  # fmt: skip
+    from navkit.localization.field import _gather
+
+    x, y = pts[None, :, 0], pts[None, :, 1]
+    c, s = c[:, None], s[:, None]
+    ux = ((c * x - s * y + poses[:, None, 0]) - fld.origin[0]) / fld.resolution - 0.5
+    uy = ((s * x + c * y + poses[:, None, 1]) - fld.origin[1]) / fld.resolution - 0.5
+    x0, y0 = np.floor(ux).astype(np.intp), np.floor(uy).astype(np.intp)
+    fx, fy = ux - x0, uy - y0
+    v00 = _gather(fld.values, x0, y0)
+    v10 = _gather(fld.values, x0 + 1, y0)
+    v01 = _gather(fld.values, x0, y0 + 1)
+    v11 = _gather(fld.values, x0 + 1, y0 + 1)
+    v = v00 * (1 - fx) * (1 - fy) + v10 * fx * (1 - fy) + v01 * (1 - fx) * fy + v11 * fx * fy
+    return np.asarray(np.cumsum(v, axis=1)[:, -1] / pts.shape[0], dtype=np.float64)
 
 
 _STENCIL = np.stack(
@@ -687,8 +781,7 @@ def _refine(
     GX, GY, GA = np.meshgrid(g, g, a, indexing="ij")
     cand = x + np.stack([GX.ravel(), GY.ravel(), GA.ravel()], axis=1)
     # (bilinear here, a quarter of the cubic's look-ups: it only picks the start cell)
-    W = _rotate(cand[:, 2], pts) + cand[:, None, :2]
-    v1 = fld.interpolate(W.reshape(-1, 2))[0].reshape(len(cand), -1).mean(axis=1)
+    v1 = _bilinear_scores(fld, pts, cand)
     x = cand[int(np.argmax(v1))].copy()
     # Phase 2: quadratic model rounds.
     h = np.array([dxy / 2, dxy / 2, dth / 2])
