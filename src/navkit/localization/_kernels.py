@@ -193,3 +193,87 @@ def _at(g: np.ndarray, ix: int, iy: int, W: int, H: int) -> float:  # pragma: no
     if ix < 0 or ix >= W or iy < 0 or iy >= H:
         return 0.0
     return np.float64(g[iy, ix])
+
+
+@njit(cache=True)
+def expand_sums(
+    grid: np.ndarray,
+    table: np.ndarray,
+    a_shift: int,
+    k: np.ndarray,
+    ix: np.ndarray,
+    iy: np.ndarray,
+    s: int,
+    split: int,
+    kstep: int,
+    K: int,
+    n: int,
+    Wp: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """The children of branch-and-bound nodes and their score sums in one pass
+    (``_Search._children`` then ``_Search._sums`` / ``_sums_group``).
+
+    A parent ``(k, ix, iy)`` has, for each of its ``split`` rotations ``k + r kstep < K`` (one
+    when the rotation group does not split at this level), the four translations ``(ix, iy)``,
+    ``(ix + s, iy)``, ``(ix, iy + s)``, ``(ix + s, iy + s)`` inside the ``n x n`` window - in
+    that order, the order of ``_children``. The four children of one rotation share the pass
+    over the scan's points (one read of the table row for four sums). A child's sum is
+    ``sum_i grid[table[row, i] + iy_c Wp + ix_c]`` with ``row = k_c >> a_shift`` (the rotation
+    group's row). Integer sums: identical to the NumPy path.
+    """
+    P = len(k)
+    cap = P * split * 4
+    ck = np.empty(cap, np.int64)
+    cx = np.empty(cap, np.int64)
+    cy = np.empty(cap, np.int64)
+    out = np.empty(cap, np.int64)
+    N = table.shape[1]
+    m = 0
+    for p in range(P):
+        x0 = ix[p]
+        y0 = iy[p]
+        okx = x0 + s < n
+        oky = y0 + s < n
+        # a child outside the window reads its sibling's cells (never out of the tables' range)
+        dx = s if okx else 0
+        dy = s * Wp if oky else 0
+        for r in range(split):
+            kk = k[p] + r * kstep
+            if kk >= K:
+                continue
+            row = kk >> a_shift
+            b = y0 * Wp + x0
+            a0 = 0
+            a1 = 0
+            a2 = 0
+            a3 = 0
+            for i in range(N):
+                f = table[row, i] + b
+                a0 += grid[f]
+                a1 += grid[f + dx]
+                a2 += grid[f + dy]
+                a3 += grid[f + dy + dx]
+            ck[m] = kk
+            cx[m] = x0
+            cy[m] = y0
+            out[m] = a0
+            m += 1
+            if okx:
+                ck[m] = kk
+                cx[m] = x0 + s
+                cy[m] = y0
+                out[m] = a1
+                m += 1
+            if oky:
+                ck[m] = kk
+                cx[m] = x0
+                cy[m] = y0 + s
+                out[m] = a2
+                m += 1
+            if okx and oky:
+                ck[m] = kk
+                cx[m] = x0 + s
+                cy[m] = y0 + s
+                out[m] = a3
+                m += 1
+    return ck[:m], cx[:m], cy[:m], out[:m]

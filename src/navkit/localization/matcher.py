@@ -218,6 +218,7 @@ _CACHE_ENTRIES = 2  # cached region pyramids per coarse field
 _PAD_WINDOW = 64  # cells; windows up to this use the per-map padded pyramid (see _Search)
 _ROT_GROUPS = 3  # global search: nodes cover up to 2^3 rotations (see _Search._group_tables)
 _ROT_START = 3  # ... from this pyramid level up (2^(h-1) rotations at level h)
+_ROT_LAG = 1
 _GROUP_EXTRA_LEVELS = 2  # pyramid levels beyond the search's for the rotation groups' bounds
 
 
@@ -307,7 +308,7 @@ class _Search:
                 a_top -= 1
             self.a[levels - 1] = a_top
             for h in range(levels - 2, -1, -1):
-                self.a[h] = min(h - 1, self.a[h + 1]) if h >= _ROT_START else 0
+                self.a[h] = min(h - _ROT_LAG, self.a[h + 1]) if h >= _ROT_START else 0
             dmax = dil(self.a[levels - 1])
         # The region of cells any look-up of this search can touch: [lo, hi) per axis. The
         # pyramid is pooled on this region (zeros outside the map), so a block that starts
@@ -506,6 +507,29 @@ class _Search:
             return k4, ix4, iy4
         return k4[ok], ix4[ok], iy4[ok]
 
+    def _expand(  # type: ignore[no-untyped-def]
+        self, h: int, k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp], exclude
+    ):
+        """Children ``(k, ix, iy)`` of level-``h`` nodes (those ``exclude`` leaves) and their
+        level ``h - 1`` scores. Compiled (without ``exclude``): one pass
+        (:func:`navkit.localization._kernels.expand_sums`, the same children in the same order
+        and the same integer sums); otherwise ``_children``, ``_drop``, ``scores``."""
+        if not self.compiled or exclude is not None:
+            ck, cx, cy = self._drop(h - 1, self._children(h, k, ix, iy), exclude)
+            return ck, cx, cy, self.scores(h - 1, ck, cx, cy)
+        from navkit.localization import _kernels
+
+        lv = h - 1
+        a = self.a[lv]
+        grid, table = (self.flat_all, self.FG[lv]) if a else (self.flat[lv], self.F)
+        split = 2 ** (self.a[h] - a)
+        ck, cx, cy, sums = _kernels.expand_sums(
+            grid, table, a, k, ix, iy, 2 ** (h - 1), split, 2**a, len(self.thetas), self.n,
+            self.Wp,
+        )  # fmt: skip
+        self.evaluated += len(ck)
+        return ck, cx, cy, sums / (255.0 * self.F.shape[1])
+
     def _drop(self, level: int, nodes, exclude):  # type: ignore[no-untyped-def]
         """The nodes ``(k, ix, iy)`` of ``level`` that ``exclude`` does not remove whole."""
         k, ix, iy = nodes
@@ -558,8 +582,7 @@ class _Search:
         # says little; a level of a few 10^4 nodes is where the bounds start to rank.
         h = L
         while h > 1 and 4 * len(k) <= self.breadth:
-            k, ix, iy = self._drop(h - 1, self._children(h, k, ix, iy), exclude)
-            bound = self.scores(h - 1, k, ix, iy)
+            k, ix, iy, bound = self._expand(h, k, ix, iy, exclude)
             h -= 1
             live = bound > keep * lower
             k, ix, iy, bound = k[live], ix[live], iy[live], bound[live]
@@ -570,10 +593,9 @@ class _Search:
         top = np.argsort(-bound, kind="stable")[: self.beam]
         sk, sx, sy = k[top], ix[top], iy[top]
         for hh in range(h, 0, -1):
-            ck, cx, cy = self._drop(hh - 1, self._children(hh, sk, sx, sy), exclude)
+            ck, cx, cy, cb = self._expand(hh, sk, sx, sy, exclude)
             if not len(ck):
                 break
-            cb = self.scores(hh - 1, ck, cx, cy)
             if hh == 1:
                 j = int(np.argmax(cb))
                 if cb[j] > lower:
@@ -601,11 +623,8 @@ class _Search:
                     return
                 sl = slice(a, a + self.batch)
                 live = bound[sl] > keep * state.lower
-                ck, cx, cy = self._drop(
-                    h - 1, self._children(h, k[sl][live], ix[sl][live], iy[sl][live]), exclude
-                )
+                ck, cx, cy, cb = self._expand(h, k[sl][live], ix[sl][live], iy[sl][live], exclude)
                 state.budget -= len(ck)
-                cb = self.scores(h - 1, ck, cx, cy)
                 if h == 1:
                     if len(cb):
                         j = int(np.argmax(cb))
