@@ -10,7 +10,8 @@ process on the same maps and fields) and the point-to-point ICP baseline of
 - global: no prior (ICP cannot).
 
 Success = within 0.3 m and 5 deg of the corrected pose (and ``ok`` for a global fix). The two
-matchers' fixes are compared: same verdicts and poses within ``--tol`` metres / radians.
+matchers' fixes are compared: same verdicts, ambiguity reasons, poses and peak extents within
+``--tol`` metres / radians.
 
 Run from the repository root::
 
@@ -105,7 +106,12 @@ def main() -> None:
                 good = _ok(f.pose, r) and (kind == "track" or f.ok)
                 ok.setdefault(f"{kind} {label}", []).append(good)
             a, b = fixes["before"], fixes["after"]
-            same &= bool(a.ok == b.ok and np.allclose(a.pose, b.pose, rtol=0, atol=args.tol))
+            same &= bool(
+                a.ok == b.ok
+                and np.allclose(a.pose, b.pose, rtol=0, atol=args.tol)
+                and a.ambiguity.reason == b.ambiguity.reason
+                and np.isclose(a.ambiguity.extent, b.ambiguity.extent, rtol=0, atol=args.tol)
+            )
             if kind == "track":
                 c0 = time.process_time()
                 est = icp_2d(fld.points, tree, pts, p)

@@ -209,6 +209,8 @@ def expand_sums(
     K: int,
     n: int,
     Wp: int,
+    grid_up: np.ndarray,
+    threshold: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """The children of branch-and-bound nodes and their score sums in one pass
     (``_Search._children`` then ``_Search._sums`` / ``_sums_group``).
@@ -220,6 +222,13 @@ def expand_sums(
     over the scan's points (one read of the table row for four sums). A child's sum is
     ``sum_i grid[table[row, i] + iy_c Wp + ix_c]`` with ``row = k_c >> a_shift`` (the rotation
     group's row). Integer sums: identical to the NumPy path.
+
+    Where a rotation group splits into single rotations (``split > 1``, ``a_shift = 0``), each
+    rotation is first bounded over the parent's whole translation block on the parent's level
+    (``grid_up``, the same table): when that bound, ``sum / (255 N)``, is not above
+    ``threshold`` none of its four children can be (each child's block lies inside the
+    parent's), so they are not generated - the caller prunes at that threshold anyway (pass
+    ``-inf`` where it does not), and the search visits the same nodes in the same order.
     """
     P = len(k)
     cap = P * split * 4
@@ -243,6 +252,12 @@ def expand_sums(
                 continue
             row = kk >> a_shift
             b = y0 * Wp + x0
+            if split > 1 and a_shift == 0:
+                up = 0
+                for i in range(N):
+                    up += grid_up[table[row, i] + b]
+                if not up / (255.0 * N) > threshold:
+                    continue
             a0 = 0
             a1 = 0
             a2 = 0

@@ -330,6 +330,13 @@ class _Search:
                     lo, hi, flat = c_lo, c_hi, c_flat
                     break
             else:
+                # a miss: the new region also covers the latest cached one (of this stack), so
+                # the cache converges to one region that serves every scan of the map instead
+                # of rebuilding for scans that reach a little farther in another direction
+                for c_lo, c_hi, c_flat in cache:
+                    if len(c_flat) == n_stack:
+                        lo, hi = np.minimum(lo, c_lo), np.maximum(hi, c_hi)
+                        break
                 lo = np.floor_divide(lo, _REGION_BLOCK) * _REGION_BLOCK
                 hi = -np.floor_divide(-hi, _REGION_BLOCK) * _REGION_BLOCK
         Wr, Hr = int(hi[0] - lo[0]), int(hi[1] - lo[1])
@@ -508,12 +515,20 @@ class _Search:
         return k4[ok], ix4[ok], iy4[ok]
 
     def _expand(  # type: ignore[no-untyped-def]
-        self, h: int, k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp], exclude
+        self,
+        h: int,
+        k: NDArray[np.intp],
+        ix: NDArray[np.intp],
+        iy: NDArray[np.intp],
+        exclude,
+        threshold: float = -np.inf,
     ):
         """Children ``(k, ix, iy)`` of level-``h`` nodes (those ``exclude`` leaves) and their
         level ``h - 1`` scores. Compiled (without ``exclude``): one pass
         (:func:`navkit.localization._kernels.expand_sums`, the same children in the same order
-        and the same integer sums); otherwise ``_children``, ``_drop``, ``scores``."""
+        and the same integer sums), which may leave out children whose score cannot be above
+        ``threshold`` (the caller drops those: the search is the same; fewer nodes are counted
+        in ``evaluated``); otherwise ``_children``, ``_drop``, ``scores``."""
         if not self.compiled or exclude is not None:
             ck, cx, cy = self._drop(h - 1, self._children(h, k, ix, iy), exclude)
             return ck, cx, cy, self.scores(h - 1, ck, cx, cy)
@@ -525,7 +540,7 @@ class _Search:
         split = 2 ** (self.a[h] - a)
         ck, cx, cy, sums = _kernels.expand_sums(
             grid, table, a, k, ix, iy, 2 ** (h - 1), split, 2**a, len(self.thetas), self.n,
-            self.Wp,
+            self.Wp, self.flat[h], float(threshold),
         )  # fmt: skip
         self.evaluated += len(ck)
         return ck, cx, cy, sums / (255.0 * self.F.shape[1])
@@ -582,7 +597,7 @@ class _Search:
         # says little; a level of a few 10^4 nodes is where the bounds start to rank.
         h = L
         while h > 1 and 4 * len(k) <= self.breadth:
-            k, ix, iy, bound = self._expand(h, k, ix, iy, exclude)
+            k, ix, iy, bound = self._expand(h, k, ix, iy, exclude, keep * lower)
             h -= 1
             live = bound > keep * lower
             k, ix, iy, bound = k[live], ix[live], iy[live], bound[live]
@@ -623,7 +638,9 @@ class _Search:
                     return
                 sl = slice(a, a + self.batch)
                 live = bound[sl] > keep * state.lower
-                ck, cx, cy, cb = self._expand(h, k[sl][live], ix[sl][live], iy[sl][live], exclude)
+                ck, cx, cy, cb = self._expand(
+                    h, k[sl][live], ix[sl][live], iy[sl][live], exclude, keep * state.lower
+                )
                 state.budget -= len(ck)
                 if h == 1:
                     if len(cb):
@@ -772,6 +789,20 @@ def _bilinear_scores(
 _STENCIL = np.stack(
     np.meshgrid([-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], [-1.0, 0.0, 1.0], indexing="ij"), -1
 ).reshape(-1, 3)
+# least squares of the quadratic model on the stencil, columns 1, u, v, w, u^2, v^2, w^2, uv,
+# uw, vw: its pseudo-inverse, once (instead of an SVD per round)
+_STENCIL_FIT = np.linalg.pinv(
+    np.column_stack(
+        [
+            np.ones(len(_STENCIL)),
+            _STENCIL,
+            _STENCIL**2,
+            _STENCIL[:, 0] * _STENCIL[:, 1],
+            _STENCIL[:, 0] * _STENCIL[:, 2],
+            _STENCIL[:, 1] * _STENCIL[:, 2],
+        ]
+    )
+)
 
 
 def _refine(
@@ -808,20 +839,9 @@ def _refine(
     for _ in range(3):
         U = _STENCIL  # offsets in units of h
         v = _fine_scores(fld, pts, x + U * h)
-        # quadratic model v = c + g.u + 0.5 u^T A u
-        cols = [
-            np.ones(len(U)),
-            U[:, 0],
-            U[:, 1],
-            U[:, 2],
-            U[:, 0] ** 2,
-            U[:, 1] ** 2,
-            U[:, 2] ** 2,
-            U[:, 0] * U[:, 1],
-            U[:, 0] * U[:, 2],
-            U[:, 1] * U[:, 2],
-        ]
-        c = np.linalg.lstsq(np.stack(cols, 1), v, rcond=None)[0]
+        # quadratic model v = c + g.u + 0.5 u^T A u, least squares (the stencil's fixed
+        # pseudo-inverse)
+        c = _STENCIL_FIT @ v
         g = c[1:4]
         A = np.array([[2 * c[4], c[7], c[8]], [c[7], 2 * c[5], c[9]], [c[8], c[9], 2 * c[6]]])
         step = None
@@ -879,8 +899,14 @@ def analyse_peak(
     )
     # The near-optimal set by branch-and-bound instead of scoring the whole window: pruning at
     # a hair under (1 - peak_tolerance) x the best keeps every leaf of the set (run(keep=...)
-    # collects all leaves above keep x the optimum); the same set as exhaustive scoring.
-    res, _ = search.run(len(search.flat), -1.0, 10**12, keep=(1.0 - s.peak_tolerance) * (1 - 1e-9))
+    # collects all leaves above keep x the optimum); the same set as exhaustive scoring. The
+    # search starts from the score of the pose itself (the window's centre leaf, which it finds
+    # again): the optimum is at least that, so the pruning from the first level on stays exact
+    # (instead of the top levels expanded whole from a bound of -1).
+    centre = np.array([1, n, n])
+    s0 = float(search.scores(0, centre[:1], centre[1:2], centre[2:])[0])
+    keep = (1.0 - s.peak_tolerance) * (1 - 1e-9)
+    res, _ = search.run(len(search.flat), float(np.nextafter(s0, -np.inf)), 10**12, keep=keep)
     assert res is not None
     top = float(res[0])
     if top > 0:
