@@ -292,3 +292,62 @@ def expand_sums(
                 out[m] = a3
                 m += 1
     return ck[:m], cx[:m], cy[:m], out[:m]
+
+
+@njit(cache=True)
+def rotated_cells(
+    c: np.ndarray,
+    s: np.ndarray,
+    pts: np.ndarray,
+    base_x: float,
+    base_y: float,
+    origin_x: float,
+    origin_y: float,
+    res: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Cells ``floor(((R_k p_i + base) - origin) / res)`` of every point at every rotation
+    ``(c[k], s[k])``: x and y ``(K, N)`` int64, and their extremes ``[min x, min y, max x,
+    max y]`` - the float operations of ``_Search.__init__``'s NumPy version in the same order,
+    so the same cells exactly."""
+    K = len(c)
+    N = pts.shape[0]
+    cx = np.empty((K, N), np.int64)
+    cy = np.empty((K, N), np.int64)
+    ext = np.empty(4, np.int64)
+    ext[0] = ext[1] = np.iinfo(np.int64).max
+    ext[2] = ext[3] = np.iinfo(np.int64).min
+    for k in range(K):
+        ck = c[k]
+        sk = s[k]
+        for i in range(N):
+            x = pts[i, 0]
+            y = pts[i, 1]
+            qx = int(np.floor(((ck * x - sk * y + base_x) - origin_x) / res))
+            qy = int(np.floor(((sk * x + ck * y + base_y) - origin_y) / res))
+            cx[k, i] = qx
+            cy[k, i] = qy
+            ext[0] = min(ext[0], qx)
+            ext[1] = min(ext[1], qy)
+            ext[2] = max(ext[2], qx)
+            ext[3] = max(ext[3], qy)
+    return cx, cy, ext
+
+
+@njit(cache=True)
+def flat_table(
+    cx: np.ndarray,
+    cy: np.ndarray,
+    d: np.ndarray,
+    add: np.ndarray,
+    lo_x: int,
+    lo_y: int,
+    W: int,
+    out: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """``out[k, i] = add[i] + (cy[k, i] - d[i] - lo_y) W + (cx[k, i] - d[i] - lo_x)`` (the flat
+    look-up tables of ``_Search``: ``d = add = 0`` for single rotations; a rotation group's
+    dilation and pyramid level otherwise), in ``out``'s integer type."""
+    K, N = cx.shape
+    for k in range(K):
+        for i in range(N):
+            out[k, i] = add[i] + (cy[k, i] - d[i] - lo_y) * W + (cx[k, i] - d[i] - lo_x)

@@ -290,8 +290,7 @@ class _Search:
         if cache is None and n_cells <= _PAD_WINDOW and levels <= len(fld.pyramid):
             self._padded_window(pts, levels)
             return
-        Q = _rotate(thetas, pts)  # (K, N, 2)
-        off = np.floor((Q + base - fld.origin) / fld.resolution).astype(np.int64)  # (K, N, 2)
+        cx, cy, ext = self._cells(thetas, pts)  # (K, N) each, [min x, min y, max x, max y]
         grouped = rot_groups > 0 and cache is not None and len(thetas) > 1 and levels > 1
         extra = _GROUP_EXTRA_LEVELS if grouped else 0
         if grouped:
@@ -314,8 +313,8 @@ class _Search:
         # pyramid is pooled on this region (zeros outside the map), so a block that starts
         # outside the map but reaches into it keeps its true maximum; the look-up is then one
         # gather, grid[F[k] + iy * Wr + ix].
-        lo = off.min(axis=(0, 1))
-        hi = off.max(axis=(0, 1)) + n_cells
+        lo = ext[:2].copy()
+        hi = ext[2:] + n_cells
         if grouped:  # a group's look-ups reach dmax cells beyond its rotations' cells
             lo, hi = lo - dmax, hi + dmax
         flat = None
@@ -361,10 +360,49 @@ class _Search:
                 cache.insert(0, (lo, hi, flat))
                 del cache[_CACHE_ENTRIES:]
         self.Wp = Wr
-        self.F = ((off[..., 1] - lo[1]) * Wr + off[..., 0] - lo[0]).astype(np.int32)  # (K, N)
+        zero = np.zeros(len(pts), dtype=np.int64)
+        self.F = self._table(cx, cy, zero, zero, lo, np.int32)  # (K, N)
         self.flat = flat
         if grouped:
             self._group_tables(pts, lo, dth, levels)
+
+    def _cells(
+        self, thetas: NDArray[np.float64], pts: NDArray[np.float64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+        """Cells x, y ``(K, N)`` of the points rotated by ``thetas`` and moved to the window's
+        base, and their extremes ``[min x, min y, max x, max y]``; compiled:
+        :func:`navkit.localization._kernels.rotated_cells` (the same cells)."""
+        f = self.f
+        if self.compiled:
+            from navkit.localization import _kernels
+
+            return _kernels.rotated_cells(  # type: ignore[no-any-return]
+                np.cos(thetas), np.sin(thetas), np.ascontiguousarray(pts),
+                float(self.base[0]), float(self.base[1]), float(f.origin[0]),
+                float(f.origin[1]), float(f.resolution),
+            )  # fmt: skip
+        off = np.floor((_rotate(thetas, pts) + self.base - f.origin) / f.resolution)
+        cx, cy = off[..., 0].astype(np.int64), off[..., 1].astype(np.int64)
+        return cx, cy, np.array([cx.min(), cy.min(), cx.max(), cy.max()], dtype=np.int64)
+
+    def _table(  # type: ignore[no-untyped-def]
+        self,
+        cx: NDArray[np.int64],
+        cy: NDArray[np.int64],
+        d: NDArray[np.int64],
+        add: NDArray[np.int64],
+        lo: NDArray[np.int64],
+        dtype,
+    ) -> NDArray[np.integer]:
+        """Flat look-up table ``add + (cy - d - lo_y) Wp + (cx - d - lo_x)`` (``d``, ``add``
+        per point) in ``dtype``; compiled: :func:`navkit.localization._kernels.flat_table`."""
+        if self.compiled:
+            from navkit.localization import _kernels
+
+            out = np.empty(cx.shape, dtype=dtype)
+            _kernels.flat_table(cx, cy, d, add, int(lo[0]), int(lo[1]), int(self.Wp), out)
+            return out
+        return (add + (cy - d - lo[1]) * self.Wp + (cx - d - lo[0])).astype(dtype)
 
     def _padded_window(self, pts: NDArray[np.float64], levels: int) -> None:
         """The look-up table of a window searched around a prior (tracking, the global fine
@@ -436,15 +474,12 @@ class _Search:
                 continue
             k0 = np.arange(0, K, g)
             centre = self.thetas[0] + (k0 + (g - 1) / 2) * dth
-            q = np.floor((_rotate(centre, pts) + self.base - self.f.origin) / res).astype(
-                np.int64
-            )  # (G, N, 2)
+            qx, qy, _ = self._cells(centre, pts)  # (G, N) each
             d = np.ceil(radius * (g - 1) / 2 * abs(dth) / res).astype(np.int64)  # (N,)
             j = np.searchsorted(widths, 2**h + 2 * d)  # the narrowest window that covers
             assert j.max() < len(widths)
             lvl = which[j]
-            idx = lvl * cells + (q[..., 1] - d - lo[1]) * self.Wp + (q[..., 0] - d - lo[0])
-            self.FG[h] = idx.astype(dtype)
+            self.FG[h] = self._table(qx, qy, d, (lvl * cells).astype(np.int64), lo, dtype)
 
     def scores(
         self, level: int, k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp]
