@@ -286,7 +286,7 @@ class _Search:
         # Rotation groups (see _group_tables): a node of level h covers 2^a[h] consecutive
         # rotations; a = 0 everywhere is the plain search (one rotation per node).
         self.a = [0] * levels
-        self.FG: dict[int, NDArray[np.int64]] = {}
+        self.FG: dict[int, NDArray[np.integer]] = {}
         if cache is None and n_cells <= _PAD_WINDOW and levels <= len(fld.pyramid):
             self._padded_window(pts, levels)
             return
