@@ -79,3 +79,15 @@ def test_fixes_identical_on_recorded_logs(data_path, name):
         a, b = _both(fld, lg.points(k, 30.0), prior)
         assert np.array_equal(a.pose, b.pose)
         assert a.score == b.score and a.ok == b.ok
+
+
+def test_counting_sort_is_numpys_stable_descending_argsort(rng):
+    from navkit.localization import _kernels
+
+    for n, N in ((1, 37), (600, 37), (20_000, 150)):
+        sums = rng.integers(0, 255 * N // 3, n)
+        sums[: n // 3] = sums[0]  # many ties: their original order must be kept
+        bound = sums / (255.0 * N)
+        got = _kernels.order_desc(bound, 255.0 * N)
+        assert np.array_equal(got, np.argsort(-bound, kind="stable"))
+    assert len(_kernels.order_desc(np.array([0.5, -0.1]), 10.0)) == 0  # negative: NumPy sorts

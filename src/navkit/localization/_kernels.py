@@ -210,6 +210,7 @@ def expand_sums(
     n: int,
     Wp: int,
     grid_up: np.ndarray,
+    table_up: np.ndarray,
     threshold: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """The children of branch-and-bound nodes and their score sums in one pass
@@ -223,13 +224,16 @@ def expand_sums(
     ``sum_i grid[table[row, i] + iy_c Wp + ix_c]`` with ``row = k_c >> a_shift`` (the rotation
     group's row). Integer sums: identical to the NumPy path.
 
-    Where a rotation group splits into single rotations (``split > 1``, ``a_shift = 0``), each
-    rotation is first bounded over the parent's whole translation block on the parent's level
-    (``grid_up``, the same table): when that bound, ``sum / (255 N)``, is not above
-    ``threshold`` none of its four children can be (each child's block lies inside the
-    parent's), so they are not generated - the caller prunes at that threshold anyway (pass
-    ``-inf`` where it does not), and the search visits the same nodes in the same order.
+    Where a rotation group splits (``split > 1``) and ``table_up`` has rows, each sub-group
+    (``row = kk >> a_shift``) is first bounded over the parent's whole translation block
+    (``grid_up[table_up[row, i] + b]``: the parent's level for single rotations, the
+    sub-group's dilated windows at the parent's size otherwise): when that bound,
+    ``sum / (255 N)``, is not above ``threshold`` none of its four children can be (each
+    child's block lies inside the parent's), so they are not generated - the caller prunes at
+    that threshold anyway (pass ``-inf`` where it does not), and the search visits the same
+    nodes in the same order.
     """
+    use_up = split > 1 and table_up.shape[0] > 0
     P = len(k)
     cap = P * split * 4
     ck = np.empty(cap, np.int64)
@@ -252,10 +256,10 @@ def expand_sums(
                 continue
             row = kk >> a_shift
             b = y0 * Wp + x0
-            if split > 1 and a_shift == 0:
+            if use_up:
                 up = 0
                 for i in range(N):
-                    up += grid_up[table[row, i] + b]
+                    up += grid_up[table_up[row, i] + b]
                 if not up / (255.0 * N) > threshold:
                     continue
             a0 = 0
@@ -351,3 +355,33 @@ def flat_table(
     for k in range(K):
         for i in range(N):
             out[k, i] = add[i] + (cy[k, i] - d[i] - lo_y) * W + (cx[k, i] - d[i] - lo_x)
+
+
+@njit(cache=True)
+def order_desc(bound: np.ndarray, scale: float) -> np.ndarray:  # pragma: no cover - compiled
+    """``np.argsort(-bound, kind="stable")`` for scores ``bound = sums / scale`` of non-negative
+    integer sums (the branch-and-bound's bounds): a counting sort on the sums
+    ``rint(bound * scale)`` (exact: the relative error of ``bound`` is ~1e-16), largest first,
+    ties in their original order - the same permutation. Returns int64 indices, or an empty
+    array when a sum is negative (the caller then sorts with NumPy)."""
+    n = len(bound)
+    keys = np.empty(n, np.int64)
+    kmax = 0
+    for i in range(n):
+        k = int(np.rint(bound[i] * scale))
+        if k < 0:
+            return np.empty(0, np.int64)
+        keys[i] = k
+        if k > kmax:
+            kmax = k
+    start = np.zeros(kmax + 2, np.int64)
+    for i in range(n):
+        start[kmax - keys[i] + 1] += 1
+    for j in range(1, kmax + 2):
+        start[j] += start[j - 1]
+    out = np.empty(n, np.int64)
+    for i in range(n):
+        j = kmax - keys[i]
+        out[start[j]] = i
+        start[j] += 1
+    return out
