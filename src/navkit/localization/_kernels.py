@@ -385,3 +385,160 @@ def order_desc(bound: np.ndarray, scale: float) -> np.ndarray:  # pragma: no cov
         out[start[j]] = i
         start[j] += 1
     return out
+
+
+@njit(cache=True)
+def _grow(a: np.ndarray, n: int) -> np.ndarray:  # pragma: no cover - compiled
+    if n <= len(a):
+        return a
+    b = np.empty(max(n, 2 * len(a)), a.dtype)
+    b[: len(a)] = a
+    return b
+
+
+@njit(cache=True)
+def depth_first(
+    flat_all: np.ndarray,
+    cells: int,
+    tables: np.ndarray,
+    row_start: np.ndarray,
+    row_stop: np.ndarray,
+    a_lv: np.ndarray,
+    K: int,
+    n: int,
+    Wp: int,
+    h0: int,
+    k0: np.ndarray,
+    ix0: np.ndarray,
+    iy0: np.ndarray,
+    b0: np.ndarray,
+    keep: float,
+    lower: float,
+    best: np.ndarray,
+    seen: np.ndarray,
+    budget: int,
+    batch: int,
+    scale: float,
+):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
+    """``_Search.run``'s depth-first branch-and-bound (``descend``) in one loop, an explicit
+    stack of levels instead of recursion (recursive cached kernels crash, ``docs/kernels.md``).
+
+    The same search step by step: at each level the nodes sorted by bound (descending,
+    stable: :func:`order_desc`), expanded ``batch`` at a time while the batch's first bound is
+    above ``keep x lower`` and the budget lasts, the children of the live nodes from
+    :func:`expand_sums`, at the leaves the first best leaf raising ``lower`` / ``seen`` and every
+    leaf above ``keep x lower`` collected in order; other children above ``keep x lower``
+    descended into at once. Level ``lv``'s table is ``tables[row_start[lv]:row_stop[lv]]``
+    (its rows the rotations, or the rotation groups of ``2^a_lv[lv]``); its grid the level's
+    slice of ``flat_all`` (``cells`` per level) for single rotations, ``flat_all`` itself for
+    groups (their table holds the level). ``best`` and ``seen`` are ``[score, k, ix, iy]``
+    (``best[0] = -inf``: none), updated in place.
+
+    Returns ``lower, budget, evaluated`` and the collected leaves ``score, k, ix, iy``.
+    """
+    D = h0 + 1
+    fk = [np.empty(0, np.int64) for _ in range(D)]
+    fx = [np.empty(0, np.int64) for _ in range(D)]
+    fy = [np.empty(0, np.int64) for _ in range(D)]
+    fb = [np.empty(0, np.float64) for _ in range(D)]
+    cur = np.zeros(D, np.int64)
+    ls = np.empty(256, np.float64)
+    lk = np.empty(256, np.int64)
+    lx = np.empty(256, np.int64)
+    ly = np.empty(256, np.int64)
+    nl = 0
+    evaluated = 0
+    empty = tables[0:0]
+
+    o = order_desc(b0, scale)
+    if len(o) != len(b0):
+        o = np.argsort(-b0, kind="mergesort")
+    fk[h0], fx[h0], fy[h0], fb[h0] = k0[o], ix0[o], iy0[o], b0[o]
+    cur[h0] = 0
+    h = h0
+    while h <= h0:
+        k, ix, iy, b = fk[h], fx[h], fy[h], fb[h]
+        a = cur[h]
+        if a >= len(k) or b[a] <= keep * lower or budget <= 0:
+            h += 1  # this level is done: back to its parent's next batch
+            continue
+        e = min(a + batch, len(k))
+        cur[h] = e
+        thr = keep * lower
+        m = 0
+        for i in range(a, e):
+            if b[i] > thr:
+                m += 1
+        pk = np.empty(m, np.int64)
+        px = np.empty(m, np.int64)
+        py = np.empty(m, np.int64)
+        m = 0
+        for i in range(a, e):
+            if b[i] > thr:
+                pk[m] = k[i]
+                px[m] = ix[i]
+                py[m] = iy[i]
+                m += 1
+        lv = h - 1
+        al = a_lv[lv]
+        tab = tables[row_start[lv] : row_stop[lv]]
+        grid = flat_all if al else flat_all[lv * cells : (lv + 1) * cells]
+        split = 1 << (a_lv[h] - al)
+        if al:
+            grid_up, tab_up = flat_all, empty
+        else:
+            grid_up = flat_all[h * cells : (h + 1) * cells]
+            tab_up = tab
+        ck, cx, cy, sums = expand_sums(
+            grid, tab, al, pk, px, py, 1 << (h - 1), split, 1 << al, K, n, Wp, grid_up,
+            tab_up, thr,
+        )  # fmt: skip
+        nc = len(ck)
+        evaluated += nc
+        budget -= nc
+        cb = sums / scale
+        if h == 1:
+            if nc:
+                j = 0
+                for i in range(1, nc):
+                    if cb[i] > cb[j]:
+                        j = i
+                if cb[j] > seen[0]:
+                    seen[0], seen[1], seen[2], seen[3] = cb[j], ck[j], cx[j], cy[j]
+                if cb[j] > lower:
+                    lower = cb[j]
+                    best[0], best[1], best[2], best[3] = cb[j], ck[j], cx[j], cy[j]
+                if keep < 1.0:
+                    t = keep * lower
+                    for i in range(nc):
+                        if cb[i] > t:
+                            if nl >= len(ls):
+                                ls = _grow(ls, nl + 1)
+                                lk = _grow(lk, nl + 1)
+                                lx = _grow(lx, nl + 1)
+                                ly = _grow(ly, nl + 1)
+                            ls[nl], lk[nl], lx[nl], ly[nl] = cb[i], ck[i], cx[i], cy[i]
+                            nl += 1
+            continue
+        t = keep * lower
+        m = 0
+        for i in range(nc):
+            if cb[i] > t:
+                m += 1
+        if m == 0:
+            continue
+        sel = np.empty(m, np.int64)
+        m = 0
+        for i in range(nc):
+            if cb[i] > t:
+                sel[m] = i
+                m += 1
+        bb = cb[sel]
+        o = order_desc(bb, scale)
+        if len(o) != len(bb):
+            o = np.argsort(-bb, kind="mergesort")
+        so = sel[o]
+        fk[lv], fx[lv], fy[lv], fb[lv] = ck[so], cx[so], cy[so], bb[o]
+        cur[lv] = 0
+        h = lv
+    return lower, budget, evaluated, ls[:nl], lk[:nl], lx[:nl], ly[:nl]

@@ -284,6 +284,10 @@ class _Search:
         H, W = fld.shape
         levels = len(fld.pyramid) if levels is None else levels
         self.evaluated = 0
+        # leaves collected by run(keep < 1): chunks of (score, k, ix, iy)
+        self.leaves: list[
+            tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]
+        ] = []
         # Rotation groups (see _group_tables): a node of level h covers 2^a[h] consecutive
         # rotations; a = 0 everywhere is the plain search (one rotation per node).
         self.a = [0] * levels
@@ -585,6 +589,44 @@ class _Search:
         self.evaluated += len(ck)
         return ck, cx, cy, sums / (255.0 * self.F.shape[1])
 
+    def _depth_first(  # type: ignore[no-untyped-def]
+        self, h: int, k, ix, iy, bound, keep: float, state: _BnBState
+    ) -> None:
+        """``run``'s ``descend`` from level ``h`` as one compiled loop
+        (:func:`navkit.localization._kernels.depth_first`: the same nodes in the same order,
+        the same best leaf, the same collected leaves in the same order); updates ``state``,
+        ``self.leaves`` and ``self.evaluated``."""
+        from navkit.localization import _kernels
+
+        levels = len(self.a)
+        K, N = self.F.shape
+        tables, start, stop = [self.F], np.zeros(levels, np.int64), np.full(levels, K)
+        rows = K
+        for lv in range(levels):
+            if self.a[lv]:
+                t = self.FG[lv]
+                start[lv], stop[lv] = rows, rows + len(t)
+                rows += len(t)
+                tables.append(t)
+        table = tables[0] if len(tables) == 1 else np.concatenate(tables)
+        # int32 tables: a region is < 60 M cells, its stack < 2^31 cells (see _group_tables)
+        assert table.dtype == np.int32
+        best = np.array(state.best if state.best is not None else (-np.inf, 0, 0, 0), float)
+        seen = np.array(state.seen, dtype=np.float64)
+        lower, budget, ev, ls, lk, lx, ly = _kernels.depth_first(
+            self.flat.reshape(-1), self.flat.shape[1], table, start, stop,
+            np.array(self.a, dtype=np.int64), len(self.thetas), self.n, self.Wp, h,
+            k.astype(np.int64), ix.astype(np.int64), iy.astype(np.int64), bound, keep,
+            float(state.lower), best, seen, int(state.budget), self.batch, 255.0 * N,
+        )  # fmt: skip
+        state.lower, state.budget = float(lower), int(budget)
+        self.evaluated += int(ev)
+        if np.isfinite(best[0]):
+            state.best = (float(best[0]), int(best[1]), int(best[2]), int(best[3]))
+        state.seen = (float(seen[0]), int(seen[1]), int(seen[2]), int(seen[3]))
+        if keep < 1.0:
+            self.leaves = [(ls, lk, lx, ly)]
+
     def _order(self, bound: NDArray[np.float64]) -> NDArray[np.intp]:
         """``np.argsort(-bound, kind="stable")``; compiled, for large batches: the same
         permutation by a counting sort on the integer sums
@@ -625,9 +667,7 @@ class _Search:
         from an optimistic bound (``optimism``; exact, see the comment there). ``seeds`` is
         no longer used (the beam replaced the greedy descents).
         """
-        self.leaves: list[
-            tuple[NDArray[np.float64], NDArray[np.intp], NDArray[np.intp], NDArray[np.intp]]
-        ] = []
+        self.leaves = []
         L = levels - 1
         step = 2**L
         g = np.arange(0, self.n, step)
@@ -714,7 +754,10 @@ class _Search:
             state.lower, state.best = start, start_best
             self.leaves = []
             live = bound > keep * start
-            descend(h, k[live], ix[live], iy[live], bound[live])
+            if self.compiled and exclude is None:
+                self._depth_first(h, k[live], ix[live], iy[live], bound[live], keep, state)
+            else:
+                descend(h, k[live], ix[live], iy[live], bound[live])
 
         # An optimistic start: the bounds of the frontier cap the optimum, and a global fix's
         # optimum is usually within a few % of that cap (coarse scores of 0.96-1.0 on the real
