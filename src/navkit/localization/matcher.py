@@ -31,6 +31,11 @@ thinned to one point per coarse cell for the coarse stage; the fine angular step
 in the +-2-step fine stage; the peak analysis is a branch-and-bound too (all translations
 within ``peak_tolerance`` of the best, not the whole window scored).
 
+The inner loops - the search tables, the expansion and scoring of nodes, the depth-first
+search, the sub-cell scores - are compiled (Numba, :mod:`navkit.localization._kernels`,
+``docs/kernels.md``); ``_Search.compiled = False`` runs their NumPy versions, the test oracles
+(identical fixes).
+
 The score of a pose is the mean field value at the scan's points, in ``[0, 1]``.
 """
 
