@@ -1,8 +1,10 @@
-"""The compiled scoring loop of the correlative matcher against its NumPy oracle.
+"""The compiled loops of the correlative matcher against their NumPy oracles.
 
-The score sums are integers (uint8 field values), so the fixes must be identical - pose,
-score, verdict - with a prior (tracking) and without one (global). Here on the Intel and ACES
-logs; ``benchmarks/localization_kernels_vs_numpy.py`` checks all seven CARMEN logs.
+The score sums are integers (uint8 field values), the search tables integers, and the sub-cell
+scores (bicubic and bilinear) the same float operations in the same order in both, so the fixes
+must be identical - pose, score, verdict - with a prior (tracking) and without one (global).
+Here on a simulated field and the Intel and ACES logs;
+``benchmarks/localization_kernels_vs_numpy.py`` checks all seven CARMEN logs.
 """
 
 from __future__ import annotations
@@ -29,6 +31,37 @@ def _both(fld, pts, prior):  # type: ignore[no-untyped-def]
     return out
 
 
+def _modes(f):  # type: ignore[no-untyped-def]
+    out = []
+    for compiled in (True, False):
+        M._Search.compiled = compiled
+        try:
+            out.append(f())
+        finally:
+            M._Search.compiled = True
+    return out
+
+
+def test_window_tables_and_subcell_scores_identical(rng):
+    from navkit.localization import LikelihoodField
+
+    walls = np.concatenate(
+        [np.c_[np.linspace(0, 8, 400), np.full(400, y)] for y in (0.0, 5.0)]
+        + [np.c_[np.full(250, x), np.linspace(0, 5, 250)] for x in (0.0, 8.0, 3.3)]
+    )
+    fld = LikelihoodField.from_points(walls, 0.05, 0.1)
+    pts = M._thin(walls[::3] - [4.0, 2.5] + rng.normal(0, 0.01, (len(walls[::3]), 2)), 0.1)
+    poses = np.c_[rng.uniform(-1, 9, (300, 2)), rng.uniform(-np.pi, np.pi, 300)]
+    poses[:10, :2] += 50.0  # the scan beyond the grid: zeros
+    for f in (M._fine_scores, M._bilinear_scores):
+        a, b = _modes(lambda f=f: f(fld, pts, poses))
+        assert np.array_equal(a, b)
+    for n_cells, th in ((41, 0.1 + 0.004 * np.arange(101)), (61, np.array([-0.01, 0.0, 0.01]))):
+        for base in (np.array([2.0, 1.5]), np.array([-5.0, 7.0])):  # inside, partly beyond
+            a, b = _modes(lambda n=n_cells, t=th, o=base: M._Search(fld, pts, t, o, n).F)
+            assert a.dtype == b.dtype == np.int32 and np.array_equal(a, b)
+
+
 @pytest.mark.parametrize("name", LOGS)
 def test_fixes_identical_on_recorded_logs(data_path, name):
     from navkit.io.carmen import read_carmen
@@ -46,3 +79,15 @@ def test_fixes_identical_on_recorded_logs(data_path, name):
         a, b = _both(fld, lg.points(k, 30.0), prior)
         assert np.array_equal(a.pose, b.pose)
         assert a.score == b.score and a.ok == b.ok
+
+
+def test_counting_sort_is_numpys_stable_descending_argsort(rng):
+    from navkit.localization import _kernels
+
+    for n, N in ((1, 37), (600, 37), (20_000, 150)):
+        sums = rng.integers(0, 255 * N // 3, n)
+        sums[: n // 3] = sums[0]  # many ties: their original order must be kept
+        bound = sums / (255.0 * N)
+        got = _kernels.order_desc(bound, 255.0 * N)
+        assert np.array_equal(got, np.argsort(-bound, kind="stable"))
+    assert len(_kernels.order_desc(np.array([0.5, -0.1]), 10.0)) == 0  # negative: NumPy sorts

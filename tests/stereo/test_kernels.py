@@ -1,11 +1,11 @@
-"""The compiled fill and left-right check against their NumPy oracles: identical results on
-random disparity maps with holes and on the Middlebury pair (both matcher runs)."""
+"""The compiled fill, forward warp and left-right check against their NumPy oracles: identical
+results on random disparity maps with holes and on the Middlebury pair (both matcher runs)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from navkit.stereo.disparity import fill_background, lr_consistency
+from navkit.stereo.disparity import fill_background, lr_consistency, warp_right_disparity
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
@@ -23,6 +23,8 @@ def test_random_maps(rng):
         dr[rng.random(d.shape) < 0.3] = np.nan
         assert _same(fill_background(d), fill_background(d, compiled=False))
         assert _same(fill_background(d_inf), fill_background(d_inf, compiled=False))
+        assert _same(warp_right_disparity(d), warp_right_disparity(d, compiled=False))
+        assert _same(warp_right_disparity(d_inf), warp_right_disparity(d_inf, compiled=False))
         for m in (0.5, 1.0, 3.0):
             assert np.array_equal(
                 lr_consistency(d, dr, m), lr_consistency(d, dr, m, compiled=False)
@@ -31,6 +33,10 @@ def test_random_maps(rng):
     d = np.tile(np.arange(20) + 0.5, (4, 1))
     dr = np.tile(np.arange(20, dtype=float), (4, 1))
     assert np.array_equal(lr_consistency(d, dr, 0.5), lr_consistency(d, dr, 0.5, compiled=False))
+    assert _same(warp_right_disparity(d), warp_right_disparity(d, compiled=False))
+    # collisions: many left pixels on one right pixel, the largest wins in both
+    d = np.tile(np.array([1.0, 2.0, 3.0, 2.5, 4.0, np.nan, 6.0, 7.0]), (3, 1))
+    assert _same(warp_right_disparity(d), warp_right_disparity(d, compiled=False))
 
 
 def test_middlebury_pair(data_path):
@@ -51,3 +57,6 @@ def test_middlebury_pair(data_path):
     assert np.isnan(dl).mean() > 0.05
     assert np.array_equal(lr_consistency(dl, dr), lr_consistency(dl, dr, compiled=False))
     assert _same(fill_background(dl), fill_background(dl, compiled=False))
+    warped = warp_right_disparity(dl)
+    assert _same(warped, warp_right_disparity(dl, compiled=False))
+    assert np.array_equal(lr_consistency(dl, warped), lr_consistency(dl, warped, compiled=False))

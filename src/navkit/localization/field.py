@@ -184,10 +184,7 @@ class LikelihoodField:
         Zero beyond the grid.
         """
         P = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-        V = self.__dict__.get("_values_padded")
-        if V is None:  # two zero cells around the grid: every 4 x 4 stencil is in range
-            V = np.pad(self.values, 2)
-            object.__setattr__(self, "_values_padded", V)
+        V = self.cubic_grid()
         Hp, Wp = V.shape
         # padded index coordinates: cell centres of the grid sit at i + 0.5 (+ 2 of padding)
         u = (P - self.origin) / self.resolution + 1.5
@@ -202,6 +199,15 @@ class LikelihoodField:
         # a point clipped to the border lies beyond the padding: the field is zero there
         out[(f[:, 0] < 1) | (f[:, 0] > Wp - 3) | (f[:, 1] < 1) | (f[:, 1] > Hp - 3)] = 0.0
         return out.astype(np.float64)
+
+    def cubic_grid(self) -> NDArray[np.float32]:
+        """``values`` with two zero cells around the grid (every 4 x 4 bicubic stencil of
+        :meth:`interpolate_cubic` is in range), built once and cached on the field."""
+        V = self.__dict__.get("_values_padded")
+        if V is None:
+            V = np.pad(self.values, 2)
+            object.__setattr__(self, "_values_padded", V)
+        return V  # type: ignore[no-any-return]
 
     def padded_pyramid_u8(self, levels: int, pad: int) -> tuple[NDArray[np.uint8], int]:
         """The pyramid as flat ``uint8`` rows ``(levels, S)`` over the grid grown by ``pad`` cells.

@@ -1,7 +1,8 @@
 """Paper 3's front end: rectified stereo -> dense disparity -> 3D points -> 2D wall points.
 
 - :mod:`~navkit.stereo.disparity` - OpenCV SGBM / BM with an explicit left-right consistency
-  check and 1/16-pixel sub-pixel disparities; Middlebury's bad-pixel figure;
+  check (the right disparity by forward warping, or a second matcher run) and 1/16-pixel
+  sub-pixel disparities; Middlebury's bad-pixel figure;
 - :mod:`~navkit.stereo.triangulation` - ``z = b f / d`` and the paper's ``x, y`` (eq. 1), camera
   -> world (eq. 2);
 - :mod:`~navkit.stereo.floorplan` - wall points of the floor plan (height band, projection).
@@ -15,6 +16,7 @@ from navkit.stereo.disparity import (
     bad_pixel_rate,
     compute_disparity,
     lr_consistency,
+    warp_right_disparity,
 )
 from navkit.stereo.floorplan import (
     FloorplanSettings,
@@ -45,4 +47,5 @@ __all__ = [
     "triangulate_pixels",
     "wall_points_body",
     "wall_points_world",
+    "warp_right_disparity",
 ]
