@@ -76,10 +76,10 @@ OVERWRITE_HELP = "Replace outputs already in --out."
 
 @path_app.command("record")
 def record(
-    trajectories: list[Path] = typer.Argument(
+    trajectories: list[str] = typer.Argument(
         ...,
-        help="Trajectory file(s): TUM, KITTI, EuRoC or a 'time v omega' log. "
-        "Several files: one output folder each, named after the file.",
+        help="Trajectory file(s): TUM, KITTI, EuRoC or a 'time v omega' log (paths or fsspec "
+        "URLs). Several files: one output folder each, named after the file.",
     ),
     tolerance: float = typer.Option(
         0.05, "--tolerance", "-e", help="eps: max distance of a point from the spline (m)."
@@ -153,7 +153,7 @@ def record(
 
 
 def _record_batch(
-    trajectories: list[Path],
+    trajectories: list[str],
     out: Path,
     settings: Any,
     fmt: str,
@@ -165,15 +165,16 @@ def _record_batch(
     """Every trajectory as one task of a batch (``out/<file stem>/path.json``, ``path.png``)."""
     from navkit.batch import BatchTask, settings_hash
     from navkit.batch.path_record import record_path_job
+    from navkit.io.urls import input_identity, url_name
 
-    keys = [t.stem for t in trajectories]
+    keys = [Path(url_name(t)).stem for t in trajectories]
     keys = [k if keys.count(k) == 1 else f"{k}_{i}" for i, k in enumerate(keys)]
     tasks = [
         BatchTask(
             key,
             record_path_job,
             {"trajectory": str(t), "settings": settings, "fmt": fmt, "plane": plane},
-            settings_hash(t, settings, fmt, plane),
+            settings_hash(input_identity(t), settings, fmt, plane),
         )
         for key, t in zip(keys, trajectories, strict=True)
     ]

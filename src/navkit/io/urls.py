@@ -21,13 +21,13 @@ import os
 import re
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 from navkit.errors import ConfigError, DataNotFoundError, InputError, NavkitError, require_module
 
-__all__ = ["input_identity", "is_url", "local_copy", "url_name"]
+__all__ = ["expand_url", "input_identity", "is_url", "local_copy", "url_name"]
 
 _URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]+://")
 
@@ -57,8 +57,11 @@ def _filesystem(url: str) -> tuple[Any, str]:
 
 
 @contextlib.contextmanager
-def local_copy(source: str | os.PathLike[str]) -> Iterator[Path]:
+def local_copy(source: str | os.PathLike[str], siblings: Sequence[str] = ()) -> Iterator[Path]:
     """A local path to read ``source`` from: the path itself, or a temporary copy of a URL.
+
+    ``siblings``: names of files beside a URL's file that its reader opens too (a ``map.json``'s
+    ``map.yaml`` and ``map.pgm``); those that exist are copied into the same private folder.
 
     Raises
     ------
@@ -82,6 +85,13 @@ def local_copy(source: str | os.PathLike[str]) -> Iterator[Path]:
             raise DataNotFoundError(f"{url}: no such file") from None
         except OSError as exc:
             raise InputError(f"cannot be read ({exc})", source=url) from None
+        folder = path.rsplit("/", 1)[0] if "/" in path else ""
+        for name in siblings:
+            other = f"{folder}/{name}" if folder else name
+            if "/" in name or not fs.isfile(other):
+                continue
+            with fs.open(other, "rb") as src, open(tmp / name, "wb") as dst:
+                shutil.copyfileobj(src, dst, 1 << 20)
         try:
             yield local
         except InputError as exc:  # the error names the URL, not the private copy
@@ -116,3 +126,41 @@ def input_identity(source: str | os.PathLike[str]) -> Any:
         None,
     )  # fmt: skip
     return [url, info.get("size"), str(stamp)]
+
+
+def expand_url(url: str, suffixes: tuple[str, ...] = ()) -> list[str]:
+    """The files a URL names: itself, the matches of a glob (``memory://in/*.bin``) or the files
+    of a folder ending in one of ``suffixes``, sorted, each as a full URL.
+
+    Raises
+    ------
+    DataNotFoundError
+        Nothing matches.
+    """
+    fs, path = _filesystem(url)
+    protocol = url.split("://", 1)[0]
+
+    def full(p: str) -> str:
+        return fs.unstrip_protocol(p) if hasattr(fs, "unstrip_protocol") else f"{protocol}://{p}"
+
+    try:
+        if any(c in path for c in "*?["):
+            found = [full(p) for p in sorted(fs.glob(path)) if fs.isfile(p)]
+        elif fs.isdir(path):
+            found = [
+                full(p)
+                for p in sorted(fs.ls(path, detail=False))
+                if fs.isfile(p) and p.lower().endswith(tuple(suffixes))
+            ]
+        elif fs.isfile(path):
+            found = [url]
+        else:
+            found = []
+    except OSError as exc:
+        raise InputError(f"cannot be listed ({exc})", source=url) from None
+    if not found:
+        raise DataNotFoundError(
+            f"{url}: no such file, folder or matching glob"
+            + (f" (files ending in {', '.join(suffixes)})" if suffixes else "")
+        )
+    return found
