@@ -102,15 +102,20 @@ def dask_processes(tmp_path):
         finally:
             client.close()
         yield address, {p.pid for p in workers}
-    finally:
-        for p in procs[::-1]:
-            p.terminate()
-        for p in procs:
-            try:
-                p.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                p.kill()
-                p.wait()
+    finally:  # the workers first (they say goodbye to a live scheduler), then the scheduler
+        _stop(procs[1:])
+        _stop(procs[:1])
+
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    for p in procs:
+        p.terminate()
+    for p in procs:
+        try:
+            p.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
 
 
 def test_obstacles_on_a_cluster_of_separate_processes_equal_serial(
