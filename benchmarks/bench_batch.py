@@ -1,8 +1,11 @@
 """Batch throughput: the same inputs in process, on a LocalCluster of 1 and of 2 workers.
 
-Inputs: ``path record`` over the real trajectories (TUM fr1/xyz and fr2/desk, KITTI 00), each at
-four tolerances, so every task is real work of 0.1-0.5 s. Also the scheduler's overhead per task,
-from tasks that do nothing: (wall time - time inside the tasks) / tasks, on one worker.
+Inputs: real SemanticKITTI frames (``obstacles detect``), the real RGB-D inputs (``planes
+extract``: a CAPE frame, two Kinect clouds, a slambook frame), a few seeds of ``mission sweep
+yard --small``, the runs of a ``path return`` sweep over a path recorded from a simulated 7-leg
+drive, and ``path record`` over the real trajectories (TUM fr1/xyz and fr2/desk, KITTI 00), each
+at four tolerances. Also the scheduler's overhead per task, from tasks that do nothing: (wall
+time - time inside the tasks) / tasks, on one worker.
 """
 
 from __future__ import annotations
@@ -61,6 +64,45 @@ def _obstacle_tasks(quick: bool):  # type: ignore[no-untyped-def]
     return tasks
 
 
+def _planes_tasks(quick: bool):  # type: ignore[no-untyped-def]
+    """The 4 real RGB-D inputs of tests/batch/test_planes_batch.py, each 3 times (1 when quick)."""
+    from navkit import datasets
+    from navkit.batch import BatchTask
+    from navkit.batch.planes_extract import CameraOverride, input_key, planes_extract_job
+
+    cam = CameraOverride(fx=518.0, fy=519.0, cx=325.5, cy=253.5)  # slambook-ch5's camera
+    names = ("cape-tunnel", "pcl-kinect/capture0001.pcd", "pcl-kinect/capture0002.pcd",
+             "slambook-ch5")  # fmt: skip
+    tasks = []
+    for copy in range(1 if quick else 3):
+        for name in names:
+            src = str(datasets.find(f"rgbd/{name}"))
+            kwargs = {"source": src, "camera": cam}
+            tasks.append(BatchTask(f"{input_key(src)}-{copy}", planes_extract_job, kwargs, ""))
+    return tasks
+
+
+def _return_tasks(quick: bool, tmp: Path):  # type: ignore[no-untyped-def]
+    """The runs of a ``path return`` sweep (default VO and controller) over a 3.5 m path recorded
+    from a simulated 7-leg drive (``path simulate --legs 7``): 8 runs (4 when quick)."""
+    import numpy as np
+
+    from navkit.batch.path_return import ReturnSweepSettings, return_sweep_tasks
+    from navkit.io.pathjson import write_path_json
+    from navkit.path import ApproximatorSettings, approximate
+    from navkit.path.control import ReturnSettings
+    from navkit.sensors import VisualOdometryNoise
+    from navkit.sim.return_sim import leg_drive
+
+    rng = np.random.default_rng(0)
+    vo = VisualOdometryNoise()
+    est = vo.corrupt(leg_drive(7, 0.5, 90.0, rng=rng, rate_hz=vo.rate_hz), rng)
+    spline = approximate(est[:, :2], ApproximatorSettings(tolerance=0.05)).spline
+    write_path_json(tmp / "path.json", spline)
+    sweep = ReturnSweepSettings(vo=vo, controller=ReturnSettings(), seed=0)
+    return return_sweep_tasks(str(tmp / "path.json"), 4 if quick else 8, sweep)
+
+
 def _throughput(name: str, tasks: list, rows: list[Row]) -> None:  # type: ignore[type-arg]
     """Inputs per second in process, on 1 and on 2 workers (clusters started beforehand)."""
     import distributed
@@ -106,6 +148,9 @@ def run(quick: bool = False) -> list[Row]:
     tasks = _tasks(quick)
     rows: list[Row] = []
     _throughput("obstacles detect, KITTI frames", _obstacle_tasks(quick), rows)
+    _throughput("planes extract, real RGB-D inputs", _planes_tasks(quick), rows)
+    with tempfile.TemporaryDirectory() as tmp:
+        _throughput("path return sweep, 7-leg path", _return_tasks(quick, Path(tmp)), rows)
     from navkit.batch import mission_sweep_tasks
 
     _throughput(

@@ -53,14 +53,38 @@ def localizer_settings(table: Mapping[str, Any], seq: Any, source: str = "option
 def map_source(map_json: str | Path) -> str | None:
     """The input a ``map.json`` was built from (its ``source`` field), if it says."""
     from navkit.io.atomic import read_json
+    from navkit.io.urls import local_copy
 
-    data = read_json(map_json)
+    with local_copy(map_json) as local:
+        data = read_json(local)
     src = data.get("source") if isinstance(data, dict) else None
     return str(src) if src else None
 
 
+def _grid_files(map_json: str) -> tuple[str, ...]:
+    """The grid files a URL ``map.json`` names (its ``grid`` YAML and that YAML's ``.pgm``, as
+    ``navkit map build`` writes them); none for a plain path, read where it is."""
+    from navkit.io.urls import is_url
+
+    if not is_url(map_json):
+        return ()
+    from navkit.io.atomic import read_json
+    from navkit.io.urls import local_copy
+
+    with local_copy(map_json) as local:
+        data = read_json(local, what="a map.json written by navkit map build")
+    grid = data.get("grid") if isinstance(data, dict) else None
+    if not isinstance(grid, str) or not grid:
+        return ()
+    return (grid, str(Path(grid).with_suffix(".pgm")))
+
+
 def _reference(inp: LocateInput, kind: str) -> str:
+    from navkit.io.urls import is_url
+
     src = map_source(inp.map)
+    if src and (is_url(src) or is_url(inp.input)) and src == inp.input:
+        return SELF_CONSISTENCY
     if src and Path(src).resolve() == Path(inp.input).resolve():
         return SELF_CONSISTENCY
     if kind == "stereo":
@@ -79,12 +103,17 @@ def locate_input(
 
     from navkit.io.fixes import write_fix_poses, write_fixes_csv
     from navkit.io.scan_sequence import read_scan_sequence
+    from navkit.io.urls import local_copy, url_name
     from navkit.io.wallmap import read_wall_map
     from navkit.localization import Localizer, evaluate_fixes, reported_poses
     from navkit.viz.maps import plot_map
 
-    wall_map = read_wall_map(inp.map)
-    seq = read_scan_sequence(inp.input, every=inp.every, group=inp.group, max_range=inp.max_range)
+    # paths as they are; fsspec URLs (a map with its grid files, a CARMEN log) through private
+    # copies
+    with local_copy(inp.map, siblings=_grid_files(inp.map)) as local:
+        wall_map = read_wall_map(local)
+    with local_copy(inp.input) as local:
+        seq = read_scan_sequence(local, every=inp.every, group=inp.group, max_range=inp.max_range)
     settings = localizer_settings(inp.localizer, seq)
     loc = Localizer(wall_map, settings, view=seq.view)
     tracking = inp.prior == "odometry"
@@ -117,7 +146,7 @@ def locate_input(
         size = float(np.linalg.norm(np.subtract(*wall_map.bounds[::-1])))
         summary["map_diagonal_m"] = size
         summary["position_error_relative_median"] = stats["position_error_m_median"] / size
-    title = f"{Path(inp.input).name}: {100 * stats['success_rate']:.0f}% within {inp.success_m} m"
+    title = f"{url_name(inp.input)}: {100 * stats['success_rate']:.0f}% within {inp.success_m} m"
     est = np.where([[r.ok] for r in results], reported_poses(results), np.nan)
     plot_map(wall_map, out_dir / "locate.png", poses=est, truth=seq.reference, title=title)
     return summary, settings

@@ -65,20 +65,22 @@ class RunSettings:
     map: MapOptions = field(default_factory=MapOptions)
 
 
-def read_mounted(path: Path, opts: InputOptions) -> tuple[Any, Any]:
-    """Read one input as a scan grid and its mounting (height still 0: see
-    :func:`resolve_height`)."""
+def read_mounted(path: Path | str, opts: InputOptions) -> tuple[Any, Any]:
+    """Read one input (a path or an fsspec URL) as a scan grid and its mounting (height still
+    0: see :func:`resolve_height`)."""
     from navkit.io.scans import read_scan_grid
+    from navkit.io.urls import local_copy
     from navkit.obstacles import Mounting
 
-    scan = read_scan_grid(
-        path,
-        rings=opts.rings,
-        columns=opts.columns,
-        ring_method=opts.ring_method,
-        intrinsics=opts.intrinsics,
-        depth_scale=opts.depth_scale,
-    )
+    with local_copy(path) as local:  # a path as it is; an fsspec URL through a private copy
+        scan = read_scan_grid(
+            local,
+            rings=opts.rings,
+            columns=opts.columns,
+            ring_method=opts.ring_method,
+            intrinsics=opts.intrinsics,
+            depth_scale=opts.depth_scale,
+        )
     use_file_R = scan.R_body_sensor is not None and opts.gravity is None
     use_file_R = use_file_R and opts.roll_deg == 0 and opts.pitch_deg == 0
     R_file = scan.R_body_sensor if use_file_R else None
@@ -86,7 +88,7 @@ def read_mounted(path: Path, opts: InputOptions) -> tuple[Any, Any]:
     return scan, mounting
 
 
-def resolve_height(scan: Any, mounting: Any, opts: InputOptions, path: Path) -> Any:
+def resolve_height(scan: Any, mounting: Any, opts: InputOptions, path: Path | str) -> Any:
     """The sensor height of a run: given, from the file, or measured on this frame's ground
     (:func:`~navkit.obstacles.mounting.choose_sensor_height`)."""
     from navkit.obstacles.mounting import choose_sensor_height
@@ -105,7 +107,7 @@ def resolve_height(scan: Any, mounting: Any, opts: InputOptions, path: Path) -> 
 
 
 def process_frame(
-    path: Path, out: Path, settings: Any, opts: InputOptions, mopts: MapOptions, height: Any
+    path: Path | str, out: Path, settings: Any, opts: InputOptions, mopts: MapOptions, height: Any
 ) -> tuple[dict[str, Any], Any]:
     """Read one input, detect its obstacles and write the chosen outputs into ``out``.
 
@@ -114,6 +116,7 @@ def process_frame(
     """
     from navkit.io.maps import GeoOrigin, write_occupancy_grid
     from navkit.io.obstacles import write_labels, write_obstacle_geojson, write_obstacles_json
+    from navkit.io.urls import url_name
     from navkit.obstacles import detect_obstacles_in_grid
     from navkit.obstacles.occupancy import occupancy_grid
 
@@ -154,7 +157,7 @@ def process_frame(
             det,
             shapes=mopts.png_shapes,
             extent_m=min(mopts.extent_m or 40.0, 40.0),
-            title=f"{path.name}: {len(det.obstacles)} obstacles",
+            title=f"{url_name(path)}: {len(det.obstacles)} obstacles",
         )
     t4 = time.perf_counter()
     frame = {
@@ -190,5 +193,8 @@ def obstacles_frame_job(
     height: Any,
 ) -> dict[str, Any]:
     """:func:`process_frame` as a batch task: the frame's figures without its timings."""
-    frame, _ = process_frame(Path(path), out_dir, settings, opts, mopts, height)
+    from navkit.io.urls import is_url
+
+    source = path if is_url(path) else Path(path)
+    frame, _ = process_frame(source, out_dir, settings, opts, mopts, height)
     return {k: v for k, v in frame.items() if k not in ("timings_s", "output")}

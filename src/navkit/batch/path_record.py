@@ -34,7 +34,7 @@ def record_path(
     plane: str = "auto",
     iterate: Callable[[Iterable[Any], int], Iterator[Any]] | None = None,
 ) -> tuple[Any, dict[str, Any]]:
-    """Record ``trajectory`` with ``settings`` (:class:`~navkit.path.ApproximatorSettings`) and
+    """Record ``trajectory`` (a path or an fsspec URL) with ``settings`` (:class:`~navkit.path.ApproximatorSettings`) and
     write ``path.json`` and ``path.png`` into ``out_dir``; returns the result and its summary.
 
     ``iterate(items, n)`` wraps the loop over the ``n`` points (a progress bar).
@@ -47,11 +47,14 @@ def record_path(
     from navkit.errors import InputError
     from navkit.io.pathjson import write_path_json
     from navkit.io.trajectory import load_planar_track
+    from navkit.io.urls import local_copy, url_name
     from navkit.path import approximate
     from navkit.viz.path import plot_record
 
-    trajectory = Path(trajectory)
-    _, xy, frame, used = load_planar_track(trajectory, fmt, plane)
+    with local_copy(trajectory) as local:  # a path as it is; a URL through a private copy
+        _, xy, frame, used = load_planar_track(local, fmt, plane)
+    if isinstance(frame, dict) and frame.get("source") == str(local):
+        frame = {**frame, "source": str(trajectory)}  # the URL, not the private copy
     wrap = None if iterate is None else (lambda items: iterate(items, len(xy)))
     result = approximate(xy, settings, frame=frame, iterate=wrap)
     if result.spline.n_segments == 0 or result.spline.total_length <= 0:
@@ -66,7 +69,7 @@ def record_path(
         result,
         out_dir / "path.png",
         raw_points=xy,
-        title=f"{trajectory.name}: eps = {settings.tolerance:g} m",
+        title=f"{url_name(trajectory)}: eps = {settings.tolerance:g} m",
     )
     summary = {"input": str(trajectory), "format": used, **result.summary()}
     return result, summary

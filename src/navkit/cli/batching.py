@@ -13,7 +13,15 @@ from typing import Any
 
 import typer
 
-__all__ = ["EXIT_SOME_FAILED", "RESUME", "SCHEDULER", "WORKERS", "exit_if_failed", "run_inputs"]
+__all__ = [
+    "EXIT_SOME_FAILED",
+    "RESUME",
+    "SCHEDULER",
+    "WORKERS",
+    "exit_if_failed",
+    "expand_sources",
+    "run_inputs",
+]
 
 EXIT_SOME_FAILED = 3
 
@@ -76,3 +84,20 @@ def exit_if_failed(summary: dict[str, Any]) -> None:
     """Exit with code 3 when any input of the batch failed."""
     if summary.get("failed"):
         raise typer.Exit(code=EXIT_SOME_FAILED)
+
+
+def expand_sources(inputs: Sequence[str], suffixes: Sequence[str]) -> list[Any]:
+    """Like :func:`navkit.cli.common.expand_inputs` (files, folders, globs -> paths), and an
+    fsspec URL (``file://``, ``memory://``, ``s3://``...) -> the URLs of the file, folder or
+    glob it names (strings, read by the workers through :func:`navkit.io.urls.local_copy`).
+    The inputs keep their order; each one's files are sorted."""
+    from navkit.cli.common import expand_inputs
+    from navkit.io.urls import expand_url, is_url
+
+    found: list[Any] = []
+    for item in inputs:
+        if is_url(item):
+            found.extend(expand_url(item, tuple(suffixes)))
+        else:
+            found.extend(expand_inputs([item], suffixes))
+    return found

@@ -144,11 +144,11 @@ _GROUP_HELP = "Stereo: N consecutive frames taken at one place form one fragment
 
 @map_app.command("locate")
 def locate_cmd(
-    map_json: Path = typer.Argument(..., help="map.json from navkit map build."),
-    inputs: list[Path] = typer.Argument(
+    map_json: str = typer.Argument(..., help="map.json from navkit map build (path or URL)."),
+    inputs: list[str] = typer.Argument(
         ...,
-        help="CARMEN log(s) or stereo frame folder(s) to localize; several: one output folder "
-        "each, named after the input.",
+        help="CARMEN log(s) (paths or fsspec URLs) or stereo frame folder(s) to localize; "
+        "several: one output folder each, named after the input.",
     ),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     prior: PriorChoice = typer.Option(
@@ -209,8 +209,8 @@ def locate_cmd(
 
 
 def _locate_batch(
-    map_json: Path,
-    inputs: list[Path],
+    map_json: str,
+    inputs: list[str],
     out: Path,
     opts: dict[str, Any],
     workers: int | None,
@@ -220,15 +220,16 @@ def _locate_batch(
     """Every input as one task of a batch (``out/<input name>/``)."""
     from navkit.batch import BatchTask, settings_hash
     from navkit.batch.locate import LocateInput, locate_job
+    from navkit.io.urls import input_identity, url_name
 
-    names = [p.name.split(".")[0] for p in inputs]
+    names = [url_name(p).split(".")[0] for p in inputs]
     keys = [k if names.count(k) == 1 else f"{k}_{i}" for i, k in enumerate(names)]
     tasks = [
         BatchTask(
             key,
             locate_job,
             {"inp": LocateInput(str(map_json), str(p), **opts)},
-            settings_hash(map_json, p, opts),
+            settings_hash(input_identity(map_json), input_identity(p), opts),
         )
         for key, p in zip(keys, inputs, strict=True)
     ]

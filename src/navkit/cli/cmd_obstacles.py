@@ -16,8 +16,15 @@ from navkit.batch.obstacle_frames import (
     RunSettings,
     process_frame,
 )
-from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
-from navkit.cli.common import check_out_dir, cli_errors, expand_inputs, progress, write_run_files
+from navkit.cli.batching import (
+    RESUME,
+    SCHEDULER,
+    WORKERS,
+    exit_if_failed,
+    expand_sources,
+    run_inputs,
+)
+from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
 
 log = logging.getLogger(__name__)
 
@@ -202,7 +209,7 @@ def detect(
     """
     with cli_errors():
         settings, opts, mopts = _resolve_settings(ctx, config)
-        files = expand_inputs(inputs, _suffixes())
+        files = expand_sources(inputs, _suffixes())
         check_out_dir(out, overwrite or resume)
         if workers or scheduler or resume:
             frames, failed, height = _run_batch(
@@ -211,9 +218,11 @@ def detect(
             first_error = None
         else:
             from navkit.io.scans import check_scan_input
+            from navkit.io.urls import local_copy
 
             for f in files:  # every input's container checked before anything is written
-                check_scan_input(f)
+                with local_copy(f) as local:
+                    check_scan_input(local)
             frames, failed, height, first_error = _run_frames(files, out, settings, opts, mopts)
         if first_error is not None and not frames:
             raise first_error  # nothing worked: the one-line error, exit code 2, no run files
@@ -335,6 +344,7 @@ def _run_batch(
     from navkit.batch import BatchTask, settings_hash
     from navkit.batch.obstacle_frames import obstacles_frame_job, read_mounted, resolve_height
     from navkit.errors import DegenerateGeometryError, InputError
+    from navkit.io.urls import input_identity
 
     named = _frame_names(files)
     height, first_error = None, None
@@ -353,7 +363,7 @@ def _run_batch(
             name,
             obstacles_frame_job,
             {"path": str(p), "settings": settings, "opts": opts, "mopts": mopts, "height": height},
-            settings_hash(p, settings, opts, mopts, height.height_m),
+            settings_hash(input_identity(p), settings, opts, mopts, height.height_m),
         )
         for p, name in named
     ]
@@ -380,14 +390,18 @@ def _suffixes() -> tuple[str, ...]:
     return SCAN_SUFFIXES
 
 
-def _frame_names(files: list[Path]) -> list[tuple[Path, str]]:
-    """One output sub-folder per input, named after its stem (``_2``, ... for repeated stems)."""
+def _frame_names(files: list[Any]) -> list[tuple[Any, str]]:
+    """One output sub-folder per input (a path or a URL), named after its stem (``_2``, ... for
+    repeated stems)."""
+    from navkit.io.urls import url_name
+
     used: dict[str, int] = {}
     named = []
     for path in files:
-        used[path.stem] = used.get(path.stem, 0) + 1
-        k = used[path.stem]
-        named.append((path, path.stem if k == 1 else f"{path.stem}_{k}"))
+        stem = Path(url_name(path)).stem
+        used[stem] = used.get(stem, 0) + 1
+        k = used[stem]
+        named.append((path, stem if k == 1 else f"{stem}_{k}"))
     return named
 
 

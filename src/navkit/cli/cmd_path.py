@@ -13,6 +13,7 @@ not import the simulator).
 
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass
 from enum import Enum
@@ -21,7 +22,14 @@ from typing import Any
 
 import typer
 
-from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
+from navkit.cli.batching import (
+    EXIT_SOME_FAILED,
+    RESUME,
+    SCHEDULER,
+    WORKERS,
+    exit_if_failed,
+    run_inputs,
+)
 from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
 
 log = logging.getLogger(__name__)
@@ -68,10 +76,10 @@ OVERWRITE_HELP = "Replace outputs already in --out."
 
 @path_app.command("record")
 def record(
-    trajectories: list[Path] = typer.Argument(
+    trajectories: list[str] = typer.Argument(
         ...,
-        help="Trajectory file(s): TUM, KITTI, EuRoC or a 'time v omega' log. "
-        "Several files: one output folder each, named after the file.",
+        help="Trajectory file(s): TUM, KITTI, EuRoC or a 'time v omega' log (paths or fsspec "
+        "URLs). Several files: one output folder each, named after the file.",
     ),
     tolerance: float = typer.Option(
         0.05, "--tolerance", "-e", help="eps: max distance of a point from the spline (m)."
@@ -145,7 +153,7 @@ def record(
 
 
 def _record_batch(
-    trajectories: list[Path],
+    trajectories: list[str],
     out: Path,
     settings: Any,
     fmt: str,
@@ -157,15 +165,16 @@ def _record_batch(
     """Every trajectory as one task of a batch (``out/<file stem>/path.json``, ``path.png``)."""
     from navkit.batch import BatchTask, settings_hash
     from navkit.batch.path_record import record_path_job
+    from navkit.io.urls import input_identity, url_name
 
-    keys = [t.stem for t in trajectories]
+    keys = [Path(url_name(t)).stem for t in trajectories]
     keys = [k if keys.count(k) == 1 else f"{k}_{i}" for i, k in enumerate(keys)]
     tasks = [
         BatchTask(
             key,
             record_path_job,
             {"trajectory": str(t), "settings": settings, "fmt": fmt, "plane": plane},
-            settings_hash(t, settings, fmt, plane),
+            settings_hash(input_identity(t), settings, fmt, plane),
         )
         for key, t in zip(keys, trajectories, strict=True)
     ]
@@ -176,7 +185,9 @@ def _record_batch(
 
 @path_app.command("return")
 def return_(
-    path_json: Path = typer.Argument(..., help="A path.json written by 'navkit path record'."),
+    path_json: str = typer.Argument(
+        ..., help="A path.json written by 'navkit path record' (a path or an fsspec URL)."
+    ),
     runs: int = typer.Option(
         40, "--runs", min=1, max=10_000, help="Number of simulated returns (paper: 40)."
     ),
@@ -199,8 +210,15 @@ def return_(
     stop_radius: float = typer.Option(
         0.05, "--stop-radius", help="Stop radius around the start (m)."
     ),
+    workers: int | None = WORKERS,
+    scheduler: str | None = SCHEDULER,
+    resume: bool = RESUME,
 ) -> None:
     """Simulate returns from the end of a stored path to its start (mode 2, paper fig. 4).
+
+    Each run is one task of a batch (OUT/run-NNN/, batch.jsonl, rates with 95 % intervals in
+    batch_summary.json) with its own random stream from (--seed, run index), so the runs do not
+    depend on how they are split across --workers or a --scheduler's cluster.
 
     \b
     Example:
@@ -209,9 +227,15 @@ def return_(
     with cli_errors():
         import numpy as np
 
+        from navkit.batch.path_return import (
+            ReturnSweepSettings,
+            collect_returns,
+            return_sweep_tasks,
+        )
         from navkit.errors import ConfigError
         from navkit.io.atomic import write_json
         from navkit.io.pathjson import read_path_json
+        from navkit.io.urls import local_copy
         from navkit.path.control import ReturnSettings
         from navkit.sensors import VisualOdometryNoise
         from navkit.sim.return_sim import simulate_returns
@@ -219,7 +243,8 @@ def return_(
 
         if runs < 1:
             raise ConfigError(f"is {runs}", field="--runs", expected="at least 1")
-        spline = read_path_json(path_json)
+        with local_copy(path_json) as local:
+            spline = read_path_json(local)
         if spline.n_segments == 0 or spline.total_length <= 0:
             raise ConfigError(
                 "the stored path has zero length",
@@ -235,28 +260,36 @@ def return_(
             heading_sigma=np.radians(vo_heading_sigma_deg),
         )
         ctrl = ReturnSettings(delta=delta, v_max=speed, stop_radius=stop_radius)
-        sim = simulate_returns(
-            spline, runs=runs, settings=ctrl, vo=vo, rng=np.random.default_rng(seed)
+        # every check of the controller and the simulator (time limit, step bound) before any
+        # run starts or anything is written: a return that starts at the path's start stops at
+        # once, so this costs one control cycle
+        start = spline.start
+        simulate_returns(
+            spline, runs=1, settings=ctrl, vo=vo, initial_true=[start[0], start[1], 0.0], rng=0
         )
-        summary = sim.summary()
-        check_out_dir(out, overwrite)
+        check_out_dir(out, overwrite or resume)
+        sweep = ReturnSweepSettings(vo=vo, controller=ctrl, seed=seed)
+        bs = run_inputs(
+            return_sweep_tasks(path_json, runs, sweep),
+            out,
+            workers=workers,
+            scheduler=scheduler,
+            resume=resume,
+            description="returns",
+        )
+        rows = [json.loads(line) for line in (out / "batch.jsonl").read_text().splitlines()]
+        sim, detail = collect_returns(out, rows)
+        if sim is None:  # every run failed: the manifest says why, exit code 3
+            typer.echo(f"no run completed -> {out / 'batch.jsonl'}", err=True)
+            raise typer.Exit(code=EXIT_SOME_FAILED)
+        summary = {**sim.summary(), "failed_runs": bs["failed"], "rates": bs["rates"]}
         write_json(
             out / "returns.json",
             {
                 **summary,
                 "start": sim.start,
-                "runs_detail": [
-                    {
-                        "final_xy": sim.final_true[i],
-                        "final_error_m": sim.final_error[i],
-                        "final_error_pct": sim.final_error_pct[i],
-                        "lateral_mean_m": sim.lateral_mean[i],
-                        "lateral_max_m": sim.lateral_max[i],
-                        "duration_s": sim.duration[i],
-                        "stopped": bool(sim.stopped[i]),
-                    }
-                    for i in range(runs)
-                ],
+                "seeds": f"run i: numpy default_rng(SeedSequence([{seed}, i]))",
+                "runs_detail": detail,
             },
         )
         plot_returns(spline, sim, out / "returns.png", stop_radius=stop_radius)
@@ -271,10 +304,11 @@ def return_(
             },
         )
         typer.echo(
-            f"{runs} returns over L = {summary['path_length_m']:.3f} m: final error mean "
+            f"{summary['runs']} returns over L = {summary['path_length_m']:.3f} m: final error mean "
             f"{summary['final_error_mean_pct']:.2f} %, p95 {summary['final_error_p95_pct']:.2f} % of L; "
             f"lateral mean {summary['lateral_error_mean_m']:.3f} m -> {out / 'returns.json'}"
         )
+    exit_if_failed(bs)
 
 
 @path_app.command("simulate")

@@ -10,6 +10,8 @@ from typing import Any
 
 import typer
 
+from navkit.batch.planes_extract import CameraOverride, open_rgbd
+from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
 from navkit.cli.common import check_out_dir, cli_errors, expand_inputs, progress, write_run_files
 
 log = logging.getLogger(__name__)
@@ -19,20 +21,6 @@ planes_app = typer.Typer(
     help="Planes from RGB-D / range images and motion from 1, 2 or >= 3 textured planes.",
     no_args_is_help=True,
 )
-
-
-@dataclass(frozen=True)
-class CameraOverride:
-    """Intrinsics given on the command line (0 = not given)."""
-
-    fx: float = 0.0
-    fy: float = 0.0
-    cx: float = 0.0
-    cy: float = 0.0
-    depth_scale: float = 0.0
-
-    def as_dict(self) -> dict[str, float]:
-        return {k: v for k, v in vars(self).items() if v > 0}
 
 
 @dataclass(frozen=True)
@@ -104,108 +92,19 @@ def _intrinsics(text: str | None, depth_scale: float | None, config: dict) -> Ca
 
 
 _CAMERA_KEYS = ("fx", "fy", "cx", "cy", "depth_scale")
-DEFAULT_DEPTH_SCALE = 1000.0
-"""Raw depth units per metre when neither ``--depth-scale`` nor the folder says (millimetres;
-a TUM folder keeps its format's 5000)."""
-
-
 INTRINSICS_HELP = "Camera intrinsics FX,FY,CX,CY (pixels); overrides the folder's."
 DEPTH_SCALE_HELP = (
     "Raw depth units per metre (default 1000: millimetres; TUM folders 5000 as the format says)."
 )
 
 
-def _open_rgbd(path: Path, cam: CameraOverride):
-    """An RGB-D folder; a simple layout without ``camera.yaml`` needs ``--intrinsics``."""
-    from navkit.errors import DataNotFoundError
-    from navkit.io.rgbd import open_rgbd_sequence
-
-    given = cam.as_dict()
-    if (
-        (path / "color").is_dir()
-        and not (path / "camera.yaml").is_file()
-        and not all(k in given for k in ("fx", "fy", "cx", "cy"))
-    ):
-        raise DataNotFoundError(
-            f"{path / 'camera.yaml'}: not found, and no --intrinsics given; give the camera as "
-            "--intrinsics FX,FY,CX,CY (pixels; and --depth-scale when not 1000) or write "
-            "camera.yaml with fx, fy, cx, cy, depth_scale"
-        )
-    if not (path / "rgb.txt").is_file():
-        given.setdefault("depth_scale", DEFAULT_DEPTH_SCALE)
-    return open_rgbd_sequence(path, given)
-
-
-def _load_observation(path: Path, frame: int, cam: CameraOverride, cell: int):
-    """An observation, the picture to draw on (or None) and a description of the input kind."""
-    from navkit.errors import InputError
-    from navkit.planes import (
-        CloudExtractionSettings,
-        ExtractionSettings,
-        observe_points,
-        observe_rgbd,
-    )
-
-    es = ExtractionSettings(cell=cell)
-    if path.is_dir() and (path / "calib_params.xml").is_file():
-        from navkit.io.rgbd import read_cape_frame
-
-        f = read_cape_frame(path, frame)
-        obs = observe_points(
-            f.points,
-            gray=f.color,
-            camera=f.camera,
-            T_camera_sensor=f.T_camera_sensor,
-            organized_settings=es,
-        )
-        # the overlay is drawn in the depth camera's pixels: the colour registered to them
-        return (
-            obs,
-            f.color_registered,
-            "CAPE frame (depth camera + separately calibrated RGB camera)",
-            None,
-        )
-    if path.is_dir():
-        seq = _open_rgbd(path, cam)
-        if not 0 <= frame < len(seq):
-            raise InputError(
-                f"frame {frame} of {len(seq)}",
-                source=path,
-                field="--frame",
-                expected=f"0 <= frame < {len(seq)}",
-            )
-        rgbd = seq.frame(frame)
-        return observe_rgbd(rgbd, es), rgbd.color, "RGB-D frame", None
-    suffix = path.suffix.lower()
-    if suffix in (".pcd", ".ply"):
-        from navkit.io.pointcloud import read_pcd, read_ply
-
-        cloud = read_pcd(path) if suffix == ".pcd" else read_ply(path)
-        if cloud.is_organized:
-            return (
-                observe_points(cloud.grid(), organized_settings=es),
-                None,
-                "organised cloud",
-                None,
-            )
-        return (
-            observe_points(cloud.points, cloud_settings=CloudExtractionSettings()),
-            None,
-            "unorganised cloud",
-            None,
-        )
-    raise InputError(
-        "unsupported input",
-        source=path,
-        expected="an RGB-D folder (TUM or color/ + depth/), a CAPE folder, a .pcd or .ply file",
-    )
-
-
 @planes_app.command("extract")
 def extract_cmd(
-    input: Path = typer.Argument(
+    inputs: list[str] = typer.Argument(
         ...,
-        help="RGB-D folder (TUM, color/+depth/+camera.yaml, 7-Scenes), CAPE folder, .pcd or .ply.",
+        help="RGB-D folder (TUM, color/+depth/+camera.yaml, 7-Scenes), CAPE folder, .pcd or .ply "
+        "(a path or an fsspec URL such as file:// or s3://). Several inputs: one output folder "
+        "each, named after the input.",
     ),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace earlier outputs in --out."),
@@ -215,81 +114,81 @@ def extract_cmd(
     cell: int = typer.Option(20, "--cell", help="Patch size of the organised extraction (px)."),
     intrinsics: str | None = typer.Option(None, "--intrinsics", help=INTRINSICS_HELP),
     depth_scale: float | None = typer.Option(None, "--depth-scale", help=DEPTH_SCALE_HELP),
+    workers: int | None = WORKERS,
+    scheduler: str | None = SCHEDULER,
+    resume: bool = RESUME,
 ) -> None:
     """Extract planes: planes.json, one texture PNG per plane, overlay.png.
+
+    Several inputs (or --workers / --scheduler / --resume) run as a batch: OUT/<input>/ per
+    input, batch.jsonl (one row per input) and batch_summary.json; exit code 3 when any failed.
 
     Example: navkit planes extract "$NAVKIT_DATA"/rgbd/slambook-ch5 --intrinsics 518,519,325.5,253.5 -o out/slambook-planes
     """
     with cli_errors():
-        import numpy as np
-
-        from navkit.io.atomic import write_json
-        from navkit.io.images import write_image
-        from navkit.planes import plane_frame
-        from navkit.viz.planes import extraction_overlay, texture_to_uint8
+        from navkit.batch.planes_extract import extract_planes_to
 
         conf = _config(config)
         nu, cell = _opt(conf, "nu", nu, 0.01), int(_opt(conf, "cell", cell, 20))
         frame = int(_opt(conf, "frame", frame, 0))
         cam = _intrinsics(intrinsics, depth_scale, conf)
-        out = check_out_dir(out, overwrite)
-        settings = PlanesRunSettings(input=str(input), frame=frame, nu=nu, cell=cell, camera=cam)
-        t0 = time.perf_counter()
-        obs, color, kind, gray = _load_observation(input, frame, cam, cell)
-        ms = 1000 * (time.perf_counter() - t0)
-        planes: list[dict[str, Any]] = []
-        for k, seg in enumerate(progress(obs.segments, "textures")):
-            origin, axes = plane_frame(seg.plane)
-            entry: dict[str, Any] = {
-                "id": k,
-                "normal": seg.normal,
-                "rho": seg.rho,
-                "rms": seg.rms,
-                "inliers": int(seg.plane.count),
-                "area_m2": seg.area,
-                "centroid": seg.plane.centroid,
-                "frame_origin": origin,
-                "frame_axes": axes,
-                "outline": seg.outline,
-                "outline_3d": seg.outline_3d(),
-            }
-            if obs.has_texture:
-                tex = obs.texture(k, nu=nu)
-                name = f"texture_{k:02d}.png"
-                write_image(out / name, texture_to_uint8(tex.image))
-                entry.update(
-                    texture=name,
-                    texture_nu=nu,
-                    texture_index0=tex.index0,
-                    texture_valid=tex.valid_count,
-                    texture_contrast=tex.contrast(),
-                )
-            planes.append(entry)
-        write_json(
-            out / "planes.json",
-            {
-                "input": str(input),
-                "kind": kind,
-                "frame": "sensor (camera: OpenCV x right, y down, z forward)",
-                "planes": planes,
-            },
+        out = check_out_dir(out, overwrite or resume)
+        settings = PlanesRunSettings(
+            input=" ".join(inputs), frame=frame, nu=nu, cell=cell, camera=cam
         )
-        if color is not None:
-            write_image(out / "overlay.png", extraction_overlay(color, obs.extraction.labels))
-        elif obs.extraction.labels.ndim == 2:
-            base = gray if gray is not None else np.full(obs.extraction.labels.shape, 128, np.uint8)
-            if base.shape != obs.extraction.labels.shape:
-                base = np.full(obs.extraction.labels.shape, 128, np.uint8)
-            write_image(out / "overlay.png", extraction_overlay(base, obs.extraction.labels))
-        summary = {
-            "input": str(input),
-            "kind": kind,
-            "planes": len(planes),
-            "extract_and_load_ms": ms,
-            "textured": obs.has_texture,
-        }
+        if len(inputs) > 1 or workers or scheduler or resume:
+            summary = _extract_batch(inputs, out, frame, cam, nu, cell, workers, scheduler, resume)
+        else:
+            summary = extract_planes_to(
+                out,
+                inputs[0],
+                frame=frame,
+                camera=cam,
+                nu=nu,
+                cell=cell,
+                iterate=lambda items: progress(items, "textures"),
+            )
+            typer.echo(f"{summary['planes']} planes ({summary['kind']}) -> {out}")
         write_run_files(out, settings, summary)
-        typer.echo(f"{len(planes)} planes ({kind}) -> {out}")
+    exit_if_failed(summary)
+
+
+def _extract_batch(
+    inputs: list[str],
+    out: Path,
+    frame: int,
+    cam: CameraOverride,
+    nu: float,
+    cell: int,
+    workers: int | None,
+    scheduler: str | None,
+    resume: bool,
+) -> dict[str, Any]:
+    """Every input as one task of a batch (``out/<input name>/planes.json``, textures, overlay).
+
+    The settings hash covers the navkit version, the input (a file's size and modification
+    time; a folder's own entry, so a frame replaced in place inside a folder is not noticed by
+    ``--resume``: use a new --out), the frame, the camera override, nu and cell.
+    """
+    from navkit import __version__
+    from navkit.batch import BatchTask, settings_hash
+    from navkit.batch.planes_extract import input_key, planes_extract_job
+    from navkit.io.urls import input_identity
+
+    keys = [input_key(s) for s in inputs]
+    keys = [k if keys.count(k) == 1 else f"{k}_{i}" for i, k in enumerate(keys)]
+    tasks = [
+        BatchTask(
+            key,
+            planes_extract_job,
+            {"source": str(s), "frame": frame, "camera": cam, "nu": nu, "cell": cell},
+            settings_hash(__version__, input_identity(s), frame, cam, nu, cell),
+        )
+        for key, s in zip(keys, inputs, strict=True)
+    ]
+    return run_inputs(
+        tasks, out, workers=workers, scheduler=scheduler, resume=resume, description="planes"
+    )
 
 
 def _reference_poses(path: Path, n: int):
@@ -343,7 +242,7 @@ def _open_sequence(sequence: list[str], cam: CameraOverride, cell: int, max_fram
     es = ExtractionSettings(cell=cell)
     first = Path(sequence[0])
     if len(sequence) == 1 and first.is_dir() and not any(first.glob("*.pcd")):
-        seq = _open_rgbd(first, cam)
+        seq = open_rgbd(first, cam)
         n = len(seq) if max_frames <= 0 else min(max_frames, len(seq))
         ref = None if seq.reference is None else seq.reference[:n]
         return (
