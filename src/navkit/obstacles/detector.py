@@ -8,12 +8,11 @@ import time
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
-from navkit.geometry.shapes import compute_shapes, hull_points
+from navkit.geometry.shapes import compute_shapes, hull_points, hulls_csr, shapes_csr
 from navkit.obstacles.grids import ScanGrid
 from navkit.obstacles.ground import refine_by_ground_height
 from navkit.obstacles.mesh import MeshCharacteristics, build_mesh, robust_cell_normals
@@ -533,49 +532,6 @@ def _group(
     return np.split(values[order], np.cumsum(counts)[:-1])
 
 
-def _hulls(groups: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
-    """Convex hull ``(M, 2)`` (counter-clockwise) of each obstacle's boundary vertices ``(N, 2)``.
-
-    OpenCV's monotone chain on float32 coordinates relative to each group's first point picks the
-    hull vertices (a fraction of Qhull's per-call set-up, which dominated the map stage with
-    shapes off); the vertices returned are the float64 input rows. Relative coordinates keep the
-    float32 rounding at ~1e-7 x the obstacle's extent (a micrometre for a 10 m obstacle, far below
-    the range noise), so the vertex set could differ from the exact hull only for points collinear
-    with a hull edge within that tolerance. A hull is accepted only when it is strictly convex in
-    float64 (every turn to the left, checked for all hulls in one vectorised pass); otherwise -
-    fewer than 3 points, degenerate or nearly collinear sets, non-finite values -
-    :func:`navkit.geometry.shapes.hull_points` (Qhull, with its 1 mm dilation of degenerate sets)
-    decides. On the SemanticKITTI frames every hull has Qhull's vertices in Qhull's cyclic order;
-    only the starting vertex differs (which matters to the order-dependent A3 alone).
-    """
-    out: list[NDArray[np.float64] | None] = [None] * len(groups)
-    cand: list[NDArray[np.float64]] = []
-    which: list[int] = []
-    for k, b in enumerate(groups):
-        if len(b) < 3 or not np.isfinite(b).all():
-            out[k] = hull_points(b)
-            continue
-        idx = cv2.convexHull((b - b[0]).astype(np.float32), returnPoints=False).ravel()
-        if len(idx) < 3:
-            out[k] = hull_points(b)
-            continue
-        cand.append(b[idx])
-        which.append(k)
-    if cand:
-        H = np.concatenate(cand)
-        m = np.array([len(c) for c in cand])
-        start = np.repeat(np.cumsum(m) - m, m)
-        pos = np.arange(len(H)) - start
-        nxt = start + (pos + 1) % np.repeat(m, m)
-        e = H[nxt] - H  # edge from each vertex to the next
-        en = e[nxt]
-        turn = e[:, 0] * en[:, 1] - e[:, 1] * en[:, 0]
-        bad = np.bincount(np.repeat(np.arange(len(cand)), m), weights=turn <= 0) > 0
-        for c, k, b in zip(cand, which, bad, strict=True):
-            out[k] = hull_points(groups[k]) if b else c
-    return [h for h in out if h is not None]
-
-
 def _build_obstacles(
     P: NDArray[np.float64],
     tri: NDArray[np.int64],
@@ -596,10 +552,9 @@ def _build_obstacles(
         b_start, b_xy, v_start, v_xyz, s_start, s_xy, shadow_area, ntri = (
             _kernels.map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n)
         )
-        bxy = [b_xy[b_start[k] : b_start[k + 1]] for k in range(1, n + 1)]
-        vxyz = [v_xyz[v_start[k] : v_start[k + 1]] for k in range(1, n + 1)]
-        sxy = [s_xy[s_start[k] : s_start[k + 1]] for k in range(1, n + 1)]
-        return _assemble_obstacles(bxy, vxyz, sxy, shadow_area, ntri, n, settings)
+        return _assemble_compiled(
+            b_xy, b_start[1:], v_xyz, v_start[1:], s_xy, s_start[1:], shadow_area, ntri, settings
+        )
     # boundary vertices per obstacle
     bmask = boundary.ravel()
     bxy = _group(vid.ravel()[bmask].astype(np.int64), flat[bmask, :2], n)
@@ -637,10 +592,9 @@ def _assemble_obstacles(
     vz = [v[:, 2] for v in vxyz]
     vxy = [v[:, :2] for v in vxyz]
     guaranteed_sets = [np.concatenate([o, s]) for o, s in zip(vxy, sxy, strict=True)]
-    # the outline written to files, and the shapes' input; A3 (one pass over the hull in its
-    # stored order) depends on the starting vertex, so with A3 requested Qhull's cycle is kept
-    # and A3 stays equal to ``circle_a3(hull_points(boundary))``
-    hulls = [hull_points(b) for b in bxy] if "A3" in settings.shapes else _hulls(bxy)
+    # the outline written to files, and the shapes' input (counter-clockwise from the
+    # lexicographically smallest vertex: A3 and Welzl depend on the start)
+    hulls = [hull_points(b) for b in bxy]
     shapes = (
         compute_shapes(hulls, settings.shapes, are_hulls=True, backend=settings.backend)
         if settings.shapes
@@ -669,6 +623,56 @@ def _assemble_obstacles(
             )
         )
     return out
+
+
+def _assemble_compiled(
+    b_xy: NDArray[np.float64],
+    b_off: NDArray[np.int64],
+    v_xyz: NDArray[np.float64],
+    v_off: NDArray[np.int64],
+    s_xy: NDArray[np.float64],
+    s_off: NDArray[np.int64],
+    shadow_area: NDArray[Any],
+    ntri: NDArray[Any],
+    settings: ObstacleSettings,
+) -> list[Obstacle]:
+    """:func:`_assemble_obstacles` on CSR vertex sets (rows ``off[k]:off[k + 1]`` of obstacle
+    ``k + 1``): the hulls and shapes of all obstacles in a few kernel calls
+    (:func:`navkit.geometry.shapes.hulls_csr`, :func:`~navkit.geometry.shapes.shapes_csr`),
+    the same obstacles as the twin."""
+    from navkit.obstacles import _kernels_map
+
+    n = len(b_off) - 1
+    g_xy, g_off = _kernels_map.guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off)
+    H, hoff = hulls_csr(b_xy, b_off)
+    shapes = shapes_csr(H, hoff, settings.shapes)
+    if settings.guaranteed_shapes:
+        G, goff = hulls_csr(g_xy, g_off)
+        guaranteed = shapes_csr(G, goff, settings.guaranteed_shapes)
+    else:
+        guaranteed = [{} for _ in range(n)]
+    starts = v_off[:-1]
+    z_min = np.minimum.reduceat(v_xyz[:, 2], starts).tolist()
+    z_max = np.maximum.reduceat(v_xyz[:, 2], starts).tolist()
+    n_points = np.diff(v_off).tolist()
+    n_tri = ntri.tolist()
+    area = shadow_area.tolist()
+    return [
+        Obstacle(
+            id=k + 1,
+            n_triangles=n_tri[k],
+            n_points=n_points[k],
+            z_min=z_min[k],
+            z_max=z_max[k],
+            boundary_xy=b_xy[b_off[k] : b_off[k + 1]],
+            polygon_xy=H[hoff[k] : hoff[k + 1]],
+            shadow_xy=g_xy[g_off[k] : g_off[k + 1]],
+            shadow_area=area[k],
+            shapes=shapes[k],
+            guaranteed=guaranteed[k],
+        )
+        for k in range(n)
+    ]
 
 
 def detect_obstacles(
