@@ -7,10 +7,23 @@ stage 8 are in :mod:`navkit.geometry._kernels`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
-__all__ = ["guaranteed_sets_kernel"]
+from navkit.obstacles._kernels import (
+    _OFF_I,
+    _OFF_J,
+    _find,
+    _kth,
+    _max_nan,
+    _merge_close,
+    _min_nan,
+    _union,
+)
+
+__all__ = ["guaranteed_sets_kernel", "split_kernel", "vertex_kernel"]
 
 
 @njit(cache=True)
@@ -34,3 +47,367 @@ def guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off):  # type: ignore[no-untype
             g[p, 1] = s_xy[r, 1]
             p += 1
     return g, g_off
+
+
+# ------------------------------------------------------------------------------------------
+# stage 6: one union-find for the obstacle, shadow and ground components
+
+_GROUND, _OBSTACLE, _SHADOW = 0, 1, 2
+
+
+@njit(cache=True)
+def _class_of(label):  # type: ignore[no-untyped-def]
+    """Component class of a triangle class m_t: ground, obstacle, shadow (both kinds), or -1."""
+    if label == 0:
+        return _GROUND
+    if label == -2:
+        return _OBSTACLE
+    if label == -3 or label == -4:
+        return _SHADOW
+    return -1
+
+
+@njit(cache=True)
+def _class_union_find(labels, wrap):  # type: ignore[no-untyped-def]
+    """The mesh components of the ground, obstacle and shadow triangles in one union-find
+    (``segment.MESH_STRUCTURE``, rows cyclic with ``wrap``; a union only joins triangles of one
+    class, so the components are those of three separate passes). Returns the class per
+    triangle (flat, -1: none) and the parent array (roots = smallest member)."""
+    R, C = labels.shape
+    cls = np.empty(R * C, np.int8)
+    parent = np.empty(R * C, np.int32)
+    for i in range(R):
+        for j in range(C):
+            f = i * C + j
+            cls[f] = _class_of(labels[i, j])
+            parent[f] = f
+    seam = wrap and R > 1
+    for i in range(R):
+        for j in range(C):
+            f = i * C + j
+            c = cls[f]
+            if c < 0:
+                continue
+            if j > 0 and cls[f - 1] == c:
+                _union(parent, f, f - 1)
+            if i > 0 and j + 1 < C and cls[f - C + 1] == c:
+                _union(parent, f, f - C + 1)
+            if seam and i == R - 1 and j > 0 and cls[j - 1] == c:
+                _union(parent, f, j - 1)
+    return cls, parent
+
+
+@njit(cache=True)
+def _neighbours(i, j, R, C, wrap, out):  # type: ignore[no-untyped-def]
+    """The (up to 4) mesh neighbours of triangle ``(i, j)`` (``segment.MESH_STRUCTURE``) as flat
+    indices in ``out``; returns their number."""
+    m = 0
+    for o in range(4):
+        ti, tj = i + _OFF_I[o], j + _OFF_J[o]
+        if tj < 0 or tj >= C:
+            continue
+        if ti < 0 or ti >= R:
+            if not (wrap and R > 1):
+                continue
+            ti = ti % R
+        out[m] = ti * C + tj
+        m += 1
+    return m
+
+
+@njit(cache=True)
+def split_kernel(  # type: ignore[no-untyped-def]
+    labels,
+    zmin,
+    zmax,
+    P,
+    wrap,
+    min_triangles,
+    min_height32,
+    half,
+    distance_m,
+    gap,
+):
+    """Stage 6 (twin: ``detector._split``): obstacle components, the size / height /
+    noise-patch filters, merging of close components and the shadows' owners, with the ground
+    components of stage 7 from the same union-find. ``labels`` is changed in place (dropped
+    components back to ground).
+
+    Returns ``obs_lab, n, owner, ground_root, ground_size``: ``ground_root (R * C,)`` the root of
+    each ground triangle's component after the drop (-1: not ground) and ``ground_size`` the
+    component sizes by root.
+    """
+    R, C = labels.shape
+    cls, parent = _class_union_find(labels, wrap)
+    # obstacle and shadow components numbered by first appearance in raster order
+    new = np.zeros(R * C, np.int32)
+    lab = np.zeros((R, C), np.int32)
+    sl = np.zeros((R, C), np.int32)
+    n = 0
+    ns = 0
+    for i in range(R):
+        for j in range(C):
+            f = i * C + j
+            c = cls[f]
+            if c <= 0:
+                continue
+            r = _find(parent, f)
+            if new[r] == 0:
+                if c == _OBSTACLE:
+                    n += 1
+                    new[r] = n
+                else:
+                    ns += 1
+                    new[r] = ns
+            if c == _OBSTACLE:
+                lab[i, j] = new[r]
+            else:
+                sl[i, j] = new[r]
+    dropped_any = False
+    if n:
+        size = np.zeros(n + 1, np.int64)
+        hi = np.full(n + 1, -np.inf, np.float32)
+        lo = np.full(n + 1, np.inf, np.float32)
+        sm = np.zeros(n + 1, np.float64)
+        h = np.float32(0.5)
+        # obstacle triangles in raster order, grouped by label (a counting sort)
+        for i in range(R):
+            for j in range(C):
+                a = lab[i, j]
+                if a:
+                    size[a] += 1
+        start = np.zeros(n + 2, np.int64)
+        for a in range(1, n + 1):
+            start[a + 1] = start[a] + size[a]
+        fill = start.copy()
+        nt = start[n + 1]
+        ti_ = np.empty(nt, np.int64)  # the obstacle triangles in raster order
+        tj_ = np.empty(nt, np.int64)
+        zs = np.empty(nt, np.float64)  # their mid heights by label
+        m = 0
+        for i in range(R):
+            for j in range(C):
+                a = lab[i, j]
+                if a == 0:
+                    continue
+                ti_[m] = i
+                tj_[m] = j
+                m += 1
+                hi[a] = _max_nan(hi[a], zmax[i, j])
+                lo[a] = _min_nan(lo[a], zmin[i, j])
+                zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
+                sm[a] += zm
+                zs[fill[a]] = zm
+                fill[a] += 1
+        # 10th / 90th percentile of the mid heights per label
+        spread = np.empty(n + 1, np.float64)
+        for a in range(1, n + 1):
+            k = size[a] - 1
+            spread[a] = _kth(zs[start[a] : start[a + 1]], math.floor(0.9 * k)) - _kth(
+                zs[start[a] : start[a + 1]], math.floor(0.1 * k)
+            )
+        # lift over the adjacent ground, the sums in the twin's pair order (per offset: the
+        # pairs inside the array in raster order, then the ones across the seam)
+        cnt_g = np.zeros(n + 1, np.int64)
+        sum_g = np.zeros(n + 1, np.float64)
+        first_last = np.searchsorted(ti_, R - 1)  # where row R - 1 starts
+        first_one = np.searchsorted(ti_, 1)  # where row 0 ends
+        for o in range(4):
+            di, dj = _OFF_I[o], _OFF_J[o]
+            for seam in range(2 if (wrap and di != 0) else 1):
+                k0, k1 = 0, nt
+                if seam == 1:  # only row R - 1 (di = 1) or row 0 (di = -1) crosses
+                    k0, k1 = (first_last, nt) if di == 1 else (0, first_one)
+                for k in range(k0, k1):
+                    i, j = ti_[k], tj_[k]
+                    tj = j + dj
+                    if tj < 0 or tj >= C:
+                        continue
+                    ti = i + di
+                    crosses = ti < 0 or ti >= R
+                    if crosses != (seam == 1):
+                        continue
+                    if crosses:
+                        ti = ti % R
+                    if labels[ti, tj] == 0:
+                        a = lab[i, j]
+                        cnt_g[a] += 1
+                        sum_g[a] += np.float64(h * (zmax[ti, tj] + zmin[ti, tj]))
+        lut = np.zeros(n + 1, np.int32)
+        m2 = 0
+        for a in range(1, n + 1):
+            lift = sm[a] / max(size[a], 1) - sum_g[a] / cnt_g[a] if cnt_g[a] > 0 else np.inf
+            noise_patch = spread[a] < half and lift < half
+            if size[a] >= min_triangles and (hi[a] - lo[a]) >= min_height32 and not noise_patch:
+                m2 += 1
+                lut[a] = m2
+        for k in range(nt):
+            i, j = ti_[k], tj_[k]
+            a = lab[i, j]
+            if lut[a] == 0:
+                labels[i, j] = 0
+                cls[i * C + j] = _GROUND
+                dropped_any = True
+            lab[i, j] = lut[a]
+        if dropped_any:  # the dropped triangles join the ground around them
+            nb = np.empty(4, np.int64)
+            for k in range(nt):
+                i, j = ti_[k], tj_[k]
+                f = i * C + j
+                if cls[f] != _GROUND:
+                    continue
+                for q in range(_neighbours(i, j, R, C, wrap, nb)):
+                    if cls[nb[q]] == _GROUND:
+                        _union(parent, f, nb[q])
+        n = m2
+        if n >= 2 and gap >= 1 and distance_m > 0:
+            lab, n = _merge_close(lab, n, P, wrap, distance_m, gap)
+    # ground components (stage 7's main ground zones)
+    ground_root = np.full(R * C, -1, np.int32)
+    ground_size = np.zeros(R * C, np.int32)
+    for f in range(R * C):
+        if cls[f] == _GROUND:
+            r = _find(parent, f)
+            ground_root[f] = r
+            ground_size[r] += 1
+    owner = np.zeros((R, C), np.int32)
+    if ns == 0 or n == 0:
+        return lab, n, owner, ground_root, ground_size
+    # shadow owners: per shadow zone, the obstacle it shares the most adjacencies with (ties:
+    # the larger id, as the twin's stable lexsort)
+    nobs = n + 1
+    dense = (ns + 1) * nobs <= 1 << 22
+    counts = np.zeros((ns + 1) * nobs if dense else 1, np.int64)
+    keys = np.empty(0 if dense else 4 * R * C, np.int64)
+    k = 0
+    nb = np.empty(4, np.int64)
+    labf = lab.ravel()
+    for i in range(R):
+        for j in range(C):
+            z = sl[i, j]
+            if z == 0:
+                continue
+            for q in range(_neighbours(i, j, R, C, wrap, nb)):
+                b = labf[nb[q]]
+                if b <= 0:
+                    continue
+                if dense:
+                    counts[z * nobs + b] += 1
+                else:
+                    keys[k] = np.int64(z) * nobs + b
+                    k += 1
+    best = np.zeros(ns + 1, np.int32)
+    if dense:
+        for z in range(1, ns + 1):
+            bc = 0
+            for b in range(1, nobs):
+                c = counts[z * nobs + b]
+                if c > 0 and c >= bc:
+                    bc = c
+                    best[z] = b
+    elif k:
+        keys = np.sort(keys[:k])
+        best_count = np.zeros(ns + 1, np.int64)
+        run = 1
+        for m in range(1, k + 1):
+            if m < k and keys[m] == keys[m - 1]:
+                run += 1
+                continue
+            z = keys[m - 1] // nobs
+            b = keys[m - 1] % nobs
+            if run >= best_count[z]:
+                best_count[z] = run
+                best[z] = b
+            run = 1
+    for i in range(R):
+        for j in range(C):
+            if sl[i, j]:
+                owner[i, j] = best[sl[i, j]]
+    return lab, n, owner, ground_root, ground_size
+
+
+# ------------------------------------------------------------------------------------------
+# stage 7: one pass over the vertices
+
+
+@njit(cache=True)
+def vertex_kernel(labels, obs_lab, valid, wrap, ground_root, ground_size, main_share):  # type: ignore[no-untyped-def]
+    """``segment.boundary_vertices`` + ``vertex_labels`` + ``main_ground_vertices`` in one pass
+    over the vertices, each reading its six incident triangles once
+    (``segment._incident_slices``' order: a missing triangle counts as obstacle id 0, no class,
+    not main ground). The main ground zones are the ground components of
+    :func:`split_kernel` with at least ``main_share`` of the largest one's triangles.
+    Returns ``vid, boundary, vertex labels, main ground vertices``."""
+    n_az, n_el = valid.shape
+    R = labels.shape[0]
+    C2 = labels.shape[1]
+    C = C2 // 2
+    big = 0
+    for f in range(len(ground_size)):
+        if ground_size[f] > big:
+            big = ground_size[f]
+    thr = main_share * big
+    vid = np.zeros((n_az, n_el), np.int32)
+    bnd = np.zeros((n_az, n_el), np.bool_)
+    vlab = np.empty((n_az, n_el), np.int8)
+    main = np.zeros((n_az, n_el), np.bool_)
+    rows = np.empty(6, np.int64)
+    cols = np.empty(6, np.int64)
+    for p in range(n_az):
+        rp = p if p < R else -1
+        rm = p - 1 if p >= 1 else (R - 1 if wrap else -1)
+        for q in range(n_el):
+            c0 = 2 * q if q < C else -1
+            cm = 2 * (q - 1) if q >= 1 else -1
+            rows[0], cols[0] = rp, c0
+            rows[1], cols[1] = rp, cm
+            rows[2], cols[2] = rm, c0
+            rows[3], cols[3] = rm, c0 + 1 if c0 >= 0 else -1
+            rows[4], cols[4] = rp, cm + 1 if cm >= 0 else -1
+            rows[5], cols[5] = rm, cm + 1 if cm >= 0 else -1
+            flags = 0
+            is_main = False
+            hi = 0
+            lo = 0
+            for k in range(6):
+                r, c = rows[k], cols[k]
+                if r < 0 or c < 0:
+                    v = 0
+                else:
+                    v = obs_lab[r, c]
+                    t = labels[r, c]
+                    if t == 0:
+                        flags |= 1
+                        g = ground_root[r * C2 + c]
+                        if g >= 0 and ground_size[g] >= thr:
+                            is_main = True
+                    elif t == -4:
+                        flags |= 2
+                    elif t == -3:
+                        flags |= 4
+                    elif t == -2:
+                        flags |= 8
+                if k == 0:
+                    hi = v
+                    lo = v
+                else:
+                    if v > hi:
+                        hi = v
+                    if v < lo:
+                        lo = v
+            vid[p, q] = hi
+            bnd[p, q] = hi > 0 and lo != hi
+            main[p, q] = is_main and big > 0
+            if not valid[p, q]:
+                vlab[p, q] = -1
+            elif flags & 8:
+                vlab[p, q] = -2
+            elif flags & 1:
+                vlab[p, q] = 0
+            elif flags & 2:
+                vlab[p, q] = -4
+            elif flags & 4:
+                vlab[p, q] = -3
+            else:
+                vlab[p, q] = -1
+    return vid, bnd, vlab, main

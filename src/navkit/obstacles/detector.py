@@ -307,7 +307,7 @@ def detect_obstacles_grid(
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
     compiled = settings.backend == "compiled"
     if compiled:
-        obs_lab, n, owner = _compiled_split(labels, mesh, P, wrap, settings)
+        obs_lab, n, owner, ground = _compiled_split(labels, mesh, P, wrap, settings)
     else:
         obs_lab, n, owner = _split(labels, mesh, P, wrap, settings)
     tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
@@ -315,7 +315,7 @@ def detect_obstacles_grid(
 
     # stage 7: boundary vertices, per-vertex classes
     if compiled:
-        vid, boundary, vlab = _compiled_vertices(labels, obs_lab, P, valid, wrap, settings)
+        vid, boundary, vlab = _compiled_vertices(labels, obs_lab, P, valid, wrap, settings, ground)
     else:
         vid, boundary, vlab = _vertices(labels, obs_lab, P, valid, wrap, settings)
     clock.lap("boundaries")
@@ -391,11 +391,13 @@ def _compiled_split(
     P: NDArray[np.float64],
     wrap: bool,
     settings: ObstacleSettings,
-) -> tuple[NDArray[np.int32], int, NDArray[np.int32]]:
-    """Stage 6 in one kernel (:func:`navkit.obstacles._kernels.split_kernel`), same answers."""
-    from navkit.obstacles import _kernels
+) -> tuple[NDArray[np.int32], int, NDArray[np.int32], tuple[NDArray[np.int32], NDArray[np.int32]]]:
+    """Stage 6 in one kernel (:func:`navkit.obstacles._kernels_map.split_kernel`), same answers;
+    also returns the ground components (root per triangle, sizes) for stage 7, found by the
+    same union-find as the obstacle and shadow components."""
+    from navkit.obstacles import _kernels_map
 
-    obs_lab, n, owner = _kernels.split_kernel(
+    obs_lab, n, owner, ground_root, ground_size = _kernels_map.split_kernel(
         labels,
         mesh.z_min.astype(np.float32, copy=False),
         mesh.z_max.astype(np.float32, copy=False),
@@ -407,7 +409,7 @@ def _compiled_split(
         float(settings.merge_distance_m),
         int(settings.merge_gap_cells),
     )
-    return obs_lab, int(n), owner
+    return obs_lab, int(n), owner, (ground_root, ground_size)
 
 
 def _vertices(
@@ -443,12 +445,17 @@ def _compiled_vertices(
     valid: NDArray[np.bool_],
     wrap: bool,
     settings: ObstacleSettings,
+    ground: tuple[NDArray[np.int32], NDArray[np.int32]],
 ) -> tuple[NDArray[np.int32], NDArray[np.bool_], NDArray[np.int8]]:
-    """Stage 7 with the kernels of :mod:`navkit.obstacles._kernels` (same answers)."""
-    from navkit.obstacles import _kernels
+    """Stage 7 with the kernels of :mod:`navkit.obstacles._kernels_map` (one pass over the
+    vertices, on stage 6's ground components) and :mod:`navkit.obstacles._kernels` (the
+    ground-height refinement); same answers."""
+    from navkit.obstacles import _kernels, _kernels_map
     from navkit.obstacles.ground import fill_missing_cells
 
-    vid, boundary, vlab, main = _kernels.vertex_kernel(labels, obs_lab, valid, bool(wrap), 0.1)
+    vid, boundary, vlab, main = _kernels_map.vertex_kernel(
+        labels, obs_lab, valid, bool(wrap), ground[0], ground[1], 0.1
+    )
     if settings.ground_refine:
         flat = P.reshape(-1, 3)
         ref = (main & (vlab == GROUND)).reshape(-1)
