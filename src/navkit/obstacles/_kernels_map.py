@@ -72,28 +72,48 @@ def _class_union_find(labels, wrap):  # type: ignore[no-untyped-def]
     """The mesh components of the ground, obstacle and shadow triangles in one union-find
     (``segment.MESH_STRUCTURE``, rows cyclic with ``wrap``; a union only joins triangles of one
     class, so the components are those of three separate passes). Returns the class per
-    triangle (flat, -1: none) and the parent array (roots = smallest member)."""
+    triangle (flat, -1: none) and the parent array (every root is its set's smallest member).
+
+    One raster scan: a triangle is a new singleton when reached, so it takes its left
+    neighbour's root (kept from the previous step) and joins the upper-right and seam
+    neighbours' sets by a find each."""
     R, C = labels.shape
     cls = np.empty(R * C, np.int8)
     parent = np.empty(R * C, np.int32)
-    for i in range(R):
-        for j in range(C):
-            f = i * C + j
-            cls[f] = _class_of(labels[i, j])
-            parent[f] = f
     seam = wrap and R > 1
     for i in range(R):
+        prev = -1
+        cur = np.int32(0)
         for j in range(C):
             f = i * C + j
-            c = cls[f]
+            c = _class_of(labels[i, j])
+            cls[f] = c
             if c < 0:
+                parent[f] = f
+                prev = -1
                 continue
-            if j > 0 and cls[f - 1] == c:
-                _union(parent, f, f - 1)
+            root = np.int32(f)
+            if prev == c:
+                root = cur
             if i > 0 and j + 1 < C and cls[f - C + 1] == c:
-                _union(parent, f, f - C + 1)
+                rb = _find(parent, f - C + 1)
+                if rb < root:
+                    if root != f:
+                        parent[root] = rb
+                    root = rb
+                elif root < rb:
+                    parent[rb] = root
             if seam and i == R - 1 and j > 0 and cls[j - 1] == c:
-                _union(parent, f, j - 1)
+                rb = _find(parent, j - 1)
+                if rb < root:
+                    if root != f:
+                        parent[root] = rb
+                    root = rb
+                elif root < rb:
+                    parent[rb] = root
+            parent[f] = root
+            prev = c
+            cur = root
     return cls, parent
 
 
