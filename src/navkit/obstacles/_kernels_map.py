@@ -23,7 +23,12 @@ from navkit.obstacles._kernels import (
     _union,
 )
 
-__all__ = ["guaranteed_sets_kernel", "split_kernel", "vertex_kernel"]
+__all__ = [
+    "guaranteed_sets_kernel",
+    "map_groups_kernel",
+    "split_kernel",
+    "vertex_kernel",
+]
 
 
 @njit(cache=True)
@@ -431,3 +436,98 @@ def vertex_kernel(labels, obs_lab, valid, wrap, ground_root, ground_size, main_s
             else:
                 vlab[p, q] = -1
     return vid, bnd, vlab, main
+
+
+# ------------------------------------------------------------------------------------------
+# stage 8 input: per-obstacle vertex sets (twin: detector._build_obstacles' groupings)
+
+
+@njit(cache=True, error_model="numpy")
+def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ignore[no-untyped-def]
+    """Boundary vertices ``(x, y)``, all vertices ``(x, y, z)`` and shadow vertex sets
+    ``(x, y)`` of obstacles 1..n in CSR layouts (each with offsets ``(n + 1,)``), the shadow
+    areas and the triangle counts, in the twin's orders (vertices in raster order; a shadow
+    set's vertices sorted by index, each once; areas summed in raster order). Two passes over
+    the vertices and one over the triangles."""
+    vf = vid.ravel()
+    bf = boundary.ravel()
+    nv = len(vf)
+    v_off = np.zeros(n + 1, np.int64)
+    b_off = np.zeros(n + 1, np.int64)
+    for k in range(nv):
+        a = vf[k]
+        if a > 0:
+            v_off[a] += 1
+            if bf[k]:
+                b_off[a] += 1
+    for a in range(1, n + 1):  # counts -> offsets: id a's rows are off[a - 1]:off[a]
+        v_off[a] += v_off[a - 1]
+        b_off[a] += b_off[a - 1]
+    tv, tb = v_off[n], b_off[n]
+    v_xyz = np.empty((tv, 3))
+    b_xy = np.empty((tb, 2))
+    vfill = v_off.copy()
+    bfill = b_off.copy()
+    for k in range(nv):
+        a = vf[k]
+        if a > 0:
+            p = vfill[a - 1]
+            v_xyz[p, 0] = flat[k, 0]
+            v_xyz[p, 1] = flat[k, 1]
+            v_xyz[p, 2] = flat[k, 2]
+            vfill[a - 1] = p + 1
+            if bf[k]:
+                q = bfill[a - 1]
+                b_xy[q, 0] = flat[k, 0]
+                b_xy[q, 1] = flat[k, 1]
+                bfill[a - 1] = q + 1
+    # triangles: counts per obstacle, shadow areas and the shadow triangles (raster order)
+    R, C2 = owner.shape
+    ntri = np.zeros(n + 1, np.int64)
+    area = np.zeros(n + 1)
+    t_cnt = np.zeros(n + 1, np.int64)
+    sh = np.empty(R * C2, np.int64)
+    ns = 0
+    for r in range(R):
+        for c in range(C2):
+            ntri[obs_lab[r, c]] += 1
+            a = owner[r, c]
+            if a > 0:
+                t_cnt[a] += 1
+                sh[ns] = r * C2 + c
+                ns += 1
+                i0, i1, i2 = tri[r, c, 0], tri[r, c, 1], tri[r, c, 2]
+                v0x, v0y = flat[i0, 0], flat[i0, 1]
+                area[a] += 0.5 * abs(
+                    (flat[i1, 0] - v0x) * (flat[i2, 1] - v0y)
+                    - (flat[i2, 0] - v0x) * (flat[i1, 1] - v0y)
+                )
+    t_off = np.zeros(n + 2, np.int64)
+    for a in range(1, n + 1):
+        t_off[a + 1] = t_off[a] + 3 * t_cnt[a]
+    fill = t_off.copy()
+    verts = np.empty(3 * ns, np.int64)
+    ownf = owner.ravel()
+    for k in range(ns):
+        t = sh[k]
+        a = ownf[t]
+        r, c = t // C2, t % C2
+        p = fill[a]
+        verts[p] = tri[r, c, 0]
+        verts[p + 1] = tri[r, c, 1]
+        verts[p + 2] = tri[r, c, 2]
+        fill[a] = p + 3
+    s_off = np.zeros(n + 1, np.int64)
+    m = 0
+    for a in range(1, n + 1):
+        seg = np.sort(verts[t_off[a] : t_off[a + 1]])
+        for k in range(len(seg)):
+            if k == 0 or seg[k] != seg[k - 1]:
+                verts[m] = seg[k]
+                m += 1
+        s_off[a] = m
+    s_xy = np.empty((m, 2))
+    for k in range(m):
+        s_xy[k, 0] = flat[verts[k], 0]
+        s_xy[k, 1] = flat[verts[k], 1]
+    return b_off, b_xy, v_off, v_xyz, s_off, s_xy, area[1:], ntri[1:]

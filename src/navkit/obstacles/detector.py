@@ -554,13 +554,13 @@ def _build_obstacles(
         return []
     flat = P.reshape(-1, 3)
     if settings.backend == "compiled":
-        from navkit.obstacles import _kernels
+        from navkit.obstacles import _kernels_map
 
-        b_start, b_xy, v_start, v_xyz, s_start, s_xy, shadow_area, ntri = (
-            _kernels.map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n)
+        b_off, b_xy, v_off, v_xyz, s_off, s_xy, shadow_area, ntri = (
+            _kernels_map.map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n)
         )
         return _assemble_compiled(
-            b_xy, b_start[1:], v_xyz, v_start[1:], s_xy, s_start[1:], shadow_area, ntri, settings
+            b_xy, b_off, v_xyz, v_off, s_xy, s_off, shadow_area, ntri, settings
         )
     # boundary vertices per obstacle
     bmask = boundary.ravel()
