@@ -264,27 +264,56 @@ def _hull_one(x, y, out):  # type: ignore[no-untyped-def]
     for k in range(m):
         if not (np.isfinite(x[k]) and np.isfinite(y[k])):
             return -1
-    # Akl-Toussaint: drop the points clearly inside the quadrilateral of the extreme points
-    q = np.zeros(4, np.int64)  # min x, min y, max x, max y: counter-clockwise
+    # Akl-Toussaint: drop the points clearly inside the octagon of the extreme points along
+    # x, x + y, y, y - x and their opposites (hull vertices, counter-clockwise); "clearly":
+    # beyond every edge line by more than the ambiguity margin, taken with the set's L1
+    # extent (>= any |p - a|_1) so that every point the chain could call ambiguous is kept
+    q = np.zeros(8, np.int64)  # directions (-1, 0), (-1, -1), (0, -1), (1, -1), (1, 0), ...
     for k in range(1, m):
-        if x[k] < x[q[0]]:
+        xk, yk = x[k], y[k]
+        if xk < x[q[0]]:
             q[0] = k
-        if y[k] < y[q[1]]:
+        if xk + yk < x[q[1]] + y[q[1]]:
             q[1] = k
-        if x[k] > x[q[2]]:
+        if yk < y[q[2]]:
             q[2] = k
-        if y[k] > y[q[3]]:
+        if xk - yk > x[q[3]] - y[q[3]]:
             q[3] = k
+        if xk > x[q[4]]:
+            q[4] = k
+        if xk + yk > x[q[5]] + y[q[5]]:
+            q[5] = k
+        if yk > y[q[6]]:
+            q[6] = k
+        if yk - xk > y[q[7]] - x[q[7]]:
+            q[7] = k
+    extent = (x[q[4]] - x[q[0]]) + (y[q[6]] - y[q[2]])
+    x0, y0 = x[0], y[0]
+    ex = np.empty(8)
+    ey = np.empty(8)
+    ec = np.empty(8)
+    ne = 0
+    for e in range(8):
+        a, b = q[e], q[(e + 1) % 8]
+        ux, uy = x[b] - x[a], y[b] - y[a]
+        if ux == 0.0 and uy == 0.0:
+            continue
+        # inside: ux (py - ay) - uy (px - ax) > margin, in coordinates relative to the first
+        # point (their rounding, ~1e-16 x extent, is far below the margin)
+        ex[ne] = -uy
+        ey[ne] = ux
+        ec[ne] = (
+            ux * (y[a] - y0)
+            - uy * (x[a] - x0)
+            + 2 * AMBIGUOUS_TURN * (abs(ux) + abs(uy)) * extent
+        )
+        ne += 1
     cand = np.empty(m, np.int64)
     nc = 0
     for k in range(m):
-        inside = True
-        for e in range(4):
-            a, b = q[e], q[(e + 1) % 4]
-            if x[a] == x[b] and y[a] == y[b]:
-                continue
-            cr, amb = _turn(x[a], y[a], x[b], y[b], x[k], y[k])
-            if cr <= 0.0 or amb:
+        inside = ne >= 3
+        for e in range(ne):
+            if not (ex[e] * (x[k] - x0) + ey[e] * (y[k] - y0) > ec[e]):
                 inside = False
                 break
         if not inside:
