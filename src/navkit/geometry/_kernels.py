@@ -303,9 +303,7 @@ def _hull_one(x, y, out):  # type: ignore[no-untyped-def]
         ex[ne] = -uy
         ey[ne] = ux
         ec[ne] = (
-            ux * (y[a] - y0)
-            - uy * (x[a] - x0)
-            + 2 * AMBIGUOUS_TURN * (abs(ux) + abs(uy)) * extent
+            ux * (y[a] - y0) - uy * (x[a] - x0) + 2 * AMBIGUOUS_TURN * (abs(ux) + abs(uy)) * extent
         )
         ne += 1
     cand = np.empty(m, np.int64)

@@ -24,6 +24,7 @@ from navkit.obstacles._kernels import (
 )
 
 __all__ = [
+    "ground_cells_kernel",
     "guaranteed_sets_kernel",
     "map_groups_kernel",
     "split_kernel",
@@ -170,6 +171,9 @@ def split_kernel(  # type: ignore[no-untyped-def]
     sl = np.zeros((R, C), np.int32)
     n = 0
     ns = 0
+    sh_i = np.empty(R * C, np.int32)  # the shadow triangles in raster order
+    sh_j = np.empty(R * C, np.int32)
+    nsh = 0
     for i in range(R):
         for j in range(C):
             f = i * C + j
@@ -188,6 +192,9 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 lab[i, j] = new[r]
             else:
                 sl[i, j] = new[r]
+                sh_i[nsh] = i
+                sh_j[nsh] = j
+                nsh += 1
     dropped_any = False
     if n:
         size = np.zeros(n + 1, np.int64)
@@ -209,7 +216,12 @@ def split_kernel(  # type: ignore[no-untyped-def]
         ti_ = np.empty(nt, np.int64)  # the obstacle triangles in raster order
         tj_ = np.empty(nt, np.int64)
         zs = np.empty(nt, np.float64)  # their mid heights by label
+        bi_ = np.empty(nt, np.int64)  # those with a ground neighbour (the lift's pairs)
+        bj_ = np.empty(nt, np.int64)
+        nb4 = np.empty(4, np.int64)
+        labf0 = labels.ravel()
         m = 0
+        nbd = 0
         for i in range(R):
             for j in range(C):
                 a = lab[i, j]
@@ -218,6 +230,12 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 ti_[m] = i
                 tj_[m] = j
                 m += 1
+                for q in range(_neighbours(i, j, R, C, wrap, nb4)):
+                    if labf0[nb4[q]] == 0:
+                        bi_[nbd] = i
+                        bj_[nbd] = j
+                        nbd += 1
+                        break
                 hi[a] = _max_nan(hi[a], zmax[i, j])
                 lo[a] = _min_nan(lo[a], zmin[i, j])
                 zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
@@ -228,23 +246,25 @@ def split_kernel(  # type: ignore[no-untyped-def]
         spread = np.empty(n + 1, np.float64)
         for a in range(1, n + 1):
             k = size[a] - 1
-            spread[a] = _kth(zs[start[a] : start[a + 1]], math.floor(0.9 * k)) - _kth(
-                zs[start[a] : start[a + 1]], math.floor(0.1 * k)
-            )
+            k90, k10 = math.floor(0.9 * k), math.floor(0.1 * k)
+            seg = zs[start[a] : start[a + 1]]
+            v90 = _kth(seg, k90)  # leaves the k90 + 1 smallest in front
+            spread[a] = v90 - _kth(seg[: k90 + 1], k10)
         # lift over the adjacent ground, the sums in the twin's pair order (per offset: the
         # pairs inside the array in raster order, then the ones across the seam)
         cnt_g = np.zeros(n + 1, np.int64)
         sum_g = np.zeros(n + 1, np.float64)
-        first_last = np.searchsorted(ti_, R - 1)  # where row R - 1 starts
-        first_one = np.searchsorted(ti_, 1)  # where row 0 ends
+        bi_ = bi_[:nbd]
+        first_last = np.searchsorted(bi_, R - 1)  # where row R - 1 starts
+        first_one = np.searchsorted(bi_, 1)  # where row 0 ends
         for o in range(4):
             di, dj = _OFF_I[o], _OFF_J[o]
             for seam in range(2 if (wrap and di != 0) else 1):
-                k0, k1 = 0, nt
+                k0, k1 = 0, nbd
                 if seam == 1:  # only row R - 1 (di = 1) or row 0 (di = -1) crosses
-                    k0, k1 = (first_last, nt) if di == 1 else (0, first_one)
+                    k0, k1 = (first_last, nbd) if di == 1 else (0, first_one)
                 for k in range(k0, k1):
-                    i, j = ti_[k], tj_[k]
+                    i, j = bi_[k], bj_[k]
                     tj = j + dj
                     if tj < 0 or tj >= C:
                         continue
@@ -307,20 +327,18 @@ def split_kernel(  # type: ignore[no-untyped-def]
     k = 0
     nb = np.empty(4, np.int64)
     labf = lab.ravel()
-    for i in range(R):
-        for j in range(C):
-            z = sl[i, j]
-            if z == 0:
+    for t in range(nsh):
+        i, j = sh_i[t], sh_j[t]
+        z = sl[i, j]
+        for q in range(_neighbours(i, j, R, C, wrap, nb)):
+            b = labf[nb[q]]
+            if b <= 0:
                 continue
-            for q in range(_neighbours(i, j, R, C, wrap, nb)):
-                b = labf[nb[q]]
-                if b <= 0:
-                    continue
-                if dense:
-                    counts[z * nobs + b] += 1
-                else:
-                    keys[k] = np.int64(z) * nobs + b
-                    k += 1
+            if dense:
+                counts[z * nobs + b] += 1
+            else:
+                keys[k] = np.int64(z) * nobs + b
+                k += 1
     best = np.zeros(ns + 1, np.int32)
     if dense:
         for z in range(1, ns + 1):
@@ -344,10 +362,9 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 best_count[z] = run
                 best[z] = b
             run = 1
-    for i in range(R):
-        for j in range(C):
-            if sl[i, j]:
-                owner[i, j] = best[sl[i, j]]
+    for t in range(nsh):
+        i, j = sh_i[t], sh_j[t]
+        owner[i, j] = best[sl[i, j]]
     return lab, n, owner, ground_root, ground_size
 
 
@@ -378,6 +395,8 @@ def vertex_kernel(labels, obs_lab, valid, wrap, ground_root, ground_size, main_s
     main = np.zeros((n_az, n_el), np.bool_)
     rows = np.empty(6, np.int64)
     cols = np.empty(6, np.int64)
+    ref = np.empty(n_az * n_el, np.int64)  # main ground vertices labelled ground
+    nref = 0
     for p in range(n_az):
         rp = p if p < R else -1
         rm = p - 1 if p >= 1 else (R - 1 if wrap else -1)
@@ -429,13 +448,65 @@ def vertex_kernel(labels, obs_lab, valid, wrap, ground_root, ground_size, main_s
                 vlab[p, q] = -2
             elif flags & 1:
                 vlab[p, q] = 0
+                if main[p, q]:
+                    ref[nref] = p * n_el + q
+                    nref += 1
             elif flags & 2:
                 vlab[p, q] = -4
             elif flags & 4:
                 vlab[p, q] = -3
             else:
                 vlab[p, q] = -1
-    return vid, bnd, vlab, main
+    return vid, bnd, vlab, main, ref[:nref]
+
+
+@njit(cache=True)
+def ground_cells_kernel(P, sel, cell_m, quantile):  # type: ignore[no-untyped-def]
+    """``ground.ground_height_map`` before its hole filling, on the reference points ``sel``
+    (flat indices in raster order, from :func:`vertex_kernel`): the ``quantile`` of their z
+    per horizontal cell ``(nx, ny)`` (NaN: no point), the grid's origin, and whether a cell is
+    empty. The arithmetic of ``_kernels.ground_cells_kernel``, without its two passes over
+    every vertex to find the reference points."""
+    m = len(sel)
+    if m == 0:
+        return np.zeros((1, 1)), np.zeros(2), False
+    gx_min = np.inf
+    gy_min = np.inf
+    for k in range(m):
+        gx_min = min(gx_min, P[sel[k], 0])
+        gy_min = min(gy_min, P[sel[k], 1])
+    ix = np.empty(m, np.int64)
+    iy = np.empty(m, np.int64)
+    nx = 0
+    ny = 0
+    for k in range(m):
+        p = sel[k]
+        ix[k] = math.floor((P[p, 0] - gx_min) / cell_m)
+        iy[k] = math.floor((P[p, 1] - gy_min) / cell_m)
+        nx = max(nx, ix[k] + 1)
+        ny = max(ny, iy[k] + 1)
+    counts = np.zeros(nx * ny + 1, np.int64)
+    for k in range(m):
+        counts[ix[k] * ny + iy[k] + 1] += 1
+    start = np.cumsum(counts)
+    fill = start.copy()
+    zs = np.empty(m, np.float64)
+    for k in range(m):
+        c = ix[k] * ny + iy[k]
+        zs[fill[c]] = P[sel[k], 2]
+        fill[c] += 1
+    heights = np.full((nx, ny), np.nan)
+    missing = False
+    for c in range(nx * ny):
+        a, b = start[c], start[c + 1]
+        if b > a:
+            heights[c // ny, c % ny] = _kth(zs[a:b], math.floor(quantile * (b - a - 1)))
+        else:
+            missing = True
+    origin = np.empty(2)
+    origin[0] = gx_min
+    origin[1] = gy_min
+    return heights, origin, missing
 
 
 # ------------------------------------------------------------------------------------------

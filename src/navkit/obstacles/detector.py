@@ -453,13 +453,12 @@ def _compiled_vertices(
     from navkit.obstacles import _kernels, _kernels_map
     from navkit.obstacles.ground import fill_missing_cells
 
-    vid, boundary, vlab, main = _kernels_map.vertex_kernel(
+    vid, boundary, vlab, _main, ref = _kernels_map.vertex_kernel(
         labels, obs_lab, valid, bool(wrap), ground[0], ground[1], 0.1
     )
     if settings.ground_refine:
         flat = P.reshape(-1, 3)
-        ref = (main & (vlab == GROUND)).reshape(-1)
-        grid, origin, missing = _kernels.ground_cells_kernel(
+        grid, origin, missing = _kernels_map.ground_cells_kernel(
             flat, ref, float(settings.ground_cell_m), 0.25
         )
         if missing:
@@ -556,8 +555,8 @@ def _build_obstacles(
     if settings.backend == "compiled":
         from navkit.obstacles import _kernels_map
 
-        b_off, b_xy, v_off, v_xyz, s_off, s_xy, shadow_area, ntri = (
-            _kernels_map.map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n)
+        b_off, b_xy, v_off, v_xyz, s_off, s_xy, shadow_area, ntri = _kernels_map.map_groups_kernel(
+            flat, tri, obs_lab, owner, vid, boundary, n
         )
         return _assemble_compiled(
             b_xy, b_off, v_xyz, v_off, s_xy, s_off, shadow_area, ntri, settings
