@@ -218,8 +218,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
         zs = np.empty(nt, np.float64)  # their mid heights by label
         bi_ = np.empty(nt, np.int64)  # those with a ground neighbour (the lift's pairs)
         bj_ = np.empty(nt, np.int64)
-        nb4 = np.empty(4, np.int64)
-        labf0 = labels.ravel()
+        cyc = wrap and R > 1
         m = 0
         nbd = 0
         for i in range(R):
@@ -230,26 +229,24 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 ti_[m] = i
                 tj_[m] = j
                 m += 1
-                for q in range(_neighbours(i, j, R, C, wrap, nb4)):
-                    if labf0[nb4[q]] == 0:
-                        bi_[nbd] = i
-                        bj_[nbd] = j
-                        nbd += 1
-                        break
+                # a ground neighbour (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)?
+                up = i - 1 if i > 0 else (R - 1 if cyc else -1)
+                dn = i + 1 if i + 1 < R else (0 if cyc else -1)
+                if (
+                    (j + 1 < C and labels[i, j + 1] == 0)
+                    or (j > 0 and labels[i, j - 1] == 0)
+                    or (dn >= 0 and j > 0 and labels[dn, j - 1] == 0)
+                    or (up >= 0 and j + 1 < C and labels[up, j + 1] == 0)
+                ):
+                    bi_[nbd] = i
+                    bj_[nbd] = j
+                    nbd += 1
                 hi[a] = _max_nan(hi[a], zmax[i, j])
                 lo[a] = _min_nan(lo[a], zmin[i, j])
                 zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
                 sm[a] += zm
                 zs[fill[a]] = zm
                 fill[a] += 1
-        # 10th / 90th percentile of the mid heights per label
-        spread = np.empty(n + 1, np.float64)
-        for a in range(1, n + 1):
-            k = size[a] - 1
-            k90, k10 = math.floor(0.9 * k), math.floor(0.1 * k)
-            seg = zs[start[a] : start[a + 1]]
-            v90 = _kth(seg, k90)  # leaves the k90 + 1 smallest in front
-            spread[a] = v90 - _kth(seg[: k90 + 1], k10)
         # lift over the adjacent ground, the sums in the twin's pair order (per offset: the
         # pairs inside the array in raster order, then the ones across the seam)
         cnt_g = np.zeros(n + 1, np.int64)
@@ -281,11 +278,20 @@ def split_kernel(  # type: ignore[no-untyped-def]
         lut = np.zeros(n + 1, np.int32)
         m2 = 0
         for a in range(1, n + 1):
+            if not (size[a] >= min_triangles and (hi[a] - lo[a]) >= min_height32):
+                continue
             lift = sm[a] / max(size[a], 1) - sum_g[a] / cnt_g[a] if cnt_g[a] > 0 else np.inf
-            noise_patch = spread[a] < half and lift < half
-            if size[a] >= min_triangles and (hi[a] - lo[a]) >= min_height32 and not noise_patch:
-                m2 += 1
-                lut[a] = m2
+            if lift < half:
+                # a patch of noise on the ground: little spread (10th to 90th percentile of
+                # the mid heights) and no lift; computed only where it decides
+                k = size[a] - 1
+                k90, k10 = math.floor(0.9 * k), math.floor(0.1 * k)
+                seg = zs[start[a] : start[a + 1]]
+                v90 = _kth(seg, k90)  # leaves the k90 + 1 smallest in front
+                if v90 - _kth(seg[: k90 + 1], k10) < half:
+                    continue
+            m2 += 1
+            lut[a] = m2
         for k in range(nt):
             i, j = ti_[k], tj_[k]
             a = lab[i, j]
