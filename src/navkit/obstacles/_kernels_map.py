@@ -159,9 +159,10 @@ def split_kernel(  # type: ignore[no-untyped-def]
     components of stage 7 from the same union-find. ``labels`` is changed in place (dropped
     components back to ground).
 
-    Returns ``obs_lab, n, owner, ground_root, ground_size``: ``ground_root (R * C,)`` the root of
-    each ground triangle's component after the drop (-1: not ground) and ``ground_size`` the
-    component sizes by root.
+    Returns ``obs_lab, n, owner, tri_obstacle, ground_root, ground_size``: ``tri_obstacle`` the
+    obstacle id of obstacle triangles and the owner of shadow triangles,
+    ``ground_root (R * C,)`` the root of each ground triangle's component after the drop (-1:
+    not ground) and ``ground_size`` the component sizes by root.
     """
     R, C = labels.shape
     cls, parent = _class_union_find(labels, wrap)
@@ -322,8 +323,9 @@ def split_kernel(  # type: ignore[no-untyped-def]
             ground_root[f] = r
             ground_size[r] += 1
     owner = np.zeros((R, C), np.int32)
+    tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
     if ns == 0 or n == 0:
-        return lab, n, owner, ground_root, ground_size
+        return lab, n, owner, tri_obstacle, ground_root, ground_size
     # shadow owners: per shadow zone, the obstacle it shares the most adjacencies with (ties:
     # the larger id, as the twin's stable lexsort)
     nobs = n + 1
@@ -371,7 +373,8 @@ def split_kernel(  # type: ignore[no-untyped-def]
     for t in range(nsh):
         i, j = sh_i[t], sh_j[t]
         owner[i, j] = best[sl[i, j]]
-    return lab, n, owner, ground_root, ground_size
+        tri_obstacle[i, j] = owner[i, j]
+    return lab, n, owner, tri_obstacle, ground_root, ground_size
 
 
 # ------------------------------------------------------------------------------------------

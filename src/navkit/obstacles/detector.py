@@ -307,10 +307,10 @@ def detect_obstacles_grid(
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
     compiled = settings.backend == "compiled"
     if compiled:
-        obs_lab, n, owner, ground = _compiled_split(labels, mesh, P, wrap, settings)
+        obs_lab, n, owner, tri_obstacle, ground = _compiled_split(labels, mesh, P, wrap, settings)
     else:
         obs_lab, n, owner = _split(labels, mesh, P, wrap, settings)
-    tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
+        tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
     clock.lap("split")
 
     # stage 7: boundary vertices, per-vertex classes
@@ -391,13 +391,20 @@ def _compiled_split(
     P: NDArray[np.float64],
     wrap: bool,
     settings: ObstacleSettings,
-) -> tuple[NDArray[np.int32], int, NDArray[np.int32], tuple[NDArray[np.int32], NDArray[np.int32]]]:
+) -> tuple[
+    NDArray[np.int32],
+    int,
+    NDArray[np.int32],
+    NDArray[np.int32],
+    tuple[NDArray[np.int32], NDArray[np.int32]],
+]:
     """Stage 6 in one kernel (:func:`navkit.obstacles._kernels_map.split_kernel`), same answers;
-    also returns the ground components (root per triangle, sizes) for stage 7, found by the
-    same union-find as the obstacle and shadow components."""
+    also returns the triangles' obstacle ids with the shadows' owners, and the ground
+    components (root per triangle, sizes) for stage 7, found by the same union-find as the
+    obstacle and shadow components."""
     from navkit.obstacles import _kernels_map
 
-    obs_lab, n, owner, ground_root, ground_size = _kernels_map.split_kernel(
+    obs_lab, n, owner, tri_obstacle, ground_root, ground_size = _kernels_map.split_kernel(
         labels,
         mesh.z_min.astype(np.float32, copy=False),
         mesh.z_max.astype(np.float32, copy=False),
@@ -409,7 +416,7 @@ def _compiled_split(
         float(settings.merge_distance_m),
         int(settings.merge_gap_cells),
     )
-    return obs_lab, int(n), owner, (ground_root, ground_size)
+    return obs_lab, int(n), owner, tri_obstacle, (ground_root, ground_size)
 
 
 def _vertices(
