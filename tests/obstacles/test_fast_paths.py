@@ -187,7 +187,16 @@ def test_compiled_hulls_match_qhull(rng):
         np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0], [np.nan, 3.0]]),  # NaN row
     ]
     every = sets + degenerate
-    H, hoff = hulls_csr(np.concatenate(every), _offsets([len(p) for p in every]))
+    xy, off = np.concatenate(every), _offsets([len(p) for p in every])
+    H, hoff, chain = hulls_csr(xy, off)
+    # the same hulls when the points inside the hull of a subset are dropped first (the map
+    # stage's A7 sets: obstacle + shadows, filtered by the boundary's hull)
+    subsets = [P[: max(1, len(P) // 3)] for P in every]
+    inner = hulls_csr(np.concatenate(subsets), _offsets([len(p) for p in subsets]))
+    H2, hoff2, _ = hulls_csr(xy, off, inner=inner)
+    np.testing.assert_array_equal(H2, H)
+    np.testing.assert_array_equal(hoff2, hoff)
+    assert chain[: len(sets)].all() and not chain[len(sets) :].any()
     for s, P in enumerate(every):
         h = H[hoff[s] : hoff[s + 1]]
         np.testing.assert_array_equal(h, hull_points(P))

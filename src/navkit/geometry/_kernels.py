@@ -253,17 +253,10 @@ def _turn(ox, oy, ax, ay, bx, by):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, error_model="numpy")
-def _hull_one(x, y, out):  # type: ignore[no-untyped-def]
-    """Andrew's monotone chain on one set: writes the hull's local indices to ``out``
-    (counter-clockwise from the lexicographically smallest vertex) and returns their number,
-    or -1 when the set is for Qhull (fewer than 3 hull vertices, a non-finite value, or a turn
-    within ``AMBIGUOUS_TURN`` of collinear, where Qhull's precision handling decides)."""
+def _outside_octagon(x, y):  # type: ignore[no-untyped-def]
+    """Indices of the points not clearly inside the octagon of the extreme points, and their
+    number (see :func:`_hull_one`)."""
     m = len(x)
-    if m < 3:
-        return -1
-    for k in range(m):
-        if not (np.isfinite(x[k]) and np.isfinite(y[k])):
-            return -1
     # Akl-Toussaint: drop the points clearly inside the octagon of the extreme points along
     # x, x + y, y, y - x and their opposites (hull vertices, counter-clockwise); "clearly":
     # beyond every edge line by more than the ambiguity margin, taken with the set's L1
@@ -317,6 +310,80 @@ def _hull_one(x, y, out):  # type: ignore[no-untyped-def]
         if not inside:
             cand[nc] = k
             nc += 1
+    return cand, nc
+
+
+@njit(cache=True, error_model="numpy")
+def _clearly_left(ax, ay, bx, by, px, py, extent):  # type: ignore[no-untyped-def]
+    """``p`` left of the line ``a -> b`` by more than the ambiguity margin (with the set's L1
+    ``extent`` >= any ``|p - a|_1``, as the octagon filter)."""
+    ux, uy = bx - ax, by - ay
+    cr = ux * (py - ay) - uy * (px - ax)
+    return cr > 2 * AMBIGUOUS_TURN * (abs(ux) + abs(uy)) * extent
+
+
+@njit(cache=True, error_model="numpy")
+def _outside_polygon(x, y, qx, qy):  # type: ignore[no-untyped-def]
+    """Indices of the points not clearly inside the convex polygon ``qx, qy`` (counter-
+    clockwise, strictly convex), and their number: each point is located in the fan of
+    triangles from the polygon's first vertex by a binary search (O(log h) tests)."""
+    m = len(x)
+    h = len(qx)
+    xmin, xmax, ymin, ymax = x[0], x[0], y[0], y[0]
+    for k in range(1, m):
+        xmin = min(xmin, x[k])
+        xmax = max(xmax, x[k])
+        ymin = min(ymin, y[k])
+        ymax = max(ymax, y[k])
+    extent = (xmax - xmin) + (ymax - ymin)
+    ox, oy = qx[0], qy[0]  # coordinates relative to the fan's apex
+    rx = np.empty(h)
+    ry = np.empty(h)
+    for t in range(h):
+        rx[t] = qx[t] - ox
+        ry[t] = qy[t] - oy
+    cand = np.empty(m, np.int64)
+    nc = 0
+    for k in range(m):
+        px, py = x[k] - ox, y[k] - oy
+        inside = _clearly_left(0.0, 0.0, rx[1], ry[1], px, py, extent) and _clearly_left(
+            rx[h - 1], ry[h - 1], 0.0, 0.0, px, py, extent
+        )
+        if inside:
+            lo, hi = 1, h - 1
+            while hi - lo > 1:
+                mid = (lo + hi) // 2
+                if rx[mid] * py - ry[mid] * px >= 0.0:
+                    lo = mid
+                else:
+                    hi = mid
+            inside = _clearly_left(rx[lo], ry[lo], rx[hi], ry[hi], px, py, extent)
+        if not inside:
+            cand[nc] = k
+            nc += 1
+    return cand, nc
+
+
+@njit(cache=True, error_model="numpy")
+def _hull_one(x, y, out, qx, qy):  # type: ignore[no-untyped-def]
+    """Andrew's monotone chain on one set: writes the hull's local indices to ``out``
+    (counter-clockwise from the lexicographically smallest vertex) and returns their number,
+    or -1 when the set is for Qhull (fewer than 3 hull vertices, a non-finite value, or a turn
+    within ``AMBIGUOUS_TURN`` of collinear, where Qhull's precision handling decides).
+
+    The points clearly inside a convex polygon inside the hull - ``qx, qy`` (counter-clockwise,
+    strictly convex, at least 3 vertices, e.g. the hull of a subset) or else the octagon of the
+    extreme points - are dropped first (Akl-Toussaint)."""
+    m = len(x)
+    if m < 3:
+        return -1
+    for k in range(m):
+        if not (np.isfinite(x[k]) and np.isfinite(y[k])):
+            return -1
+    if len(qx) >= 3:
+        cand, nc = _outside_polygon(x, y, qx, qy)
+    else:
+        cand, nc = _outside_octagon(x, y)
     cand = cand[:nc]
     order = cand[_lex_order(x[cand], y[cand])]
     # distinct points only (duplicates are adjacent after the sort)
@@ -358,9 +425,13 @@ def _hull_one(x, y, out):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def hulls_csr_kernel(xy, off):  # type: ignore[no-untyped-def]
+def hulls_csr_kernel(xy, off, inner, ioff):  # type: ignore[no-untyped-def]
     """Convex hulls of the sets of ``xy`` (CSR ``off``): the global row of every hull vertex,
-    the hulls' offsets ``(n + 1,)`` and ``ok (n,)`` (False: left to Qhull, empty here)."""
+    the hulls' offsets ``(n + 1,)`` and ``ok (n,)`` (False: left to Qhull, empty here).
+
+    ``inner`` (CSR ``ioff``; a set may have none): for each set, a strictly convex polygon
+    (counter-clockwise) inside its hull, such as the hull of a subset; the points clearly
+    inside it are dropped before the chain."""
     n = len(off) - 1
     idx = np.empty(len(xy) + 1, np.int64)
     hoff = np.zeros(n + 1, np.int64)
@@ -369,7 +440,8 @@ def hulls_csr_kernel(xy, off):  # type: ignore[no-untyped-def]
     for s in range(n):
         a, b = off[s], off[s + 1]
         buf = np.empty(b - a + 1, np.int64)
-        k = _hull_one(xy[a:b, 0], xy[a:b, 1], buf)
+        qa, qb = ioff[s], ioff[s + 1]
+        k = _hull_one(xy[a:b, 0], xy[a:b, 1], buf, inner[qa:qb, 0], inner[qa:qb, 1])
         if k > 0:
             ok[s] = True
             for t in range(k):

@@ -817,7 +817,7 @@ def compute_shapes(
         sets = [as_points(p, 2) for p in point_sets]
         xy = np.concatenate(sets) if sets else np.empty((0, 2))
         off = _offsets([len(p) for p in sets])
-        H, hoff = (xy, off) if are_hulls else hulls_csr(xy, off)
+        H, hoff = (xy, off) if are_hulls else hulls_csr(xy, off)[:2]
         return shapes_csr(H, hoff, names)
     hulls = [np.asarray(p, dtype=np.float64) if are_hulls else hull_points(p) for p in point_sets]
     out: list[dict[str, Any]] = [{} for _ in hulls]
@@ -860,9 +860,11 @@ def _offsets(lengths: Sequence[int] | NDArray[np.int64]) -> NDArray[np.int64]:
 
 
 def hulls_csr(
-    xy: NDArray[np.float64], off: NDArray[np.int64]
-) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """Convex hulls of many sets at once (compiled): ``(H, hoff)``, set ``s``'s hull is
+    xy: NDArray[np.float64],
+    off: NDArray[np.int64],
+    inner: tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:
+    """Convex hulls of many sets at once (compiled): ``(H, hoff, chain)``, set ``s``'s hull is
     ``H[hoff[s]:hoff[s + 1]]``, the rows of ``xy[off[s]:off[s + 1]]`` on its hull.
 
     Andrew's monotone chain (:func:`navkit.geometry._kernels.hulls_csr_kernel`, after an
@@ -870,13 +872,28 @@ def hulls_csr(
     from the lexicographically smallest vertex). Sets the chain cannot decide exactly as Qhull -
     fewer than 3 hull vertices, non-finite values, or a turn within ``1e-9`` (relative) of
     collinear, where Qhull's precision handling decides - go to :func:`hull_points` itself
-    (with its 1 mm dilation of degenerate sets).
+    (with its 1 mm dilation of degenerate sets); ``chain (n,)`` says which sets the chain did.
+
+    ``inner``: the ``(H, hoff, chain)`` of subsets of the sets (the obstacles' boundary
+    vertices when the sets are the obstacles with their shadows): the points clearly inside a
+    subset's chain hull are dropped before the chain (the answer is the same, found faster).
     """
     from navkit.geometry import _kernels
 
     xy = np.ascontiguousarray(xy, dtype=np.float64)
     off = np.ascontiguousarray(off, dtype=np.int64)
-    idx, hoff, ok = _kernels.hulls_csr_kernel(xy, off)
+    n = len(off) - 1
+    if inner is None:
+        Q, qoff = np.empty((0, 2)), np.zeros(n + 1, dtype=np.int64)
+    else:
+        Q, qoff, qchain = inner
+        if not qchain.all():  # a dilated (Qhull) hull may reach outside the set's hull
+            keep = np.repeat(qchain, np.diff(qoff))
+            Q = Q[keep]
+            qoff = _offsets(np.where(qchain, np.diff(qoff), 0))
+    idx, hoff, ok = _kernels.hulls_csr_kernel(
+        xy, off, np.ascontiguousarray(Q, dtype=np.float64), np.ascontiguousarray(qoff)
+    )
     H = xy[idx]
     if not ok.all():
         parts = [
@@ -885,7 +902,7 @@ def hulls_csr(
         ]
         H = np.concatenate(parts) if parts else np.empty((0, 2))
         hoff = _offsets([len(p) for p in parts])
-    return H, hoff
+    return H, hoff, ok
 
 
 def _normalised(

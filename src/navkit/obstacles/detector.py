@@ -657,10 +657,11 @@ def _assemble_compiled(
 
     n = len(b_off) - 1
     g_xy, g_off = _kernels_map.guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off)
-    H, hoff = hulls_csr(b_xy, b_off)
+    H, hoff, chain = hulls_csr(b_xy, b_off)
     shapes = shapes_csr(H, hoff, settings.shapes)
     if settings.guaranteed_shapes:
-        G, goff = hulls_csr(g_xy, g_off)
+        # the boundary's hull is inside the hull of obstacle + shadows: a cheap first filter
+        G, goff, _ = hulls_csr(g_xy, g_off, inner=(H, hoff, chain))
         guaranteed = shapes_csr(G, goff, settings.guaranteed_shapes)
     else:
         guaranteed = [{} for _ in range(n)]
