@@ -59,6 +59,7 @@ def guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off):  # type: ignore[no-untype
 # stage 6: one union-find for the obstacle, shadow and ground components
 
 _GROUND, _OBSTACLE, _SHADOW = 0, 1, 2
+_MAIN = 17  # stage 7's code of a main-ground triangle: ground (1) | main (16)
 
 
 @njit(cache=True)
@@ -153,16 +154,19 @@ def split_kernel(  # type: ignore[no-untyped-def]
     half,
     distance_m,
     gap,
+    main_share,
 ):
     """Stage 6 (twin: ``detector._split``): obstacle components, the size / height /
     noise-patch filters, merging of close components and the shadows' owners, with the ground
     components of stage 7 from the same union-find. ``labels`` is changed in place (dropped
     components back to ground).
 
-    Returns ``obs_lab, n, owner, tri_obstacle, ground_root, ground_size``: ``tri_obstacle`` the
-    obstacle id of obstacle triangles and the owner of shadow triangles,
-    ``ground_root (R * C,)`` the root of each ground triangle's component after the drop (-1:
-    not ground) and ``ground_size`` the component sizes by root.
+    Returns ``obs_lab, n, owner, tri_obstacle, tcode``: ``tri_obstacle`` the obstacle id of
+    obstacle triangles and the owner of shadow triangles; ``tcode (R, 2C) int8`` each
+    triangle's class flag for stage 7 (1 ground, 2 shadow behind, 4 side shadow, 8 obstacle,
+    0 unreliable) with ``_MAIN`` (= 1 | 16) for a ground triangle of a main ground zone (a
+    ground component after the drop with at least ``main_share`` of the largest one's
+    triangles; ``segment.main_ground_vertices``).
     """
     R, C = labels.shape
     cls, parent = _class_union_find(labels, wrap)
@@ -314,18 +318,35 @@ def split_kernel(  # type: ignore[no-untyped-def]
         n = m2
         if n >= 2 and gap >= 1 and distance_m > 0:
             lab, n = _merge_close(lab, n, P, wrap, distance_m, gap)
-    # ground components (stage 7's main ground zones)
-    ground_root = np.full(R * C, -1, np.int32)
+    # ground components: the main ground zones (>= main_share of the largest one's triangles)
+    # and each triangle's code for stage 7 (class flag, main ground)
     ground_size = np.zeros(R * C, np.int32)
+    big = 0
     for f in range(R * C):
         if cls[f] == _GROUND:
             r = _find(parent, f)
-            ground_root[f] = r
+            parent[f] = r
             ground_size[r] += 1
+            big = max(big, ground_size[r])
+    thr = main_share * big
+    tcode = np.empty((R, C), np.int8)
+    for i in range(R):
+        for j in range(C):
+            t = labels[i, j]
+            if t == 0:
+                tcode[i, j] = _MAIN if ground_size[parent[i * C + j]] >= thr else 1
+            elif t == -4:
+                tcode[i, j] = 2
+            elif t == -3:
+                tcode[i, j] = 4
+            elif t == -2:
+                tcode[i, j] = 8
+            else:
+                tcode[i, j] = 0
     owner = np.zeros((R, C), np.int32)
     tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
     if ns == 0 or n == 0:
-        return lab, n, owner, tri_obstacle, ground_root, ground_size
+        return lab, n, owner, tri_obstacle, tcode
     # shadow owners: per shadow zone, the obstacle it shares the most adjacencies with (ties:
     # the larger id, as the twin's stable lexsort)
     nobs = n + 1
@@ -374,7 +395,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
         i, j = sh_i[t], sh_j[t]
         owner[i, j] = best[sl[i, j]]
         tri_obstacle[i, j] = owner[i, j]
-    return lab, n, owner, tri_obstacle, ground_root, ground_size
+    return lab, n, owner, tri_obstacle, tcode
 
 
 # ------------------------------------------------------------------------------------------
@@ -382,29 +403,21 @@ def split_kernel(  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def vertex_kernel(labels, obs_lab, valid, wrap, ground_root, ground_size, main_share):  # type: ignore[no-untyped-def]
+def vertex_kernel(tcode, obs_lab, valid, wrap):  # type: ignore[no-untyped-def]
     """``segment.boundary_vertices`` + ``vertex_labels`` + ``main_ground_vertices`` in one pass
     over the vertices, each reading its six incident triangles once
-    (``segment._incident_slices``' order: a missing triangle counts as obstacle id 0, no class,
-    not main ground). The main ground zones are the ground components of
-    :func:`split_kernel` with at least ``main_share`` of the largest one's triangles.
-    Returns ``vid, boundary, vertex labels, main ground vertices``."""
+    (``segment._incident_slices``' order; a missing triangle counts as obstacle id 0, no class,
+    not main ground) in stage 6's codes ``tcode`` (:func:`split_kernel`). Returns ``vid,
+    boundary, vertex labels, main ground vertices`` and the flat indices of the main ground
+    vertices labelled ground (the ground-height reference, raster order)."""
     n_az, n_el = valid.shape
-    R = labels.shape[0]
-    C2 = labels.shape[1]
-    C = C2 // 2
-    big = 0
-    for f in range(len(ground_size)):
-        if ground_size[f] > big:
-            big = ground_size[f]
-    thr = main_share * big
+    R = tcode.shape[0]
+    C = tcode.shape[1] // 2
     vid = np.zeros((n_az, n_el), np.int32)
     bnd = np.zeros((n_az, n_el), np.bool_)
     vlab = np.empty((n_az, n_el), np.int8)
     main = np.zeros((n_az, n_el), np.bool_)
-    rows = np.empty(6, np.int64)
-    cols = np.empty(6, np.int64)
-    ref = np.empty(n_az * n_el, np.int64)  # main ground vertices labelled ground
+    ref = np.empty(n_az * n_el, np.int64)
     nref = 0
     for p in range(n_az):
         rp = p if p < R else -1
@@ -412,52 +425,43 @@ def vertex_kernel(labels, obs_lab, valid, wrap, ground_root, ground_size, main_s
         for q in range(n_el):
             c0 = 2 * q if q < C else -1
             cm = 2 * (q - 1) if q >= 1 else -1
-            rows[0], cols[0] = rp, c0
-            rows[1], cols[1] = rp, cm
-            rows[2], cols[2] = rm, c0
-            rows[3], cols[3] = rm, c0 + 1 if c0 >= 0 else -1
-            rows[4], cols[4] = rp, cm + 1 if cm >= 0 else -1
-            rows[5], cols[5] = rm, cm + 1 if cm >= 0 else -1
             flags = 0
-            is_main = False
             hi = 0
             lo = 0
             for k in range(6):
-                r, c = rows[k], cols[k]
-                if r < 0 or c < 0:
-                    v = 0
+                if k == 0:
+                    r, c = rp, c0
+                elif k == 1:
+                    r, c = rp, cm
+                elif k == 2:
+                    r, c = rm, c0
+                elif k == 3:
+                    r, c = rm, c0 + 1
+                elif k == 4:
+                    r, c = rp, cm + 1
                 else:
+                    r, c = rm, cm + 1
+                v = 0
+                if r >= 0 and c >= 0 and (k < 3 or c > 0 or (k == 3 and c0 >= 0)):
                     v = obs_lab[r, c]
-                    t = labels[r, c]
-                    if t == 0:
-                        flags |= 1
-                        g = ground_root[r * C2 + c]
-                        if g >= 0 and ground_size[g] >= thr:
-                            is_main = True
-                    elif t == -4:
-                        flags |= 2
-                    elif t == -3:
-                        flags |= 4
-                    elif t == -2:
-                        flags |= 8
+                    flags |= tcode[r, c]
                 if k == 0:
                     hi = v
                     lo = v
                 else:
-                    if v > hi:
-                        hi = v
-                    if v < lo:
-                        lo = v
+                    hi = max(hi, v)
+                    lo = min(lo, v)
             vid[p, q] = hi
             bnd[p, q] = hi > 0 and lo != hi
-            main[p, q] = is_main and big > 0
+            is_main = (flags & 16) != 0
+            main[p, q] = is_main
             if not valid[p, q]:
                 vlab[p, q] = -1
             elif flags & 8:
                 vlab[p, q] = -2
             elif flags & 1:
                 vlab[p, q] = 0
-                if main[p, q]:
+                if is_main:
                     ref[nref] = p * n_el + q
                     nref += 1
             elif flags & 2:

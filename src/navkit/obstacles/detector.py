@@ -40,6 +40,10 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
+MAIN_GROUND_SHARE = 0.1
+"""Main ground zones: ground components with at least this share of the largest one's triangles
+(``segment.main_ground_vertices``' default; the compiled stage 6 finds them)."""
+
 STAGES = ("points", "mesh", "classes", "split", "boundaries", "map")
 """Stage names used as keys of :attr:`ObstacleDetection.timings` (stages 3-4 are in "mesh")."""
 
@@ -307,7 +311,7 @@ def detect_obstacles_grid(
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
     compiled = settings.backend == "compiled"
     if compiled:
-        obs_lab, n, owner, tri_obstacle, ground = _compiled_split(labels, mesh, P, wrap, settings)
+        obs_lab, n, owner, tri_obstacle, tcode = _compiled_split(labels, mesh, P, wrap, settings)
     else:
         obs_lab, n, owner = _split(labels, mesh, P, wrap, settings)
         tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
@@ -315,7 +319,7 @@ def detect_obstacles_grid(
 
     # stage 7: boundary vertices, per-vertex classes
     if compiled:
-        vid, boundary, vlab = _compiled_vertices(labels, obs_lab, P, valid, wrap, settings, ground)
+        vid, boundary, vlab = _compiled_vertices(labels, obs_lab, P, valid, wrap, settings, tcode)
     else:
         vid, boundary, vlab = _vertices(labels, obs_lab, P, valid, wrap, settings)
     clock.lap("boundaries")
@@ -391,20 +395,14 @@ def _compiled_split(
     P: NDArray[np.float64],
     wrap: bool,
     settings: ObstacleSettings,
-) -> tuple[
-    NDArray[np.int32],
-    int,
-    NDArray[np.int32],
-    NDArray[np.int32],
-    tuple[NDArray[np.int32], NDArray[np.int32]],
-]:
+) -> tuple[NDArray[np.int32], int, NDArray[np.int32], NDArray[np.int32], NDArray[np.int8]]:
     """Stage 6 in one kernel (:func:`navkit.obstacles._kernels_map.split_kernel`), same answers;
-    also returns the triangles' obstacle ids with the shadows' owners, and the ground
-    components (root per triangle, sizes) for stage 7, found by the same union-find as the
-    obstacle and shadow components."""
+    also returns the triangles' obstacle ids with the shadows' owners, and each triangle's code
+    for stage 7 (class, main ground zone: the ground components come from the same union-find
+    as the obstacle and shadow components)."""
     from navkit.obstacles import _kernels_map
 
-    obs_lab, n, owner, tri_obstacle, ground_root, ground_size = _kernels_map.split_kernel(
+    obs_lab, n, owner, tri_obstacle, tcode = _kernels_map.split_kernel(
         labels,
         mesh.z_min.astype(np.float32, copy=False),
         mesh.z_max.astype(np.float32, copy=False),
@@ -415,8 +413,9 @@ def _compiled_split(
         0.5 * settings.min_obstacle_height_m,
         float(settings.merge_distance_m),
         int(settings.merge_gap_cells),
+        MAIN_GROUND_SHARE,
     )
-    return obs_lab, int(n), owner, tri_obstacle, (ground_root, ground_size)
+    return obs_lab, int(n), owner, tri_obstacle, tcode
 
 
 def _vertices(
@@ -452,17 +451,15 @@ def _compiled_vertices(
     valid: NDArray[np.bool_],
     wrap: bool,
     settings: ObstacleSettings,
-    ground: tuple[NDArray[np.int32], NDArray[np.int32]],
+    tcode: NDArray[np.int8],
 ) -> tuple[NDArray[np.int32], NDArray[np.bool_], NDArray[np.int8]]:
     """Stage 7 with the kernels of :mod:`navkit.obstacles._kernels_map` (one pass over the
-    vertices, on stage 6's ground components) and :mod:`navkit.obstacles._kernels` (the
+    vertices, on stage 6's triangle codes ``tcode``) and :mod:`navkit.obstacles._kernels` (the
     ground-height refinement); same answers."""
     from navkit.obstacles import _kernels, _kernels_map
     from navkit.obstacles.ground import fill_missing_cells
 
-    vid, boundary, vlab, _main, ref = _kernels_map.vertex_kernel(
-        labels, obs_lab, valid, bool(wrap), ground[0], ground[1], 0.1
-    )
+    vid, boundary, vlab, _main, ref = _kernels_map.vertex_kernel(tcode, obs_lab, valid, bool(wrap))
     if settings.ground_refine:
         flat = P.reshape(-1, 3)
         grid, origin, missing = _kernels_map.ground_cells_kernel(
