@@ -431,7 +431,7 @@ def _vertices(
     vid, boundary = boundary_vertices(obs_lab, n_az, n_el, wrap)
     vlab = vertex_labels(labels, valid, wrap)
     if settings.ground_refine:  # beyond the paper: per-point height above the local ground
-        main = main_ground_vertices(labels, n_az, n_el, wrap)
+        main = main_ground_vertices(labels, n_az, n_el, wrap, MAIN_GROUND_SHARE)
         vlab = refine_by_ground_height(
             P,
             vlab,
