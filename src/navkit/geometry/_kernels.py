@@ -150,12 +150,18 @@ def _a6_search(P, x0, step0, min_step, max_iter):  # type: ignore[no-untyped-def
             cs[t] = np.cos(vals[t, 2])
             sn[t] = np.sin(vals[t, 2])
             kk[t] = np.exp(vals[t, 3])
+        # a trial whose running maximum already gives an area >= thr (the current area, or the
+        # best earlier trial's) can be neither the first best trial nor an improvement: once
+        # all three trials of a group are there, the group stops (f = inf); the chosen trial
+        # and its area are the twin's exactly
+        thr = f_cur * (1 - 1e-12)
         for tx in range(3):
             for ty in range(3):
                 for tp in range(3):
                     a2k0 = -1.0
                     a2k1 = -1.0
                     a2k2 = -1.0
+                    pruned = False
                     for q in range(mh):
                         dx = P[q, 0] - vals[tx, 0]
                         dy = P[q, 1] - vals[ty, 1]
@@ -172,10 +178,27 @@ def _a6_search(P, x0, step0, min_step, max_iter):  # type: ignore[no-untyped-def
                             a2k1 = w1
                         if q == 0 or w2 > a2k2:
                             a2k2 = w2
+                        if (
+                            (q & 3) == 3
+                            and np.pi * a2k0 * kk[0] >= thr
+                            and np.pi * a2k1 * kk[1] >= thr
+                            and np.pi * a2k2 * kk[2] >= thr
+                        ):
+                            pruned = True
+                            break
                     base = ((tx * 3 + ty) * 3 + tp) * 3
-                    f[base] = np.pi * a2k0 * kk[0]
-                    f[base + 1] = np.pi * a2k1 * kk[1]
-                    f[base + 2] = np.pi * a2k2 * kk[2]
+                    if pruned:
+                        f[base] = np.inf
+                        f[base + 1] = np.inf
+                        f[base + 2] = np.inf
+                    else:
+                        f[base] = np.pi * a2k0 * kk[0]
+                        f[base + 1] = np.pi * a2k1 * kk[1]
+                        f[base + 2] = np.pi * a2k2 * kk[2]
+                        if base == 39:  # t = 40 is the zero move: not a candidate
+                            thr = min(thr, f[base], f[base + 2])
+                        else:
+                            thr = min(thr, f[base], f[base + 1], f[base + 2])
         best = -1
         for t in range(81):
             if t == 40:  # the zero move
