@@ -119,7 +119,9 @@ def _a6_search(P, x0, step0, min_step, max_iter):  # type: ignore[no-untyped-def
     (x, y, phi, log k) with steps ``step0 (4,)`` down to ``min_step (4,)``: the final parameters.
 
     The 81 trials are evaluated as in the twin (u, v on the 27 (phi, x, y) combinations, a^2 on
-    81) in the twin's order; ``cos``, ``sin`` and ``exp`` are libm's.
+    81) in the twin's order; ``cos``, ``sin`` and ``exp`` are libm's. A group of three trials
+    stops early once none of them can be chosen (its running maximum already gives an area at
+    least the current one or an earlier trial's): the chosen trial and its area are unchanged.
     """
     mh = P.shape[0]
     three = np.array([-1.0, 0.0, 1.0])
