@@ -161,58 +161,52 @@ def test_cpu_and_wall_timings_cover_every_stage():
     assert len(det.obstacles) == 0  # level ground
 
 
-def _same_cycle(a: np.ndarray, b: np.ndarray) -> bool:
-    """True when ``a`` is ``b`` with another starting vertex (same rows, same cyclic order)."""
-    if a.shape != b.shape:
-        return False
-    start = np.flatnonzero((b == a[0]).all(axis=1))
-    return any(np.array_equal(np.roll(b, -int(k), axis=0), a) for k in start)
+def test_compiled_hulls_match_qhull(rng):
+    """The map stage's compiled hulls (monotone chain, one kernel call for all sets) against
+    Qhull's (``hull_points``): the same vertices in the same order (counter-clockwise from the
+    lexicographically smallest vertex), on Gaussian clouds, points densely on an ellipse (many
+    nearly collinear hull neighbours), duplicated points and degenerate sets (Qhull's dilated
+    hull). Each hull is strictly convex, made of input rows, and contains every input point."""
+    from navkit.geometry.shapes import _offsets, hulls_csr
 
-
-def test_opencv_hulls_match_qhull(rng):
-    """The map stage's OpenCV hulls (used when A3 is not requested) against Qhull's.
-
-    OpenCV decides on float32 coordinates relative to each set's first point: a coordinate is off
-    by at most 2**-24 x the set's extent L, so an orientation test can go wrong only for a point
-    within a few 2**-24 L of a hull edge. Hence, for every set: the hull is strictly convex and
-    counter-clockwise, made of input rows, and no input point lies more than 1e-6 L (about 16 x
-    the rounding) outside it. For clouds with no near-collinear hull points (Gaussian clouds) the
-    hull is exactly Qhull's cycle; points densely on an ellipse may differ by near-collinear
-    vertices within that tolerance. Degenerate sets fall back to Qhull's dilated hull exactly.
-    """
-    from navkit.obstacles.detector import _hulls
-
-    sets, gaussian = [], []
+    sets = []
     for _ in range(60):
         k = int(rng.integers(3, 2000))
         P = rng.normal(size=(k, 2)) * rng.uniform(0.05, 5.0, size=2) + rng.uniform(-80, 80, 2)
-        is_gauss = rng.random() >= 0.3
-        if not is_gauss:  # many hull vertices, nearly collinear neighbours
+        if rng.random() < 0.3:  # many hull vertices, nearly collinear neighbours
             t = rng.uniform(0, 2 * np.pi, k)
             P = np.c_[np.cos(t), 0.4 * np.sin(t)] * rng.uniform(0.5, 3) + rng.uniform(-80, 80, 2)
         if rng.random() < 0.3:  # duplicated points, as boundary vertices shared by triangles
             P = np.concatenate([P, P[: k // 2]])
         sets.append(P)
-        gaussian.append(is_gauss)
     degenerate = [
         np.array([[1.0, 2.0]]),
         np.array([[1.0, 2.0], [3.0, 4.0]]),
         np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0], [3.0, 3.0]]),  # collinear
         np.array([[5.0, 5.0], [5.0, 5.0], [5.0, 5.0]]),  # one point, repeated
+        np.array([[0.0, 0.0], [2.0, 0.0], [1.0, 0.0], [1.0, 1.0], [np.nan, 3.0]]),  # NaN row
     ]
-    got = _hulls(sets + degenerate)
-    assert len(got) == len(sets) + len(degenerate)
-    for P, H, is_gauss in zip(sets, got[: len(sets)], gaussian, strict=True):
-        ext = float(np.ptp(P, axis=0).max())
-        e = np.roll(H, -1, axis=0) - H
+    every = sets + degenerate
+    xy, off = np.concatenate(every), _offsets([len(p) for p in every])
+    H, hoff, chain = hulls_csr(xy, off)
+    # the same hulls when the points inside the hull of a subset are dropped first (the map
+    # stage's A7 sets: obstacle + shadows, filtered by the boundary's hull)
+    subsets = [P[: max(1, len(P) // 3)] for P in every]
+    inner = hulls_csr(np.concatenate(subsets), _offsets([len(p) for p in subsets]))
+    H2, hoff2, _ = hulls_csr(xy, off, inner=inner)
+    np.testing.assert_array_equal(H2, H)
+    np.testing.assert_array_equal(hoff2, hoff)
+    assert chain[: len(sets)].all() and not chain[len(sets) :].any()
+    for s, P in enumerate(every):
+        h = H[hoff[s] : hoff[s + 1]]
+        np.testing.assert_array_equal(h, hull_points(P))
+        if s >= len(sets):
+            continue
+        e = np.roll(h, -1, axis=0) - h
         assert (e[:, 0] * np.roll(e[:, 1], -1) - e[:, 1] * np.roll(e[:, 0], -1) > 0).all()
-        assert {tuple(r) for r in H} <= {tuple(r) for r in P}
-        # signed distance of every point to the left of every edge: >= -tol
-        cross = e[None, :, 0] * (P[:, None, 1] - H[None, :, 1]) - e[None, :, 1] * (
-            P[:, None, 0] - H[None, :, 0]
+        assert {tuple(r) for r in h} <= {tuple(r) for r in P}
+        cross = e[None, :, 0] * (P[:, None, 1] - h[None, :, 1]) - e[None, :, 1] * (
+            P[:, None, 0] - h[None, :, 0]
         )
-        assert (cross / np.hypot(e[:, 0], e[:, 1])[None, :] >= -1e-6 * ext).all()
-        if is_gauss:
-            assert _same_cycle(H, hull_points(P))
-    for P, H in zip(degenerate, got[len(sets) :], strict=True):
-        np.testing.assert_array_equal(H, hull_points(P))
+        assert (cross >= -1e-9).all()
+        assert tuple(h[0]) == min(map(tuple, P))  # the lexicographically smallest point

@@ -31,9 +31,9 @@ from navkit.obstacles.rules import classify
 
 pytest.importorskip("numba")
 
-# stages 1-7, the map's vertex sets and hulls, A1, and the compiled shapes A6 (with its A5
-# start) and MVEE
-FAST = ObstacleSettings(shapes=("A1", "A5", "A6", "MVEE"), guaranteed_shapes=("A1",))
+# all eight stages with the default shapes: stages 1-7, the map's vertex sets, hulls (the
+# compiled monotone chain against Qhull), A1-A6, Welzl's circle, MVEE and A7 (A1, MEC)
+FAST = ObstacleSettings()
 
 
 def _close(a: np.ndarray, b: np.ndarray, what: str) -> None:

@@ -28,6 +28,7 @@ a 1 mm dilation (documented in :func:`hull_points`), so every method returns a s
 
 from __future__ import annotations
 
+import functools
 import math
 import random
 from collections.abc import Callable, Iterable, Sequence
@@ -234,6 +235,12 @@ def _ellipse(x: float, y: float, a: float, b: float, angle: float) -> Ellipse:
 def hull_points(points: ArrayLike) -> NDArray[np.float64]:
     """Convex-hull vertices ``(M, 2)`` (counter-clockwise) of finite points ``(N, 2)``.
 
+    The cycle starts at the lexicographically smallest vertex (smallest x, then smallest y),
+    where Andrew's monotone chain starts: Qhull's own starting vertex is an artefact of its
+    facet list, and A3 (one pass over the hull in its stored order) and Welzl's shuffled order
+    depend on it, so fixing the start makes both reproducible by the compiled hulls
+    (:func:`hulls_csr`).
+
     Every enclosing shape of a point set encloses its hull and vice versa, so the shapes are
     computed on the hull only. A degenerate set (one point, or all collinear) is dilated by a
     cross of four points at ``DEGENERATE_DILATION_M`` (1 mm) around each hull end point, so that
@@ -251,7 +258,7 @@ def hull_points(points: ArrayLike) -> NDArray[np.float64]:
     if len(P) >= 3:
         try:
             hull = ConvexHull(P)
-            return P[hull.vertices]
+            return _from_lowest(P[hull.vertices])
         except QhullError:
             pass
     # degenerate: keep the two extreme points along the main direction, dilate them
@@ -264,7 +271,13 @@ def hull_points(points: ArrayLike) -> NDArray[np.float64]:
     e = DEGENERATE_DILATION_M
     cross = np.array([[e, 0.0], [-e, 0.0], [0.0, e], [0.0, -e]])
     Q = (ends[:, None, :] + cross[None]).reshape(-1, 2)
-    return Q[ConvexHull(Q).vertices]
+    return _from_lowest(Q[ConvexHull(Q).vertices])
+
+
+def _from_lowest(H: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The cycle ``H`` started at its lexicographically smallest vertex (smallest x, then y)."""
+    k = int(np.lexsort((H[:, 1], H[:, 0]))[0])
+    return np.roll(H, -k, axis=0) if k else H
 
 
 # ----------------------------------------------------------------------------------------------
@@ -782,7 +795,8 @@ def compute_shapes(
 
     A6 and MVEE are computed for all sets at once (vectorised); A6 starts from the set's A5.
     ``are_hulls=True`` says the sets already are :func:`hull_points` outputs (not recomputed).
-    ``backend`` selects MVEE's implementation (see :func:`mvee_batch`).
+    ``backend="compiled"`` computes the hulls (:func:`hulls_csr`) and the shipped shapes
+    (:func:`shapes_csr`) in kernels over all sets at once; ``"numpy"`` set by set (the twin).
     """
     unknown = [n for n in names if n not in SHAPES]
     if unknown:
@@ -797,6 +811,14 @@ def compute_shapes(
             field="point_sets",
             expected="a list of (N, 2) point arrays",
         )
+    if backend not in ("compiled", "numpy"):
+        raise InputError(f"= {backend!r}", field="backend", expected="'compiled' or 'numpy'")
+    if backend == "compiled":
+        sets = [as_points(p, 2) for p in point_sets]
+        xy = np.concatenate(sets) if sets else np.empty((0, 2))
+        off = _offsets([len(p) for p in sets])
+        H, hoff = (xy, off) if are_hulls else hulls_csr(xy, off)[:2]
+        return shapes_csr(H, hoff, names)
     hulls = [np.asarray(p, dtype=np.float64) if are_hulls else hull_points(p) for p in point_sets]
     out: list[dict[str, Any]] = [{} for _ in hulls]
     for name in names:
@@ -814,3 +836,183 @@ def compute_shapes(
         for res, e in zip(out, mvee_batch(hulls, backend=backend), strict=False):
             res["MVEE"] = e
     return [{n: res[n] for n in names} for res in out]
+
+
+# ----------------------------------------------------------------------------------------------
+# many sets at once in a CSR layout (the compiled backend of stage 8)
+
+_BUILTIN: dict[str, ShapeFn] = dict(SHAPES)
+"""The registered methods as shipped: the compiled path computes these in kernels."""
+
+
+@functools.lru_cache(maxsize=4096)
+def _welzl_order(m: int, seed: int = 0) -> NDArray[np.int64]:
+    """The permutation ``random.Random(seed).shuffle`` applies to ``m`` points (Welzl's order)."""
+    idx = list(range(m))
+    random.Random(seed).shuffle(idx)
+    return np.array(idx, dtype=np.int64)
+
+
+def _offsets(lengths: Sequence[int] | NDArray[np.int64]) -> NDArray[np.int64]:
+    off = np.zeros(len(lengths) + 1, dtype=np.int64)
+    np.cumsum(lengths, out=off[1:])
+    return off
+
+
+def hulls_csr(
+    xy: NDArray[np.float64],
+    off: NDArray[np.int64],
+    inner: tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]] | None = None,
+) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.bool_]]:
+    """Convex hulls of many sets at once (compiled): ``(H, hoff, chain)``, set ``s``'s hull is
+    ``H[hoff[s]:hoff[s + 1]]``, the rows of ``xy[off[s]:off[s + 1]]`` on its hull.
+
+    Andrew's monotone chain (:func:`navkit.geometry._kernels.hulls_csr_kernel`, after an
+    Akl-Toussaint filter) gives the vertices of :func:`hull_points` in its order (counter-clockwise
+    from the lexicographically smallest vertex). Sets the chain cannot decide exactly as Qhull -
+    fewer than 3 hull vertices, non-finite values, or a turn within ``1e-9`` (relative) of
+    collinear, where Qhull's precision handling decides - go to :func:`hull_points` itself
+    (with its 1 mm dilation of degenerate sets); ``chain (n,)`` says which sets the chain did.
+
+    ``inner``: the ``(H, hoff, chain)`` of subsets of the sets (the obstacles' boundary
+    vertices when the sets are the obstacles with their shadows): the points clearly inside a
+    subset's chain hull are dropped before the chain (the answer is the same, found faster).
+    """
+    from navkit.geometry import _kernels
+
+    xy = np.ascontiguousarray(xy, dtype=np.float64)
+    off = np.ascontiguousarray(off, dtype=np.int64)
+    n = len(off) - 1
+    if inner is None:
+        Q, qoff = np.empty((0, 2)), np.zeros(n + 1, dtype=np.int64)
+    else:
+        Q, qoff, qchain = inner
+        if not qchain.all():  # a dilated (Qhull) hull may reach outside the set's hull
+            keep = np.repeat(qchain, np.diff(qoff))
+            Q = Q[keep]
+            qoff = _offsets(np.where(qchain, np.diff(qoff), 0))
+    idx, hoff, ok = _kernels.hulls_csr_kernel(
+        xy, off, np.ascontiguousarray(Q, dtype=np.float64), np.ascontiguousarray(qoff)
+    )
+    H = xy[idx]
+    if not ok.all():
+        parts = [
+            H[hoff[s] : hoff[s + 1]] if ok[s] else hull_points(xy[off[s] : off[s + 1]])
+            for s in range(len(ok))
+        ]
+        H = np.concatenate(parts) if parts else np.empty((0, 2))
+        hoff = _offsets([len(p) for p in parts])
+    return H, hoff, ok
+
+
+def _normalised(
+    x: NDArray[np.float64],
+    y: NDArray[np.float64],
+    a: NDArray[np.float64],
+    b: NDArray[np.float64],
+    angle: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """:func:`_ellipse`'s normalisation on arrays: rows ``(x, y, a, b, angle)``."""
+    a, b = np.abs(a), np.abs(b)
+    swap = b > a
+    a, b = np.where(swap, b, a), np.where(swap, a, b)
+    angle = np.where(swap, angle + math.pi / 2, angle)
+    angle = (angle + math.pi / 2) % math.pi - math.pi / 2
+    return np.column_stack([x, y, a, b, angle])
+
+
+def _mvee_rows(H: NDArray[np.float64], hoff: NDArray[np.int64]) -> NDArray[np.float64]:
+    """:func:`mvee_batch` on CSR hulls (compiled weights and shape matrix, NumPy's ``eigh``)."""
+    from navkit.geometry import _kernels
+
+    origin, scale, c, A = _kernels.mvee_csr_kernel(H, hoff, 1e-3, 2000)
+    w, V = np.linalg.eigh(A)  # ascending: w[:, 0] smallest -> major axis
+    a, b = 1 / np.sqrt(w[:, 0]), 1 / np.sqrt(w[:, 1])
+    angle = np.arctan2(V[:, 1, 0], V[:, 0, 0])
+    centre = c * scale[:, None] + origin
+    return _normalised(centre[:, 0], centre[:, 1], a * scale, b * scale, angle)
+
+
+# The records of a frame's shapes (hundreds) are built without the dataclasses' ``__init__``,
+# whose per-field ``object.__setattr__`` (the price of ``frozen=True``) is ~3x the cost of
+# filling ``__dict__`` directly; these classes have no ``__post_init__`` and stay frozen.
+
+
+def _ellipses(rows: NDArray[np.float64]) -> list[Ellipse]:
+    new = object.__new__
+    out = []
+    for x, y, a, b, angle in rows.tolist():
+        e = new(Ellipse)
+        e.__dict__.update(x=x, y=y, a=a, b=b, angle=angle, kind="ellipse")
+        out.append(e)
+    return out
+
+
+def _circles(rows: NDArray[np.float64]) -> list[Circle]:
+    new = object.__new__
+    out = []
+    for x, y, r in rows.tolist():
+        c = new(Circle)
+        c.__dict__.update(x=x, y=y, radius=r, kind="circle")
+        out.append(c)
+    return out
+
+
+def _rectangles(rows: NDArray[np.float64]) -> list[Rectangle]:
+    new = object.__new__
+    out = []
+    for xmin, xmax, ymin, ymax in rows.tolist():
+        r = new(Rectangle)
+        r.__dict__.update(xmin=xmin, xmax=xmax, ymin=ymin, ymax=ymax, kind="rectangle")
+        out.append(r)
+    return out
+
+
+def shapes_csr(
+    H: NDArray[np.float64], hoff: NDArray[np.int64], names: Sequence[str]
+) -> list[dict[str, Any]]:
+    """Every requested shape of every hull ``H[hoff[s]:hoff[s + 1]]`` (compiled backend).
+
+    The shipped methods run in kernels over all hulls at once
+    (:func:`navkit.geometry._kernels.basic_shapes_kernel`: A1-A5 and Welzl's circle;
+    ``a6_csr_kernel``; ``mvee_csr_kernel``) with their twins' arithmetic, so the shapes equal
+    :func:`compute_shapes` with ``backend="numpy"`` (floats to 1e-9 relative). A method
+    replaced or added with :func:`register_shape` is called hull by hull.
+    """
+    from navkit.geometry import _kernels
+
+    H = np.ascontiguousarray(H, dtype=np.float64)
+    hoff = np.ascontiguousarray(hoff, dtype=np.int64)
+    n = len(hoff) - 1
+    if n == 0 or not names:
+        return [{} for _ in range(n)]
+    fast = {name for name in names if SHAPES[name] is _BUILTIN.get(name)}
+    cols: dict[str, list[Any]] = {}
+    basic = None
+    if fast - {"MVEE"}:
+        lengths = np.diff(hoff)
+        perm = np.concatenate([_welzl_order(int(m)) for m in lengths.tolist()])
+        basic = _kernels.basic_shapes_kernel(H, hoff, perm)
+        if "A1" in fast:
+            cols["A1"] = _rectangles(basic[:, 0:4])
+        if "A2" in fast:
+            cols["A2"] = _circles(basic[:, 4:7])
+        if "A3" in fast:
+            cols["A3"] = _circles(basic[:, 7:10])
+        if "A4" in fast:
+            cols["A4"] = _ellipses(basic[:, 10:15])
+        if "A5" in fast:
+            cols["A5"] = _ellipses(basic[:, 15:20])
+        if "MEC" in fast:
+            cols["MEC"] = _circles(basic[:, 20:23])
+        if "A6" in fast:
+            cols["A6"] = _ellipses(
+                _kernels.a6_csr_kernel(H, hoff, np.ascontiguousarray(basic[:, 15:20]), 3e-3, 120)
+            )
+    if "MVEE" in fast:
+        cols["MVEE"] = _ellipses(_mvee_rows(H, hoff))
+    for name in names:
+        if name not in cols:
+            cols[name] = [SHAPES[name](H[hoff[s] : hoff[s + 1]]) for s in range(n)]
+    per_name = [cols[name] for name in names]
+    return [dict(zip(names, objs, strict=True)) for objs in zip(*per_name, strict=True)]

@@ -8,12 +8,11 @@ import time
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
-from navkit.geometry.shapes import compute_shapes, hull_points
+from navkit.geometry.shapes import compute_shapes, hull_points, hulls_csr, shapes_csr
 from navkit.obstacles.grids import ScanGrid
 from navkit.obstacles.ground import refine_by_ground_height
 from navkit.obstacles.mesh import MeshCharacteristics, build_mesh, robust_cell_normals
@@ -40,6 +39,10 @@ __all__ = [
 ]
 
 log = logging.getLogger(__name__)
+
+MAIN_GROUND_SHARE = 0.1
+"""Main ground zones: ground components with at least this share of the largest one's triangles
+(``segment.main_ground_vertices``' default; the compiled stage 6 finds them)."""
 
 STAGES = ("points", "mesh", "classes", "split", "boundaries", "map")
 """Stage names used as keys of :attr:`ObstacleDetection.timings` (stages 3-4 are in "mesh")."""
@@ -308,15 +311,15 @@ def detect_obstacles_grid(
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
     compiled = settings.backend == "compiled"
     if compiled:
-        obs_lab, n, owner = _compiled_split(labels, mesh, P, wrap, settings)
+        obs_lab, n, owner, tri_obstacle, tcode = _compiled_split(labels, mesh, P, wrap, settings)
     else:
         obs_lab, n, owner = _split(labels, mesh, P, wrap, settings)
-    tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
+        tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
     clock.lap("split")
 
     # stage 7: boundary vertices, per-vertex classes
     if compiled:
-        vid, boundary, vlab = _compiled_vertices(labels, obs_lab, P, valid, wrap, settings)
+        vid, boundary, vlab = _compiled_vertices(labels, obs_lab, P, valid, wrap, settings, tcode)
     else:
         vid, boundary, vlab = _vertices(labels, obs_lab, P, valid, wrap, settings)
     clock.lap("boundaries")
@@ -392,11 +395,14 @@ def _compiled_split(
     P: NDArray[np.float64],
     wrap: bool,
     settings: ObstacleSettings,
-) -> tuple[NDArray[np.int32], int, NDArray[np.int32]]:
-    """Stage 6 in one kernel (:func:`navkit.obstacles._kernels.split_kernel`), same answers."""
-    from navkit.obstacles import _kernels
+) -> tuple[NDArray[np.int32], int, NDArray[np.int32], NDArray[np.int32], NDArray[np.int8]]:
+    """Stage 6 in one kernel (:func:`navkit.obstacles._kernels_map.split_kernel`), same answers;
+    also returns the triangles' obstacle ids with the shadows' owners, and each triangle's code
+    for stage 7 (class, main ground zone: the ground components come from the same union-find
+    as the obstacle and shadow components)."""
+    from navkit.obstacles import _kernels_map
 
-    obs_lab, n, owner = _kernels.split_kernel(
+    obs_lab, n, owner, tri_obstacle, tcode = _kernels_map.split_kernel(
         labels,
         mesh.z_min.astype(np.float32, copy=False),
         mesh.z_max.astype(np.float32, copy=False),
@@ -407,8 +413,9 @@ def _compiled_split(
         0.5 * settings.min_obstacle_height_m,
         float(settings.merge_distance_m),
         int(settings.merge_gap_cells),
+        MAIN_GROUND_SHARE,
     )
-    return obs_lab, int(n), owner
+    return obs_lab, int(n), owner, tri_obstacle, tcode
 
 
 def _vertices(
@@ -424,7 +431,7 @@ def _vertices(
     vid, boundary = boundary_vertices(obs_lab, n_az, n_el, wrap)
     vlab = vertex_labels(labels, valid, wrap)
     if settings.ground_refine:  # beyond the paper: per-point height above the local ground
-        main = main_ground_vertices(labels, n_az, n_el, wrap)
+        main = main_ground_vertices(labels, n_az, n_el, wrap, MAIN_GROUND_SHARE)
         vlab = refine_by_ground_height(
             P,
             vlab,
@@ -444,16 +451,18 @@ def _compiled_vertices(
     valid: NDArray[np.bool_],
     wrap: bool,
     settings: ObstacleSettings,
+    tcode: NDArray[np.int8],
 ) -> tuple[NDArray[np.int32], NDArray[np.bool_], NDArray[np.int8]]:
-    """Stage 7 with the kernels of :mod:`navkit.obstacles._kernels` (same answers)."""
-    from navkit.obstacles import _kernels
+    """Stage 7 with the kernels of :mod:`navkit.obstacles._kernels_map` (one pass over the
+    vertices, on stage 6's triangle codes ``tcode``) and :mod:`navkit.obstacles._kernels` (the
+    ground-height refinement); same answers."""
+    from navkit.obstacles import _kernels, _kernels_map
     from navkit.obstacles.ground import fill_missing_cells
 
-    vid, boundary, vlab, main = _kernels.vertex_kernel(labels, obs_lab, valid, bool(wrap), 0.1)
+    vid, boundary, vlab, _main, ref = _kernels_map.vertex_kernel(tcode, obs_lab, valid, bool(wrap))
     if settings.ground_refine:
         flat = P.reshape(-1, 3)
-        ref = (main & (vlab == GROUND)).reshape(-1)
-        grid, origin, missing = _kernels.ground_cells_kernel(
+        grid, origin, missing = _kernels_map.ground_cells_kernel(
             flat, ref, float(settings.ground_cell_m), 0.25
         )
         if missing:
@@ -533,49 +542,6 @@ def _group(
     return np.split(values[order], np.cumsum(counts)[:-1])
 
 
-def _hulls(groups: list[NDArray[np.float64]]) -> list[NDArray[np.float64]]:
-    """Convex hull ``(M, 2)`` (counter-clockwise) of each obstacle's boundary vertices ``(N, 2)``.
-
-    OpenCV's monotone chain on float32 coordinates relative to each group's first point picks the
-    hull vertices (a fraction of Qhull's per-call set-up, which dominated the map stage with
-    shapes off); the vertices returned are the float64 input rows. Relative coordinates keep the
-    float32 rounding at ~1e-7 x the obstacle's extent (a micrometre for a 10 m obstacle, far below
-    the range noise), so the vertex set could differ from the exact hull only for points collinear
-    with a hull edge within that tolerance. A hull is accepted only when it is strictly convex in
-    float64 (every turn to the left, checked for all hulls in one vectorised pass); otherwise -
-    fewer than 3 points, degenerate or nearly collinear sets, non-finite values -
-    :func:`navkit.geometry.shapes.hull_points` (Qhull, with its 1 mm dilation of degenerate sets)
-    decides. On the SemanticKITTI frames every hull has Qhull's vertices in Qhull's cyclic order;
-    only the starting vertex differs (which matters to the order-dependent A3 alone).
-    """
-    out: list[NDArray[np.float64] | None] = [None] * len(groups)
-    cand: list[NDArray[np.float64]] = []
-    which: list[int] = []
-    for k, b in enumerate(groups):
-        if len(b) < 3 or not np.isfinite(b).all():
-            out[k] = hull_points(b)
-            continue
-        idx = cv2.convexHull((b - b[0]).astype(np.float32), returnPoints=False).ravel()
-        if len(idx) < 3:
-            out[k] = hull_points(b)
-            continue
-        cand.append(b[idx])
-        which.append(k)
-    if cand:
-        H = np.concatenate(cand)
-        m = np.array([len(c) for c in cand])
-        start = np.repeat(np.cumsum(m) - m, m)
-        pos = np.arange(len(H)) - start
-        nxt = start + (pos + 1) % np.repeat(m, m)
-        e = H[nxt] - H  # edge from each vertex to the next
-        en = e[nxt]
-        turn = e[:, 0] * en[:, 1] - e[:, 1] * en[:, 0]
-        bad = np.bincount(np.repeat(np.arange(len(cand)), m), weights=turn <= 0) > 0
-        for c, k, b in zip(cand, which, bad, strict=True):
-            out[k] = hull_points(groups[k]) if b else c
-    return [h for h in out if h is not None]
-
-
 def _build_obstacles(
     P: NDArray[np.float64],
     tri: NDArray[np.int64],
@@ -591,15 +557,14 @@ def _build_obstacles(
         return []
     flat = P.reshape(-1, 3)
     if settings.backend == "compiled":
-        from navkit.obstacles import _kernels
+        from navkit.obstacles import _kernels_map
 
-        b_start, b_xy, v_start, v_xyz, s_start, s_xy, shadow_area, ntri = (
-            _kernels.map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n)
+        b_off, b_xy, v_off, v_xyz, s_off, s_xy, shadow_area, ntri = _kernels_map.map_groups_kernel(
+            flat, tri, obs_lab, owner, vid, boundary, n
         )
-        bxy = [b_xy[b_start[k] : b_start[k + 1]] for k in range(1, n + 1)]
-        vxyz = [v_xyz[v_start[k] : v_start[k + 1]] for k in range(1, n + 1)]
-        sxy = [s_xy[s_start[k] : s_start[k + 1]] for k in range(1, n + 1)]
-        return _assemble_obstacles(bxy, vxyz, sxy, shadow_area, ntri, n, settings)
+        return _assemble_compiled(
+            b_xy, b_off, v_xyz, v_off, s_xy, s_off, shadow_area, ntri, settings
+        )
     # boundary vertices per obstacle
     bmask = boundary.ravel()
     bxy = _group(vid.ravel()[bmask].astype(np.int64), flat[bmask, :2], n)
@@ -637,10 +602,9 @@ def _assemble_obstacles(
     vz = [v[:, 2] for v in vxyz]
     vxy = [v[:, :2] for v in vxyz]
     guaranteed_sets = [np.concatenate([o, s]) for o, s in zip(vxy, sxy, strict=True)]
-    # the outline written to files, and the shapes' input; A3 (one pass over the hull in its
-    # stored order) depends on the starting vertex, so with A3 requested Qhull's cycle is kept
-    # and A3 stays equal to ``circle_a3(hull_points(boundary))``
-    hulls = [hull_points(b) for b in bxy] if "A3" in settings.shapes else _hulls(bxy)
+    # the outline written to files, and the shapes' input (counter-clockwise from the
+    # lexicographically smallest vertex: A3 and Welzl depend on the start)
+    hulls = [hull_points(b) for b in bxy]
     shapes = (
         compute_shapes(hulls, settings.shapes, are_hulls=True, backend=settings.backend)
         if settings.shapes
@@ -669,6 +633,57 @@ def _assemble_obstacles(
             )
         )
     return out
+
+
+def _assemble_compiled(
+    b_xy: NDArray[np.float64],
+    b_off: NDArray[np.int64],
+    v_xyz: NDArray[np.float64],
+    v_off: NDArray[np.int64],
+    s_xy: NDArray[np.float64],
+    s_off: NDArray[np.int64],
+    shadow_area: NDArray[Any],
+    ntri: NDArray[Any],
+    settings: ObstacleSettings,
+) -> list[Obstacle]:
+    """:func:`_assemble_obstacles` on CSR vertex sets (rows ``off[k]:off[k + 1]`` of obstacle
+    ``k + 1``): the hulls and shapes of all obstacles in a few kernel calls
+    (:func:`navkit.geometry.shapes.hulls_csr`, :func:`~navkit.geometry.shapes.shapes_csr`),
+    the same obstacles as the twin."""
+    from navkit.obstacles import _kernels_map
+
+    n = len(b_off) - 1
+    g_xy, g_off = _kernels_map.guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off)
+    H, hoff, chain = hulls_csr(b_xy, b_off)
+    shapes = shapes_csr(H, hoff, settings.shapes)
+    if settings.guaranteed_shapes:
+        # the boundary's hull is inside the hull of obstacle + shadows: a cheap first filter
+        G, goff, _ = hulls_csr(g_xy, g_off, inner=(H, hoff, chain))
+        guaranteed = shapes_csr(G, goff, settings.guaranteed_shapes)
+    else:
+        guaranteed = [{} for _ in range(n)]
+    starts = v_off[:-1]
+    z_min = np.minimum.reduceat(v_xyz[:, 2], starts).tolist()
+    z_max = np.maximum.reduceat(v_xyz[:, 2], starts).tolist()
+    n_points = np.diff(v_off).tolist()
+    n_tri = ntri.tolist()
+    area = shadow_area.tolist()
+    return [
+        Obstacle(
+            id=k + 1,
+            n_triangles=n_tri[k],
+            n_points=n_points[k],
+            z_min=z_min[k],
+            z_max=z_max[k],
+            boundary_xy=b_xy[b_off[k] : b_off[k + 1]],
+            polygon_xy=H[hoff[k] : hoff[k + 1]],
+            shadow_xy=g_xy[g_off[k] : g_off[k + 1]],
+            shadow_area=area[k],
+            shapes=shapes[k],
+            guaranteed=guaranteed[k],
+        )
+        for k in range(n)
+    ]
 
 
 def detect_obstacles(

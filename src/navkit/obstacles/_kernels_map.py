@@ -1,0 +1,617 @@
+"""Compiled (Numba) kernels of stages 6-8 that share passes or batch all obstacles at once.
+
+Twins (the NumPy references) live in :mod:`navkit.obstacles.detector` and
+:mod:`navkit.obstacles.segment`; see ``docs/kernels.md`` ("Obstacles"). The shape kernels of
+stage 8 are in :mod:`navkit.geometry._kernels`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from navkit.obstacles._kernels import (
+    _OFF_I,
+    _OFF_J,
+    _find,
+    _kth,
+    _max_nan,
+    _merge_close,
+    _min_nan,
+    _union,
+)
+
+__all__ = [
+    "ground_cells_kernel",
+    "guaranteed_sets_kernel",
+    "map_groups_kernel",
+    "split_kernel",
+    "vertex_kernel",
+]
+
+
+@njit(cache=True)
+def guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off):  # type: ignore[no-untyped-def]
+    """A7's input in a CSR layout: per obstacle its vertices' ``(x, y)`` (``v_xyz`` rows
+    ``v_off[k]:v_off[k + 1]``) followed by its shadow vertices (``s_xy``, ``s_off``), as the
+    twin's ``np.concatenate([vertices, shadows])``. Returns ``(g_xy (N, 2), g_off (n + 1,))``."""
+    n = len(v_off) - 1
+    g_off = np.empty(n + 1, np.int64)
+    for k in range(n + 1):
+        g_off[k] = v_off[k] + s_off[k]
+    g = np.empty((g_off[n], 2))
+    for k in range(n):
+        p = g_off[k]
+        for r in range(v_off[k], v_off[k + 1]):
+            g[p, 0] = v_xyz[r, 0]
+            g[p, 1] = v_xyz[r, 1]
+            p += 1
+        for r in range(s_off[k], s_off[k + 1]):
+            g[p, 0] = s_xy[r, 0]
+            g[p, 1] = s_xy[r, 1]
+            p += 1
+    return g, g_off
+
+
+# ------------------------------------------------------------------------------------------
+# stage 6: one union-find for the obstacle, shadow and ground components
+
+_GROUND, _OBSTACLE, _SHADOW = 0, 1, 2
+_MAIN = 17  # stage 7's code of a main-ground triangle: ground (1) | main (16)
+
+
+@njit(cache=True)
+def _class_of(label):  # type: ignore[no-untyped-def]
+    """Component class of a triangle class m_t: ground, obstacle, shadow (both kinds), or -1."""
+    if label == 0:
+        return _GROUND
+    if label == -2:
+        return _OBSTACLE
+    if label == -3 or label == -4:
+        return _SHADOW
+    return -1
+
+
+@njit(cache=True)
+def _class_union_find(labels, wrap):  # type: ignore[no-untyped-def]
+    """The mesh components of the ground, obstacle and shadow triangles in one union-find
+    (``segment.MESH_STRUCTURE``, rows cyclic with ``wrap``; a union only joins triangles of one
+    class, so the components are those of three separate passes). Returns the class per
+    triangle (flat, -1: none) and the parent array (every root is its set's smallest member).
+
+    One raster scan: a triangle is a new singleton when reached, so it takes its left
+    neighbour's root (kept from the previous step) and joins the upper-right and seam
+    neighbours' sets by a find each."""
+    R, C = labels.shape
+    cls = np.empty(R * C, np.int8)
+    parent = np.empty(R * C, np.int32)
+    seam = wrap and R > 1
+    for i in range(R):
+        prev = -1
+        cur = np.int32(0)
+        for j in range(C):
+            f = i * C + j
+            c = _class_of(labels[i, j])
+            cls[f] = c
+            if c < 0:
+                parent[f] = f
+                prev = -1
+                continue
+            root = np.int32(f)
+            if prev == c:
+                root = cur
+            if i > 0 and j + 1 < C and cls[f - C + 1] == c:
+                rb = _find(parent, f - C + 1)
+                if rb < root:
+                    if root != f:
+                        parent[root] = rb
+                    root = rb
+                elif root < rb:
+                    parent[rb] = root
+            if seam and i == R - 1 and j > 0 and cls[j - 1] == c:
+                rb = _find(parent, j - 1)
+                if rb < root:
+                    if root != f:
+                        parent[root] = rb
+                    root = rb
+                elif root < rb:
+                    parent[rb] = root
+            parent[f] = root
+            prev = c
+            cur = root
+    return cls, parent
+
+
+@njit(cache=True)
+def _neighbours(i, j, R, C, wrap, out):  # type: ignore[no-untyped-def]
+    """The (up to 4) mesh neighbours of triangle ``(i, j)`` (``segment.MESH_STRUCTURE``) as flat
+    indices in ``out``; returns their number."""
+    m = 0
+    for o in range(4):
+        ti, tj = i + _OFF_I[o], j + _OFF_J[o]
+        if tj < 0 or tj >= C:
+            continue
+        if ti < 0 or ti >= R:
+            if not (wrap and R > 1):
+                continue
+            ti = ti % R
+        out[m] = ti * C + tj
+        m += 1
+    return m
+
+
+@njit(cache=True)
+def split_kernel(  # type: ignore[no-untyped-def]
+    labels,
+    zmin,
+    zmax,
+    P,
+    wrap,
+    min_triangles,
+    min_height32,
+    half,
+    distance_m,
+    gap,
+    main_share,
+):
+    """Stage 6 (twin: ``detector._split``): obstacle components, the size / height /
+    noise-patch filters, merging of close components and the shadows' owners, with the ground
+    components of stage 7 from the same union-find. ``labels`` is changed in place (dropped
+    components back to ground).
+
+    Returns ``obs_lab, n, owner, tri_obstacle, tcode``: ``tri_obstacle`` the obstacle id of
+    obstacle triangles and the owner of shadow triangles; ``tcode (R, 2C) int8`` each
+    triangle's class flag for stage 7 (1 ground, 2 shadow behind, 4 side shadow, 8 obstacle,
+    0 unreliable) with ``_MAIN`` (= 1 | 16) for a ground triangle of a main ground zone (a
+    ground component after the drop with at least ``main_share`` of the largest one's
+    triangles; ``segment.main_ground_vertices``).
+    """
+    R, C = labels.shape
+    cls, parent = _class_union_find(labels, wrap)
+    # obstacle and shadow components numbered by first appearance in raster order
+    new = np.zeros(R * C, np.int32)
+    lab = np.zeros((R, C), np.int32)
+    sl = np.zeros((R, C), np.int32)
+    n = 0
+    ns = 0
+    sh_i = np.empty(R * C, np.int32)  # the shadow triangles in raster order
+    sh_j = np.empty(R * C, np.int32)
+    nsh = 0
+    for i in range(R):
+        for j in range(C):
+            f = i * C + j
+            c = cls[f]
+            if c <= 0:
+                continue
+            r = _find(parent, f)
+            if new[r] == 0:
+                if c == _OBSTACLE:
+                    n += 1
+                    new[r] = n
+                else:
+                    ns += 1
+                    new[r] = ns
+            if c == _OBSTACLE:
+                lab[i, j] = new[r]
+            else:
+                sl[i, j] = new[r]
+                sh_i[nsh] = i
+                sh_j[nsh] = j
+                nsh += 1
+    dropped_any = False
+    if n:
+        size = np.zeros(n + 1, np.int64)
+        hi = np.full(n + 1, -np.inf, np.float32)
+        lo = np.full(n + 1, np.inf, np.float32)
+        sm = np.zeros(n + 1, np.float64)
+        h = np.float32(0.5)
+        # obstacle triangles in raster order, grouped by label (a counting sort)
+        for i in range(R):
+            for j in range(C):
+                a = lab[i, j]
+                if a:
+                    size[a] += 1
+        start = np.zeros(n + 2, np.int64)
+        for a in range(1, n + 1):
+            start[a + 1] = start[a] + size[a]
+        fill = start.copy()
+        nt = start[n + 1]
+        ti_ = np.empty(nt, np.int64)  # the obstacle triangles in raster order
+        tj_ = np.empty(nt, np.int64)
+        zs = np.empty(nt, np.float64)  # their mid heights by label
+        bi_ = np.empty(nt, np.int64)  # those with a ground neighbour (the lift's pairs)
+        bj_ = np.empty(nt, np.int64)
+        cyc = wrap and R > 1
+        m = 0
+        nbd = 0
+        for i in range(R):
+            for j in range(C):
+                a = lab[i, j]
+                if a == 0:
+                    continue
+                ti_[m] = i
+                tj_[m] = j
+                m += 1
+                # a ground neighbour (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)?
+                up = i - 1 if i > 0 else (R - 1 if cyc else -1)
+                dn = i + 1 if i + 1 < R else (0 if cyc else -1)
+                if (
+                    (j + 1 < C and labels[i, j + 1] == 0)
+                    or (j > 0 and labels[i, j - 1] == 0)
+                    or (dn >= 0 and j > 0 and labels[dn, j - 1] == 0)
+                    or (up >= 0 and j + 1 < C and labels[up, j + 1] == 0)
+                ):
+                    bi_[nbd] = i
+                    bj_[nbd] = j
+                    nbd += 1
+                hi[a] = _max_nan(hi[a], zmax[i, j])
+                lo[a] = _min_nan(lo[a], zmin[i, j])
+                zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
+                sm[a] += zm
+                zs[fill[a]] = zm
+                fill[a] += 1
+        # lift over the adjacent ground, the sums in the twin's pair order (per offset: the
+        # pairs inside the array in raster order, then the ones across the seam)
+        cnt_g = np.zeros(n + 1, np.int64)
+        sum_g = np.zeros(n + 1, np.float64)
+        bi_ = bi_[:nbd]
+        first_last = np.searchsorted(bi_, R - 1)  # where row R - 1 starts
+        first_one = np.searchsorted(bi_, 1)  # where row 0 ends
+        for o in range(4):
+            di, dj = _OFF_I[o], _OFF_J[o]
+            for seam in range(2 if (wrap and di != 0) else 1):
+                k0, k1 = 0, nbd
+                if seam == 1:  # only row R - 1 (di = 1) or row 0 (di = -1) crosses
+                    k0, k1 = (first_last, nbd) if di == 1 else (0, first_one)
+                for k in range(k0, k1):
+                    i, j = bi_[k], bj_[k]
+                    tj = j + dj
+                    if tj < 0 or tj >= C:
+                        continue
+                    ti = i + di
+                    crosses = ti < 0 or ti >= R
+                    if crosses != (seam == 1):
+                        continue
+                    if crosses:
+                        ti = ti % R
+                    if labels[ti, tj] == 0:
+                        a = lab[i, j]
+                        cnt_g[a] += 1
+                        sum_g[a] += np.float64(h * (zmax[ti, tj] + zmin[ti, tj]))
+        lut = np.zeros(n + 1, np.int32)
+        m2 = 0
+        for a in range(1, n + 1):
+            if not (size[a] >= min_triangles and (hi[a] - lo[a]) >= min_height32):
+                continue
+            lift = sm[a] / max(size[a], 1) - sum_g[a] / cnt_g[a] if cnt_g[a] > 0 else np.inf
+            if lift < half:
+                # a patch of noise on the ground: little spread (10th to 90th percentile of
+                # the mid heights) and no lift; computed only where it decides
+                k = size[a] - 1
+                k90, k10 = math.floor(0.9 * k), math.floor(0.1 * k)
+                seg = zs[start[a] : start[a + 1]]
+                v90 = _kth(seg, k90)  # leaves the k90 + 1 smallest in front
+                if v90 - _kth(seg[: k90 + 1], k10) < half:
+                    continue
+            m2 += 1
+            lut[a] = m2
+        for k in range(nt):
+            i, j = ti_[k], tj_[k]
+            a = lab[i, j]
+            if lut[a] == 0:
+                labels[i, j] = 0
+                cls[i * C + j] = _GROUND
+                dropped_any = True
+            lab[i, j] = lut[a]
+        if dropped_any:  # the dropped triangles join the ground around them
+            nb = np.empty(4, np.int64)
+            for k in range(nt):
+                i, j = ti_[k], tj_[k]
+                f = i * C + j
+                if cls[f] != _GROUND:
+                    continue
+                for q in range(_neighbours(i, j, R, C, wrap, nb)):
+                    if cls[nb[q]] == _GROUND:
+                        _union(parent, f, nb[q])
+        n = m2
+        if n >= 2 and gap >= 1 and distance_m > 0:
+            lab, n = _merge_close(lab, n, P, wrap, distance_m, gap)
+    # ground components: the main ground zones (>= main_share of the largest one's triangles)
+    # and each triangle's code for stage 7 (class flag, main ground)
+    ground_size = np.zeros(R * C, np.int32)
+    big = 0
+    for f in range(R * C):
+        if cls[f] == _GROUND:
+            r = _find(parent, f)
+            parent[f] = r
+            ground_size[r] += 1
+            big = max(big, ground_size[r])
+    thr = main_share * big
+    tcode = np.empty((R, C), np.int8)
+    for i in range(R):
+        for j in range(C):
+            t = labels[i, j]
+            if t == 0:
+                tcode[i, j] = _MAIN if ground_size[parent[i * C + j]] >= thr else 1
+            elif t == -4:
+                tcode[i, j] = 2
+            elif t == -3:
+                tcode[i, j] = 4
+            elif t == -2:
+                tcode[i, j] = 8
+            else:
+                tcode[i, j] = 0
+    owner = np.zeros((R, C), np.int32)
+    tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
+    if ns == 0 or n == 0:
+        return lab, n, owner, tri_obstacle, tcode
+    # shadow owners: per shadow zone, the obstacle it shares the most adjacencies with (ties:
+    # the larger id, as the twin's stable lexsort)
+    nobs = n + 1
+    dense = (ns + 1) * nobs <= 1 << 22
+    counts = np.zeros((ns + 1) * nobs if dense else 1, np.int64)
+    keys = np.empty(0 if dense else 4 * R * C, np.int64)
+    k = 0
+    nb = np.empty(4, np.int64)
+    labf = lab.ravel()
+    for t in range(nsh):
+        i, j = sh_i[t], sh_j[t]
+        z = sl[i, j]
+        for q in range(_neighbours(i, j, R, C, wrap, nb)):
+            b = labf[nb[q]]
+            if b <= 0:
+                continue
+            if dense:
+                counts[z * nobs + b] += 1
+            else:
+                keys[k] = np.int64(z) * nobs + b
+                k += 1
+    best = np.zeros(ns + 1, np.int32)
+    if dense:
+        for z in range(1, ns + 1):
+            bc = 0
+            for b in range(1, nobs):
+                c = counts[z * nobs + b]
+                if c > 0 and c >= bc:
+                    bc = c
+                    best[z] = b
+    elif k:
+        keys = np.sort(keys[:k])
+        best_count = np.zeros(ns + 1, np.int64)
+        run = 1
+        for m in range(1, k + 1):
+            if m < k and keys[m] == keys[m - 1]:
+                run += 1
+                continue
+            z = keys[m - 1] // nobs
+            b = keys[m - 1] % nobs
+            if run >= best_count[z]:
+                best_count[z] = run
+                best[z] = b
+            run = 1
+    for t in range(nsh):
+        i, j = sh_i[t], sh_j[t]
+        owner[i, j] = best[sl[i, j]]
+        tri_obstacle[i, j] = owner[i, j]
+    return lab, n, owner, tri_obstacle, tcode
+
+
+# ------------------------------------------------------------------------------------------
+# stage 7: one pass over the vertices
+
+
+@njit(cache=True)
+def vertex_kernel(tcode, obs_lab, valid, wrap):  # type: ignore[no-untyped-def]
+    """``segment.boundary_vertices`` + ``vertex_labels`` + ``main_ground_vertices`` in one pass
+    over the vertices, each reading its six incident triangles once
+    (``segment._incident_slices``' order; a missing triangle counts as obstacle id 0, no class,
+    not main ground) in stage 6's codes ``tcode`` (:func:`split_kernel`). Returns ``vid,
+    boundary, vertex labels, main ground vertices`` and the flat indices of the main ground
+    vertices labelled ground (the ground-height reference, raster order)."""
+    n_az, n_el = valid.shape
+    R = tcode.shape[0]
+    C = tcode.shape[1] // 2
+    vid = np.zeros((n_az, n_el), np.int32)
+    bnd = np.zeros((n_az, n_el), np.bool_)
+    vlab = np.empty((n_az, n_el), np.int8)
+    main = np.zeros((n_az, n_el), np.bool_)
+    ref = np.empty(n_az * n_el, np.int64)
+    nref = 0
+    for p in range(n_az):
+        rp = p if p < R else -1
+        rm = p - 1 if p >= 1 else (R - 1 if wrap else -1)
+        for q in range(n_el):
+            c0 = 2 * q if q < C else -1
+            cm = 2 * (q - 1) if q >= 1 else -1
+            flags = 0
+            hi = 0
+            lo = 0
+            for k in range(6):
+                if k == 0:
+                    r, c = rp, c0
+                elif k == 1:
+                    r, c = rp, cm
+                elif k == 2:
+                    r, c = rm, c0
+                elif k == 3:
+                    r, c = rm, c0 + 1
+                elif k == 4:
+                    r, c = rp, cm + 1
+                else:
+                    r, c = rm, cm + 1
+                v = 0
+                if r >= 0 and c >= 0 and (k < 3 or c > 0 or (k == 3 and c0 >= 0)):
+                    v = obs_lab[r, c]
+                    flags |= tcode[r, c]
+                if k == 0:
+                    hi = v
+                    lo = v
+                else:
+                    hi = max(hi, v)
+                    lo = min(lo, v)
+            vid[p, q] = hi
+            bnd[p, q] = hi > 0 and lo != hi
+            is_main = (flags & 16) != 0
+            main[p, q] = is_main
+            if not valid[p, q]:
+                vlab[p, q] = -1
+            elif flags & 8:
+                vlab[p, q] = -2
+            elif flags & 1:
+                vlab[p, q] = 0
+                if is_main:
+                    ref[nref] = p * n_el + q
+                    nref += 1
+            elif flags & 2:
+                vlab[p, q] = -4
+            elif flags & 4:
+                vlab[p, q] = -3
+            else:
+                vlab[p, q] = -1
+    return vid, bnd, vlab, main, ref[:nref]
+
+
+@njit(cache=True)
+def ground_cells_kernel(P, sel, cell_m, quantile):  # type: ignore[no-untyped-def]
+    """``ground.ground_height_map`` before its hole filling, on the reference points ``sel``
+    (flat indices in raster order, from :func:`vertex_kernel`): the ``quantile`` of their z
+    per horizontal cell ``(nx, ny)`` (NaN: no point), the grid's origin, and whether a cell is
+    empty. The arithmetic of ``_kernels.ground_cells_kernel``, without its two passes over
+    every vertex to find the reference points."""
+    m = len(sel)
+    if m == 0:
+        return np.zeros((1, 1)), np.zeros(2), False
+    gx_min = np.inf
+    gy_min = np.inf
+    for k in range(m):
+        gx_min = min(gx_min, P[sel[k], 0])
+        gy_min = min(gy_min, P[sel[k], 1])
+    ix = np.empty(m, np.int64)
+    iy = np.empty(m, np.int64)
+    nx = 0
+    ny = 0
+    for k in range(m):
+        p = sel[k]
+        ix[k] = math.floor((P[p, 0] - gx_min) / cell_m)
+        iy[k] = math.floor((P[p, 1] - gy_min) / cell_m)
+        nx = max(nx, ix[k] + 1)
+        ny = max(ny, iy[k] + 1)
+    counts = np.zeros(nx * ny + 1, np.int64)
+    for k in range(m):
+        counts[ix[k] * ny + iy[k] + 1] += 1
+    start = np.cumsum(counts)
+    fill = start.copy()
+    zs = np.empty(m, np.float64)
+    for k in range(m):
+        c = ix[k] * ny + iy[k]
+        zs[fill[c]] = P[sel[k], 2]
+        fill[c] += 1
+    heights = np.full((nx, ny), np.nan)
+    missing = False
+    for c in range(nx * ny):
+        a, b = start[c], start[c + 1]
+        if b > a:
+            heights[c // ny, c % ny] = _kth(zs[a:b], math.floor(quantile * (b - a - 1)))
+        else:
+            missing = True
+    origin = np.empty(2)
+    origin[0] = gx_min
+    origin[1] = gy_min
+    return heights, origin, missing
+
+
+# ------------------------------------------------------------------------------------------
+# stage 8 input: per-obstacle vertex sets (twin: detector._build_obstacles' groupings)
+
+
+@njit(cache=True, error_model="numpy")
+def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ignore[no-untyped-def]
+    """Boundary vertices ``(x, y)``, all vertices ``(x, y, z)`` and shadow vertex sets
+    ``(x, y)`` of obstacles 1..n in CSR layouts (each with offsets ``(n + 1,)``), the shadow
+    areas and the triangle counts, in the twin's orders (vertices in raster order; a shadow
+    set's vertices sorted by index, each once; areas summed in raster order). Two passes over
+    the vertices and one over the triangles."""
+    vf = vid.ravel()
+    bf = boundary.ravel()
+    nv = len(vf)
+    v_off = np.zeros(n + 1, np.int64)
+    b_off = np.zeros(n + 1, np.int64)
+    for k in range(nv):
+        a = vf[k]
+        if a > 0:
+            v_off[a] += 1
+            if bf[k]:
+                b_off[a] += 1
+    for a in range(1, n + 1):  # counts -> offsets: id a's rows are off[a - 1]:off[a]
+        v_off[a] += v_off[a - 1]
+        b_off[a] += b_off[a - 1]
+    tv, tb = v_off[n], b_off[n]
+    v_xyz = np.empty((tv, 3))
+    b_xy = np.empty((tb, 2))
+    vfill = v_off.copy()
+    bfill = b_off.copy()
+    for k in range(nv):
+        a = vf[k]
+        if a > 0:
+            p = vfill[a - 1]
+            v_xyz[p, 0] = flat[k, 0]
+            v_xyz[p, 1] = flat[k, 1]
+            v_xyz[p, 2] = flat[k, 2]
+            vfill[a - 1] = p + 1
+            if bf[k]:
+                q = bfill[a - 1]
+                b_xy[q, 0] = flat[k, 0]
+                b_xy[q, 1] = flat[k, 1]
+                bfill[a - 1] = q + 1
+    # triangles: counts per obstacle, shadow areas and the shadow triangles (raster order)
+    R, C2 = owner.shape
+    ntri = np.zeros(n + 1, np.int64)
+    area = np.zeros(n + 1)
+    t_cnt = np.zeros(n + 1, np.int64)
+    sh = np.empty(R * C2, np.int64)
+    ns = 0
+    for r in range(R):
+        for c in range(C2):
+            ntri[obs_lab[r, c]] += 1
+            a = owner[r, c]
+            if a > 0:
+                t_cnt[a] += 1
+                sh[ns] = r * C2 + c
+                ns += 1
+                i0, i1, i2 = tri[r, c, 0], tri[r, c, 1], tri[r, c, 2]
+                v0x, v0y = flat[i0, 0], flat[i0, 1]
+                area[a] += 0.5 * abs(
+                    (flat[i1, 0] - v0x) * (flat[i2, 1] - v0y)
+                    - (flat[i2, 0] - v0x) * (flat[i1, 1] - v0y)
+                )
+    t_off = np.zeros(n + 2, np.int64)
+    for a in range(1, n + 1):
+        t_off[a + 1] = t_off[a] + 3 * t_cnt[a]
+    fill = t_off.copy()
+    verts = np.empty(3 * ns, np.int64)
+    ownf = owner.ravel()
+    for k in range(ns):
+        t = sh[k]
+        a = ownf[t]
+        r, c = t // C2, t % C2
+        p = fill[a]
+        verts[p] = tri[r, c, 0]
+        verts[p + 1] = tri[r, c, 1]
+        verts[p + 2] = tri[r, c, 2]
+        fill[a] = p + 3
+    s_off = np.zeros(n + 1, np.int64)
+    m = 0
+    for a in range(1, n + 1):
+        seg = np.sort(verts[t_off[a] : t_off[a + 1]])
+        for k in range(len(seg)):
+            if k == 0 or seg[k] != seg[k - 1]:
+                verts[m] = seg[k]
+                m += 1
+        s_off[a] = m
+    s_xy = np.empty((m, 2))
+    for k in range(m):
+        s_xy[k, 0] = flat[verts[k], 0]
+        s_xy[k, 1] = flat[verts[k], 1]
+    return b_off, b_xy, v_off, v_xyz, s_off, s_xy, area[1:], ntri[1:]
