@@ -95,3 +95,19 @@ def test_real_7scenes(data_path):
         P = np.stack([(u - 320.0) / 585.0 * z, (v - 240.0) / 585.0 * z, z], axis=2)
         total += assert_same(P)
     assert total > 100
+
+
+def test_backproject_same_bits(data_path):
+    """``PinholeCamera.backproject`` (broadcast rays, issue 12) gives ``pixel_rays() * depth``
+    bit for bit, NaN where the depth is missing: the extraction's input is unchanged."""
+    from navkit.io.rgbd import read_simple_rgbd
+
+    seq = read_simple_rgbd(
+        data_path("rgbd/slambook-ch5"),
+        {"fx": 518.0, "fy": 519.0, "cx": 325.5, "cy": 253.5, "depth_scale": 1000.0},
+    )
+    f = seq.frame(0)
+    a = f.camera.backproject(f.depth)
+    b = f.camera.pixel_rays() * f.depth[..., None]
+    assert np.isnan(f.depth).any()
+    assert np.array_equal(a.view(np.uint64), b.view(np.uint64))
