@@ -111,3 +111,33 @@ def test_backproject_same_bits(data_path):
     b = f.camera.pixel_rays() * f.depth[..., None]
     assert np.isnan(f.depth).any()
     assert np.array_equal(a.view(np.uint64), b.view(np.uint64))
+
+
+def test_outline_rasters_match_outline_from_points(rng):
+    """The rasters of all planes in one compiled pass give ``outline_from_points``'s outlines
+    and areas: point clouds with NaN rows, quadrilaterals (one with a NaN corner), a plane with
+    two points only (empty outline) and one whose raster exceeds 4e6 cells (coarsened)."""
+    from navkit.planes.extract import _outlines_compiled
+    from navkit.planes.segments import outline_from_points
+
+    sets = []
+    for n, nq, span in ((3000, 5, 2.0), (2, 0, 1.0), (500, 0, 0.3), (400, 2, 60.0), (0, 3, 1.5)):
+        uv = rng.uniform(-span, span, (n, 2)) + rng.normal(0, 5, 2)
+        if n > 10:
+            uv[rng.integers(0, n, 5)] = np.nan
+        c0 = rng.uniform(-span, span, (nq, 1, 2))
+        q = c0 + np.array([[0, 0], [0.3, 0], [0.3, 0.3], [0, 0.3]])[None]
+        if nq > 2:
+            q[1, 2, 0] = np.nan
+        sets.append((uv, q))
+    uv_all = np.concatenate([u for u, _ in sets])
+    cuts = np.concatenate([[0], np.cumsum([len(u) for u, _ in sets])])
+    quads = np.concatenate([q for _, q in sets])
+    qcuts = np.concatenate([[0], np.cumsum([len(q) for _, q in sets])])
+    step = np.array([1, 1, 2, 1, 1])
+    got = _outlines_compiled(uv_all, cuts, step, quads, qcuts, 0.02)
+    for k, (uv, q) in enumerate(sets):
+        want = outline_from_points(uv[:: step[k]], 0.02, quads=q)
+        assert np.array_equal(got[k][0], want[0])
+        assert got[k][1] == want[1]
+    assert len(got[1][0]) == 0 and len(got[0][0]) >= 3 and got[3][1] > 0

@@ -469,3 +469,100 @@ def plane_rows(
         mean[g, 1] = my
         mean[g, 2] = mz
     return normal, rho, rms, mean, rank1
+
+
+@njit(cache=True)
+def outline_rasters(
+    uv: np.ndarray,
+    cuts: np.ndarray,
+    step: np.ndarray,
+    quads: np.ndarray,
+    qcuts: np.ndarray,
+    cell: float,
+) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
+]:  # pragma: no cover - compiled
+    """The rasters of :func:`navkit.planes.segments.outline_from_points` for all segments at
+    once (see ``extract._outlines``): segment ``k`` has the points ``uv[cuts[k]:cuts[k + 1]:
+    step[k]] (., 2)`` and the quadrilaterals ``quads[qcuts[k]:qcuts[k + 1]] (., 4, 2)``.
+
+    The bounding box, the raster size and the cells of the points are computed as that
+    function does (the same float64 operations). Returns the rasters one after the other in one
+    zeroed uint8 buffer with the points drawn (segment ``k`` from ``start[k]``, ``shape[k] =
+    (columns, rows)``), ``lo (K, 2)``, a status per segment (0 = raster, 1 = fewer than 3
+    points and corners: empty outline, 2 = raster above 4e6 cells: the caller calls
+    ``outline_from_points``), the quadrilaterals' corners in 1/16 raster cell as OpenCV's
+    ``fillPoly`` takes them ``(Q, 4, 2)`` int32 and whether each quadrilateral is finite."""
+    K = len(cuts) - 1
+    inv = 1.0 / cell
+    lo = np.zeros((K, 2), np.float64)
+    shape = np.zeros((K, 2), np.int64)
+    start = np.zeros(K + 1, np.int64)
+    status = np.zeros(K, np.int64)
+    qfin = np.ones(len(quads), np.bool_)
+    total = 0
+    for k in range(K):
+        lo0 = np.inf
+        lo1 = np.inf
+        hi0 = -np.inf
+        hi1 = -np.inf
+        n = 0
+        for p in range(cuts[k], cuts[k + 1], step[k]):
+            u = uv[p, 0]
+            v = uv[p, 1]
+            if np.isfinite(u) and np.isfinite(v):
+                n += 1
+                lo0 = min(lo0, u)
+                hi0 = max(hi0, u)
+                lo1 = min(lo1, v)
+                hi1 = max(hi1, v)
+        for qi in range(qcuts[k], qcuts[k + 1]):
+            fin = True
+            for a in range(4):
+                fin = fin and np.isfinite(quads[qi, a, 0]) and np.isfinite(quads[qi, a, 1])
+            qfin[qi] = fin
+            if fin:
+                n += 4
+                for a in range(4):
+                    lo0 = min(lo0, quads[qi, a, 0])
+                    hi0 = max(hi0, quads[qi, a, 0])
+                    lo1 = min(lo1, quads[qi, a, 1])
+                    hi1 = max(hi1, quads[qi, a, 1])
+        start[k + 1] = total
+        if n < 3:
+            status[k] = 1
+            continue
+        lo0 -= cell
+        lo1 -= cell
+        lo[k, 0] = lo0
+        lo[k, 1] = lo1
+        e0 = (hi0 - lo0) * inv + 2.0
+        e1 = (hi1 - lo1) * inv + 2.0
+        if e0 * e1 > 4_000_000:
+            status[k] = 2
+            continue
+        shape[k, 0] = np.int64(e0)
+        shape[k, 1] = np.int64(e1)
+        total += shape[k, 0] * shape[k, 1]
+        start[k + 1] = total
+    grid = np.zeros(total, np.uint8)
+    qint = np.zeros((len(quads), 4, 2), np.int32)
+    for k in range(K):
+        if status[k] != 0:
+            continue
+        lo0 = lo[k, 0]
+        lo1 = lo[k, 1]
+        w = shape[k, 0]
+        s0 = start[k]
+        for p in range(cuts[k], cuts[k + 1], step[k]):
+            u = uv[p, 0]
+            v = uv[p, 1]
+            if np.isfinite(u) and np.isfinite(v):
+                ii = np.int64((u - lo0) * inv)
+                jj = np.int64((v - lo1) * inv)
+                grid[s0 + jj * w + ii] = 1
+        for qi in range(qcuts[k], qcuts[k + 1]):
+            for a in range(4):
+                qint[qi, a, 0] = np.int32(np.rint(((quads[qi, a, 0] - lo0) * inv - 0.5) * 16.0))
+                qint[qi, a, 1] = np.int32(np.rint(((quads[qi, a, 1] - lo1) * inv - 0.5) * 16.0))
+    return grid, start, shape, lo, status, qint, qfin

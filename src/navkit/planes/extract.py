@@ -53,7 +53,12 @@ from navkit.errors import InputError
 from navkit.geometry import Plane, canonical_plane
 from navkit.geometry._validate import check_settings
 from navkit.planes.extract_cloud import CloudExtractionSettings, extract_planes_cloud
-from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points
+from navkit.planes.segments import (
+    ExtractionResult,
+    PlaneSegment,
+    outline_from_points,
+    outline_of_raster,
+)
 
 __all__ = [
     "CloudExtractionSettings",
@@ -938,13 +943,11 @@ def _outlines(
         uv_all, cuts = _kernels().outline_points(
             points, point_seg, pt.P, pt.valid, bi, bj, t, qseg[~use], axes, off, c
         )
-        out = []
-        for k in range(K):
-            n_k = cuts[k + 1] - cuts[k]
-            uv = uv_all[cuts[k] : cuts[k + 1] : max(1, n_k // 40_000)]
-            ql, qh = qcuts[k], qcuts[k + 1]
-            out.append(outline_from_points(uv, cell, quads=quads[ql:qh][use[ql:qh]]))
-        return out
+        step = np.maximum(1, np.diff(cuts) // 40_000)  # at most ~40k points per plane
+        q_used = np.ascontiguousarray(quads[use])
+        return _outlines_compiled(
+            uv_all, cuts, step, q_used, np.searchsorted(qseg[use], np.arange(K + 1)), cell
+        )
     # points: the sampled pixels of the mixed patches, then of the wholesale patches not used
     # as quadrilaterals (every t-th row / column), grouped by segment
     pseg = point_seg
@@ -972,4 +975,43 @@ def _outlines(
         uv = np.stack([x * A[a, 0] + y * A[a, 1] + z * A[a, 2] - o[a] for a in range(2)], axis=1)
         ql, qh = qcuts[k], qcuts[k + 1]
         out.append(outline_from_points(uv, cell, quads=quads[ql:qh][use[ql:qh]]))
+    return out
+
+
+def _outlines_compiled(
+    uv: NDArray[np.float64],
+    cuts: NDArray[np.int64],
+    step: NDArray[np.int64],
+    quads: NDArray[np.float64],
+    qcuts: NDArray[np.int64],
+    cell: float,
+) -> list[tuple[NDArray[np.float64], float]]:
+    """``outline_from_points(uv[cuts[k]:cuts[k + 1]:step[k]], cell, quads=quads[qcuts[k]:
+    qcuts[k + 1]])`` for every segment ``k``, the same outlines and areas: the rasters of all
+    segments drawn in one compiled pass (:func:`navkit.planes._kernels.outline_rasters`), then
+    per segment OpenCV's polygon fill, closing and contour (``outline_of_raster``)."""
+    buf, start, shape, lo, status, qint, qfin = _kernels().outline_rasters(
+        np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2),
+        cuts,
+        step,
+        np.ascontiguousarray(quads, dtype=np.float64).reshape(-1, 4, 2),
+        qcuts,
+        float(cell),
+    )
+    out = []
+    for k in range(len(cuts) - 1):
+        ql, qh = qcuts[k], qcuts[k + 1]
+        if status[k] == 1:  # fewer than 3 points and corners
+            out.append((np.zeros((0, 2)), 0.0))
+            continue
+        if status[k] == 2:  # a huge raster: outline_from_points coarsens it
+            uv_k = uv[cuts[k] : cuts[k + 1] : step[k]]
+            out.append(outline_from_points(uv_k, cell, quads=quads[ql:qh]))
+            continue
+        w, h = int(shape[k, 0]), int(shape[k, 1])
+        grid = buf[start[k] : start[k] + w * h].reshape(h, w)
+        qk = qint[ql:qh][qfin[ql:qh]]
+        if len(qk):
+            cv2.fillPoly(grid, list(qk), 1, cv2.LINE_8, 4)
+        out.append(outline_of_raster(grid, lo[k], cell))
     return out

@@ -85,7 +85,21 @@ def outline_from_points(
         # corners in 1/16 pixel (shift = 4)
         q = np.rint(((Q - lo) * (1.0 / cell) - 0.5) * 16.0).astype(np.int32)
         cv2.fillPoly(grid, list(q), 1, cv2.LINE_8, 4)
-    grid = np.asarray(cv2.morphologyEx(grid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)), np.uint8)
+    return outline_of_raster(grid, lo, cell)
+
+
+_CLOSE_3X3 = np.ones((3, 3), np.uint8)
+
+
+def outline_of_raster(
+    grid: NDArray[np.uint8], lo: NDArray[np.float64], cell: float
+) -> tuple[NDArray[np.float64], float]:
+    """The last steps of :func:`outline_from_points` on its raster ``grid (rows, cols)`` (1 =
+    covered, row = v, column = u; cell ``(i, j)`` spans ``lo + (j, i) cell`` to ``lo + (j + 1,
+    i + 1) cell``): 3 x 3 closing, area, the largest outer contour simplified to one cell,
+    counter-clockwise. The organised extraction fills the rasters of all planes in one
+    compiled pass and calls this per plane (the same outlines)."""
+    grid = np.asarray(cv2.morphologyEx(grid, cv2.MORPH_CLOSE, _CLOSE_3X3), np.uint8)
     area = float(np.count_nonzero(grid)) * cell * cell
     contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
