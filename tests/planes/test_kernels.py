@@ -141,3 +141,67 @@ def test_outline_rasters_match_outline_from_points(rng):
         assert np.array_equal(got[k][0], want[0])
         assert got[k][1] == want[1]
     assert len(got[1][0]) == 0 and len(got[0][0]) >= 3 and got[3][1] > 0
+
+
+def test_cell_components_match_opencv(rng):
+    """The union-find components of the cell graph are OpenCV's ``connectedComponents`` of the
+    graph image (numbered by first patch in raster order, small ones dropped), on random
+    graphs from sparse to dense."""
+    import cv2
+
+    from navkit.planes import _kernels
+
+    for trial in range(40):
+        hc, wc = int(rng.integers(1, 30)), int(rng.integers(1, 40))
+        p = rng.uniform(0.2, 0.95)
+        keep = rng.random((hc, wc)) < p
+        eh = rng.random((hc, wc - 1)) < p
+        ev = rng.random((hc - 1, wc)) < p
+        min_cells = int(rng.integers(1, 5))
+        graph = np.zeros((2 * hc - 1, 2 * wc - 1), np.uint8)
+        graph[0::2, 0::2] = keep
+        graph[0::2, 1::2] = eh & keep[:, :-1] & keep[:, 1:]
+        graph[1::2, 0::2] = ev & keep[:-1, :] & keep[1:, :]
+        n_comp, lab = cv2.connectedComponents(graph, connectivity=4, ltype=cv2.CV_32S)
+        comp = lab[0::2, 0::2].ravel().astype(np.int64) - 1
+        sizes = np.bincount(comp[comp >= 0], minlength=n_comp - 1)
+        big = sizes >= min_cells
+        remap = -np.ones(n_comp, np.int64)
+        remap[1:][big] = np.arange(int(big.sum()))
+        n, got = _kernels.cell_components(keep, eh, ev, min_cells)
+        assert n == int(big.sum()), trial
+        assert np.array_equal(got, remap[comp + 1]), trial
+
+
+def test_patch_graph_same_bits(pairs):
+    """The compiled planar test and edge tests give the NumPy formulas' decisions (the bounds
+    bit for bit; the dot products in ``einsum``'s order of the three products)."""
+    from navkit.planes import _kernels
+    from navkit.planes.extract import _planes_from_rows
+
+    P = pairs[3].f1.frame.points().copy()
+    P[100:140, 200:260] = np.nan
+    s = ExtractionSettings()
+    for cell in (20, 7):
+        hc, wc = P.shape[0] // cell, P.shape[1] // cell
+        M = _patch_moments(P, s, hc, wc, True).M
+        normal, d, rms, mean = _planes_from_rows(M, True)
+        cos_t = np.cos(np.radians(s.angle_deg))
+        bound, planar, eh, ev = _kernels.patch_graph(
+            normal, d, mean, M[:, 0].copy(), rms, hc, wc, s.min_fill * cell * cell,
+            s.rms_base, s.rms_quadratic, float(cos_t), s.distance_factor,
+        )  # fmt: skip
+        want = s.noise(np.einsum("gi,gi->g", mean, mean))
+        assert np.array_equal(bound, want)
+        assert np.array_equal(planar, (M[:, 0] >= s.min_fill * cell * cell) & (rms < want))
+        ids = np.arange(hc * wc).reshape(hc, wc)
+        for got, a, b in ((eh, ids[:, :-1], ids[:, 1:]), (ev, ids[:-1, :], ids[1:, :])):
+            pa, pb = a.ravel(), b.ravel()
+            tol = s.distance_factor * np.maximum(want[pa], want[pb])
+            ok = (
+                (np.einsum("ei,ei->e", normal[pa], normal[pb]) > cos_t)
+                & (np.abs(np.einsum("ei,ei->e", normal[pa], mean[pb]) - d[pa]) < tol)
+                & (np.abs(np.einsum("ei,ei->e", normal[pb], mean[pa]) - d[pb]) < tol)
+            )
+            assert np.array_equal(got.ravel(), ok)
+        assert planar.sum() > 20 and eh.sum() > 20

@@ -566,3 +566,121 @@ def outline_rasters(
                 qint[qi, a, 0] = np.int32(np.rint(((quads[qi, a, 0] - lo0) * inv - 0.5) * 16.0))
                 qint[qi, a, 1] = np.int32(np.rint(((quads[qi, a, 1] - lo1) * inv - 0.5) * 16.0))
     return grid, start, shape, lo, status, qint, qfin
+
+
+@njit(cache=True)
+def _dot3(a: np.ndarray, i: int, b: np.ndarray, j: int) -> float:  # pragma: no cover
+    """``a[i] . b[j]`` of two ``(., 3)`` arrays in ``numpy.einsum``'s order for three terms,
+    ``(a0 b0 + a2 b2) + a1 b1`` (its SIMD pairs; checked bit for bit by the tests)."""
+    return (a[i, 0] * b[j, 0] + a[i, 2] * b[j, 2]) + a[i, 1] * b[j, 1]
+
+
+@njit(cache=True)
+def patch_graph(
+    normal: np.ndarray,
+    d: np.ndarray,
+    mean: np.ndarray,
+    count: np.ndarray,
+    rms: np.ndarray,
+    hc: int,
+    wc: int,
+    min_count: float,
+    rms_base: float,
+    rms_quadratic: float,
+    cos_t: float,
+    distance_factor: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Steps 2-3 of the extraction (see ``extract._grow_regions``) in one loop over the patches:
+    the thickness bound ``rms_base + rms_quadratic |mean|^2``, the planar test (``count >=
+    min_count`` and ``rms < bound``) and the tests of the edges to the right and below that do
+    not depend on the kept set (normals within ``cos_t``, each centroid within ``distance_factor
+    x`` the larger bound of the other's plane). Returns ``bound (G,)``, ``planar (G,)``, the
+    horizontal edges ``(hc, wc - 1)`` and the vertical ones ``(hc - 1, wc)``."""
+    G = hc * wc
+    bound = np.empty(G, np.float64)
+    planar = np.empty(G, np.bool_)
+    for g in range(G):
+        bound[g] = rms_base + rms_quadratic * _dot3(mean, g, mean, g)
+        planar[g] = (count[g] >= min_count) and (rms[g] < bound[g])
+    eh = np.zeros((hc, max(wc - 1, 0)), np.bool_)
+    ev = np.zeros((max(hc - 1, 0), wc), np.bool_)
+    for i in range(hc):
+        for j in range(wc):
+            a = i * wc + j
+            for e in range(2):
+                if e == 0:
+                    if j + 1 >= wc:
+                        continue
+                    b = a + 1
+                else:
+                    if i + 1 >= hc:
+                        continue
+                    b = a + wc
+                tol = distance_factor * max(bound[a], bound[b])
+                ok = (
+                    _dot3(normal, a, normal, b) > cos_t
+                    and abs(_dot3(normal, a, mean, b) - d[a]) < tol
+                    and abs(_dot3(normal, b, mean, a) - d[b]) < tol
+                )
+                if e == 0:
+                    eh[i, j] = ok
+                else:
+                    ev[i, j] = ok
+    return bound, planar, eh, ev
+
+
+@njit(cache=True)
+def _find(parent: np.ndarray, a: int) -> int:  # pragma: no cover - compiled
+    """Root of ``a`` in a union-find forest, halving the path on the way (no recursion)."""
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@njit(cache=True)
+def cell_components(
+    keep: np.ndarray, eh: np.ndarray, ev: np.ndarray, min_cells: int
+) -> tuple[int, np.ndarray]:  # pragma: no cover - compiled
+    """Connected components of the kept patches ``keep (hc, wc)`` joined by the edges ``eh
+    (hc, wc - 1)``, ``ev (hc - 1, wc)`` (union-find), numbered by their first patch in raster
+    order - the order of OpenCV's ``connectedComponents`` on the cell-graph image of
+    ``extract._grow_regions`` - those below ``min_cells`` patches dropped and the others
+    renumbered in that order. Returns their number and the component of each patch ``(G,)``
+    (-1 = none)."""
+    hc, wc = keep.shape
+    G = hc * wc
+    parent = np.arange(G)
+    for i in range(hc):
+        for j in range(wc):
+            if not keep[i, j]:
+                continue
+            a = i * wc + j
+            if j + 1 < wc and keep[i, j + 1] and eh[i, j]:
+                ra = _find(parent, a)
+                rb = _find(parent, a + 1)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+            if i + 1 < hc and keep[i + 1, j] and ev[i, j]:
+                ra = _find(parent, a)
+                rb = _find(parent, a + wc)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+    size = np.zeros(G, np.int64)
+    root = np.full(G, -1, np.int64)
+    for g in range(G):
+        if keep[g // wc, g % wc]:
+            root[g] = _find(parent, g)
+            size[root[g]] += 1
+    # roots are each component's smallest patch: numbering roots in raster order
+    new = np.full(G, -1, np.int64)
+    n = 0
+    for g in range(G):
+        if root[g] == g and size[g] >= min_cells:
+            new[g] = n
+            n += 1
+    comp = np.full(G, -1, np.int64)
+    for g in range(G):
+        if root[g] >= 0:
+            comp[g] = new[root[g]]
+    return n, comp

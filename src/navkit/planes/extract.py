@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -288,7 +289,7 @@ def _planes_from_rows(
     if compiled and len(M) > 64:
         normal, rho, rms, mean, rank1 = _kernels().plane_rows(np.ascontiguousarray(M))
         if rank1.any():  # a repeated smallest eigenvalue: LAPACK's vector, as the NumPy path
-            normal[rank1], rho[rank1], rms[rank1], _ = _planes_from_rows(M[rank1])
+            _rank1_normals(M, rank1, normal, rho)
         return normal, rho, rms, mean
     n = np.maximum(M[:, 0], 1.0)
     m = M[:, 1:4] / n[:, None]
@@ -301,6 +302,34 @@ def _planes_from_rows(
     d = np.einsum("gi,gi->g", normal, m)
     normal[d < 0] *= -1
     return normal, np.abs(d), np.sqrt(lam), m
+
+
+def _rank1_normals(
+    M: NDArray[np.float64],
+    rank1: NDArray[np.bool_],
+    normal: NDArray[np.float64],
+    rho: NDArray[np.float64],
+) -> None:
+    """The normals (and rho) of the rows whose smallest eigenvalue is repeated, in place, as
+    :func:`smallest_eigenpairs` gives them: LAPACK's first eigenvector, normalised, pointing
+    away from the origin. The empty patches (all-zero rows, ~100 of a Kinect frame's 768) all
+    have the zero matrix: one LAPACK call for all of them."""
+    idx = np.flatnonzero(rank1)
+    zero = ~M[idx].any(axis=1)
+    z, nz = idx[zero], idx[~zero]
+    rows = nz if not len(z) else np.concatenate([nz, z[:1]])
+    n = np.maximum(M[rows, 0], 1.0)
+    m = M[rows, 1:4] / n[:, None]
+    C = M[rows, 4:].reshape(-1, 3, 3) / n[:, None, None] - m[:, :, None] * m[:, None, :]
+    _, V = np.linalg.eigh(C)
+    v = V[:, :, 0] / np.sqrt(np.einsum("gi,gi->g", V[:, :, 0], V[:, :, 0]))[:, None]
+    d = np.einsum("gi,gi->g", v, m)
+    v[d < 0] *= -1
+    normal[nz] = v[: len(nz)]
+    rho[nz] = np.abs(d[: len(nz)])
+    if len(z):
+        normal[z] = v[-1]
+        rho[z] = np.abs(d[-1])
 
 
 def _block_sum(a: NDArray[np.float32], hc: int, wc: int, c: int) -> NDArray[np.float32]:
@@ -428,9 +457,31 @@ def _grow_regions(
     c = int(s.cell)
     G = hc * wc
     normal, d, rms, mean = _planes_from_rows(M, compiled)
+    cos_t = np.cos(np.radians(s.angle_deg))
+    if compiled:  # the planar test, the edge tests and the components as compiled loops
+        kern = _kernels()
+        bound, planar, eh, ev = kern.patch_graph(
+            normal,
+            d,
+            mean,
+            np.ascontiguousarray(M[:, 0]),
+            rms,
+            hc,
+            wc,
+            s.min_fill * c * c,
+            s.rms_base,
+            s.rms_quadratic,
+            float(cos_t),
+            s.distance_factor,
+        )
+
+        def regions(keep: NDArray[np.bool_]) -> tuple[int, NDArray[np.int64]]:
+            n, comp = kern.cell_components(keep.reshape(hc, wc), eh, ev, int(s.min_cells))
+            return int(n), comp
+
+        return _prune_merge(M, normal, mean, bound, planar, regions, s, cos_t)
     bound = s.noise(np.einsum("gi,gi->g", mean, mean))
     planar = (M[:, 0] >= s.min_fill * c * c) & (rms < bound)
-    cos_t = np.cos(np.radians(s.angle_deg))
     ids = np.arange(G).reshape(hc, wc)
     pa = np.concatenate([ids[:, :-1].ravel(), ids[:-1, :].ravel()])
     pb = np.concatenate([ids[:, 1:].ravel(), ids[1:, :].ravel()])
@@ -461,6 +512,21 @@ def _grow_regions(
         remap[1:][big] = np.arange(int(big.sum()))
         return int(big.sum()), remap[comp + 1]
 
+    return _prune_merge(M, normal, mean, bound, planar, regions, s, cos_t)
+
+
+def _prune_merge(
+    M: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    mean: NDArray[np.float64],
+    bound: NDArray[np.float64],
+    planar: NDArray[np.bool_],
+    regions: Callable[[NDArray[np.bool_]], tuple[int, NDArray[np.int64]]],
+    s: ExtractionSettings,
+    cos_t: float,
+) -> tuple[int, NDArray[np.int64], int]:
+    """Steps 3-4 of :func:`_grow_regions` from the planar patches: regions (``regions(keep)``:
+    the components of the kept patches' graph), pruning, regrouping, merging."""
     n_planar = int(planar.sum())
     n_reg, comp = regions(planar)
     if n_reg == 0:
