@@ -1,7 +1,8 @@
 """Organised plane extraction: this working tree against a git revision's, and Open3D's loop.
 
-The revision's ``src/navkit/planes/segments.py`` and ``extract.py`` are loaded beside the working
-tree (``git show REV:...``, the extract module's import of ``segments`` redirected), and the two
+The revision's ``src/navkit/planes/segments.py``, ``extract.py`` and ``_kernels.py`` are loaded
+beside the working tree (``git show REV:...`` into a temporary folder, the extract module's imports
+of ``segments`` and ``_kernels`` redirected: the revision runs its own compiled kernels), and the two
 versions and Open3D's ``segment_plane`` loop are timed interleaved in one process on the
 benchmark's frames (``bench_planes.extraction_frames``): CPU time medians, 3 x ``--repeats``.
 
@@ -16,6 +17,7 @@ import argparse
 import subprocess
 import sys
 import types
+from pathlib import Path
 
 import numpy as np
 
@@ -24,24 +26,39 @@ from navkit.planes import ExtractionSettings, extract_planes_organized
 
 
 def _load_revision(rev: str) -> types.ModuleType:
-    """The revision's organised extraction as a module (``rev_extract``)."""
-    src = {
-        name: subprocess.run(
-            ["git", "show", f"{rev}:src/navkit/planes/{name}.py"],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout
-        for name in ("segments", "extract")
-    }
-    seg = types.ModuleType("rev_segments")
-    sys.modules["rev_segments"] = seg
-    exec(compile(src["segments"], f"{rev}:segments.py", "exec"), seg.__dict__)
-    ex = types.ModuleType("rev_extract")
-    sys.modules["rev_extract"] = ex
+    """The revision's organised extraction as a module (``rev_extract``), with the revision's
+    own compiled kernels (``rev_kernels``, when it has ``_kernels.py``): the three files are
+    written to a temporary folder and imported from there (Numba caches beside them)."""
+    import importlib.util
+    import tempfile
+
+    folder = Path(tempfile.mkdtemp(prefix="navkit-rev-"))
+    src = {}
+    for name in ("segments", "extract", "_kernels"):
+        res = subprocess.run(
+            ["git", "show", f"{rev}:src/navkit/planes/{name}.py"], capture_output=True, text=True
+        )
+        if res.returncode == 0:
+            src[name] = res.stdout
+        elif name != "_kernels":
+            raise SystemExit(f"{rev}: no src/navkit/planes/{name}.py ({res.stderr.strip()})")
     code = src["extract"].replace("from navkit.planes.segments import", "from rev_segments import")
-    exec(compile(code, f"{rev}:extract.py", "exec"), ex.__dict__)
-    return ex
+    code = code.replace("from navkit.planes import _kernels", "import rev_kernels as _kernels")
+    src["extract"] = code
+    mods = {}
+    for name in ("_kernels", "segments", "extract"):
+        if name not in src:
+            continue
+        path = folder / f"rev{name if name.startswith('_') else '_' + name}.py"
+        path.write_text(src[name])
+        mod_name = path.stem
+        spec = importlib.util.spec_from_file_location(mod_name, path)
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[mod_name] = mod
+        spec.loader.exec_module(mod)
+        mods[name] = mod
+    return mods["extract"]
 
 
 def _same(a: object, b: object) -> str:

@@ -59,22 +59,44 @@ def _pairwise32(a: np.ndarray, n: int) -> np.float32:  # pragma: no cover - comp
 
 
 @njit(cache=True)
+def _raw_row(
+    out: np.ndarray, n: float, ref: np.ndarray, sd: np.ndarray, ssd: np.ndarray
+) -> None:  # pragma: no cover - compiled
+    """One raw float64 moment row ``out (13,)`` - count, sums, sums of outer products - from the
+    moments about a reference point: ``n``, ``ref (3,)``, the sums of the coordinates minus it
+    ``sd (3,)`` and of their products ``ssd (6,)`` (xx, xy, xz, yy, yz, zz). The operations of
+    ``extract._moment_rows`` in its order: ``S = n ref + Sd``, ``SS = ((SSd + ref Sd^T) + Sd
+    ref^T) + (n ref) ref^T``."""
+    out[0] = n
+    for a in range(3):
+        out[1 + a] = n * ref[a] + sd[a]
+    for a in range(3):
+        for b in range(3):
+            lo = min(a, b)
+            hi = max(a, b)
+            ss = ssd[lo * 3 - (lo * (lo - 1)) // 2 + (hi - lo)]
+            out[4 + 3 * a + b] = ((ss + ref[a] * sd[b]) + ref[b] * sd[a]) + (n * ref[a]) * ref[b]
+
+
+@njit(cache=True)
 def patch_moments(
     P: np.ndarray, hc: int, wc: int, c: int, valid: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Step 1 of the extraction in one pass per patch (see ``extract._patch_moments``).
 
-    Fills ``valid (hc c, wc c)`` (finite, non-zero range) and returns per patch the count
-    ``(G,)``, the float32 mean ``(G, 3)``, the sums of the coordinates minus that mean ``(G, 3)``
-    and of their products ``(G, 6)`` (xx, xy, xz, yy, yz, zz), float32 sums as float64. The
-    centred coordinates themselves are not stored: :func:`refine_pixels` recomputes them for
-    the few patches it needs (writing them for the whole grid cost more memory traffic).
+    Fills ``valid (hc c, wc c)`` (finite, non-zero range) and returns per patch the raw float64
+    moment row ``(G, 13)`` (count, sums, sums of outer products: the float32 sums about the
+    patch's float32 mean converted as ``extract._moment_rows`` does) and that mean ``(G, 3)``.
+    The centred coordinates themselves are not stored: :func:`refine_pixels` recomputes them
+    for the few patches it needs (writing them for the whole grid cost more memory traffic).
+    An empty patch skips the second pass (its sums are +0, as the pass would give).
     """
     G = hc * wc
-    cnt = np.empty(G, np.float64)
+    M = np.empty((G, 13), np.float64)
     ref = np.empty((G, 3), np.float32)
-    Sd = np.empty((G, 3), np.float64)
-    SSd = np.empty((G, 6), np.float64)
+    ref64 = np.empty(3, np.float64)
+    sd = np.zeros(3, np.float64)
+    ssd = np.zeros(6, np.float64)
     col = np.empty((10, c), np.float32)  # per-column sums of one patch
     X = np.empty((3, c, c), np.float32)  # one patch's float32 coordinates, 0 where invalid
     for i in range(hc):
@@ -111,10 +133,17 @@ def patch_moments(
             mx = np.float32(_pairwise32(col[1], c) / den)
             my = np.float32(_pairwise32(col[2], c) / den)
             mz = np.float32(_pairwise32(col[3], c) / den)
-            cnt[g] = n
             ref[g, 0] = mx
             ref[g, 1] = my
             ref[g, 2] = mz
+            ref64[0] = mx
+            ref64[1] = my
+            ref64[2] = mz
+            if n == 0:  # no valid pixel: all sums +0
+                sd[:] = 0.0
+                ssd[:] = 0.0
+                _raw_row(M[g], np.float64(n), ref64, sd, ssd)
+                continue
             # pass 2: centred coordinates (x 0 / 1 validity) and their products
             col[:] = 0.0
             for r in range(c):
@@ -135,10 +164,11 @@ def patch_moments(
                     col[8, q] = np.float32(col[8, q] + np.float32(dy * dz))
                     col[9, q] = np.float32(col[9, q] + np.float32(dz * dz))
             for k in range(3):
-                Sd[g, k] = _pairwise32(col[1 + k], c)
+                sd[k] = _pairwise32(col[1 + k], c)
             for k in range(6):
-                SSd[g, k] = _pairwise32(col[4 + k], c)
-    return cnt, ref, Sd, SSd
+                ssd[k] = _pairwise32(col[4 + k], c)
+            _raw_row(M[g], np.float64(n), ref64, sd, ssd)
+    return M, ref
 
 
 @njit(cache=True)
@@ -156,6 +186,7 @@ def refine_pixels(
     wc: int,
     c: int,
     label: np.ndarray,
+    n_reg: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Step 5, the border patches pixel by pixel (see ``extract._refine_border``).
 
@@ -165,15 +196,20 @@ def refine_pixels(
     (patch, candidate), ``n32 (n_reg, 3)`` float32 normals. The centred float32 coordinates and
     the bound are recomputed exactly as :func:`patch_moments` / the NumPy path define them.
     Fills ``label (B, c, c)`` (closest candidate within the bound, -1 = none; ties keep the
-    earlier slot). Returns ``complete (B,)`` and the float64 moments ``(B, m, 10)`` - count,
-    sums of d, sums of d d^T (xx, xy, xz, yy, yz, zz) - of the pixels of each (incomplete
-    patch, candidate) (zero for complete patches) - and the outline samples of the incomplete
+    earlier slot). Returns ``complete (B,)``, the raw float64 moments ``(n_reg, 13)`` of the
+    pixels of the incomplete patches per region (per (patch, candidate): the float64 sums of d
+    and d d^T converted by ``extract._moment_rows``' arithmetic, added in (patch, slot) order
+    as ``sum_rows`` adds them) and the outline samples of the incomplete
     patches: their labelled pixels on every ``stride[b]``-th row and column, ``float32(d + ref)``
     ``(3, K)``, and their regions ``(K,)`` (patch by patch, raster order within one).
     """
     B, m = cand.shape
     complete = np.empty(B, np.bool_)
-    G = np.zeros((B, m, 10), np.float64)
+    Mreg = np.zeros((n_reg, 13), np.float64)
+    row = np.empty(13, np.float64)
+    ref64 = np.empty(3, np.float64)
+    sd = np.empty(3, np.float64)
+    ssd = np.empty(6, np.float64)
     d = np.empty((3, c, c), np.float32)
     pts = np.empty((3, B * c * c), np.float32)
     preg = np.empty(B * c * c, np.int64)
@@ -185,7 +221,11 @@ def refine_pixels(
         mx = ref[g, 0]
         my = ref[g, 1]
         mz = ref[g, 2]
-        ok = own[b] >= 0
+        own_b = own[b]
+        n_slot = 0
+        while n_slot < m and cand[b, n_slot] >= 0:
+            n_slot += 1
+        ok = own_b >= 0
         for r in range(c):
             y = i * c + r
             for q in range(c):
@@ -196,25 +236,19 @@ def refine_pixels(
                 r2 = np.float32(
                     np.float32(np.float32(px * px) + np.float32(py * py)) + np.float32(pz * pz)
                 )
-                if r2 > 0 and r2 < np.inf:
-                    t = np.float32(np.float32(r2 * tol_scale) + tol_base)
-                    dx = np.float32(px - mx)
-                    dy = np.float32(py - my)
-                    dz = np.float32(pz - mz)
-                else:  # never an inlier
-                    t = np.float32(-1.0)
-                    dx = np.float32(0.0)
-                    dy = np.float32(0.0)
-                    dz = np.float32(0.0)
+                # branch-free (selects): a pixel's validity and its label are data-dependent
+                val = (r2 > 0) & (r2 < np.inf)  # else never an inlier
+                t = np.float32(np.float32(r2 * tol_scale) + tol_base) if val else np.float32(-1.0)
+                dx = np.float32(px - mx) if val else np.float32(0.0)
+                dy = np.float32(py - my) if val else np.float32(0.0)
+                dz = np.float32(pz - mz) if val else np.float32(0.0)
                 d[0, r, q] = dx
                 d[1, r, q] = dy
                 d[2, r, q] = dz
                 best = np.float32(np.inf)
                 lab = -1
-                for s in range(m):
+                for s in range(n_slot):
                     k = cand[b, s]
-                    if k < 0:
-                        break
                     dist = np.float32(
                         np.float32(
                             np.float32(np.float32(dx * n32[k, 0]) + np.float32(dy * n32[k, 1]))
@@ -223,43 +257,71 @@ def refine_pixels(
                         + off[b, s]
                     )
                     dist = abs(dist)
-                    if dist < t and dist < best:
-                        best = dist
-                        lab = k
+                    better = (dist < t) & (dist < best)  # ties keep the earlier slot
+                    best = dist if better else best
+                    lab = k if better else lab
                 label[b, r, q] = lab
-                if ok and lab != own[b] and t >= 0:
-                    ok = False
+                ok = ok and (lab == own_b or t < 0)
         complete[b] = ok
         if ok:
             continue
-        for r in range(c):
-            for q in range(c):
+        # the mixed patch: float64 moments per candidate (local sums, one sweep per slot)
+        for s in range(n_slot):
+            k = cand[b, s]
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
+            s4 = 0.0
+            s5 = 0.0
+            s6 = 0.0
+            s7 = 0.0
+            s8 = 0.0
+            s9 = 0.0
+            for r in range(c):
+                for q in range(c):
+                    if label[b, r, q] == k:
+                        ex = np.float64(d[0, r, q])
+                        ey = np.float64(d[1, r, q])
+                        ez = np.float64(d[2, r, q])
+                        s0 += 1.0
+                        s1 += ex
+                        s2 += ey
+                        s3 += ez
+                        s4 += ex * ex
+                        s5 += ex * ey
+                        s6 += ex * ez
+                        s7 += ey * ey
+                        s8 += ey * ez
+                        s9 += ez * ez
+            if s0 > 0:
+                ref64[0] = mx
+                ref64[1] = my
+                ref64[2] = mz
+                sd[0] = s1
+                sd[1] = s2
+                sd[2] = s3
+                ssd[0] = s4
+                ssd[1] = s5
+                ssd[2] = s6
+                ssd[3] = s7
+                ssd[4] = s8
+                ssd[5] = s9
+                _raw_row(row, s0, ref64, sd, ssd)
+                for t in range(13):
+                    Mreg[k, t] += row[t]
+        # outline samples: labelled pixels on every stride-th row and column, raster order
+        st = stride[b]
+        for r in range(0, c, st):
+            for q in range(0, c, st):
                 lab = label[b, r, q]
-                if lab < 0:
-                    continue
-                s = 0
-                while cand[b, s] != lab:
-                    s += 1
-                ex = np.float64(d[0, r, q])
-                ey = np.float64(d[1, r, q])
-                ez = np.float64(d[2, r, q])
-                if r % stride[b] == 0 and q % stride[b] == 0:
+                if lab >= 0:
                     pts[0, n_pts] = np.float32(d[0, r, q] + mx)
                     pts[1, n_pts] = np.float32(d[1, r, q] + my)
                     pts[2, n_pts] = np.float32(d[2, r, q] + mz)
                     preg[n_pts] = lab
                     n_pts += 1
-                G[b, s, 0] += 1.0
-                G[b, s, 1] += ex
-                G[b, s, 2] += ey
-                G[b, s, 3] += ez
-                G[b, s, 4] += ex * ex
-                G[b, s, 5] += ex * ey
-                G[b, s, 6] += ex * ez
-                G[b, s, 7] += ey * ey
-                G[b, s, 8] += ey * ez
-                G[b, s, 9] += ez * ez
-    return complete, G, pts[:, :n_pts].copy(), preg[:n_pts].copy()
+    return complete, Mreg, pts[:, :n_pts].copy(), preg[:n_pts].copy()
 
 
 @njit(cache=True)

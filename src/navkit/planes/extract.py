@@ -374,9 +374,7 @@ def _patch_moments(
     tol_scale = np.float32(s.inlier_factor * s.rms_quadratic)
     tol_base = np.float32(s.inlier_factor * s.rms_base)
     if compiled:
-        cnt, ref_g, Sd, SSd6 = _kernels().patch_moments(P, hc, wc, c, valid)
-        SSd = SSd6[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
-        M = _moment_rows(cnt, ref_g.astype(np.float64), Sd, SSd)
+        M, ref_g = _kernels().patch_moments(P, hc, wc, c, valid)
         return _Patches(P, valid, ref_g, M, tol_scale, tol_base)
     X = _WS.get("X", (3, Hc, Wc), np.float32)
     r2 = _WS.get("r2", (Hc, Wc), np.float32)
@@ -658,14 +656,25 @@ def _refine_border(
     off -= rho32[kc]
     if compiled:
         stride = _sample_stride(pt.M[ids], c, raster)
-        complete, Gall, cpoints, cregion = _kernels().refine_pixels(
-            pt.P, pt.ref, pt.tol_scale, pt.tol_base, ids, own, cand, off, n32, stride, wc, c, label
+        complete, M, cpoints, cregion = _kernels().refine_pixels(
+            pt.P,
+            pt.ref,
+            pt.tol_scale,
+            pt.tol_base,
+            ids,
+            own,
+            cand,
+            off,
+            n32,
+            stride,
+            wc,
+            c,
+            label,
+            n_reg,
         )
-        mixed = np.flatnonzero(~complete)
-        G = Gall[mixed].reshape(-1, 10)
-    else:
-        complete, G = _refine_border_numpy(pt, ids, ci, cj, own, cand, off, n32, label, hc, wc, c)
-        mixed = np.flatnonzero(~complete)
+        return _Border(ids, label, complete, M, cpoints, cregion.astype(label.dtype))
+    complete, G = _refine_border_numpy(pt, ids, ci, cj, own, cand, off, n32, label, hc, wc, c)
+    mixed = np.flatnonzero(~complete)
     M = np.zeros((n_reg, _NM))
     points = np.zeros((3, 0), np.float32)
     point_region = np.zeros(0, label.dtype)
@@ -679,11 +688,7 @@ def _refine_border(
         Sdd[:, _IU[0], _IU[1]] = g[:, 4:]
         Sdd[:, _IU[1], _IU[0]] = g[:, 4:]
         gref = np.repeat(ref[mixed].astype(np.float64), cm.shape[1], axis=0)[used]
-        M = _sum_rows(
-            cm.ravel()[used], n_reg, _moment_rows(g[:, 0], gref, g[:, 1:4], Sdd), compiled
-        )
-        if compiled:
-            return _Border(ids, label, complete, M, cpoints, cregion.astype(label.dtype))
+        M = _sum_rows(cm.ravel()[used], n_reg, _moment_rows(g[:, 0], gref, g[:, 1:4], Sdd))
         # the pixels of the mixed patches per region for the outlines, every t-th row / column
         # (lattice masks per stride looked up, one index list for all three coordinates)
         t = _sample_stride(pt.M[ids[mixed]], c, raster)
