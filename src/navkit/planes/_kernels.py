@@ -328,6 +328,7 @@ def refine_pixels(
 def label_image(
     valid: np.ndarray,
     lab_cell: np.ndarray,
+    cell_count: np.ndarray,
     mixed_ids: np.ndarray,
     mixed_label: np.ndarray,
     H: int,
@@ -336,43 +337,64 @@ def label_image(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """The label image and the inliers of each segment in raster order (see
     ``extract._extract``): ``valid (hc c, wc c)``, ``lab_cell (hc, wc)`` the segment of each
-    wholesale patch (-1 = none), ``mixed_ids (Bm,)`` the patches refined pixel by pixel and
-    ``mixed_label (Bm, c, c)`` their pixels' segments. Returns ``labels (H, W)`` int64 (-1 =
-    none), the inlier indices ``row * W + col`` of all segments one after the other and the
-    ``(K + 1,)`` cuts between segments."""
+    wholesale patch (-1 = none), ``cell_count (G,)`` the valid pixels of each patch, ``mixed_ids
+    (Bm,)`` the patches refined pixel by pixel and ``mixed_label (Bm, c, c)`` their pixels'
+    segments. Returns ``labels (H, W)`` int64 (-1 = none), the inlier indices ``row * W + col``
+    of all segments one after the other and the ``(K + 1,)`` cuts between segments.
+
+    The segments' sizes come first (a wholesale patch adds its valid pixels), so that one raster
+    pass writes each label once and places each inlier."""
     hc, wc = lab_cell.shape
     c = valid.shape[0] // hc
-    labels = np.full((H, W), -1, np.int64)
+    mix = np.full(hc * wc, -1, np.int64)
+    for b in range(len(mixed_ids)):
+        mix[mixed_ids[b]] = b
+    count = np.zeros(K + 1, np.int64)
     for i in range(hc):
         for j in range(wc):
-            s = lab_cell[i, j]
-            if s < 0:
-                continue
-            for r in range(c):
-                for q in range(c):
-                    if valid[i * c + r, j * c + q]:
-                        labels[i * c + r, j * c + q] = s
-    for b in range(len(mixed_ids)):
-        i = mixed_ids[b] // wc
-        j = mixed_ids[b] - i * wc
-        for r in range(c):
-            for q in range(c):
-                labels[i * c + r, j * c + q] = mixed_label[b, r, q]
-    count = np.zeros(K + 1, np.int64)
-    for y in range(H):
-        for x in range(W):
-            count[labels[y, x] + 1] += 1
+            b = mix[i * wc + j]
+            if b >= 0:
+                for r in range(c):
+                    for q in range(c):
+                        count[mixed_label[b, r, q] + 1] += 1
+            elif lab_cell[i, j] >= 0:
+                count[lab_cell[i, j] + 1] += np.int64(cell_count[i * wc + j])
     cuts = np.zeros(K + 1, np.int64)
     for k in range(K):
         cuts[k + 1] = cuts[k] + count[k + 1]
     inl = np.empty(cuts[K], np.int64)
     pos = cuts[:K].copy()
+    labels = np.empty((H, W), np.int64)
     for y in range(H):
-        for x in range(W):
-            s = labels[y, x]
-            if s >= 0:
-                inl[pos[s]] = y * W + x
-                pos[s] += 1
+        i = y // c
+        if i >= hc:
+            labels[y, :] = -1
+            continue
+        r = y - i * c
+        for j in range(wc):
+            x0 = j * c
+            b = mix[i * wc + j]
+            s = lab_cell[i, j]
+            if b >= 0:
+                for q in range(c):
+                    v = mixed_label[b, r, q]
+                    labels[y, x0 + q] = v
+                    if v >= 0:
+                        inl[pos[v]] = y * W + x0 + q
+                        pos[v] += 1
+            elif s >= 0:
+                for q in range(c):
+                    if valid[y, x0 + q]:
+                        labels[y, x0 + q] = s
+                        inl[pos[s]] = y * W + x0 + q
+                        pos[s] += 1
+                    else:
+                        labels[y, x0 + q] = -1
+            else:
+                for q in range(c):
+                    labels[y, x0 + q] = -1
+        for x in range(wc * c, W):
+            labels[y, x] = -1
     return labels, inl, cuts
 
 

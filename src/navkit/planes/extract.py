@@ -836,7 +836,7 @@ def _extract(
     if compiled:
         mixed_lab = new_id[bd.label[mixed].astype(np.int64) + 1]
         labels, inl, cuts = _kernels().label_image(
-            pt.valid, lab_cell, ids[mixed], mixed_lab, H, W, len(keep)
+            pt.valid, lab_cell, pt.M[:, 0], ids[mixed], mixed_lab, H, W, len(keep)
         )
         inliers = [inl[cuts[k] : cuts[k + 1]] for k in range(len(keep))]
     else:
