@@ -213,6 +213,13 @@ def refine_pixels(
     d = np.empty((3, c, c), np.float32)
     pts = np.empty((3, B * c * c), np.float32)
     preg = np.empty(B * c * c, np.int64)
+    # one row of a patch at a time, in short loops over its c pixels that LLVM vectorises
+    dx = np.empty(c, np.float32)
+    dy = np.empty(c, np.float32)
+    dz = np.empty(c, np.float32)
+    tt = np.empty(c, np.float32)
+    best = np.empty(c, np.float32)
+    lab = np.empty(c, np.int64)
     n_pts = 0
     for b in range(B):
         i = ids[b] // wc
@@ -227,41 +234,46 @@ def refine_pixels(
             n_slot += 1
         ok = own_b >= 0
         for r in range(c):
-            y = i * c + r
+            Pr = P[i * c + r, j * c : (j + 1) * c]
             for q in range(c):
-                x = j * c + q
-                px = np.float32(P[y, x, 0])
-                py = np.float32(P[y, x, 1])
-                pz = np.float32(P[y, x, 2])
+                px = np.float32(Pr[q, 0])
+                py = np.float32(Pr[q, 1])
+                pz = np.float32(Pr[q, 2])
                 r2 = np.float32(
                     np.float32(np.float32(px * px) + np.float32(py * py)) + np.float32(pz * pz)
                 )
-                # branch-free (selects): a pixel's validity and its label are data-dependent
-                val = (r2 > 0) & (r2 < np.inf)  # else never an inlier
-                t = np.float32(np.float32(r2 * tol_scale) + tol_base) if val else np.float32(-1.0)
-                dx = np.float32(px - mx) if val else np.float32(0.0)
-                dy = np.float32(py - my) if val else np.float32(0.0)
-                dz = np.float32(pz - mz) if val else np.float32(0.0)
-                d[0, r, q] = dx
-                d[1, r, q] = dy
-                d[2, r, q] = dz
-                best = np.float32(np.inf)
-                lab = -1
-                for s in range(n_slot):
-                    k = cand[b, s]
-                    dist = np.float32(
+                val = (r2 > 0) & (r2 < np.inf)  # else never an inlier (bound -1)
+                tt[q] = np.float32(np.float32(r2 * tol_scale) + tol_base) if val else np.float32(-1)
+                dx[q] = np.float32(px - mx) if val else np.float32(0.0)
+                dy[q] = np.float32(py - my) if val else np.float32(0.0)
+                dz[q] = np.float32(pz - mz) if val else np.float32(0.0)
+                best[q] = np.inf
+                lab[q] = -1
+            for s in range(n_slot):  # closest candidate within the bound; ties keep the earlier
+                k = cand[b, s]
+                n0 = n32[k, 0]
+                n1 = n32[k, 1]
+                n2 = n32[k, 2]
+                o = off[b, s]
+                for q in range(c):
+                    dist = abs(
                         np.float32(
-                            np.float32(np.float32(dx * n32[k, 0]) + np.float32(dy * n32[k, 1]))
-                            + np.float32(dz * n32[k, 2])
+                            np.float32(
+                                np.float32(np.float32(dx[q] * n0) + np.float32(dy[q] * n1))
+                                + np.float32(dz[q] * n2)
+                            )
+                            + o
                         )
-                        + off[b, s]
                     )
-                    dist = abs(dist)
-                    better = (dist < t) & (dist < best)  # ties keep the earlier slot
-                    best = dist if better else best
-                    lab = k if better else lab
-                label[b, r, q] = lab
-                ok = ok and (lab == own_b or t < 0)
+                    better = (dist < tt[q]) & (dist < best[q])
+                    best[q] = dist if better else best[q]
+                    lab[q] = k if better else lab[q]
+            for q in range(c):
+                label[b, r, q] = lab[q]
+                d[0, r, q] = dx[q]
+                d[1, r, q] = dy[q]
+                d[2, r, q] = dz[q]
+                ok = ok and (lab[q] == own_b or tt[q] < 0)
         complete[b] = ok
         if ok:
             continue
@@ -280,20 +292,21 @@ def refine_pixels(
             s9 = 0.0
             for r in range(c):
                 for q in range(c):
-                    if label[b, r, q] == k:
-                        ex = np.float64(d[0, r, q])
-                        ey = np.float64(d[1, r, q])
-                        ez = np.float64(d[2, r, q])
-                        s0 += 1.0
-                        s1 += ex
-                        s2 += ey
-                        s3 += ez
-                        s4 += ex * ex
-                        s5 += ex * ey
-                        s6 += ex * ez
-                        s7 += ey * ey
-                        s8 += ey * ez
-                        s9 += ez * ez
+                    # branch-free: a pixel of another candidate adds exact zeros
+                    w = 1.0 if label[b, r, q] == k else 0.0
+                    ex = np.float64(d[0, r, q])
+                    ey = np.float64(d[1, r, q])
+                    ez = np.float64(d[2, r, q])
+                    s0 += w
+                    s1 += ex * w
+                    s2 += ey * w
+                    s3 += ez * w
+                    s4 += (ex * ex) * w
+                    s5 += (ex * ey) * w
+                    s6 += (ex * ez) * w
+                    s7 += (ey * ey) * w
+                    s8 += (ey * ez) * w
+                    s9 += (ez * ez) * w
             if s0 > 0:
                 ref64[0] = mx
                 ref64[1] = my
@@ -314,14 +327,14 @@ def refine_pixels(
         st = stride[b]
         for r in range(0, c, st):
             for q in range(0, c, st):
-                lab = label[b, r, q]
-                if lab >= 0:
+                lb = label[b, r, q]
+                if lb >= 0:
                     pts[0, n_pts] = np.float32(d[0, r, q] + mx)
                     pts[1, n_pts] = np.float32(d[1, r, q] + my)
                     pts[2, n_pts] = np.float32(d[2, r, q] + mz)
-                    preg[n_pts] = lab
+                    preg[n_pts] = lb
                     n_pts += 1
-    return complete, Mreg, pts[:, :n_pts].copy(), preg[:n_pts].copy()
+    return complete, Mreg, pts[:, :n_pts], preg[:n_pts]  # views: read once, then dropped
 
 
 @njit(cache=True)

@@ -672,7 +672,7 @@ def _refine_border(
             label,
             n_reg,
         )
-        return _Border(ids, label, complete, M, cpoints, cregion.astype(label.dtype))
+        return _Border(ids, label, complete, M, cpoints, cregion)
     complete, G = _refine_border_numpy(pt, ids, ci, cj, own, cand, off, n32, label, hc, wc, c)
     mixed = np.flatnonzero(~complete)
     M = np.zeros((n_reg, _NM))
@@ -856,7 +856,7 @@ def _extract(
         wholesale.reshape(hc, wc),
         segmap,
         bd.points,
-        new_id[bd.point_region.astype(np.int64) + 1],
+        new_id[np.asarray(bd.point_region, np.int64) + 1],
         planes,
         c,
         s.outline_cell,
