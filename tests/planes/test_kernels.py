@@ -181,8 +181,8 @@ def test_patch_graph_same_bits(pairs):
 
     P = pairs[3].f1.frame.points().copy()
     P[100:140, 200:260] = np.nan
-    s = ExtractionSettings()
     for cell in (20, 7):
+        s = ExtractionSettings(cell=cell)
         hc, wc = P.shape[0] // cell, P.shape[1] // cell
         M = _patch_moments(P, s, hc, wc, True).M
         normal, d, rms, mean = _planes_from_rows(M, True)
@@ -205,3 +205,26 @@ def test_patch_graph_same_bits(pairs):
             )
             assert np.array_equal(got.ravel(), ok)
         assert planar.sum() > 20 and eh.sum() > 20
+
+
+def test_border_patches_and_dense_components(rng):
+    """The compiled border-patch candidates and coplanar-region components equal the NumPy
+    versions on random region maps and adjacency matrices."""
+    from navkit.planes import _kernels
+    from navkit.planes.extract import _border_patches, _dense_components
+
+    for trial in range(30):
+        hc, wc = int(rng.integers(1, 25)), int(rng.integers(1, 33))
+        cellmap = rng.integers(-1, int(rng.integers(1, 8)), (hc, wc))
+        cellmap[: hc // 2, : wc // 2] = cellmap[0, 0]  # some interior patches
+        for full in (False, True):
+            want = _border_patches(cellmap, full)
+            got = _kernels.border_patches(cellmap, full)
+            for a, b in zip(got, want, strict=True):
+                assert a.shape == b.shape and np.array_equal(a, b), trial
+        n = int(rng.integers(1, 40))
+        adj = rng.random((n, n)) < rng.uniform(0.0, 0.15)
+        adj |= adj.T
+        k, comp = _kernels.dense_components(adj)
+        k0, comp0 = _dense_components(adj)
+        assert k == k0 and np.array_equal(comp, comp0), trial

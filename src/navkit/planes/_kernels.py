@@ -781,3 +781,91 @@ def cell_components(
         if root[g] >= 0:
             comp[g] = new[root[g]]
     return n, comp
+
+
+@njit(cache=True)
+def dense_components(adj: np.ndarray) -> tuple[int, np.ndarray]:  # pragma: no cover - compiled
+    """Connected components of a symmetric adjacency matrix ``(n, n)`` by union-find, numbered
+    by their smallest member (``extract._dense_components``' numbering). Returns their number
+    and the component of each node ``(n,)``."""
+    n = adj.shape[0]
+    parent = np.arange(n)
+    for a in range(n):
+        for b in range(a + 1, n):
+            if adj[a, b]:
+                ra = _find(parent, a)
+                rb = _find(parent, b)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+    comp = np.empty(n, np.int64)
+    new = np.full(n, -1, np.int64)
+    k = 0
+    for a in range(n):
+        r = _find(parent, a)
+        if new[r] < 0:
+            new[r] = k
+            k += 1
+        comp[a] = new[r]
+    return k, comp
+
+
+@njit(cache=True)
+def border_patches(
+    cellmap: np.ndarray, full: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """``extract._border_patches`` in one loop over the patches: ``interior (hc, wc)`` (region
+    patches whose 8 neighbours - the border repeating the edge patches - are in the same region;
+    none when ``full``), the patches to refine ``(B,)`` (not interior, with a region among their
+    9 patches) by decreasing number of candidate regions (stable) and their candidates ``(B,
+    m)``: the distinct regions of the 9 patches in decreasing order, -1 padded."""
+    hc, wc = cellmap.shape
+    G = hc * wc
+    interior = np.zeros((hc, wc), np.bool_)
+    cand = np.full((G, 9), -1, np.int64)
+    n_cand = np.zeros(G, np.int64)
+    nb = np.empty(9, np.int64)
+    for i in range(hc):
+        for j in range(wc):
+            g = i * wc + j
+            own = cellmap[i, j]
+            same = own >= 0
+            t = 0
+            for di in range(-1, 2):
+                ii = min(max(i + di, 0), hc - 1)
+                for dj in range(-1, 2):
+                    jj = min(max(j + dj, 0), wc - 1)
+                    v = cellmap[ii, jj]
+                    same = same and v == own
+                    # insertion into nb[:t], decreasing
+                    p = t
+                    while p > 0 and nb[p - 1] < v:
+                        nb[p] = nb[p - 1]
+                        p -= 1
+                    nb[p] = v
+                    t += 1
+            interior[i, j] = same and not full
+            n = 0
+            for p in range(9):
+                if nb[p] >= 0 and (p == 0 or nb[p] != nb[p - 1]):
+                    cand[g, n] = nb[p]
+                    n += 1
+            n_cand[g] = n
+    # border patches, by decreasing candidate count, then increasing id
+    m = 0
+    B = 0
+    for g in range(G):
+        if not interior[g // wc, g % wc] and n_cand[g] > 0:
+            B += 1
+            m = max(m, n_cand[g])
+    ids = np.empty(B, np.int64)
+    k = 0
+    for n in range(9, 0, -1):
+        for g in range(G):
+            if n_cand[g] == n and not interior[g // wc, g % wc]:
+                ids[k] = g
+                k += 1
+    out = np.empty((B, m), np.int64)
+    for b in range(B):
+        for p in range(m):
+            out[b, p] = cand[ids[b], p]
+    return interior, ids, out

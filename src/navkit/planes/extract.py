@@ -140,6 +140,9 @@ class ExtractionSettings:
         return self.rms_base + self.rms_quadratic * r2
 
 
+_DEFAULT_SETTINGS = ExtractionSettings()
+
+
 # ------------------------------------------------------------------------------ linear algebra
 
 
@@ -477,7 +480,7 @@ def _grow_regions(
             n, comp = kern.cell_components(keep.reshape(hc, wc), eh, ev, int(s.min_cells))
             return int(n), comp
 
-        return _prune_merge(M, normal, mean, bound, planar, regions, s, cos_t)
+        return _prune_merge(M, normal, mean, bound, planar, regions, s, cos_t, compiled)
     bound = s.noise(np.einsum("gi,gi->g", mean, mean))
     planar = (M[:, 0] >= s.min_fill * c * c) & (rms < bound)
     ids = np.arange(G).reshape(hc, wc)
@@ -522,9 +525,12 @@ def _prune_merge(
     regions: Callable[[NDArray[np.bool_]], tuple[int, NDArray[np.int64]]],
     s: ExtractionSettings,
     cos_t: float,
+    compiled: bool = False,
 ) -> tuple[int, NDArray[np.int64], int]:
     """Steps 3-4 of :func:`_grow_regions` from the planar patches: regions (``regions(keep)``:
-    the components of the kept patches' graph), pruning, regrouping, merging."""
+    the components of the kept patches' graph), pruning, regrouping, merging (``compiled``: the
+    coplanar regions' components by union-find, :func:`navkit.planes._kernels.dense_components`,
+    the same numbering)."""
     n_planar = int(planar.sum())
     n_reg, comp = regions(planar)
     if n_reg == 0:
@@ -546,7 +552,7 @@ def _prune_merge(
         < np.maximum(rtol[:, None], rtol[None, :])
     )
     same &= same.T
-    n_m, merged = _dense_components(same)
+    n_m, merged = _kernels().dense_components(same) if compiled else _dense_components(same)
     comp = np.where(comp >= 0, merged[np.maximum(comp, 0)], -1)
     return n_m, comp, n_planar
 
@@ -795,7 +801,7 @@ def _extract(
 ) -> ExtractionResult:
     """:func:`extract_planes_organized` with the compiled kernels (``compiled=True``) or their
     NumPy oracles (the tests compare the two)."""
-    s = settings or ExtractionSettings()
+    s = settings or _DEFAULT_SETTINGS  # validated once (check_settings costs ~50 us a call)
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 3 or P.shape[2] != 3:
         raise InputError(
@@ -818,7 +824,10 @@ def _extract(
     # 5. wholesale patches; the others pixel by pixel against the region planes
     rn, rd, _, _ = _planes_from_rows(_sum_rows(comp, n_reg, pt.M))
     cellmap = comp.reshape(hc, wc)
-    wholesale, ids, cand = _border_patches(cellmap, s.refine == "full")
+    if compiled:
+        wholesale, ids, cand = _kernels().border_patches(cellmap, s.refine == "full")
+    else:
+        wholesale, ids, cand = _border_patches(cellmap, s.refine == "full")
     bd = _refine_border(pt, comp, ids, cand, rn, rd, n_reg, hc, wc, c, s.outline_cell, compiled)
     wholesale = wholesale.ravel()
     wholesale[ids[bd.complete]] = True
