@@ -425,71 +425,6 @@ def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  #
 
 
 @njit(cache=True)
-def outline_points(
-    points: np.ndarray,
-    point_seg: np.ndarray,
-    P: np.ndarray,
-    valid: np.ndarray,
-    bi: np.ndarray,
-    bj: np.ndarray,
-    bt: np.ndarray,
-    bseg: np.ndarray,
-    axes: np.ndarray,
-    off: np.ndarray,
-    c: int,
-) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """The outline points of every segment in its plane (see ``extract._outlines``): the
-    sampled pixels ``points (3, N)`` float32 of the mixed patches (segments ``point_seg``, -1 =
-    none), then the pixels of the wholesale patches ``(bi, bj)`` not drawn as quadrilaterals,
-    every ``bt``-th row and column of their valid pixels (segments ``bseg``), grouped by segment
-    (stable) and projected on the segment's axes ``(K, 2, 3)`` minus ``off (K, 2)``. Returns
-    ``uv (M, 2)`` float64 and the ``(K + 1,)`` cuts between segments."""
-    K = len(axes)
-    n0 = len(point_seg)
-    count = np.zeros(K + 1, np.int64)
-    for n in range(n0):
-        count[point_seg[n] + 1] += 1
-    for b in range(len(bi)):
-        t = bt[b]
-        for r in range(0, c, t):
-            for q in range(0, c, t):
-                if valid[bi[b] * c + r, bj[b] * c + q]:
-                    count[bseg[b] + 1] += 1
-    cuts = np.zeros(K + 1, np.int64)
-    for k in range(K):
-        cuts[k + 1] = cuts[k] + count[k + 1]
-    uv = np.empty((cuts[K], 2), np.float64)
-    pos = cuts[:K].copy()
-    for n in range(n0):
-        k = point_seg[n]
-        if k < 0:
-            continue
-        x = np.float64(points[0, n])
-        y = np.float64(points[1, n])
-        z = np.float64(points[2, n])
-        for a in range(2):
-            uv[pos[k], a] = x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
-        pos[k] += 1
-    for b in range(len(bi)):
-        t = bt[b]
-        k = bseg[b]
-        for r in range(0, c, t):
-            for q in range(0, c, t):
-                yy = bi[b] * c + r
-                xx = bj[b] * c + q
-                if valid[yy, xx]:
-                    x = P[yy, xx, 0]
-                    y = P[yy, xx, 1]
-                    z = P[yy, xx, 2]
-                    for a in range(2):
-                        uv[pos[k], a] = (
-                            x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
-                        )
-                    pos[k] += 1
-    return uv, cuts
-
-
-@njit(cache=True)
 def plane_rows(
     M: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
@@ -869,3 +804,153 @@ def border_patches(
         for p in range(m):
             out[b, p] = cand[ids[b], p]
     return interior, ids, out
+
+
+@njit(cache=True)
+def _project(
+    x: float, y: float, z: float, axes: np.ndarray, off: np.ndarray, k: int, a: int
+) -> float:  # pragma: no cover - compiled
+    """In-plane coordinate ``a`` of a point on segment ``k``'s axes (``extract._outlines``'
+    arithmetic: ``x A0 + y A1 + z A2 - off``, left to right)."""
+    return x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
+
+
+@njit(cache=True)
+def outline_samples(
+    P: np.ndarray,
+    valid: np.ndarray,
+    labels: np.ndarray,
+    wholesale: np.ndarray,
+    segmap: np.ndarray,
+    M: np.ndarray,
+    points: np.ndarray,
+    point_seg: np.ndarray,
+    axes: np.ndarray,
+    off: np.ndarray,
+    c: int,
+    cell: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """What every segment's outline is rasterised from (see ``extract._outlines``), in plane
+    coordinates: the quadrilaterals of its wholesale patches that sample the plane densely and
+    the points - the sampled pixels ``points (3, N)`` float32 of the mixed patches (segments
+    ``point_seg``, -1 = none), then every ``t``-th row and column of the valid pixels of its
+    other wholesale patches (``t`` from the patch's scatter ``M``, ``extract._sample_stride``).
+
+    ``labels (H, W)`` are segment indices, ``wholesale (hc, wc)`` the patches assigned whole,
+    ``segmap (hc, wc)`` the segment of each patch's region (-1 = none), ``axes (K, 2, 3)`` and
+    ``off (K, 2)`` the segments' plane frames. Returns ``uv (., 2)`` and its ``(K + 1,)`` cuts,
+    the used quadrilaterals ``(Q, 4, 2)`` and their cuts; both grouped by segment, patches in
+    raster order within one (the NumPy version's order and floats)."""
+    hc, wc = segmap.shape
+    K = len(axes)
+    lim = 2.0 * cell * c
+    sqrt2 = np.sqrt(2.0)
+    # wholesale patches of kept segments, grouped by segment (counting sort: stable)
+    nq = np.zeros(K + 1, np.int64)
+    for i in range(hc):
+        for j in range(wc):
+            if wholesale[i, j] and segmap[i, j] >= 0:
+                nq[segmap[i, j] + 1] += 1
+    for k in range(K):
+        nq[k + 1] += nq[k]
+    Q = nq[K]
+    cells = np.empty(Q, np.int64)
+    pos = nq[:K].copy()
+    for i in range(hc):
+        for j in range(wc):
+            if wholesale[i, j] and segmap[i, j] >= 0:
+                cells[pos[segmap[i, j]]] = i * wc + j
+                pos[segmap[i, j]] += 1
+    quads = np.empty((Q, 4, 2), np.float64)
+    use = np.empty(Q, np.bool_)
+    stride = np.ones(Q, np.int64)
+    n_use = np.zeros(K + 1, np.int64)
+    count = np.zeros(K + 1, np.int64)  # points per segment (index + 1)
+    for n in range(len(point_seg)):
+        count[point_seg[n] + 1] += 1
+    for p in range(Q):
+        g = cells[p]
+        i = g // wc
+        j = g - i * wc
+        k = segmap[i, j]
+        ok = True
+        for a in range(4):  # corners around the patch: lattice corner, else its own pixel
+            lr = i * c + (c if a >= 2 else 0)
+            lq = j * c + (c if a == 1 or a == 2 else 0)
+            lr = min(lr, hc * c - 1)
+            lq = min(lq, wc * c - 1)
+            orr = i * c + (c - 1 if a >= 2 else 0)
+            oq = j * c + (c - 1 if a == 1 or a == 2 else 0)
+            lat = labels[lr, lq] == k
+            ok = ok and (lat or labels[orr, oq] == k)
+            rr = lr if lat else orr
+            qq = lq if lat else oq
+            for b in range(2):
+                quads[p, a, b] = _project(P[rr, qq, 0], P[rr, qq, 1], P[rr, qq, 2], axes, off, k, b)
+        e2 = 0.0
+        for a in range(4):
+            du = quads[p, (a + 1) % 4, 0] - quads[p, a, 0]
+            dv = quads[p, (a + 1) % 4, 1] - quads[p, a, 1]
+            e2 = max(e2, du * du + dv * dv)
+        use[p] = ok and np.sqrt(e2) <= lim
+        if use[p]:
+            n_use[k + 1] += 1
+            continue
+        # the pixel stride of a patch rasterised pixel by pixel (extract._sample_stride)
+        n = max(M[g, 0], 1.0)
+        m0 = M[g, 1] / n
+        m1 = M[g, 2] / n
+        m2 = M[g, 3] / n
+        tr = M[g, 4] / n - m0 * m0 + M[g, 8] / n - m1 * m1 + M[g, 12] / n - m2 * m2
+        spacing = np.sqrt(6.0 * max(tr, 0.0)) / c
+        t = np.floor(cell / (sqrt2 * spacing)) if spacing > 0 else np.inf
+        t = t if t >= 1.0 else 1.0
+        st = np.int64(min(t, c))
+        stride[p] = st
+        for r in range(0, c, st):
+            for q in range(0, c, st):
+                if valid[i * c + r, j * c + q]:
+                    count[k + 1] += 1
+    qcut = np.zeros(K + 1, np.int64)
+    for k in range(K):
+        qcut[k + 1] = qcut[k] + n_use[k + 1]
+    q_used = np.empty((qcut[K], 4, 2), np.float64)
+    w = 0
+    for p in range(Q):
+        if use[p]:
+            q_used[w] = quads[p]
+            w += 1
+    cuts = np.zeros(K + 1, np.int64)
+    for k in range(K):
+        cuts[k + 1] = cuts[k] + count[k + 1]
+    uv = np.empty((cuts[K], 2), np.float64)
+    pos = cuts[:K].copy()
+    for n in range(len(point_seg)):
+        k = point_seg[n]
+        if k < 0:
+            continue
+        x = np.float64(points[0, n])
+        y = np.float64(points[1, n])
+        z = np.float64(points[2, n])
+        for a in range(2):
+            uv[pos[k], a] = _project(x, y, z, axes, off, k, a)
+        pos[k] += 1
+    for p in range(Q):
+        if use[p]:
+            continue
+        g = cells[p]
+        i = g // wc
+        j = g - i * wc
+        k = segmap[i, j]
+        st = stride[p]
+        for r in range(0, c, st):
+            for q in range(0, c, st):
+                yy = i * c + r
+                xx = j * c + q
+                if valid[yy, xx]:
+                    for a in range(2):
+                        uv[pos[k], a] = _project(
+                            P[yy, xx, 0], P[yy, xx, 1], P[yy, xx, 2], axes, off, k, a
+                        )
+                    pos[k] += 1
+    return uv, cuts, q_used, qcut

@@ -986,6 +986,12 @@ def _outlines(
     hc, wc = segmap.shape
     K = len(planes)
     axes, off = _plane_frames(planes)
+    if compiled:  # quadrilaterals, strides, grouping and projection in one kernel, same floats
+        uv_all, cuts, q_used, ucuts = _kernels().outline_samples(
+            pt.P, pt.valid, labels, wholesale, segmap, pt.M, points, point_seg, axes, off, c, cell
+        )
+        step = np.maximum(1, np.diff(cuts) // 40_000)  # at most ~40k points per plane
+        return _outlines_compiled(uv_all, cuts, step, q_used, ucuts, cell)
 
     def project(xyz: list[NDArray], k: NDArray[np.int64]) -> NDArray[np.float64]:
         """``(..., 2)`` in-plane coordinates of points ``xyz`` (3 arrays) in segments ``k``."""
@@ -1017,17 +1023,6 @@ def _outlines(
     use = np.all(lat_ok | (labels[own_r, own_q] == qseg[:, None]), axis=1)
     use &= longest <= 2.0 * cell * c
     qcuts = np.searchsorted(qseg, np.arange(K + 1))
-    if compiled:  # grouping and projection in one kernel, the same floats
-        bi, bj = ii[~use], jj[~use]
-        t = _sample_stride(pt.M[bi * wc + bj], c, cell)
-        uv_all, cuts = _kernels().outline_points(
-            points, point_seg, pt.P, pt.valid, bi, bj, t, qseg[~use], axes, off, c
-        )
-        step = np.maximum(1, np.diff(cuts) // 40_000)  # at most ~40k points per plane
-        q_used = np.ascontiguousarray(quads[use])
-        return _outlines_compiled(
-            uv_all, cuts, step, q_used, np.searchsorted(qseg[use], np.arange(K + 1)), cell
-        )
     # points: the sampled pixels of the mixed patches, then of the wholesale patches not used
     # as quadrilaterals (every t-th row / column), grouped by segment
     pseg = point_seg
