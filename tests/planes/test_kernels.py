@@ -228,22 +228,3 @@ def test_border_patches_and_dense_components(rng):
         k, comp = _kernels.dense_components(adj)
         k0, comp0 = _dense_components(adj)
         assert k == k0 and np.array_equal(comp, comp0), trial
-
-
-def test_largest_contour_is_opencvs(rng):
-    """The largest contour by exact shoelace sums is ``max(contours, key=cv2.contourArea)``
-    (first of equal areas), on the contours of random rasters."""
-    import cv2
-
-    from navkit.planes.segments import _largest
-
-    for _ in range(30):
-        grid = (rng.random((int(rng.integers(5, 80)), int(rng.integers(5, 80)))) < 0.3).astype(
-            np.uint8
-        )
-        grid[rng.integers(0, grid.shape[0]), :] = 1
-        contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
-        if len(contours) < 2:
-            continue
-        want = max(contours, key=cv2.contourArea)
-        assert contours[_largest(contours)] is want

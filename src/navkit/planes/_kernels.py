@@ -342,17 +342,20 @@ def label_image(
     valid: np.ndarray,
     lab_cell: np.ndarray,
     cell_count: np.ndarray,
-    mixed_ids: np.ndarray,
-    mixed_label: np.ndarray,
+    ids: np.ndarray,
+    complete: np.ndarray,
+    label: np.ndarray,
+    new_id: np.ndarray,
     H: int,
     W: int,
     K: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """The label image and the inliers of each segment in raster order (see
     ``extract._extract``): ``valid (hc c, wc c)``, ``lab_cell (hc, wc)`` the segment of each
-    wholesale patch (-1 = none), ``cell_count (G,)`` the valid pixels of each patch, ``mixed_ids
-    (Bm,)`` the patches refined pixel by pixel and ``mixed_label (Bm, c, c)`` their pixels'
-    segments. Returns ``labels (H, W)`` int64 (-1 = none), the inlier indices ``row * W + col``
+    wholesale patch (-1 = none), ``cell_count (G,)`` the valid pixels of each patch, ``ids
+    (B,)`` the border patches, ``complete (B,)`` those assigned whole (the others are mixed:
+    refined pixel by pixel), ``label (B, c, c)`` their pixels' regions (-1 = none) and ``new_id``
+    the segment of region + 1. Returns ``labels (H, W)`` int64 (-1 = none), the inlier indices ``row * W + col``
     of all segments one after the other and the ``(K + 1,)`` cuts between segments.
 
     The segments' sizes come first (a wholesale patch adds its valid pixels), so that one raster
@@ -360,8 +363,9 @@ def label_image(
     hc, wc = lab_cell.shape
     c = valid.shape[0] // hc
     mix = np.full(hc * wc, -1, np.int64)
-    for b in range(len(mixed_ids)):
-        mix[mixed_ids[b]] = b
+    for b in range(len(ids)):
+        if not complete[b]:
+            mix[ids[b]] = b
     count = np.zeros(K + 1, np.int64)
     for i in range(hc):
         for j in range(wc):
@@ -369,7 +373,7 @@ def label_image(
             if b >= 0:
                 for r in range(c):
                     for q in range(c):
-                        count[mixed_label[b, r, q] + 1] += 1
+                        count[new_id[label[b, r, q] + 1] + 1] += 1
             elif lab_cell[i, j] >= 0:
                 count[lab_cell[i, j] + 1] += np.int64(cell_count[i * wc + j])
     cuts = np.zeros(K + 1, np.int64)
@@ -390,7 +394,7 @@ def label_image(
             s = lab_cell[i, j]
             if b >= 0:
                 for q in range(c):
-                    v = mixed_label[b, r, q]
+                    v = new_id[label[b, r, q] + 1]
                     labels[y, x0 + q] = v
                     if v >= 0:
                         inl[pos[v]] = y * W + x0 + q
@@ -824,7 +828,8 @@ def outline_samples(
     segmap: np.ndarray,
     M: np.ndarray,
     points: np.ndarray,
-    point_seg: np.ndarray,
+    point_region: np.ndarray,
+    new_id: np.ndarray,
     axes: np.ndarray,
     off: np.ndarray,
     c: int,
@@ -832,8 +837,8 @@ def outline_samples(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """What every segment's outline is rasterised from (see ``extract._outlines``), in plane
     coordinates: the quadrilaterals of its wholesale patches that sample the plane densely and
-    the points - the sampled pixels ``points (3, N)`` float32 of the mixed patches (segments
-    ``point_seg``, -1 = none), then every ``t``-th row and column of the valid pixels of its
+    the points - the sampled pixels ``points (3, N)`` float32 of the mixed patches (regions
+    ``point_region``, segment ``new_id[region + 1]``, -1 = none), then every ``t``-th row and column of the valid pixels of its
     other wholesale patches (``t`` from the patch's scatter ``M``, ``extract._sample_stride``).
 
     ``labels (H, W)`` are segment indices, ``wholesale (hc, wc)`` the patches assigned whole,
@@ -866,8 +871,8 @@ def outline_samples(
     stride = np.ones(Q, np.int64)
     n_use = np.zeros(K + 1, np.int64)
     count = np.zeros(K + 1, np.int64)  # points per segment (index + 1)
-    for n in range(len(point_seg)):
-        count[point_seg[n] + 1] += 1
+    for n in range(len(point_region)):
+        count[new_id[point_region[n] + 1] + 1] += 1
     for p in range(Q):
         g = cells[p]
         i = g // wc
@@ -925,8 +930,8 @@ def outline_samples(
         cuts[k + 1] = cuts[k] + count[k + 1]
     uv = np.empty((cuts[K], 2), np.float64)
     pos = cuts[:K].copy()
-    for n in range(len(point_seg)):
-        k = point_seg[n]
+    for n in range(len(point_region)):
+        k = new_id[point_region[n] + 1]
         if k < 0:
             continue
         x = np.float64(points[0, n])

@@ -843,9 +843,8 @@ def _extract(
     segmap = new_id[cellmap + 1]
     lab_cell = new_id[np.where(wholesale, comp, -1) + 1].reshape(hc, wc)
     if compiled:
-        mixed_lab = new_id[bd.label[mixed].astype(np.int64) + 1]
         labels, inl, cuts = _kernels().label_image(
-            pt.valid, lab_cell, pt.M[:, 0], ids[mixed], mixed_lab, H, W, len(keep)
+            pt.valid, lab_cell, pt.M[:, 0], ids, bd.complete, bd.label, new_id, H, W, len(keep)
         )
         inliers = [inl[cuts[k] : cuts[k + 1]] for k in range(len(keep))]
     else:
@@ -865,7 +864,8 @@ def _extract(
         wholesale.reshape(hc, wc),
         segmap,
         bd.points,
-        new_id[np.asarray(bd.point_region, np.int64) + 1],
+        bd.point_region,
+        new_id,
         planes,
         c,
         s.outline_cell,
@@ -956,7 +956,8 @@ def _outlines(
     wholesale: NDArray[np.bool_],
     segmap: NDArray[np.int64],
     points: NDArray[np.floating],
-    point_seg: NDArray[np.int64],
+    point_region: NDArray[np.signedinteger],
+    new_id: NDArray[np.int64],
     planes: list[Plane],
     c: int,
     cell: float,
@@ -980,16 +981,17 @@ def _outlines(
     by plane are computed for all planes at once; only the projection of a plane's points (its
     axes as scalars: gathering the axes per point is ~8x slower) and the rasterisation run per
     plane. ``segmap (hc, wc)`` is the segment of each patch's region (``-1`` = none), the labels
-    are segment indices, ``points (3, N)`` the sampled pixels of the mixed patches and
-    ``point_seg (N,)`` their segments.
+    are segment indices, ``points (3, N)`` the sampled pixels of the mixed patches,
+    ``point_region (N,)`` their regions and ``new_id`` the segment of region + 1.
     """
     hc, wc = segmap.shape
     K = len(planes)
     axes, off = _plane_frames(planes)
     if compiled:  # quadrilaterals, strides, grouping and projection in one kernel, same floats
         uv_all, cuts, q_used, ucuts = _kernels().outline_samples(
-            pt.P, pt.valid, labels, wholesale, segmap, pt.M, points, point_seg, axes, off, c, cell
-        )
+            pt.P, pt.valid, labels, wholesale, segmap, pt.M, points, point_region, new_id, axes,
+            off, c, cell,
+        )  # fmt: skip
         step = np.maximum(1, np.diff(cuts) // 40_000)  # at most ~40k points per plane
         return _outlines_compiled(uv_all, cuts, step, q_used, ucuts, cell)
 
@@ -1025,7 +1027,7 @@ def _outlines(
     qcuts = np.searchsorted(qseg, np.arange(K + 1))
     # points: the sampled pixels of the mixed patches, then of the wholesale patches not used
     # as quadrilaterals (every t-th row / column), grouped by segment
-    pseg = point_seg
+    pseg = new_id[np.asarray(point_region, np.int64) + 1]
     xyz = [points[a] for a in range(3)]
     if not use.all():
         bi, bj = ii[~use], jj[~use]

@@ -91,21 +91,6 @@ def outline_from_points(
 _CLOSE_3X3 = np.ones((3, 3), np.uint8)
 
 
-def _largest(contours: tuple[NDArray[np.int32], ...]) -> int:
-    """Index of the contour of largest area, the first of equal ones: ``max(contours,
-    key=cv2.contourArea)`` for all contours at once. OpenCV's shoelace sum over the integer
-    points (``prev.x * p.y - prev.y * p.x`` from the last point) is exact in float64, so the
-    int64 sums here are the same areas (x 2)."""
-    n = np.fromiter(map(len, contours), np.int64, len(contours))
-    xy = np.concatenate(contours).reshape(-1, 2).astype(np.int64)
-    start = np.zeros(len(n), np.int64)
-    np.cumsum(n[:-1], out=start[1:])
-    prev = np.arange(-1, len(xy) - 1)
-    prev[start] = start + n - 1  # each contour's first point follows its last
-    cross = xy[prev, 0] * xy[:, 1] - xy[prev, 1] * xy[:, 0]
-    return int(np.argmax(np.abs(np.add.reduceat(cross, start))))
-
-
 def outline_of_raster(
     grid: NDArray[np.uint8], lo: NDArray[np.float64], cell: float
 ) -> tuple[NDArray[np.float64], float]:
@@ -119,7 +104,7 @@ def outline_of_raster(
     contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
         return np.zeros((0, 2)), area
-    c = contours[0] if len(contours) == 1 else contours[_largest(contours)]
+    c = max(contours, key=cv2.contourArea)
     c = cv2.approxPolyDP(c, 1.0, True)
     # raster (x, y) = (u, v); OpenCV's oriented area is > 0 for a counter-clockwise polygon in
     # (u, v) (checked against navkit.geometry.signed_area): the others are reversed
