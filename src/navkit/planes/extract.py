@@ -29,10 +29,12 @@ odometry"):
 Temporaries are kept per thread between calls (:class:`_Workspace`); the results never share
 memory with them.
 
-The hot passes - the patch moments, the patches' planes, the border refinement with its outline
-samples, the label image with the inliers, the outline points - run as compiled kernels
-(:mod:`navkit.planes._kernels`, Numba, issue 12); the NumPy versions here are their oracle
-(``_extract(..., compiled=False)``; ``tests/planes/test_kernels.py``, ``docs/kernels.md``).
+The hot passes - the patch moments, the patches' planes, the planar and edge tests, the
+connected components (union-find instead of OpenCV on the cell-graph image; the same numbering),
+the border candidates, the border refinement with its outline samples, the label image with the
+inliers, the outline samples and rasters - run as compiled kernels (:mod:`navkit.planes._kernels`,
+Numba, issue 12); the NumPy versions here are their oracle (``_extract(..., compiled=False)``;
+``tests/planes/test_kernels.py``, ``docs/kernels.md``).
 
 Unorganised clouds: :mod:`navkit.planes.extract_cloud` (sequential RANSAC with vectorised
 hypotheses, a TLS refit, and the largest connected part of the inliers kept per plane); its names
@@ -476,11 +478,11 @@ def _grow_regions(
             s.distance_factor,
         )
 
-        def regions(keep: NDArray[np.bool_]) -> tuple[int, NDArray[np.int64]]:
+        def union_find(keep: NDArray[np.bool_]) -> tuple[int, NDArray[np.int64]]:
             n, comp = kern.cell_components(keep.reshape(hc, wc), eh, ev, int(s.min_cells))
             return int(n), comp
 
-        return _prune_merge(M, normal, mean, bound, planar, regions, s, cos_t, compiled)
+        return _prune_merge(M, normal, mean, bound, planar, union_find, s, cos_t, compiled)
     bound = s.noise(np.einsum("gi,gi->g", mean, mean))
     planar = (M[:, 0] >= s.min_fill * c * c) & (rms < bound)
     ids = np.arange(G).reshape(hc, wc)
@@ -520,7 +522,7 @@ def _prune_merge(
     M: NDArray[np.float64],
     normal: NDArray[np.float64],
     mean: NDArray[np.float64],
-    bound: NDArray[np.float64],
+    bound: NDArray[np.floating],
     planar: NDArray[np.bool_],
     regions: Callable[[NDArray[np.bool_]], tuple[int, NDArray[np.int64]]],
     s: ExtractionSettings,
