@@ -9,6 +9,7 @@ benchmark's frames (``bench_planes.extraction_frames``): CPU time medians, 3 x `
 Run from the repository root::
 
     PYTHONPATH=. .venv/bin/python benchmarks/planes_extract_vs_rev.py [--rev HEAD] [--repeats 15]
+        [--frames benchmark|7scenes|cape] [--no-open3d]
 """
 
 from __future__ import annotations
@@ -91,17 +92,36 @@ def _same(a: object, b: object) -> str:
     return "identical" if worst == 0 else f"same labels, floats within {worst:.1e} relative"
 
 
+def _frames(which: str) -> list[tuple[str, np.ndarray]]:
+    """``(name, (H, W, 3) grid)`` of the chosen frames."""
+    if which == "benchmark":
+        return [(name, f.points()) for name, f in extraction_frames()]
+    from navkit import datasets
+    from navkit.io.rgbd import open_rgbd_sequence, read_cape_frame
+
+    if which == "cape":
+        return [("CAPE tunnel", read_cape_frame(datasets.find("rgbd/cape-tunnel")).points)]
+    seq = open_rgbd_sequence(datasets.find("rgbd/7scenes-tsdf"))
+    return [(f"7-Scenes #{i}", seq.frame(i).points()) for i in range(0, len(seq), 10)]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rev", default="HEAD", help="git revision to compare with")
     parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument(
+        "--frames",
+        choices=("benchmark", "7scenes", "cape"),
+        default="benchmark",
+        help="the benchmark's frames (simulated + slambook), every 10th 7-Scenes frame, or CAPE",
+    )
+    parser.add_argument("--no-open3d", action="store_true", help="skip Open3D's loop (slow)")
     args = parser.parse_args()
     before = _load_revision(args.rev)
-    o3d = _o3d()
+    o3d = None if args.no_open3d else _o3d()
     full = ExtractionSettings(refine="full")
     print(f"frame | planes ({args.rev} -> now) | {args.rev} ms | now ms | now full ms | Open3D ms")
-    for name, f in extraction_frames():
-        P = f.points()
+    for name, P in _frames(args.frames):
         now_res, before_res = extract_planes_organized(P), before.extract_planes_organized(P)
         n, nb = len(now_res), len(before_res)
         same = _same(before_res, now_res)
@@ -116,13 +136,14 @@ def main() -> None:
             t["full"].append(
                 _cpu_median(lambda P=P: extract_planes_organized(P, full), args.repeats)
             )
-            t["o3d"].append(
-                _cpu_median(
-                    lambda flat=flat, n=n: _segment_plane_loop(o3d, flat, n),
-                    max(1, args.repeats // 3),
+            if o3d is not None:
+                t["o3d"].append(
+                    _cpu_median(
+                        lambda flat=flat, n=n: _segment_plane_loop(o3d, flat, n),
+                        max(1, args.repeats // 3),
+                    )
                 )
-            )
-        m = {k: 1000 * float(np.median(v)) for k, v in t.items()}
+        m = {k: 1000 * float(np.median(v)) if v else float("nan") for k, v in t.items()}
         print(
             f"{name} | {nb} -> {n} | {m['before']:.1f} | {m['now']:.1f} | {m['full']:.1f} | "
             f"{m['o3d']:.0f} | {m['before'] / m['now']:.2f}x | Open3D {m['o3d'] / m['now']:.0f}x"
