@@ -416,19 +416,6 @@ def label_image(
 
 
 @njit(cache=True)
-def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  # pragma: no cover
-    """Sums of the rows of ``M (N, K)`` per group ``(N,)`` (``-1`` = none), in row order:
-    ``(n_groups, K)`` float64 (see ``extract._sum_rows``)."""
-    out = np.zeros((n_groups, M.shape[1]), np.float64)
-    for i in range(M.shape[0]):
-        g = groups[i]
-        if g >= 0:
-            for k in range(M.shape[1]):
-                out[g, k] += M[i, k]
-    return out
-
-
-@njit(cache=True)
 def plane_rows(
     M: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover

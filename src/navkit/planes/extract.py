@@ -270,16 +270,12 @@ def _moment_rows(
 
 
 def _sum_rows(
-    groups: NDArray[np.int64], n_groups: int, M: NDArray[np.float64], compiled: bool = False
+    groups: NDArray[np.int64], n_groups: int, M: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     """Sums of the rows of ``M`` per group (``-1`` = none): ``(n_groups, M.shape[1])``. A one-hot
-    matrix product: ~4x faster than a weighted ``bincount`` per column for a few hundred rows;
-    ``compiled``: one loop in row order (:func:`navkit.planes._kernels.sum_rows`, the same sums
-    up to the order of float64 additions)."""
-    if compiled:
-        return _kernels().sum_rows(  # type: ignore[no-any-return]
-            np.ascontiguousarray(groups, dtype=np.int64), n_groups, np.ascontiguousarray(M)
-        )
+    matrix product: ~4x faster than a weighted ``bincount`` per column for a few hundred rows.
+    Both paths use it for the region sums of the patch moments (the same floats); the mixed
+    patches' rows are summed inside :func:`navkit.planes._kernels.refine_pixels`."""
     onehot = (groups[None, :] == np.arange(n_groups)[:, None]).astype(np.float64)
     return onehot @ M
 
