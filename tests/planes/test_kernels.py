@@ -228,3 +228,22 @@ def test_border_patches_and_dense_components(rng):
         k, comp = _kernels.dense_components(adj)
         k0, comp0 = _dense_components(adj)
         assert k == k0 and np.array_equal(comp, comp0), trial
+
+
+def test_largest_contour_is_opencvs(rng):
+    """The largest contour without the areas of 1- and 2-point contours is ``max(contours,
+    key=cv2.contourArea)`` (the first of equal areas), on the contours of random rasters."""
+    import cv2
+
+    from navkit.planes.segments import _largest_contour
+
+    n = 0
+    for _ in range(60):
+        shape = (int(rng.integers(3, 60)), int(rng.integers(3, 60)))
+        grid = (rng.random(shape) < rng.uniform(0.02, 0.4)).astype(np.uint8)
+        contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        if not contours:
+            continue
+        n += 1
+        assert _largest_contour(contours) is max(contours, key=cv2.contourArea)
+    assert n > 40

@@ -10,6 +10,7 @@ polygons are ``(M, 2)`` arrays in metres in that frame.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import cv2
@@ -91,6 +92,16 @@ def outline_from_points(
 _CLOSE_3X3 = np.ones((3, 3), np.uint8)
 
 
+def _largest_contour(contours: Sequence[NDArray[np.int32]]) -> NDArray[np.int32]:
+    """``max(contours, key=cv2.contourArea)`` (the first of equal areas) without the areas of
+    the contours of fewer than 3 points (isolated raster cells: area 0), most of a plane's."""
+    big = [c for c in contours if len(c) >= 3]
+    if not big:
+        return contours[0]
+    c = max(big, key=cv2.contourArea)
+    return c if cv2.contourArea(c) > 0 else contours[0]
+
+
 def outline_of_raster(
     grid: NDArray[np.uint8], lo: NDArray[np.float64], cell: float
 ) -> tuple[NDArray[np.float64], float]:
@@ -104,7 +115,7 @@ def outline_of_raster(
     contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
         return np.zeros((0, 2)), area
-    c = max(contours, key=cv2.contourArea)
+    c = _largest_contour(contours)
     c = cv2.approxPolyDP(c, 1.0, True)
     # raster (x, y) = (u, v); OpenCV's oriented area is > 0 for a counter-clockwise polygon in
     # (u, v) (checked against navkit.geometry.signed_area): the others are reversed
