@@ -12,6 +12,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -92,7 +93,7 @@ def outline_from_points(
 _CLOSE_3X3 = np.ones((3, 3), np.uint8)
 
 
-def _largest_contour(contours: Sequence[NDArray[np.int32]]) -> NDArray[np.int32]:
+def _largest_contour(contours: Sequence[NDArray[Any]]) -> NDArray[Any]:
     """``max(contours, key=cv2.contourArea)`` (the first of equal areas) without the areas of
     the contours of fewer than 3 points (isolated raster cells: area 0), most of a plane's."""
     big = [c for c in contours if len(c) >= 3]
@@ -115,8 +116,7 @@ def outline_of_raster(
     contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
         return np.zeros((0, 2)), area
-    c = _largest_contour(contours)
-    c = cv2.approxPolyDP(c, 1.0, True)
+    c = cv2.approxPolyDP(_largest_contour(contours), 1.0, True)
     # raster (x, y) = (u, v); OpenCV's oriented area is > 0 for a counter-clockwise polygon in
     # (u, v) (checked against navkit.geometry.signed_area): the others are reversed
     if len(c) >= 3 and cv2.contourArea(c, oriented=True) < 0:
