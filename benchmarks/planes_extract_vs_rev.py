@@ -1,13 +1,15 @@
 """Organised plane extraction: this working tree against a git revision's, and Open3D's loop.
 
-The revision's ``src/navkit/planes/segments.py`` and ``extract.py`` are loaded beside the working
-tree (``git show REV:...``, the extract module's import of ``segments`` redirected), and the two
+The revision's ``src/navkit/planes/segments.py``, ``extract.py`` and ``_kernels.py`` are loaded
+beside the working tree (``git show REV:...`` into a temporary folder, the extract module's imports
+of ``segments`` and ``_kernels`` redirected: the revision runs its own compiled kernels), and the two
 versions and Open3D's ``segment_plane`` loop are timed interleaved in one process on the
 benchmark's frames (``bench_planes.extraction_frames``): CPU time medians, 3 x ``--repeats``.
 
 Run from the repository root::
 
     PYTHONPATH=. .venv/bin/python benchmarks/planes_extract_vs_rev.py [--rev HEAD] [--repeats 15]
+        [--frames benchmark|7scenes|cape] [--no-open3d]
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ import argparse
 import subprocess
 import sys
 import types
+from pathlib import Path
 
 import numpy as np
 
@@ -24,24 +27,39 @@ from navkit.planes import ExtractionSettings, extract_planes_organized
 
 
 def _load_revision(rev: str) -> types.ModuleType:
-    """The revision's organised extraction as a module (``rev_extract``)."""
-    src = {
-        name: subprocess.run(
-            ["git", "show", f"{rev}:src/navkit/planes/{name}.py"],
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout
-        for name in ("segments", "extract")
-    }
-    seg = types.ModuleType("rev_segments")
-    sys.modules["rev_segments"] = seg
-    exec(compile(src["segments"], f"{rev}:segments.py", "exec"), seg.__dict__)
-    ex = types.ModuleType("rev_extract")
-    sys.modules["rev_extract"] = ex
+    """The revision's organised extraction as a module (``rev_extract``), with the revision's
+    own compiled kernels (``rev_kernels``, when it has ``_kernels.py``): the three files are
+    written to a temporary folder and imported from there (Numba caches beside them)."""
+    import importlib.util
+    import tempfile
+
+    folder = Path(tempfile.mkdtemp(prefix="navkit-rev-"))
+    src = {}
+    for name in ("segments", "extract", "_kernels"):
+        res = subprocess.run(
+            ["git", "show", f"{rev}:src/navkit/planes/{name}.py"], capture_output=True, text=True
+        )
+        if res.returncode == 0:
+            src[name] = res.stdout
+        elif name != "_kernels":
+            raise SystemExit(f"{rev}: no src/navkit/planes/{name}.py ({res.stderr.strip()})")
     code = src["extract"].replace("from navkit.planes.segments import", "from rev_segments import")
-    exec(compile(code, f"{rev}:extract.py", "exec"), ex.__dict__)
-    return ex
+    code = code.replace("from navkit.planes import _kernels", "import rev_kernels as _kernels")
+    src["extract"] = code
+    mods = {}
+    for name in ("_kernels", "segments", "extract"):
+        if name not in src:
+            continue
+        path = folder / f"rev{name if name.startswith('_') else '_' + name}.py"
+        path.write_text(src[name])
+        mod_name = path.stem
+        spec = importlib.util.spec_from_file_location(mod_name, path)
+        assert spec is not None and spec.loader is not None
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[mod_name] = mod
+        spec.loader.exec_module(mod)
+        mods[name] = mod
+    return mods["extract"]
 
 
 def _same(a: object, b: object) -> str:
@@ -74,17 +92,36 @@ def _same(a: object, b: object) -> str:
     return "identical" if worst == 0 else f"same labels, floats within {worst:.1e} relative"
 
 
+def _frames(which: str) -> list[tuple[str, np.ndarray]]:
+    """``(name, (H, W, 3) grid)`` of the chosen frames."""
+    if which == "benchmark":
+        return [(name, f.points()) for name, f in extraction_frames()]
+    from navkit import datasets
+    from navkit.io.rgbd import open_rgbd_sequence, read_cape_frame
+
+    if which == "cape":
+        return [("CAPE tunnel", read_cape_frame(datasets.find("rgbd/cape-tunnel")).points)]
+    seq = open_rgbd_sequence(datasets.find("rgbd/7scenes-tsdf"))
+    return [(f"7-Scenes #{i}", seq.frame(i).points()) for i in range(0, len(seq), 10)]
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rev", default="HEAD", help="git revision to compare with")
     parser.add_argument("--repeats", type=int, default=15)
+    parser.add_argument(
+        "--frames",
+        choices=("benchmark", "7scenes", "cape"),
+        default="benchmark",
+        help="the benchmark's frames (simulated + slambook), every 10th 7-Scenes frame, or CAPE",
+    )
+    parser.add_argument("--no-open3d", action="store_true", help="skip Open3D's loop (slow)")
     args = parser.parse_args()
     before = _load_revision(args.rev)
-    o3d = _o3d()
+    o3d = None if args.no_open3d else _o3d()
     full = ExtractionSettings(refine="full")
     print(f"frame | planes ({args.rev} -> now) | {args.rev} ms | now ms | now full ms | Open3D ms")
-    for name, f in extraction_frames():
-        P = f.points()
+    for name, P in _frames(args.frames):
         now_res, before_res = extract_planes_organized(P), before.extract_planes_organized(P)
         n, nb = len(now_res), len(before_res)
         same = _same(before_res, now_res)
@@ -99,13 +136,14 @@ def main() -> None:
             t["full"].append(
                 _cpu_median(lambda P=P: extract_planes_organized(P, full), args.repeats)
             )
-            t["o3d"].append(
-                _cpu_median(
-                    lambda flat=flat, n=n: _segment_plane_loop(o3d, flat, n),
-                    max(1, args.repeats // 3),
+            if o3d is not None:
+                t["o3d"].append(
+                    _cpu_median(
+                        lambda flat=flat, n=n: _segment_plane_loop(o3d, flat, n),
+                        max(1, args.repeats // 3),
+                    )
                 )
-            )
-        m = {k: 1000 * float(np.median(v)) for k, v in t.items()}
+        m = {k: 1000 * float(np.median(v)) if v else float("nan") for k, v in t.items()}
         print(
             f"{name} | {nb} -> {n} | {m['before']:.1f} | {m['now']:.1f} | {m['full']:.1f} | "
             f"{m['o3d']:.0f} | {m['before'] / m['now']:.2f}x | Open3D {m['o3d'] / m['now']:.0f}x"

@@ -95,3 +95,155 @@ def test_real_7scenes(data_path):
         P = np.stack([(u - 320.0) / 585.0 * z, (v - 240.0) / 585.0 * z, z], axis=2)
         total += assert_same(P)
     assert total > 100
+
+
+def test_backproject_same_bits(data_path):
+    """``PinholeCamera.backproject`` (broadcast rays, issue 12) gives ``pixel_rays() * depth``
+    bit for bit, NaN where the depth is missing: the extraction's input is unchanged."""
+    from navkit.io.rgbd import read_simple_rgbd
+
+    seq = read_simple_rgbd(
+        data_path("rgbd/slambook-ch5"),
+        {"fx": 518.0, "fy": 519.0, "cx": 325.5, "cy": 253.5, "depth_scale": 1000.0},
+    )
+    f = seq.frame(0)
+    a = f.camera.backproject(f.depth)
+    b = f.camera.pixel_rays() * f.depth[..., None]
+    assert np.isnan(f.depth).any()
+    assert np.array_equal(a.view(np.uint64), b.view(np.uint64))
+
+
+def test_outline_rasters_match_outline_from_points(rng):
+    """The rasters of all planes in one compiled pass give ``outline_from_points``'s outlines
+    and areas: point clouds with NaN rows, quadrilaterals (one with a NaN corner), a plane with
+    two points only (empty outline) and one whose raster exceeds 4e6 cells (coarsened)."""
+    from navkit.planes.extract import _outlines_compiled
+    from navkit.planes.segments import outline_from_points
+
+    sets = []
+    for n, nq, span in ((3000, 5, 2.0), (2, 0, 1.0), (500, 0, 0.3), (400, 2, 60.0), (0, 3, 1.5)):
+        uv = rng.uniform(-span, span, (n, 2)) + rng.normal(0, 5, 2)
+        if n > 10:
+            uv[rng.integers(0, n, 5)] = np.nan
+        c0 = rng.uniform(-span, span, (nq, 1, 2))
+        q = c0 + np.array([[0, 0], [0.3, 0], [0.3, 0.3], [0, 0.3]])[None]
+        if nq > 2:
+            q[1, 2, 0] = np.nan
+        sets.append((uv, q))
+    uv_all = np.concatenate([u for u, _ in sets])
+    cuts = np.concatenate([[0], np.cumsum([len(u) for u, _ in sets])])
+    quads = np.concatenate([q for _, q in sets])
+    qcuts = np.concatenate([[0], np.cumsum([len(q) for _, q in sets])])
+    step = np.array([1, 1, 2, 1, 1])
+    got = _outlines_compiled(uv_all, cuts, step, quads, qcuts, 0.02)
+    for k, (uv, q) in enumerate(sets):
+        want = outline_from_points(uv[:: step[k]], 0.02, quads=q)
+        assert np.array_equal(got[k][0], want[0])
+        assert got[k][1] == want[1]
+    assert len(got[1][0]) == 0 and len(got[0][0]) >= 3 and got[3][1] > 0
+
+
+def test_cell_components_match_opencv(rng):
+    """The union-find components of the cell graph are OpenCV's ``connectedComponents`` of the
+    graph image (numbered by first patch in raster order, small ones dropped), on random
+    graphs from sparse to dense."""
+    import cv2
+
+    from navkit.planes import _kernels
+
+    for trial in range(40):
+        hc, wc = int(rng.integers(1, 30)), int(rng.integers(1, 40))
+        p = rng.uniform(0.2, 0.95)
+        keep = rng.random((hc, wc)) < p
+        eh = rng.random((hc, wc - 1)) < p
+        ev = rng.random((hc - 1, wc)) < p
+        min_cells = int(rng.integers(1, 5))
+        graph = np.zeros((2 * hc - 1, 2 * wc - 1), np.uint8)
+        graph[0::2, 0::2] = keep
+        graph[0::2, 1::2] = eh & keep[:, :-1] & keep[:, 1:]
+        graph[1::2, 0::2] = ev & keep[:-1, :] & keep[1:, :]
+        n_comp, lab = cv2.connectedComponents(graph, connectivity=4, ltype=cv2.CV_32S)
+        comp = lab[0::2, 0::2].ravel().astype(np.int64) - 1
+        sizes = np.bincount(comp[comp >= 0], minlength=n_comp - 1)
+        big = sizes >= min_cells
+        remap = -np.ones(n_comp, np.int64)
+        remap[1:][big] = np.arange(int(big.sum()))
+        n, got = _kernels.cell_components(keep, eh, ev, min_cells)
+        assert n == int(big.sum()), trial
+        assert np.array_equal(got, remap[comp + 1]), trial
+
+
+def test_patch_graph_same_bits(pairs):
+    """The compiled planar test and edge tests give the NumPy formulas' decisions (the bounds
+    bit for bit; the dot products in ``einsum``'s order of the three products)."""
+    from navkit.planes import _kernels
+    from navkit.planes.extract import _planes_from_rows
+
+    P = pairs[3].f1.frame.points().copy()
+    P[100:140, 200:260] = np.nan
+    for cell in (20, 7):
+        s = ExtractionSettings(cell=cell)
+        hc, wc = P.shape[0] // cell, P.shape[1] // cell
+        M = _patch_moments(P, s, hc, wc, True).M
+        normal, d, rms, mean = _planes_from_rows(M, True)
+        cos_t = np.cos(np.radians(s.angle_deg))
+        bound, planar, eh, ev = _kernels.patch_graph(
+            normal, d, mean, M[:, 0].copy(), rms, hc, wc, s.min_fill * cell * cell,
+            s.rms_base, s.rms_quadratic, float(cos_t), s.distance_factor,
+        )  # fmt: skip
+        want = s.noise(np.einsum("gi,gi->g", mean, mean))
+        assert np.array_equal(bound, want)
+        assert np.array_equal(planar, (M[:, 0] >= s.min_fill * cell * cell) & (rms < want))
+        ids = np.arange(hc * wc).reshape(hc, wc)
+        for got, a, b in ((eh, ids[:, :-1], ids[:, 1:]), (ev, ids[:-1, :], ids[1:, :])):
+            pa, pb = a.ravel(), b.ravel()
+            tol = s.distance_factor * np.maximum(want[pa], want[pb])
+            ok = (
+                (np.einsum("ei,ei->e", normal[pa], normal[pb]) > cos_t)
+                & (np.abs(np.einsum("ei,ei->e", normal[pa], mean[pb]) - d[pa]) < tol)
+                & (np.abs(np.einsum("ei,ei->e", normal[pb], mean[pa]) - d[pb]) < tol)
+            )
+            assert np.array_equal(got.ravel(), ok)
+        assert planar.sum() > 20 and eh.sum() > 20
+
+
+def test_border_patches_and_dense_components(rng):
+    """The compiled border-patch candidates and coplanar-region components equal the NumPy
+    versions on random region maps and adjacency matrices."""
+    from navkit.planes import _kernels
+    from navkit.planes.extract import _border_patches, _dense_components
+
+    for trial in range(30):
+        hc, wc = int(rng.integers(1, 25)), int(rng.integers(1, 33))
+        cellmap = rng.integers(-1, int(rng.integers(1, 8)), (hc, wc))
+        cellmap[: hc // 2, : wc // 2] = cellmap[0, 0]  # some interior patches
+        for full in (False, True):
+            want = _border_patches(cellmap, full)
+            got = _kernels.border_patches(cellmap, full)
+            for a, b in zip(got, want, strict=True):
+                assert a.shape == b.shape and np.array_equal(a, b), trial
+        n = int(rng.integers(1, 40))
+        adj = rng.random((n, n)) < rng.uniform(0.0, 0.15)
+        adj |= adj.T
+        k, comp = _kernels.dense_components(adj)
+        k0, comp0 = _dense_components(adj)
+        assert k == k0 and np.array_equal(comp, comp0), trial
+
+
+def test_largest_contour_is_opencvs(rng):
+    """The largest contour without the areas of 1- and 2-point contours is ``max(contours,
+    key=cv2.contourArea)`` (the first of equal areas), on the contours of random rasters."""
+    import cv2
+
+    from navkit.planes.segments import _largest_contour
+
+    n = 0
+    for _ in range(60):
+        shape = (int(rng.integers(3, 60)), int(rng.integers(3, 60)))
+        grid = (rng.random(shape) < rng.uniform(0.02, 0.4)).astype(np.uint8)
+        contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
+        if not contours:
+            continue
+        n += 1
+        assert _largest_contour(contours) is max(contours, key=cv2.contourArea)
+    assert n > 40

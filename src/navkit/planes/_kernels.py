@@ -59,22 +59,44 @@ def _pairwise32(a: np.ndarray, n: int) -> np.float32:  # pragma: no cover - comp
 
 
 @njit(cache=True)
+def _raw_row(
+    out: np.ndarray, n: float, ref: np.ndarray, sd: np.ndarray, ssd: np.ndarray
+) -> None:  # pragma: no cover - compiled
+    """One raw float64 moment row ``out (13,)`` - count, sums, sums of outer products - from the
+    moments about a reference point: ``n``, ``ref (3,)``, the sums of the coordinates minus it
+    ``sd (3,)`` and of their products ``ssd (6,)`` (xx, xy, xz, yy, yz, zz). The operations of
+    ``extract._moment_rows`` in its order: ``S = n ref + Sd``, ``SS = ((SSd + ref Sd^T) + Sd
+    ref^T) + (n ref) ref^T``."""
+    out[0] = n
+    for a in range(3):
+        out[1 + a] = n * ref[a] + sd[a]
+    for a in range(3):
+        for b in range(3):
+            lo = min(a, b)
+            hi = max(a, b)
+            ss = ssd[lo * 3 - (lo * (lo - 1)) // 2 + (hi - lo)]
+            out[4 + 3 * a + b] = ((ss + ref[a] * sd[b]) + ref[b] * sd[a]) + (n * ref[a]) * ref[b]
+
+
+@njit(cache=True)
 def patch_moments(
     P: np.ndarray, hc: int, wc: int, c: int, valid: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Step 1 of the extraction in one pass per patch (see ``extract._patch_moments``).
 
-    Fills ``valid (hc c, wc c)`` (finite, non-zero range) and returns per patch the count
-    ``(G,)``, the float32 mean ``(G, 3)``, the sums of the coordinates minus that mean ``(G, 3)``
-    and of their products ``(G, 6)`` (xx, xy, xz, yy, yz, zz), float32 sums as float64. The
-    centred coordinates themselves are not stored: :func:`refine_pixels` recomputes them for
-    the few patches it needs (writing them for the whole grid cost more memory traffic).
+    Fills ``valid (hc c, wc c)`` (finite, non-zero range) and returns per patch the raw float64
+    moment row ``(G, 13)`` (count, sums, sums of outer products: the float32 sums about the
+    patch's float32 mean converted as ``extract._moment_rows`` does) and that mean ``(G, 3)``.
+    The centred coordinates themselves are not stored: :func:`refine_pixels` recomputes them
+    for the few patches it needs (writing them for the whole grid cost more memory traffic).
+    An empty patch skips the second pass (its sums are +0, as the pass would give).
     """
     G = hc * wc
-    cnt = np.empty(G, np.float64)
+    M = np.empty((G, 13), np.float64)
     ref = np.empty((G, 3), np.float32)
-    Sd = np.empty((G, 3), np.float64)
-    SSd = np.empty((G, 6), np.float64)
+    ref64 = np.empty(3, np.float64)
+    sd = np.zeros(3, np.float64)
+    ssd = np.zeros(6, np.float64)
     col = np.empty((10, c), np.float32)  # per-column sums of one patch
     X = np.empty((3, c, c), np.float32)  # one patch's float32 coordinates, 0 where invalid
     for i in range(hc):
@@ -111,10 +133,17 @@ def patch_moments(
             mx = np.float32(_pairwise32(col[1], c) / den)
             my = np.float32(_pairwise32(col[2], c) / den)
             mz = np.float32(_pairwise32(col[3], c) / den)
-            cnt[g] = n
             ref[g, 0] = mx
             ref[g, 1] = my
             ref[g, 2] = mz
+            ref64[0] = mx
+            ref64[1] = my
+            ref64[2] = mz
+            if n == 0:  # no valid pixel: all sums +0
+                sd[:] = 0.0
+                ssd[:] = 0.0
+                _raw_row(M[g], np.float64(n), ref64, sd, ssd)
+                continue
             # pass 2: centred coordinates (x 0 / 1 validity) and their products
             col[:] = 0.0
             for r in range(c):
@@ -135,10 +164,11 @@ def patch_moments(
                     col[8, q] = np.float32(col[8, q] + np.float32(dy * dz))
                     col[9, q] = np.float32(col[9, q] + np.float32(dz * dz))
             for k in range(3):
-                Sd[g, k] = _pairwise32(col[1 + k], c)
+                sd[k] = _pairwise32(col[1 + k], c)
             for k in range(6):
-                SSd[g, k] = _pairwise32(col[4 + k], c)
-    return cnt, ref, Sd, SSd
+                ssd[k] = _pairwise32(col[4 + k], c)
+            _raw_row(M[g], np.float64(n), ref64, sd, ssd)
+    return M, ref
 
 
 @njit(cache=True)
@@ -156,6 +186,7 @@ def refine_pixels(
     wc: int,
     c: int,
     label: np.ndarray,
+    n_reg: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Step 5, the border patches pixel by pixel (see ``extract._refine_border``).
 
@@ -165,18 +196,30 @@ def refine_pixels(
     (patch, candidate), ``n32 (n_reg, 3)`` float32 normals. The centred float32 coordinates and
     the bound are recomputed exactly as :func:`patch_moments` / the NumPy path define them.
     Fills ``label (B, c, c)`` (closest candidate within the bound, -1 = none; ties keep the
-    earlier slot). Returns ``complete (B,)`` and the float64 moments ``(B, m, 10)`` - count,
-    sums of d, sums of d d^T (xx, xy, xz, yy, yz, zz) - of the pixels of each (incomplete
-    patch, candidate) (zero for complete patches) - and the outline samples of the incomplete
+    earlier slot). Returns ``complete (B,)``, the raw float64 moments ``(n_reg, 13)`` of the
+    pixels of the incomplete patches per region (per (patch, candidate): the float64 sums of d
+    and d d^T converted by ``extract._moment_rows``' arithmetic, added in (patch, slot) order
+    as ``sum_rows`` adds them) and the outline samples of the incomplete
     patches: their labelled pixels on every ``stride[b]``-th row and column, ``float32(d + ref)``
     ``(3, K)``, and their regions ``(K,)`` (patch by patch, raster order within one).
     """
     B, m = cand.shape
     complete = np.empty(B, np.bool_)
-    G = np.zeros((B, m, 10), np.float64)
+    Mreg = np.zeros((n_reg, 13), np.float64)
+    row = np.empty(13, np.float64)
+    ref64 = np.empty(3, np.float64)
+    sd = np.empty(3, np.float64)
+    ssd = np.empty(6, np.float64)
     d = np.empty((3, c, c), np.float32)
     pts = np.empty((3, B * c * c), np.float32)
     preg = np.empty(B * c * c, np.int64)
+    # one row of a patch at a time, in short loops over its c pixels that LLVM vectorises
+    dx = np.empty(c, np.float32)
+    dy = np.empty(c, np.float32)
+    dz = np.empty(c, np.float32)
+    tt = np.empty(c, np.float32)
+    best = np.empty(c, np.float32)
+    lab = np.empty(c, np.int64)
     n_pts = 0
     for b in range(B):
         i = ids[b] // wc
@@ -185,211 +228,191 @@ def refine_pixels(
         mx = ref[g, 0]
         my = ref[g, 1]
         mz = ref[g, 2]
-        ok = own[b] >= 0
+        own_b = own[b]
+        n_slot = 0
+        while n_slot < m and cand[b, n_slot] >= 0:
+            n_slot += 1
+        ok = own_b >= 0
         for r in range(c):
-            y = i * c + r
+            Pr = P[i * c + r, j * c : (j + 1) * c]
             for q in range(c):
-                x = j * c + q
-                px = np.float32(P[y, x, 0])
-                py = np.float32(P[y, x, 1])
-                pz = np.float32(P[y, x, 2])
+                px = np.float32(Pr[q, 0])
+                py = np.float32(Pr[q, 1])
+                pz = np.float32(Pr[q, 2])
                 r2 = np.float32(
                     np.float32(np.float32(px * px) + np.float32(py * py)) + np.float32(pz * pz)
                 )
-                if r2 > 0 and r2 < np.inf:
-                    t = np.float32(np.float32(r2 * tol_scale) + tol_base)
-                    dx = np.float32(px - mx)
-                    dy = np.float32(py - my)
-                    dz = np.float32(pz - mz)
-                else:  # never an inlier
-                    t = np.float32(-1.0)
-                    dx = np.float32(0.0)
-                    dy = np.float32(0.0)
-                    dz = np.float32(0.0)
-                d[0, r, q] = dx
-                d[1, r, q] = dy
-                d[2, r, q] = dz
-                best = np.float32(np.inf)
-                lab = -1
-                for s in range(m):
-                    k = cand[b, s]
-                    if k < 0:
-                        break
-                    dist = np.float32(
+                val = (r2 > 0) & (r2 < np.inf)  # else never an inlier (bound -1)
+                tt[q] = np.float32(np.float32(r2 * tol_scale) + tol_base) if val else np.float32(-1)
+                dx[q] = np.float32(px - mx) if val else np.float32(0.0)
+                dy[q] = np.float32(py - my) if val else np.float32(0.0)
+                dz[q] = np.float32(pz - mz) if val else np.float32(0.0)
+                best[q] = np.inf
+                lab[q] = -1
+            for s in range(n_slot):  # closest candidate within the bound; ties keep the earlier
+                k = cand[b, s]
+                n0 = n32[k, 0]
+                n1 = n32[k, 1]
+                n2 = n32[k, 2]
+                o = off[b, s]
+                for q in range(c):
+                    dist = abs(
                         np.float32(
-                            np.float32(np.float32(dx * n32[k, 0]) + np.float32(dy * n32[k, 1]))
-                            + np.float32(dz * n32[k, 2])
+                            np.float32(
+                                np.float32(np.float32(dx[q] * n0) + np.float32(dy[q] * n1))
+                                + np.float32(dz[q] * n2)
+                            )
+                            + o
                         )
-                        + off[b, s]
                     )
-                    dist = abs(dist)
-                    if dist < t and dist < best:
-                        best = dist
-                        lab = k
-                label[b, r, q] = lab
-                if ok and lab != own[b] and t >= 0:
-                    ok = False
+                    better = (dist < tt[q]) & (dist < best[q])
+                    best[q] = dist if better else best[q]
+                    lab[q] = k if better else lab[q]
+            for q in range(c):
+                label[b, r, q] = lab[q]
+                d[0, r, q] = dx[q]
+                d[1, r, q] = dy[q]
+                d[2, r, q] = dz[q]
+                ok = ok and (lab[q] == own_b or tt[q] < 0)
         complete[b] = ok
         if ok:
             continue
-        for r in range(c):
-            for q in range(c):
-                lab = label[b, r, q]
-                if lab < 0:
-                    continue
-                s = 0
-                while cand[b, s] != lab:
-                    s += 1
-                ex = np.float64(d[0, r, q])
-                ey = np.float64(d[1, r, q])
-                ez = np.float64(d[2, r, q])
-                if r % stride[b] == 0 and q % stride[b] == 0:
+        # the mixed patch: float64 moments per candidate (local sums, one sweep per slot)
+        for s in range(n_slot):
+            k = cand[b, s]
+            s0 = 0.0
+            s1 = 0.0
+            s2 = 0.0
+            s3 = 0.0
+            s4 = 0.0
+            s5 = 0.0
+            s6 = 0.0
+            s7 = 0.0
+            s8 = 0.0
+            s9 = 0.0
+            for r in range(c):
+                for q in range(c):
+                    # branch-free: a pixel of another candidate adds exact zeros
+                    w = 1.0 if label[b, r, q] == k else 0.0
+                    ex = np.float64(d[0, r, q])
+                    ey = np.float64(d[1, r, q])
+                    ez = np.float64(d[2, r, q])
+                    s0 += w
+                    s1 += ex * w
+                    s2 += ey * w
+                    s3 += ez * w
+                    s4 += (ex * ex) * w
+                    s5 += (ex * ey) * w
+                    s6 += (ex * ez) * w
+                    s7 += (ey * ey) * w
+                    s8 += (ey * ez) * w
+                    s9 += (ez * ez) * w
+            if s0 > 0:
+                ref64[0] = mx
+                ref64[1] = my
+                ref64[2] = mz
+                sd[0] = s1
+                sd[1] = s2
+                sd[2] = s3
+                ssd[0] = s4
+                ssd[1] = s5
+                ssd[2] = s6
+                ssd[3] = s7
+                ssd[4] = s8
+                ssd[5] = s9
+                _raw_row(row, s0, ref64, sd, ssd)
+                for t in range(13):
+                    Mreg[k, t] += row[t]
+        # outline samples: labelled pixels on every stride-th row and column, raster order
+        st = stride[b]
+        for r in range(0, c, st):
+            for q in range(0, c, st):
+                lb = label[b, r, q]
+                if lb >= 0:
                     pts[0, n_pts] = np.float32(d[0, r, q] + mx)
                     pts[1, n_pts] = np.float32(d[1, r, q] + my)
                     pts[2, n_pts] = np.float32(d[2, r, q] + mz)
-                    preg[n_pts] = lab
+                    preg[n_pts] = lb
                     n_pts += 1
-                G[b, s, 0] += 1.0
-                G[b, s, 1] += ex
-                G[b, s, 2] += ey
-                G[b, s, 3] += ez
-                G[b, s, 4] += ex * ex
-                G[b, s, 5] += ex * ey
-                G[b, s, 6] += ex * ez
-                G[b, s, 7] += ey * ey
-                G[b, s, 8] += ey * ez
-                G[b, s, 9] += ez * ez
-    return complete, G, pts[:, :n_pts].copy(), preg[:n_pts].copy()
+    return complete, Mreg, pts[:, :n_pts], preg[:n_pts]  # views: read once, then dropped
 
 
 @njit(cache=True)
 def label_image(
     valid: np.ndarray,
     lab_cell: np.ndarray,
-    mixed_ids: np.ndarray,
-    mixed_label: np.ndarray,
+    cell_count: np.ndarray,
+    ids: np.ndarray,
+    complete: np.ndarray,
+    label: np.ndarray,
+    new_id: np.ndarray,
     H: int,
     W: int,
     K: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """The label image and the inliers of each segment in raster order (see
     ``extract._extract``): ``valid (hc c, wc c)``, ``lab_cell (hc, wc)`` the segment of each
-    wholesale patch (-1 = none), ``mixed_ids (Bm,)`` the patches refined pixel by pixel and
-    ``mixed_label (Bm, c, c)`` their pixels' segments. Returns ``labels (H, W)`` int64 (-1 =
-    none), the inlier indices ``row * W + col`` of all segments one after the other and the
-    ``(K + 1,)`` cuts between segments."""
+    wholesale patch (-1 = none), ``cell_count (G,)`` the valid pixels of each patch, ``ids
+    (B,)`` the border patches, ``complete (B,)`` those assigned whole (the others are mixed:
+    refined pixel by pixel), ``label (B, c, c)`` their pixels' regions (-1 = none) and ``new_id``
+    the segment of region + 1. Returns ``labels (H, W)`` int64 (-1 = none), the inlier indices ``row * W + col``
+    of all segments one after the other and the ``(K + 1,)`` cuts between segments.
+
+    The segments' sizes come first (a wholesale patch adds its valid pixels), so that one raster
+    pass writes each label once and places each inlier."""
     hc, wc = lab_cell.shape
     c = valid.shape[0] // hc
-    labels = np.full((H, W), -1, np.int64)
+    mix = np.full(hc * wc, -1, np.int64)
+    for b in range(len(ids)):
+        if not complete[b]:
+            mix[ids[b]] = b
+    count = np.zeros(K + 1, np.int64)
     for i in range(hc):
         for j in range(wc):
-            s = lab_cell[i, j]
-            if s < 0:
-                continue
-            for r in range(c):
-                for q in range(c):
-                    if valid[i * c + r, j * c + q]:
-                        labels[i * c + r, j * c + q] = s
-    for b in range(len(mixed_ids)):
-        i = mixed_ids[b] // wc
-        j = mixed_ids[b] - i * wc
-        for r in range(c):
-            for q in range(c):
-                labels[i * c + r, j * c + q] = mixed_label[b, r, q]
-    count = np.zeros(K + 1, np.int64)
-    for y in range(H):
-        for x in range(W):
-            count[labels[y, x] + 1] += 1
+            b = mix[i * wc + j]
+            if b >= 0:
+                for r in range(c):
+                    for q in range(c):
+                        count[new_id[label[b, r, q] + 1] + 1] += 1
+            elif lab_cell[i, j] >= 0:
+                count[lab_cell[i, j] + 1] += np.int64(cell_count[i * wc + j])
     cuts = np.zeros(K + 1, np.int64)
     for k in range(K):
         cuts[k + 1] = cuts[k] + count[k + 1]
     inl = np.empty(cuts[K], np.int64)
     pos = cuts[:K].copy()
+    labels = np.empty((H, W), np.int64)
     for y in range(H):
-        for x in range(W):
-            s = labels[y, x]
-            if s >= 0:
-                inl[pos[s]] = y * W + x
-                pos[s] += 1
-    return labels, inl, cuts
-
-
-@njit(cache=True)
-def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  # pragma: no cover
-    """Sums of the rows of ``M (N, K)`` per group ``(N,)`` (``-1`` = none), in row order:
-    ``(n_groups, K)`` float64 (see ``extract._sum_rows``)."""
-    out = np.zeros((n_groups, M.shape[1]), np.float64)
-    for i in range(M.shape[0]):
-        g = groups[i]
-        if g >= 0:
-            for k in range(M.shape[1]):
-                out[g, k] += M[i, k]
-    return out
-
-
-@njit(cache=True)
-def outline_points(
-    points: np.ndarray,
-    point_seg: np.ndarray,
-    P: np.ndarray,
-    valid: np.ndarray,
-    bi: np.ndarray,
-    bj: np.ndarray,
-    bt: np.ndarray,
-    bseg: np.ndarray,
-    axes: np.ndarray,
-    off: np.ndarray,
-    c: int,
-) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """The outline points of every segment in its plane (see ``extract._outlines``): the
-    sampled pixels ``points (3, N)`` float32 of the mixed patches (segments ``point_seg``, -1 =
-    none), then the pixels of the wholesale patches ``(bi, bj)`` not drawn as quadrilaterals,
-    every ``bt``-th row and column of their valid pixels (segments ``bseg``), grouped by segment
-    (stable) and projected on the segment's axes ``(K, 2, 3)`` minus ``off (K, 2)``. Returns
-    ``uv (M, 2)`` float64 and the ``(K + 1,)`` cuts between segments."""
-    K = len(axes)
-    n0 = len(point_seg)
-    count = np.zeros(K + 1, np.int64)
-    for n in range(n0):
-        count[point_seg[n] + 1] += 1
-    for b in range(len(bi)):
-        t = bt[b]
-        for r in range(0, c, t):
-            for q in range(0, c, t):
-                if valid[bi[b] * c + r, bj[b] * c + q]:
-                    count[bseg[b] + 1] += 1
-    cuts = np.zeros(K + 1, np.int64)
-    for k in range(K):
-        cuts[k + 1] = cuts[k] + count[k + 1]
-    uv = np.empty((cuts[K], 2), np.float64)
-    pos = cuts[:K].copy()
-    for n in range(n0):
-        k = point_seg[n]
-        if k < 0:
+        i = y // c
+        if i >= hc:
+            labels[y, :] = -1
             continue
-        x = np.float64(points[0, n])
-        y = np.float64(points[1, n])
-        z = np.float64(points[2, n])
-        for a in range(2):
-            uv[pos[k], a] = x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
-        pos[k] += 1
-    for b in range(len(bi)):
-        t = bt[b]
-        k = bseg[b]
-        for r in range(0, c, t):
-            for q in range(0, c, t):
-                yy = bi[b] * c + r
-                xx = bj[b] * c + q
-                if valid[yy, xx]:
-                    x = P[yy, xx, 0]
-                    y = P[yy, xx, 1]
-                    z = P[yy, xx, 2]
-                    for a in range(2):
-                        uv[pos[k], a] = (
-                            x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
-                        )
-                    pos[k] += 1
-    return uv, cuts
+        r = y - i * c
+        for j in range(wc):
+            x0 = j * c
+            b = mix[i * wc + j]
+            s = lab_cell[i, j]
+            if b >= 0:
+                for q in range(c):
+                    v = new_id[label[b, r, q] + 1]
+                    labels[y, x0 + q] = v
+                    if v >= 0:
+                        inl[pos[v]] = y * W + x0 + q
+                        pos[v] += 1
+            elif s >= 0:
+                for q in range(c):
+                    if valid[y, x0 + q]:
+                        labels[y, x0 + q] = s
+                        inl[pos[s]] = y * W + x0 + q
+                        pos[s] += 1
+                    else:
+                        labels[y, x0 + q] = -1
+            else:
+                for q in range(c):
+                    labels[y, x0 + q] = -1
+        for x in range(wc * c, W):
+            labels[y, x] = -1
+    return labels, inl, cuts
 
 
 @njit(cache=True)
@@ -469,3 +492,457 @@ def plane_rows(
         mean[g, 1] = my
         mean[g, 2] = mz
     return normal, rho, rms, mean, rank1
+
+
+@njit(cache=True)
+def outline_rasters(
+    uv: np.ndarray,
+    cuts: np.ndarray,
+    step: np.ndarray,
+    quads: np.ndarray,
+    qcuts: np.ndarray,
+    cell: float,
+) -> tuple[
+    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
+]:  # pragma: no cover - compiled
+    """The rasters of :func:`navkit.planes.segments.outline_from_points` for all segments at
+    once (see ``extract._outlines``): segment ``k`` has the points ``uv[cuts[k]:cuts[k + 1]:
+    step[k]] (., 2)`` and the quadrilaterals ``quads[qcuts[k]:qcuts[k + 1]] (., 4, 2)``.
+
+    The bounding box, the raster size and the cells of the points are computed as that
+    function does (the same float64 operations). Returns the rasters one after the other in one
+    zeroed uint8 buffer with the points drawn (segment ``k`` from ``start[k]``, ``shape[k] =
+    (columns, rows)``), ``lo (K, 2)``, a status per segment (0 = raster, 1 = fewer than 3
+    points and corners: empty outline, 2 = raster above 4e6 cells: the caller calls
+    ``outline_from_points``), the quadrilaterals' corners in 1/16 raster cell as OpenCV's
+    ``fillPoly`` takes them ``(Q, 4, 2)`` int32 and whether each quadrilateral is finite."""
+    K = len(cuts) - 1
+    inv = 1.0 / cell
+    lo = np.zeros((K, 2), np.float64)
+    shape = np.zeros((K, 2), np.int64)
+    start = np.zeros(K + 1, np.int64)
+    status = np.zeros(K, np.int64)
+    qfin = np.ones(len(quads), np.bool_)
+    total = 0
+    for k in range(K):
+        lo0 = np.inf
+        lo1 = np.inf
+        hi0 = -np.inf
+        hi1 = -np.inf
+        n = 0
+        for p in range(cuts[k], cuts[k + 1], step[k]):
+            u = uv[p, 0]
+            v = uv[p, 1]
+            if np.isfinite(u) and np.isfinite(v):
+                n += 1
+                lo0 = min(lo0, u)
+                hi0 = max(hi0, u)
+                lo1 = min(lo1, v)
+                hi1 = max(hi1, v)
+        for qi in range(qcuts[k], qcuts[k + 1]):
+            fin = True
+            for a in range(4):
+                fin = fin and np.isfinite(quads[qi, a, 0]) and np.isfinite(quads[qi, a, 1])
+            qfin[qi] = fin
+            if fin:
+                n += 4
+                for a in range(4):
+                    lo0 = min(lo0, quads[qi, a, 0])
+                    hi0 = max(hi0, quads[qi, a, 0])
+                    lo1 = min(lo1, quads[qi, a, 1])
+                    hi1 = max(hi1, quads[qi, a, 1])
+        start[k + 1] = total
+        if n < 3:
+            status[k] = 1
+            continue
+        lo0 -= cell
+        lo1 -= cell
+        lo[k, 0] = lo0
+        lo[k, 1] = lo1
+        e0 = (hi0 - lo0) * inv + 2.0
+        e1 = (hi1 - lo1) * inv + 2.0
+        if e0 * e1 > 4_000_000:
+            status[k] = 2
+            continue
+        shape[k, 0] = np.int64(e0)
+        shape[k, 1] = np.int64(e1)
+        total += shape[k, 0] * shape[k, 1]
+        start[k + 1] = total
+    grid = np.zeros(total, np.uint8)
+    qint = np.zeros((len(quads), 4, 2), np.int32)
+    for k in range(K):
+        if status[k] != 0:
+            continue
+        lo0 = lo[k, 0]
+        lo1 = lo[k, 1]
+        w = shape[k, 0]
+        s0 = start[k]
+        for p in range(cuts[k], cuts[k + 1], step[k]):
+            u = uv[p, 0]
+            v = uv[p, 1]
+            if np.isfinite(u) and np.isfinite(v):
+                ii = np.int64((u - lo0) * inv)
+                jj = np.int64((v - lo1) * inv)
+                grid[s0 + jj * w + ii] = 1
+        for qi in range(qcuts[k], qcuts[k + 1]):
+            for a in range(4):
+                qint[qi, a, 0] = np.int32(np.rint(((quads[qi, a, 0] - lo0) * inv - 0.5) * 16.0))
+                qint[qi, a, 1] = np.int32(np.rint(((quads[qi, a, 1] - lo1) * inv - 0.5) * 16.0))
+    return grid, start, shape, lo, status, qint, qfin
+
+
+@njit(cache=True)
+def _dot3(a: np.ndarray, i: int, b: np.ndarray, j: int) -> float:  # pragma: no cover
+    """``a[i] . b[j]`` of two ``(., 3)`` arrays in ``numpy.einsum``'s order for three terms,
+    ``(a0 b0 + a2 b2) + a1 b1`` (its SIMD pairs; checked bit for bit by the tests)."""
+    return (a[i, 0] * b[j, 0] + a[i, 2] * b[j, 2]) + a[i, 1] * b[j, 1]
+
+
+@njit(cache=True)
+def patch_graph(
+    normal: np.ndarray,
+    d: np.ndarray,
+    mean: np.ndarray,
+    count: np.ndarray,
+    rms: np.ndarray,
+    hc: int,
+    wc: int,
+    min_count: float,
+    rms_base: float,
+    rms_quadratic: float,
+    cos_t: float,
+    distance_factor: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Steps 2-3 of the extraction (see ``extract._grow_regions``) in one loop over the patches:
+    the thickness bound ``rms_base + rms_quadratic |mean|^2``, the planar test (``count >=
+    min_count`` and ``rms < bound``) and the tests of the edges to the right and below that do
+    not depend on the kept set (normals within ``cos_t``, each centroid within ``distance_factor
+    x`` the larger bound of the other's plane). Returns ``bound (G,)``, ``planar (G,)``, the
+    horizontal edges ``(hc, wc - 1)`` and the vertical ones ``(hc - 1, wc)``."""
+    G = hc * wc
+    bound = np.empty(G, np.float64)
+    planar = np.empty(G, np.bool_)
+    for g in range(G):
+        bound[g] = rms_base + rms_quadratic * _dot3(mean, g, mean, g)
+        planar[g] = (count[g] >= min_count) and (rms[g] < bound[g])
+    eh = np.zeros((hc, max(wc - 1, 0)), np.bool_)
+    ev = np.zeros((max(hc - 1, 0), wc), np.bool_)
+    for i in range(hc):
+        for j in range(wc):
+            a = i * wc + j
+            for e in range(2):
+                if e == 0:
+                    if j + 1 >= wc:
+                        continue
+                    b = a + 1
+                else:
+                    if i + 1 >= hc:
+                        continue
+                    b = a + wc
+                tol = distance_factor * max(bound[a], bound[b])
+                ok = (
+                    _dot3(normal, a, normal, b) > cos_t
+                    and abs(_dot3(normal, a, mean, b) - d[a]) < tol
+                    and abs(_dot3(normal, b, mean, a) - d[b]) < tol
+                )
+                if e == 0:
+                    eh[i, j] = ok
+                else:
+                    ev[i, j] = ok
+    return bound, planar, eh, ev
+
+
+@njit(cache=True)
+def _find(parent: np.ndarray, a: int) -> int:  # pragma: no cover - compiled
+    """Root of ``a`` in a union-find forest, halving the path on the way (no recursion)."""
+    while parent[a] != a:
+        parent[a] = parent[parent[a]]
+        a = parent[a]
+    return a
+
+
+@njit(cache=True)
+def cell_components(
+    keep: np.ndarray, eh: np.ndarray, ev: np.ndarray, min_cells: int
+) -> tuple[int, np.ndarray]:  # pragma: no cover - compiled
+    """Connected components of the kept patches ``keep (hc, wc)`` joined by the edges ``eh
+    (hc, wc - 1)``, ``ev (hc - 1, wc)`` (union-find), numbered by their first patch in raster
+    order - the order of OpenCV's ``connectedComponents`` on the cell-graph image of
+    ``extract._grow_regions`` - those below ``min_cells`` patches dropped and the others
+    renumbered in that order. Returns their number and the component of each patch ``(G,)``
+    (-1 = none)."""
+    hc, wc = keep.shape
+    G = hc * wc
+    parent = np.arange(G)
+    for i in range(hc):
+        for j in range(wc):
+            if not keep[i, j]:
+                continue
+            a = i * wc + j
+            if j + 1 < wc and keep[i, j + 1] and eh[i, j]:
+                ra = _find(parent, a)
+                rb = _find(parent, a + 1)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+            if i + 1 < hc and keep[i + 1, j] and ev[i, j]:
+                ra = _find(parent, a)
+                rb = _find(parent, a + wc)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+    size = np.zeros(G, np.int64)
+    root = np.full(G, -1, np.int64)
+    for g in range(G):
+        if keep[g // wc, g % wc]:
+            root[g] = _find(parent, g)
+            size[root[g]] += 1
+    # roots are each component's smallest patch: numbering roots in raster order
+    new = np.full(G, -1, np.int64)
+    n = 0
+    for g in range(G):
+        if root[g] == g and size[g] >= min_cells:
+            new[g] = n
+            n += 1
+    comp = np.full(G, -1, np.int64)
+    for g in range(G):
+        if root[g] >= 0:
+            comp[g] = new[root[g]]
+    return n, comp
+
+
+@njit(cache=True)
+def dense_components(adj: np.ndarray) -> tuple[int, np.ndarray]:  # pragma: no cover - compiled
+    """Connected components of a symmetric adjacency matrix ``(n, n)`` by union-find, numbered
+    by their smallest member (``extract._dense_components``' numbering). Returns their number
+    and the component of each node ``(n,)``."""
+    n = adj.shape[0]
+    parent = np.arange(n)
+    for a in range(n):
+        for b in range(a + 1, n):
+            if adj[a, b]:
+                ra = _find(parent, a)
+                rb = _find(parent, b)
+                if ra != rb:
+                    parent[max(ra, rb)] = min(ra, rb)
+    comp = np.empty(n, np.int64)
+    new = np.full(n, -1, np.int64)
+    k = 0
+    for a in range(n):
+        r = _find(parent, a)
+        if new[r] < 0:
+            new[r] = k
+            k += 1
+        comp[a] = new[r]
+    return k, comp
+
+
+@njit(cache=True)
+def border_patches(
+    cellmap: np.ndarray, full: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """``extract._border_patches`` in one loop over the patches: ``interior (hc, wc)`` (region
+    patches whose 8 neighbours - the border repeating the edge patches - are in the same region;
+    none when ``full``), the patches to refine ``(B,)`` (not interior, with a region among their
+    9 patches) by decreasing number of candidate regions (stable) and their candidates ``(B,
+    m)``: the distinct regions of the 9 patches in decreasing order, -1 padded."""
+    hc, wc = cellmap.shape
+    G = hc * wc
+    interior = np.zeros((hc, wc), np.bool_)
+    cand = np.full((G, 9), -1, np.int64)
+    n_cand = np.zeros(G, np.int64)
+    nb = np.empty(9, np.int64)
+    for i in range(hc):
+        for j in range(wc):
+            g = i * wc + j
+            own = cellmap[i, j]
+            same = own >= 0
+            t = 0
+            for di in range(-1, 2):
+                ii = min(max(i + di, 0), hc - 1)
+                for dj in range(-1, 2):
+                    jj = min(max(j + dj, 0), wc - 1)
+                    v = cellmap[ii, jj]
+                    same = same and v == own
+                    # insertion into nb[:t], decreasing
+                    p = t
+                    while p > 0 and nb[p - 1] < v:
+                        nb[p] = nb[p - 1]
+                        p -= 1
+                    nb[p] = v
+                    t += 1
+            interior[i, j] = same and not full
+            n = 0
+            for p in range(9):
+                if nb[p] >= 0 and (p == 0 or nb[p] != nb[p - 1]):
+                    cand[g, n] = nb[p]
+                    n += 1
+            n_cand[g] = n
+    # border patches, by decreasing candidate count, then increasing id
+    m = 0
+    B = 0
+    for g in range(G):
+        if not interior[g // wc, g % wc] and n_cand[g] > 0:
+            B += 1
+            m = max(m, n_cand[g])
+    ids = np.empty(B, np.int64)
+    k = 0
+    for n in range(9, 0, -1):
+        for g in range(G):
+            if n_cand[g] == n and not interior[g // wc, g % wc]:
+                ids[k] = g
+                k += 1
+    out = np.empty((B, m), np.int64)
+    for b in range(B):
+        for p in range(m):
+            out[b, p] = cand[ids[b], p]
+    return interior, ids, out
+
+
+@njit(cache=True)
+def _project(
+    x: float, y: float, z: float, axes: np.ndarray, off: np.ndarray, k: int, a: int
+) -> float:  # pragma: no cover - compiled
+    """In-plane coordinate ``a`` of a point on segment ``k``'s axes (``extract._outlines``'
+    arithmetic: ``x A0 + y A1 + z A2 - off``, left to right)."""
+    return x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
+
+
+@njit(cache=True)
+def outline_samples(
+    P: np.ndarray,
+    valid: np.ndarray,
+    labels: np.ndarray,
+    wholesale: np.ndarray,
+    segmap: np.ndarray,
+    M: np.ndarray,
+    points: np.ndarray,
+    point_region: np.ndarray,
+    new_id: np.ndarray,
+    axes: np.ndarray,
+    off: np.ndarray,
+    c: int,
+    cell: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """What every segment's outline is rasterised from (see ``extract._outlines``), in plane
+    coordinates: the quadrilaterals of its wholesale patches that sample the plane densely and
+    the points - the sampled pixels ``points (3, N)`` float32 of the mixed patches (regions
+    ``point_region``, segment ``new_id[region + 1]``, -1 = none), then every ``t``-th row and column of the valid pixels of its
+    other wholesale patches (``t`` from the patch's scatter ``M``, ``extract._sample_stride``).
+
+    ``labels (H, W)`` are segment indices, ``wholesale (hc, wc)`` the patches assigned whole,
+    ``segmap (hc, wc)`` the segment of each patch's region (-1 = none), ``axes (K, 2, 3)`` and
+    ``off (K, 2)`` the segments' plane frames. Returns ``uv (., 2)`` and its ``(K + 1,)`` cuts,
+    the used quadrilaterals ``(Q, 4, 2)`` and their cuts; both grouped by segment, patches in
+    raster order within one (the NumPy version's order and floats)."""
+    hc, wc = segmap.shape
+    K = len(axes)
+    lim = 2.0 * cell * c
+    sqrt2 = np.sqrt(2.0)
+    # wholesale patches of kept segments, grouped by segment (counting sort: stable)
+    nq = np.zeros(K + 1, np.int64)
+    for i in range(hc):
+        for j in range(wc):
+            if wholesale[i, j] and segmap[i, j] >= 0:
+                nq[segmap[i, j] + 1] += 1
+    for k in range(K):
+        nq[k + 1] += nq[k]
+    Q = nq[K]
+    cells = np.empty(Q, np.int64)
+    pos = nq[:K].copy()
+    for i in range(hc):
+        for j in range(wc):
+            if wholesale[i, j] and segmap[i, j] >= 0:
+                cells[pos[segmap[i, j]]] = i * wc + j
+                pos[segmap[i, j]] += 1
+    quads = np.empty((Q, 4, 2), np.float64)
+    use = np.empty(Q, np.bool_)
+    stride = np.ones(Q, np.int64)
+    n_use = np.zeros(K + 1, np.int64)
+    count = np.zeros(K + 1, np.int64)  # points per segment (index + 1)
+    for n in range(len(point_region)):
+        count[new_id[point_region[n] + 1] + 1] += 1
+    for p in range(Q):
+        g = cells[p]
+        i = g // wc
+        j = g - i * wc
+        k = segmap[i, j]
+        ok = True
+        for a in range(4):  # corners around the patch: lattice corner, else its own pixel
+            lr = i * c + (c if a >= 2 else 0)
+            lq = j * c + (c if a == 1 or a == 2 else 0)
+            lr = min(lr, hc * c - 1)
+            lq = min(lq, wc * c - 1)
+            orr = i * c + (c - 1 if a >= 2 else 0)
+            oq = j * c + (c - 1 if a == 1 or a == 2 else 0)
+            lat = labels[lr, lq] == k
+            ok = ok and (lat or labels[orr, oq] == k)
+            rr = lr if lat else orr
+            qq = lq if lat else oq
+            for b in range(2):
+                quads[p, a, b] = _project(P[rr, qq, 0], P[rr, qq, 1], P[rr, qq, 2], axes, off, k, b)
+        e2 = 0.0
+        for a in range(4):
+            du = quads[p, (a + 1) % 4, 0] - quads[p, a, 0]
+            dv = quads[p, (a + 1) % 4, 1] - quads[p, a, 1]
+            e2 = max(e2, du * du + dv * dv)
+        use[p] = ok and np.sqrt(e2) <= lim
+        if use[p]:
+            n_use[k + 1] += 1
+            continue
+        # the pixel stride of a patch rasterised pixel by pixel (extract._sample_stride)
+        n = max(M[g, 0], 1.0)
+        m0 = M[g, 1] / n
+        m1 = M[g, 2] / n
+        m2 = M[g, 3] / n
+        tr = M[g, 4] / n - m0 * m0 + M[g, 8] / n - m1 * m1 + M[g, 12] / n - m2 * m2
+        spacing = np.sqrt(6.0 * max(tr, 0.0)) / c
+        t = np.floor(cell / (sqrt2 * spacing)) if spacing > 0 else np.inf
+        t = t if t >= 1.0 else 1.0
+        st = np.int64(min(t, c))
+        stride[p] = st
+        for r in range(0, c, st):
+            for q in range(0, c, st):
+                if valid[i * c + r, j * c + q]:
+                    count[k + 1] += 1
+    qcut = np.zeros(K + 1, np.int64)
+    for k in range(K):
+        qcut[k + 1] = qcut[k] + n_use[k + 1]
+    q_used = np.empty((qcut[K], 4, 2), np.float64)
+    w = 0
+    for p in range(Q):
+        if use[p]:
+            q_used[w] = quads[p]
+            w += 1
+    cuts = np.zeros(K + 1, np.int64)
+    for k in range(K):
+        cuts[k + 1] = cuts[k] + count[k + 1]
+    uv = np.empty((cuts[K], 2), np.float64)
+    pos = cuts[:K].copy()
+    for n in range(len(point_region)):
+        k = new_id[point_region[n] + 1]
+        if k < 0:
+            continue
+        x = np.float64(points[0, n])
+        y = np.float64(points[1, n])
+        z = np.float64(points[2, n])
+        for a in range(2):
+            uv[pos[k], a] = _project(x, y, z, axes, off, k, a)
+        pos[k] += 1
+    for p in range(Q):
+        if use[p]:
+            continue
+        g = cells[p]
+        i = g // wc
+        j = g - i * wc
+        k = segmap[i, j]
+        st = stride[p]
+        for r in range(0, c, st):
+            for q in range(0, c, st):
+                yy = i * c + r
+                xx = j * c + q
+                if valid[yy, xx]:
+                    for a in range(2):
+                        uv[pos[k], a] = _project(
+                            P[yy, xx, 0], P[yy, xx, 1], P[yy, xx, 2], axes, off, k, a
+                        )
+                    pos[k] += 1
+    return uv, cuts, q_used, qcut

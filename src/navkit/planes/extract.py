@@ -29,10 +29,12 @@ odometry"):
 Temporaries are kept per thread between calls (:class:`_Workspace`); the results never share
 memory with them.
 
-The hot passes - the patch moments, the patches' planes, the border refinement with its outline
-samples, the label image with the inliers, the outline points - run as compiled kernels
-(:mod:`navkit.planes._kernels`, Numba, issue 12); the NumPy versions here are their oracle
-(``_extract(..., compiled=False)``; ``tests/planes/test_kernels.py``, ``docs/kernels.md``).
+The hot passes - the patch moments, the patches' planes, the planar and edge tests, the
+connected components (union-find instead of OpenCV on the cell-graph image; the same numbering),
+the border candidates, the border refinement with its outline samples, the label image with the
+inliers, the outline samples and rasters - run as compiled kernels (:mod:`navkit.planes._kernels`,
+Numba, issue 12); the NumPy versions here are their oracle (``_extract(..., compiled=False)``;
+``tests/planes/test_kernels.py``, ``docs/kernels.md``).
 
 Unorganised clouds: :mod:`navkit.planes.extract_cloud` (sequential RANSAC with vectorised
 hypotheses, a TLS refit, and the largest connected part of the inliers kept per plane); its names
@@ -43,6 +45,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import cv2
@@ -53,7 +56,12 @@ from navkit.errors import InputError
 from navkit.geometry import Plane, canonical_plane
 from navkit.geometry._validate import check_settings
 from navkit.planes.extract_cloud import CloudExtractionSettings, extract_planes_cloud
-from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points
+from navkit.planes.segments import (
+    ExtractionResult,
+    PlaneSegment,
+    outline_from_points,
+    outline_of_raster,
+)
 
 __all__ = [
     "CloudExtractionSettings",
@@ -132,6 +140,9 @@ class ExtractionSettings:
     def noise(self, r2: NDArray[np.floating]) -> NDArray[np.floating]:
         """Thickness bound (metres) at squared range ``r2`` (metres^2)."""
         return self.rms_base + self.rms_quadratic * r2
+
+
+_DEFAULT_SETTINGS = ExtractionSettings()
 
 
 # ------------------------------------------------------------------------------ linear algebra
@@ -259,16 +270,12 @@ def _moment_rows(
 
 
 def _sum_rows(
-    groups: NDArray[np.int64], n_groups: int, M: NDArray[np.float64], compiled: bool = False
+    groups: NDArray[np.int64], n_groups: int, M: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     """Sums of the rows of ``M`` per group (``-1`` = none): ``(n_groups, M.shape[1])``. A one-hot
-    matrix product: ~4x faster than a weighted ``bincount`` per column for a few hundred rows;
-    ``compiled``: one loop in row order (:func:`navkit.planes._kernels.sum_rows`, the same sums
-    up to the order of float64 additions)."""
-    if compiled:
-        return _kernels().sum_rows(  # type: ignore[no-any-return]
-            np.ascontiguousarray(groups, dtype=np.int64), n_groups, np.ascontiguousarray(M)
-        )
+    matrix product: ~4x faster than a weighted ``bincount`` per column for a few hundred rows.
+    Both paths use it for the region sums of the patch moments (the same floats); the mixed
+    patches' rows are summed inside :func:`navkit.planes._kernels.refine_pixels`."""
     onehot = (groups[None, :] == np.arange(n_groups)[:, None]).astype(np.float64)
     return onehot @ M
 
@@ -283,7 +290,7 @@ def _planes_from_rows(
     if compiled and len(M) > 64:
         normal, rho, rms, mean, rank1 = _kernels().plane_rows(np.ascontiguousarray(M))
         if rank1.any():  # a repeated smallest eigenvalue: LAPACK's vector, as the NumPy path
-            normal[rank1], rho[rank1], rms[rank1], _ = _planes_from_rows(M[rank1])
+            _rank1_normals(M, rank1, normal, rho)
         return normal, rho, rms, mean
     n = np.maximum(M[:, 0], 1.0)
     m = M[:, 1:4] / n[:, None]
@@ -296,6 +303,34 @@ def _planes_from_rows(
     d = np.einsum("gi,gi->g", normal, m)
     normal[d < 0] *= -1
     return normal, np.abs(d), np.sqrt(lam), m
+
+
+def _rank1_normals(
+    M: NDArray[np.float64],
+    rank1: NDArray[np.bool_],
+    normal: NDArray[np.float64],
+    rho: NDArray[np.float64],
+) -> None:
+    """The normals (and rho) of the rows whose smallest eigenvalue is repeated, in place, as
+    :func:`smallest_eigenpairs` gives them: LAPACK's first eigenvector, normalised, pointing
+    away from the origin. The empty patches (all-zero rows, ~100 of a Kinect frame's 768) all
+    have the zero matrix: one LAPACK call for all of them."""
+    idx = np.flatnonzero(rank1)
+    zero = ~M[idx].any(axis=1)
+    z, nz = idx[zero], idx[~zero]
+    rows = nz if not len(z) else np.concatenate([nz, z[:1]])
+    n = np.maximum(M[rows, 0], 1.0)
+    m = M[rows, 1:4] / n[:, None]
+    C = M[rows, 4:].reshape(-1, 3, 3) / n[:, None, None] - m[:, :, None] * m[:, None, :]
+    _, V = np.linalg.eigh(C)
+    v = V[:, :, 0] / np.sqrt(np.einsum("gi,gi->g", V[:, :, 0], V[:, :, 0]))[:, None]
+    d = np.einsum("gi,gi->g", v, m)
+    v[d < 0] *= -1
+    normal[nz] = v[: len(nz)]
+    rho[nz] = np.abs(d[: len(nz)])
+    if len(z):
+        normal[z] = v[-1]
+        rho[z] = np.abs(d[-1])
 
 
 def _block_sum(a: NDArray[np.float32], hc: int, wc: int, c: int) -> NDArray[np.float32]:
@@ -340,9 +375,7 @@ def _patch_moments(
     tol_scale = np.float32(s.inlier_factor * s.rms_quadratic)
     tol_base = np.float32(s.inlier_factor * s.rms_base)
     if compiled:
-        cnt, ref_g, Sd, SSd6 = _kernels().patch_moments(P, hc, wc, c, valid)
-        SSd = SSd6[:, [0, 1, 2, 1, 3, 4, 2, 4, 5]].reshape(-1, 3, 3)
-        M = _moment_rows(cnt, ref_g.astype(np.float64), Sd, SSd)
+        M, ref_g = _kernels().patch_moments(P, hc, wc, c, valid)
         return _Patches(P, valid, ref_g, M, tol_scale, tol_base)
     X = _WS.get("X", (3, Hc, Wc), np.float32)
     r2 = _WS.get("r2", (Hc, Wc), np.float32)
@@ -423,9 +456,31 @@ def _grow_regions(
     c = int(s.cell)
     G = hc * wc
     normal, d, rms, mean = _planes_from_rows(M, compiled)
+    cos_t = np.cos(np.radians(s.angle_deg))
+    if compiled:  # the planar test, the edge tests and the components as compiled loops
+        kern = _kernels()
+        bound, planar, eh, ev = kern.patch_graph(
+            normal,
+            d,
+            mean,
+            np.ascontiguousarray(M[:, 0]),
+            rms,
+            hc,
+            wc,
+            s.min_fill * c * c,
+            s.rms_base,
+            s.rms_quadratic,
+            float(cos_t),
+            s.distance_factor,
+        )
+
+        def union_find(keep: NDArray[np.bool_]) -> tuple[int, NDArray[np.int64]]:
+            n, comp = kern.cell_components(keep.reshape(hc, wc), eh, ev, int(s.min_cells))
+            return int(n), comp
+
+        return _prune_merge(M, normal, mean, bound, planar, union_find, s, cos_t, compiled)
     bound = s.noise(np.einsum("gi,gi->g", mean, mean))
     planar = (M[:, 0] >= s.min_fill * c * c) & (rms < bound)
-    cos_t = np.cos(np.radians(s.angle_deg))
     ids = np.arange(G).reshape(hc, wc)
     pa = np.concatenate([ids[:, :-1].ravel(), ids[:-1, :].ravel()])
     pb = np.concatenate([ids[:, 1:].ravel(), ids[1:, :].ravel()])
@@ -456,6 +511,24 @@ def _grow_regions(
         remap[1:][big] = np.arange(int(big.sum()))
         return int(big.sum()), remap[comp + 1]
 
+    return _prune_merge(M, normal, mean, bound, planar, regions, s, cos_t)
+
+
+def _prune_merge(
+    M: NDArray[np.float64],
+    normal: NDArray[np.float64],
+    mean: NDArray[np.float64],
+    bound: NDArray[np.floating],
+    planar: NDArray[np.bool_],
+    regions: Callable[[NDArray[np.bool_]], tuple[int, NDArray[np.int64]]],
+    s: ExtractionSettings,
+    cos_t: float,
+    compiled: bool = False,
+) -> tuple[int, NDArray[np.int64], int]:
+    """Steps 3-4 of :func:`_grow_regions` from the planar patches: regions (``regions(keep)``:
+    the components of the kept patches' graph), pruning, regrouping, merging (``compiled``: the
+    coplanar regions' components by union-find, :func:`navkit.planes._kernels.dense_components`,
+    the same numbering)."""
     n_planar = int(planar.sum())
     n_reg, comp = regions(planar)
     if n_reg == 0:
@@ -477,7 +550,7 @@ def _grow_regions(
         < np.maximum(rtol[:, None], rtol[None, :])
     )
     same &= same.T
-    n_m, merged = _dense_components(same)
+    n_m, merged = _kernels().dense_components(same) if compiled else _dense_components(same)
     comp = np.where(comp >= 0, merged[np.maximum(comp, 0)], -1)
     return n_m, comp, n_planar
 
@@ -587,14 +660,25 @@ def _refine_border(
     off -= rho32[kc]
     if compiled:
         stride = _sample_stride(pt.M[ids], c, raster)
-        complete, Gall, cpoints, cregion = _kernels().refine_pixels(
-            pt.P, pt.ref, pt.tol_scale, pt.tol_base, ids, own, cand, off, n32, stride, wc, c, label
+        complete, M, cpoints, cregion = _kernels().refine_pixels(
+            pt.P,
+            pt.ref,
+            pt.tol_scale,
+            pt.tol_base,
+            ids,
+            own,
+            cand,
+            off,
+            n32,
+            stride,
+            wc,
+            c,
+            label,
+            n_reg,
         )
-        mixed = np.flatnonzero(~complete)
-        G = Gall[mixed].reshape(-1, 10)
-    else:
-        complete, G = _refine_border_numpy(pt, ids, ci, cj, own, cand, off, n32, label, hc, wc, c)
-        mixed = np.flatnonzero(~complete)
+        return _Border(ids, label, complete, M, cpoints, cregion)
+    complete, G = _refine_border_numpy(pt, ids, ci, cj, own, cand, off, n32, label, hc, wc, c)
+    mixed = np.flatnonzero(~complete)
     M = np.zeros((n_reg, _NM))
     points = np.zeros((3, 0), np.float32)
     point_region = np.zeros(0, label.dtype)
@@ -608,11 +692,7 @@ def _refine_border(
         Sdd[:, _IU[0], _IU[1]] = g[:, 4:]
         Sdd[:, _IU[1], _IU[0]] = g[:, 4:]
         gref = np.repeat(ref[mixed].astype(np.float64), cm.shape[1], axis=0)[used]
-        M = _sum_rows(
-            cm.ravel()[used], n_reg, _moment_rows(g[:, 0], gref, g[:, 1:4], Sdd), compiled
-        )
-        if compiled:
-            return _Border(ids, label, complete, M, cpoints, cregion.astype(label.dtype))
+        M = _sum_rows(cm.ravel()[used], n_reg, _moment_rows(g[:, 0], gref, g[:, 1:4], Sdd))
         # the pixels of the mixed patches per region for the outlines, every t-th row / column
         # (lattice masks per stride looked up, one index list for all three coordinates)
         t = _sample_stride(pt.M[ids[mixed]], c, raster)
@@ -719,7 +799,7 @@ def _extract(
 ) -> ExtractionResult:
     """:func:`extract_planes_organized` with the compiled kernels (``compiled=True``) or their
     NumPy oracles (the tests compare the two)."""
-    s = settings or ExtractionSettings()
+    s = settings or _DEFAULT_SETTINGS  # validated once (check_settings costs ~50 us a call)
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 3 or P.shape[2] != 3:
         raise InputError(
@@ -742,7 +822,10 @@ def _extract(
     # 5. wholesale patches; the others pixel by pixel against the region planes
     rn, rd, _, _ = _planes_from_rows(_sum_rows(comp, n_reg, pt.M))
     cellmap = comp.reshape(hc, wc)
-    wholesale, ids, cand = _border_patches(cellmap, s.refine == "full")
+    if compiled:
+        wholesale, ids, cand = _kernels().border_patches(cellmap, s.refine == "full")
+    else:
+        wholesale, ids, cand = _border_patches(cellmap, s.refine == "full")
     bd = _refine_border(pt, comp, ids, cand, rn, rd, n_reg, hc, wc, c, s.outline_cell, compiled)
     wholesale = wholesale.ravel()
     wholesale[ids[bd.complete]] = True
@@ -758,9 +841,8 @@ def _extract(
     segmap = new_id[cellmap + 1]
     lab_cell = new_id[np.where(wholesale, comp, -1) + 1].reshape(hc, wc)
     if compiled:
-        mixed_lab = new_id[bd.label[mixed].astype(np.int64) + 1]
         labels, inl, cuts = _kernels().label_image(
-            pt.valid, lab_cell, ids[mixed], mixed_lab, H, W, len(keep)
+            pt.valid, lab_cell, pt.M[:, 0], ids, bd.complete, bd.label, new_id, H, W, len(keep)
         )
         inliers = [inl[cuts[k] : cuts[k + 1]] for k in range(len(keep))]
     else:
@@ -780,7 +862,8 @@ def _extract(
         wholesale.reshape(hc, wc),
         segmap,
         bd.points,
-        new_id[bd.point_region.astype(np.int64) + 1],
+        bd.point_region,
+        new_id,
         planes,
         c,
         s.outline_cell,
@@ -871,7 +954,8 @@ def _outlines(
     wholesale: NDArray[np.bool_],
     segmap: NDArray[np.int64],
     points: NDArray[np.floating],
-    point_seg: NDArray[np.int64],
+    point_region: NDArray[np.signedinteger],
+    new_id: NDArray[np.int64],
     planes: list[Plane],
     c: int,
     cell: float,
@@ -895,12 +979,19 @@ def _outlines(
     by plane are computed for all planes at once; only the projection of a plane's points (its
     axes as scalars: gathering the axes per point is ~8x slower) and the rasterisation run per
     plane. ``segmap (hc, wc)`` is the segment of each patch's region (``-1`` = none), the labels
-    are segment indices, ``points (3, N)`` the sampled pixels of the mixed patches and
-    ``point_seg (N,)`` their segments.
+    are segment indices, ``points (3, N)`` the sampled pixels of the mixed patches,
+    ``point_region (N,)`` their regions and ``new_id`` the segment of region + 1.
     """
     hc, wc = segmap.shape
     K = len(planes)
     axes, off = _plane_frames(planes)
+    if compiled:  # quadrilaterals, strides, grouping and projection in one kernel, same floats
+        uv_all, cuts, q_used, ucuts = _kernels().outline_samples(
+            pt.P, pt.valid, labels, wholesale, segmap, pt.M, points, point_region, new_id, axes,
+            off, c, cell,
+        )  # fmt: skip
+        step = np.maximum(1, np.diff(cuts) // 40_000)  # at most ~40k points per plane
+        return _outlines_compiled(uv_all, cuts, step, q_used, ucuts, cell)
 
     def project(xyz: list[NDArray], k: NDArray[np.int64]) -> NDArray[np.float64]:
         """``(..., 2)`` in-plane coordinates of points ``xyz`` (3 arrays) in segments ``k``."""
@@ -932,22 +1023,9 @@ def _outlines(
     use = np.all(lat_ok | (labels[own_r, own_q] == qseg[:, None]), axis=1)
     use &= longest <= 2.0 * cell * c
     qcuts = np.searchsorted(qseg, np.arange(K + 1))
-    if compiled:  # grouping and projection in one kernel, the same floats
-        bi, bj = ii[~use], jj[~use]
-        t = _sample_stride(pt.M[bi * wc + bj], c, cell)
-        uv_all, cuts = _kernels().outline_points(
-            points, point_seg, pt.P, pt.valid, bi, bj, t, qseg[~use], axes, off, c
-        )
-        out = []
-        for k in range(K):
-            n_k = cuts[k + 1] - cuts[k]
-            uv = uv_all[cuts[k] : cuts[k + 1] : max(1, n_k // 40_000)]
-            ql, qh = qcuts[k], qcuts[k + 1]
-            out.append(outline_from_points(uv, cell, quads=quads[ql:qh][use[ql:qh]]))
-        return out
     # points: the sampled pixels of the mixed patches, then of the wholesale patches not used
     # as quadrilaterals (every t-th row / column), grouped by segment
-    pseg = point_seg
+    pseg = new_id[np.asarray(point_region, np.int64) + 1]
     xyz = [points[a] for a in range(3)]
     if not use.all():
         bi, bj = ii[~use], jj[~use]
@@ -972,4 +1050,43 @@ def _outlines(
         uv = np.stack([x * A[a, 0] + y * A[a, 1] + z * A[a, 2] - o[a] for a in range(2)], axis=1)
         ql, qh = qcuts[k], qcuts[k + 1]
         out.append(outline_from_points(uv, cell, quads=quads[ql:qh][use[ql:qh]]))
+    return out
+
+
+def _outlines_compiled(
+    uv: NDArray[np.float64],
+    cuts: NDArray[np.int64],
+    step: NDArray[np.int64],
+    quads: NDArray[np.float64],
+    qcuts: NDArray[np.int64],
+    cell: float,
+) -> list[tuple[NDArray[np.float64], float]]:
+    """``outline_from_points(uv[cuts[k]:cuts[k + 1]:step[k]], cell, quads=quads[qcuts[k]:
+    qcuts[k + 1]])`` for every segment ``k``, the same outlines and areas: the rasters of all
+    segments drawn in one compiled pass (:func:`navkit.planes._kernels.outline_rasters`), then
+    per segment OpenCV's polygon fill, closing and contour (``outline_of_raster``)."""
+    buf, start, shape, lo, status, qint, qfin = _kernels().outline_rasters(
+        np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2),
+        cuts,
+        step,
+        np.ascontiguousarray(quads, dtype=np.float64).reshape(-1, 4, 2),
+        qcuts,
+        float(cell),
+    )
+    out = []
+    for k in range(len(cuts) - 1):
+        ql, qh = qcuts[k], qcuts[k + 1]
+        if status[k] == 1:  # fewer than 3 points and corners
+            out.append((np.zeros((0, 2)), 0.0))
+            continue
+        if status[k] == 2:  # a huge raster: outline_from_points coarsens it
+            uv_k = uv[cuts[k] : cuts[k + 1] : step[k]]
+            out.append(outline_from_points(uv_k, cell, quads=quads[ql:qh]))
+            continue
+        w, h = int(shape[k, 0]), int(shape[k, 1])
+        grid = buf[start[k] : start[k] + w * h].reshape(h, w)
+        qk = qint[ql:qh][qfin[ql:qh]]
+        if len(qk):
+            cv2.fillPoly(grid, list(qk), 1, cv2.LINE_8, 4)
+        out.append(outline_of_raster(grid, lo[k], cell))
     return out

@@ -10,7 +10,9 @@ polygons are ``(M, 2)`` arrays in metres in that frame.
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -85,13 +87,36 @@ def outline_from_points(
         # corners in 1/16 pixel (shift = 4)
         q = np.rint(((Q - lo) * (1.0 / cell) - 0.5) * 16.0).astype(np.int32)
         cv2.fillPoly(grid, list(q), 1, cv2.LINE_8, 4)
-    grid = np.asarray(cv2.morphologyEx(grid, cv2.MORPH_CLOSE, np.ones((3, 3), np.uint8)), np.uint8)
+    return outline_of_raster(grid, lo, cell)
+
+
+_CLOSE_3X3 = np.ones((3, 3), np.uint8)
+
+
+def _largest_contour(contours: Sequence[NDArray[Any]]) -> NDArray[Any]:
+    """``max(contours, key=cv2.contourArea)`` (the first of equal areas) without the areas of
+    the contours of fewer than 3 points (isolated raster cells: area 0), most of a plane's."""
+    big = [c for c in contours if len(c) >= 3]
+    if not big:
+        return contours[0]
+    c = max(big, key=cv2.contourArea)
+    return c if cv2.contourArea(c) > 0 else contours[0]
+
+
+def outline_of_raster(
+    grid: NDArray[np.uint8], lo: NDArray[np.float64], cell: float
+) -> tuple[NDArray[np.float64], float]:
+    """The last steps of :func:`outline_from_points` on its raster ``grid (rows, cols)`` (1 =
+    covered, row = v, column = u; cell ``(i, j)`` spans ``lo + (j, i) cell`` to ``lo + (j + 1,
+    i + 1) cell``): 3 x 3 closing, area, the largest outer contour simplified to one cell,
+    counter-clockwise. The organised extraction fills the rasters of all planes in one
+    compiled pass and calls this per plane (the same outlines)."""
+    grid = np.asarray(cv2.morphologyEx(grid, cv2.MORPH_CLOSE, _CLOSE_3X3), np.uint8)
     area = float(np.count_nonzero(grid)) * cell * cell
     contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
         return np.zeros((0, 2)), area
-    c = max(contours, key=cv2.contourArea)
-    c = cv2.approxPolyDP(c, 1.0, True)
+    c = cv2.approxPolyDP(_largest_contour(contours), 1.0, True)
     # raster (x, y) = (u, v); OpenCV's oriented area is > 0 for a counter-clockwise polygon in
     # (u, v) (checked against navkit.geometry.signed_area): the others are reversed
     if len(c) >= 3 and cv2.contourArea(c, oriented=True) < 0:

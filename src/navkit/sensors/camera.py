@@ -77,7 +77,13 @@ class PinholeCamera:
                 field="depth",
                 expected=f"({self.height}, {self.width}) image",
             )
-        return self.pixel_rays() * d[..., None]
+        # pixel_rays() * depth by coordinate, the rays as a row / column broadcast: the same
+        # products bit for bit, ~20x faster than multiplying a (H, W, 3) ray image (issue 12)
+        out = np.empty((self.height, self.width, 3))
+        np.multiply(((np.arange(self.width) - self.cx) / self.fx)[None, :], d, out=out[..., 0])
+        np.multiply(((np.arange(self.height) - self.cy) / self.fy)[:, None], d, out=out[..., 1])
+        out[..., 2] = d
+        return out
 
     def project(self, points: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Pixels ``(N, 2)`` and depths ``(N,)`` of camera-frame points ``(N, 3)``.
