@@ -170,3 +170,20 @@ def test_an_interrupted_batch_keeps_its_completed_inputs(real_tasks, tmp_path):
     assert done == [good[0].key, good[1].key]
     res = run_batch(good, out, BatchSettings(resume=True))
     assert [r["status"] for r in res.rows] == ["skipped", "skipped", "ok"]
+
+
+def test_summarize_counts_every_element_of_a_list_figure_as_a_trial():
+    # two chunks of simulated runs and a failed task: 3 of 5 runs succeeded
+    rows = [
+        {
+            "key": "a",
+            "status": "ok",
+            "figures": {"hit": [True, False, True], "err": [1.0, 3.0, 2.0]},
+        },
+        {"key": "b", "status": "skipped", "figures": {"hit": [True, False], "err": [4.0, 5.0]}},
+        {"key": "c", "status": "failed", "error": "x"},
+    ]
+    s = summarize(rows)
+    assert (s["rates"]["hit"]["successes"], s["rates"]["hit"]["trials"]) == (3, 5)
+    assert s["rates"]["hit"]["text"] == str(wilson_interval(3, 5))
+    assert s["figures"]["err"]["n"] == 5 and s["figures"]["err"]["mean"] == 3.0

@@ -1,5 +1,6 @@
-"""``navkit path return`` as a sweep: every run its own task and random stream, so 2 workers,
-the serial loop, the runs made one by one and a shorter sweep all agree run for run."""
+"""``navkit path return`` as a sweep: runs in chunks of tasks, every run its own random stream, so
+2 workers, the serial loop, other chunk sizes, the runs made one by one and a shorter sweep all
+agree run for run."""
 
 from __future__ import annotations
 
@@ -51,16 +52,19 @@ def test_two_workers_equal_the_runs_made_one_by_one(cli, path_json, tmp_path):
     from navkit.sensors import VisualOdometryNoise
     from navkit.sim.return_sim import simulate_returns
 
-    a, b = tmp_path / "serial", tmp_path / "dask"
+    a, b, c = tmp_path / "serial", tmp_path / "dask", tmp_path / "one-task"
     args = ("path", "return", path_json, "--runs", "4", "--seed", "7")
-    r = cli(*args, "-o", a)
+    r = cli(*args, "-o", a, "--runs-per-task", "2")
     assert r.exit_code == 0, r.output
-    r = cli(*args, "-o", b, "--workers", "2")
+    r = cli(*args, "-o", b, "--workers", "2", "--runs-per-task", "2")
     assert r.exit_code == 0, r.output
-    assert _detail(a) == _detail(b)
-    for i in range(4):
-        ta = (a / f"run-00{i}" / "true_xy.npy").read_bytes()
-        assert ta == (b / f"run-00{i}" / "true_xy.npy").read_bytes()
+    r = cli(*args, "-o", c)  # the default chunk: all 4 runs in one lock-step task
+    assert r.exit_code == 0, r.output
+    assert _detail(a) == _detail(b) == _detail(c)
+    assert [x["key"] for x in _rows(b)] == ["runs-0000-0001", "runs-0002-0003"]
+    for key in ("runs-0000-0001", "runs-0002-0003"):
+        ta = (a / key / "true_xy.npy").read_bytes()
+        assert ta == (b / key / "true_xy.npy").read_bytes()
     # each run made alone, straight from the simulator with its own stream (7, i)
     spline = read_path_json(path_json)
     for i, d in enumerate(_detail(b)):
@@ -82,11 +86,10 @@ def test_summary_rates_count_the_runs_and_a_shorter_sweep_is_a_prefix(cli, path_
     assert cli("path", "return", path_json, "--runs", "5", "-o", out).exit_code == 0
     assert cli("path", "return", path_json, "--runs", "2", "-o", short).exit_code == 0
     assert _detail(short) == _detail(out)[:2]  # run i does not depend on how many runs there are
-    rows = _rows(out)
-    assert [r["key"] for r in rows] == [f"run-00{i}" for i in range(5)]
+    detail = _detail(out)
     summary = json.loads((out / "batch_summary.json").read_text())
-    stopped = sum(r["figures"]["stopped_within_the_stop_radius"] for r in rows)
-    within = sum(r["figures"]["final_error_pct"] <= ERROR_RATE_PCT for r in rows)
+    stopped = sum(d["stopped"] for d in detail)
+    within = sum(d["final_error_pct"] <= ERROR_RATE_PCT for d in detail)
     rate = summary["rates"]["stopped_within_the_stop_radius"]
     assert (rate["successes"], rate["trials"]) == (stopped, 5)
     assert rate["text"] == str(wilson_interval(stopped, 5))
@@ -98,10 +101,11 @@ def test_summary_rates_count_the_runs_and_a_shorter_sweep_is_a_prefix(cli, path_
 
 def test_resume_recomputes_only_the_deleted_run(cli, path_json, tmp_path):
     out = tmp_path / "r"
-    assert cli("path", "return", path_json, "--runs", "3", "-o", out).exit_code == 0
+    args = ("path", "return", path_json, "--runs", "3", "--runs-per-task", "1", "-o", out)
+    assert cli(*args).exit_code == 0
     before = _detail(out)
-    (out / "run-001" / "run.json").unlink()
-    r = cli("path", "return", path_json, "--runs", "3", "-o", out, "--resume")
+    (out / "runs-0001-0001" / "runs.json").unlink()
+    r = cli(*args, "--resume")
     assert r.exit_code == 0, r.output
     assert [x["status"] for x in _rows(out)] == ["skipped", "ok", "skipped"]
     assert _detail(out) == before

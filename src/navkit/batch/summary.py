@@ -60,6 +60,9 @@ def summarize(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
 
     - a boolean figure -> a rate with its 95 % interval (``rates``);
     - a numeric figure -> count, mean, median, min, max, p95 (``figures``).
+
+    A figure whose value is a list holds one value per trial of its task (a task that simulates
+    a chunk of runs): every element counts as one trial.
     """
     status = {s: sum(r.get("status") == s for r in rows) for s in ("ok", "skipped", "failed")}
     done = [r for r in rows if r.get("status") in ("ok", "skipped")]
@@ -71,7 +74,11 @@ def summarize(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     rates: dict[str, Any] = {}
     figures: dict[str, Any] = {}
     for name in names:
-        vals = [(r.get("figures") or {}).get(name) for r in done]
+        vals: list[Any] = []
+        for r in done:
+            v = (r.get("figures") or {}).get(name)
+            # a list is one value per trial of a task (e.g. a chunk of simulated runs)
+            vals.extend(v if isinstance(v, list) else [v])
         vals = [v for v in vals if v is not None]
         if vals and all(isinstance(v, bool) for v in vals):
             rate = wilson_interval(sum(bool(v) for v in vals), len(vals))

@@ -210,15 +210,19 @@ def return_(
     stop_radius: float = typer.Option(
         0.05, "--stop-radius", help="Stop radius around the start (m)."
     ),
+    runs_per_task: int = typer.Option(
+        25, "--runs-per-task", min=1, max=10_000, help="Runs simulated together in one task."
+    ),
     workers: int | None = WORKERS,
     scheduler: str | None = SCHEDULER,
     resume: bool = RESUME,
 ) -> None:
     """Simulate returns from the end of a stored path to its start (mode 2, paper fig. 4).
 
-    Each run is one task of a batch (OUT/run-NNN/, batch.jsonl, rates with 95 % intervals in
-    batch_summary.json) with its own random stream from (--seed, run index), so the runs do not
-    depend on how they are split across --workers or a --scheduler's cluster.
+    The runs go in tasks of --runs-per-task (OUT/runs-FIRST-LAST/, batch.jsonl, rates with
+    95 % intervals in batch_summary.json); every run has its own random stream from (--seed,
+    run index), so no run depends on how they are chunked or split across --workers or a
+    --scheduler's cluster.
 
     \b
     Example:
@@ -270,7 +274,7 @@ def return_(
         check_out_dir(out, overwrite or resume)
         sweep = ReturnSweepSettings(vo=vo, controller=ctrl, seed=seed)
         bs = run_inputs(
-            return_sweep_tasks(path_json, runs, sweep),
+            return_sweep_tasks(path_json, runs, sweep, runs_per_task),
             out,
             workers=workers,
             scheduler=scheduler,

@@ -14,6 +14,7 @@ This module lives in ``navkit.sim`` because the path capability may not import t
 from __future__ import annotations
 
 import logging
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -100,20 +101,28 @@ def corrupt_step(
     true_before: NDArray[np.float64],
     true_after: NDArray[np.float64],
     vo: VisualOdometryNoise,
-    rng: np.random.Generator,
+    rng: np.random.Generator | None = None,
+    *,
+    noise: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> NDArray[np.float64]:
-    """Advance VO estimates ``(R, 3)`` by the true steps ``before -> after``, corrupted by ``vo``."""
+    """Advance VO estimates ``(R, 3)`` by the true steps ``before -> after``, corrupted by ``vo``.
+
+    The two standard normals per run (scale, heading) come from ``noise`` when given, else from
+    ``rng`` (``R`` scale draws, then ``R`` heading draws).
+    """
     c, s = np.cos(true_before[:, 2]), np.sin(true_before[:, 2])
     d = true_after[:, :2] - true_before[:, :2]
     bx, by = c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]  # body-frame increment
     dth = true_after[:, 2] - true_before[:, 2]
     dist = np.hypot(bx, by)
     n = len(est)
-    scale = 1.0 + vo.scale_bias + vo.scale_sigma * rng.standard_normal(n)
+    if noise is None:
+        if rng is None:
+            raise ValueError("corrupt_step needs rng or noise")
+        noise = (rng.standard_normal(n), rng.standard_normal(n))
+    scale = 1.0 + vo.scale_bias + vo.scale_sigma * noise[0]
     moving = (dist > 0) | (dth != 0)
-    dth_n = dth + np.where(
-        moving, vo.heading_bias_per_m * dist + vo.heading_sigma * rng.standard_normal(n), 0.0
-    )
+    dth_n = dth + np.where(moving, vo.heading_bias_per_m * dist + vo.heading_sigma * noise[1], 0.0)
     ce, se = np.cos(est[:, 2]), np.sin(est[:, 2])
     out = est.copy()
     out[:, 0] += scale * (ce * bx - se * by)
@@ -122,13 +131,37 @@ def corrupt_step(
     return out
 
 
+_NOISE_BLOCK = 256
+"""Control cycles of noise drawn at a time from each run's own stream."""
+
+
+def _step_noise(
+    rng: np.random.Generator | Sequence[np.random.Generator], runs: int
+) -> Iterator[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """The (scale, heading) standard normals of every run, one control cycle at a time.
+
+    One shared generator: ``runs`` scale draws, then ``runs`` heading draws per cycle. One
+    generator per run: run ``i`` draws (scale, heading) per cycle from ``rng[i]`` alone, in blocks
+    of :data:`_NOISE_BLOCK` cycles (the same numbers as one cycle at a time), so a run's noise
+    does not depend on which other runs share its lock-step batch.
+    """
+    if isinstance(rng, np.random.Generator):
+        while True:
+            yield rng.standard_normal(runs), rng.standard_normal(runs)
+    gens = list(rng)
+    while True:
+        block = np.stack([g.standard_normal((_NOISE_BLOCK, 2)) for g in gens], axis=1)
+        for k in range(_NOISE_BLOCK):
+            yield block[k, :, 0], block[k, :, 1]
+
+
 def simulate_returns(
     path: PathSpline,
     *,
     runs: int = 40,
     settings: ReturnSettings | None = None,
     vo: VisualOdometryNoise | None = None,
-    rng: np.random.Generator | int | None = None,
+    rng: np.random.Generator | Sequence[np.random.Generator] | int | None = None,
     initial_true: ArrayLike | None = None,
     initial_estimate: ArrayLike | None = None,
     max_time: float | None = None,
@@ -145,7 +178,9 @@ def simulate_returns(
         Controller settings.
     vo : VisualOdometryNoise, optional
         VO error model; its ``rate_hz`` is the control rate.
-    rng : Generator or seed, optional
+    rng : Generator, seed, or a sequence of ``runs`` Generators, optional
+        One stream for all runs, or one stream per run (run ``i``'s noise then depends on
+        ``rng[i]`` only, so the runs may be split into batches or across processes freely).
     initial_true : (3,) or (R, 3) array, optional
         True start poses; default: the path's end, facing along the path (the robot must turn).
     initial_estimate : (3,) or (R, 3) array, optional
@@ -157,7 +192,16 @@ def simulate_returns(
         raise ConfigError(f"is {runs}", field="runs", expected="at least 1")
     settings = settings or ReturnSettings()
     vo = vo or VisualOdometryNoise()
-    rng = rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
+    if isinstance(rng, Sequence):
+        if len(rng) != runs or not all(isinstance(g, np.random.Generator) for g in rng):
+            raise ConfigError(
+                f"has {len(rng)} entries", field="rng", expected=f"{runs} numpy Generators"
+            )
+        noise = _step_noise(rng, runs)
+    else:
+        noise = _step_noise(
+            rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng), runs
+        )
     L = path.total_length
     dt = 1.0 / vo.rate_hz
     if initial_true is None:
@@ -204,7 +248,7 @@ def simulate_returns(
         lat_n += moving
         lat_max = np.maximum(lat_max, np.where(moving, lat, 0.0))
         new_true = unicycle_step(true, cmd.v, cmd.omega, dt)
-        est = corrupt_step(est, true, new_true, vo, rng)
+        est = corrupt_step(est, true, new_true, vo, noise=next(noise))
         true = new_true
         true_hist.append(true[:, :2].copy())
         est_hist.append(est[:, :2].copy())
