@@ -43,7 +43,9 @@ __all__ = [
     "refine_kernel",
     "rings_by_order_kernel",
     "robust_normals_kernel",
+    "robust_strides_kernel",
     "split_kernel",
+    "stages_2_5_kernel",
     "vertex_kernel",
 ]
 
@@ -428,6 +430,463 @@ def classify_kernel(  # type: ignore[no-untyped-def]
             p4a[r, k] = p4
             p5a[r, k] = p5
     return labels, p1a, p2a, p3a, p4a, p5a
+
+
+# ------------------------------------------------------------------------------------------
+# stages 2-5 fused: mesh, robust normals, H_s, rules, classes in one pass over the grid
+# (twins: mesh.build_mesh, mesh.robust_cell_normals, rules.classify with normal_support = 0)
+
+
+@njit(cache=True, error_model="numpy")
+def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # type: ignore[no-untyped-def]
+    """The strides of :func:`~navkit.obstacles.mesh.robust_cell_normals` from the grid.
+
+    ``az (n_az, S) float64`` are NumPy's ``arctan2`` of the sampled columns (``points[:,
+    ::step]`` as float32, minus the origin in float64). Returns ``(dalpha, m_col)``: the median
+    azimuth step (rad, 1.0 when none) and the elevation stride per column ``(n_el,) intp``,
+    computed as the twin computes them (float32 horizontal ranges of every 4th row, their
+    per-column medians, ``np.interp`` over the empty columns, the clipped ``rint``).
+    """
+    n_az, n_el = valid.shape
+    two_pi = 2 * np.pi
+    S = az.shape[1]
+    dal = np.empty(max(n_az - 1, 0) * S)
+    m = 0
+    for i in range(n_az - 1):
+        for s in range(S):
+            v = ((az[i + 1, s] - az[i, s]) + np.pi) % two_pi - np.pi
+            v = abs(v)
+            if math.isfinite(v) and v > 0:
+                dal[m] = v
+                m += 1
+    dalpha = _median(dal[:m]) if m > 0 else 1.0
+    ox32 = np.float32(origin[0])
+    oy32 = np.float32(origin[1])
+    n4 = (n_az + 3) // 4
+    col = np.empty(n4, np.float32)
+    xp = np.empty(n_el, np.float64)
+    fp = np.empty(n_el, np.float64)
+    n_cols = 0
+    for j in range(n_el):
+        cnt = 0
+        for i in range(0, n_az, 4):
+            if valid[i, j]:
+                # float32 hypot as glibc's hypotf computes it: in double, rounded once
+                hx = np.float64(np.float32(points[i, j, 0]) - ox32)
+                hy = np.float64(np.float32(points[i, j, 1]) - oy32)
+                col[cnt] = np.float32(math.sqrt(hx * hx + hy * hy))
+                cnt += 1
+        if cnt == 0:
+            continue
+        lo = _kth(col[:cnt], (cnt - 1) // 2)
+        hi = _kth(col[:cnt], cnt // 2)
+        xp[n_cols] = j
+        fp[n_cols] = np.float64((lo + hi) / np.float32(2))
+        n_cols += 1
+    rh_col = np.ones(n_el)
+    if n_cols == 1:
+        for j in range(n_el):
+            rh_col[j] = fp[0]
+    elif n_cols > 1:
+        # np.interp at the integers 0 .. n_el - 1 (left / right: the end values)
+        k = 0
+        for j in range(n_el):
+            x = np.float64(j)
+            if x <= xp[0]:
+                rh_col[j] = fp[0]
+                continue
+            if x >= xp[n_cols - 1]:
+                rh_col[j] = fp[n_cols - 1]
+                continue
+            while xp[k + 1] <= x:
+                k += 1
+            if xp[k] == x:
+                rh_col[j] = fp[k]
+            else:
+                slope = (fp[k + 1] - fp[k]) / (xp[k + 1] - xp[k])
+                rh_col[j] = slope * (x - xp[k]) + fp[k]
+    se = np.empty(n_el)
+    for j in range(n_el - 1):
+        se[j] = abs(rh_col[j + 1] - rh_col[j])
+    se[n_el - 1] = se[n_el - 2] if n_el > 1 else 0.0
+    m_col = np.empty(n_el, np.intp)
+    for j in range(n_el):
+        a = se[j]
+        b = se[j - 1] if j > 0 else se[n_el - 1]
+        f = b if (a != a or b < a) else a  # np.fmin
+        if f != f or f < 1e-3:
+            f = 1e-3
+        v = np.rint(support_m / (2.0 * f))
+        m_col[j] = min(max(int(v), 1), max_stride)
+    return dalpha, m_col
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _robust_row(  # type: ignore[no-untyped-def]
+    i,
+    X,
+    Y,
+    Z,
+    Df,
+    vn,
+    n_az,
+    n_el,
+    ox32,
+    oy32,
+    k_scale,
+    m_col,
+    wrap,
+    max_stride,
+    jump_h,
+    jump_f,
+    ratio,
+    use_ratio,
+):
+    """Row ``i`` of the robust vertex normals (the first loop of :func:`robust_normals_kernel`)."""
+    for j in range(n_el):
+        f = i * n_el + j
+        hx = np.float64(X[f] - ox32)
+        hy = np.float64(Y[f] - oy32)
+        rh = np.float32(math.sqrt(hx * hx + hy * hy))
+        kf = np.rint(k_scale / rh)
+        if kf != kf:
+            k = 1
+        elif kf > max_stride:
+            k = max_stride
+        elif kf < 1:
+            k = 1
+        else:
+            k = int(kf)
+        if wrap:
+            ip = i + k
+            if ip >= n_az:
+                ip %= n_az
+            im = i - k
+            if im < 0:
+                im %= n_az
+        else:
+            ip = min(i + k, n_az - 1)
+            im = max(i - k, 0)
+        m = m_col[j]
+        jp = min(j + m, n_el - 1)
+        jm = max(j - m, 0)
+        zc = Z[f]
+        dc = Df[f]
+        lim = jump_h + jump_f * dc
+        e0 = ip * n_el + j
+        d0 = Df[e0]
+        if not (
+            np.float64(abs(Z[e0] - zc)) <= lim
+            and (not use_ratio or abs(d0 - dc) <= ratio * min(d0, dc))
+        ):
+            e0 = f
+        e1 = im * n_el + j
+        d1 = Df[e1]
+        if not (
+            np.float64(abs(Z[e1] - zc)) <= lim
+            and (not use_ratio or abs(d1 - dc) <= ratio * min(d1, dc))
+        ):
+            e1 = f
+        e2 = i * n_el + jp
+        if not np.float64(abs(Z[e2] - zc)) <= lim:
+            e2 = f
+        e3 = i * n_el + jm
+        if not np.float64(abs(Z[e3] - zc)) <= lim:
+            e3 = f
+        tax = X[e0] - X[e1]
+        tay = Y[e0] - Y[e1]
+        taz = Z[e0] - Z[e1]
+        tex = X[e2] - X[e3]
+        tey = Y[e2] - Y[e3]
+        tez = Z[e2] - Z[e3]
+        nx = tay * tez - taz * tey
+        ny = taz * tex - tax * tez
+        nz = tax * tey - tay * tex
+        sgn = np.float32(-1.0) if nz < 0 else np.float32(1.0)
+        inv = sgn / np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
+        cx, cy, cz = nx * inv, ny * inv, nz * inv
+        vn[f, 0] = cx if math.isfinite(cx) else np.float32(0.0)
+        vn[f, 1] = cy if math.isfinite(cy) else np.float32(0.0)
+        vn[f, 2] = cz if math.isfinite(cz) else np.float32(0.0)
+
+
+@njit(cache=True, error_model="numpy")
+def stages_2_5_kernel(  # type: ignore[no-untyped-def]
+    points,
+    valid,
+    origin,
+    wrap,
+    jump_h32,
+    jump_f32,
+    ratio32,
+    use_ratio,
+    steep_cos,
+    use_steep,
+    use_robust,
+    k_scale,
+    m_col,
+    max_stride,
+    jump_h,
+    jump_f,
+    ratio,
+    c2,
+    cos_c1,
+    chain_min,
+    want_rules,
+):
+    """Stages 2-5 in one pass over the cells: :func:`mesh_kernel`, the robust normals of
+    :func:`robust_normals_kernel` (with ``use_robust``; only their vertical component is kept)
+    and :func:`classify_kernel`, cell by cell along each row, with no per-triangle temporaries.
+
+    Mesh arguments as :func:`mesh_kernel` (``jump_h32, jump_f32, ratio32, steep_cos`` float32),
+    robust ones as :func:`robust_normals_kernel` (``k_scale`` float32, ``jump_h, jump_f, ratio``
+    float64), rule ones as :func:`classify_kernel`. Returns ``ok, normal, vray, rng, z_min,
+    z_max, jump`` (as :func:`mesh_kernel`), ``labels`` and the rules ``p1 .. p5`` (``(0, 0)``
+    arrays unless ``want_rules``). The same values as the three kernels one after the other.
+    """
+    n_az, n_el = valid.shape
+    R = n_az if wrap else n_az - 1
+    C = n_el - 1
+    C2 = 2 * C
+    nv = n_az * n_el
+    o0 = np.float32(origin[0])
+    o1 = np.float32(origin[1])
+    o2 = np.float32(origin[2])
+    X = np.empty(nv, np.float32)
+    Y = np.empty(nv, np.float32)
+    Z = np.empty(nv, np.float32)
+    D = np.empty(nv, np.float32)
+    Df = np.empty(nv if use_robust else 0, np.float64)
+    vray = np.empty((n_az, n_el, 3), np.float32)
+    for i in range(n_az):
+        for j in range(n_el):
+            f = i * n_el + j
+            x = np.float32(points[i, j, 0])
+            y = np.float32(points[i, j, 1])
+            z = np.float32(points[i, j, 2])
+            X[f] = x
+            Y[f] = y
+            Z[f] = z
+            rx = x - o0
+            ry = y - o1
+            rz = z - o2
+            d = np.float32(math.sqrt(rx * rx + ry * ry + rz * rz))
+            D[f] = d
+            vray[i, j, 0] = rx / d
+            vray[i, j, 1] = ry / d
+            vray[i, j, 2] = rz / d
+            if use_robust:
+                dx = np.float64(x) - origin[0]
+                dy = np.float64(y) - origin[1]
+                dz = np.float64(z) - origin[2]
+                Df[f] = math.sqrt(dx * dx + dy * dy + dz * dz)
+    vn = np.empty((nv if use_robust else 0, 3), np.float32)
+    ok = np.empty((R, C2), np.bool_)
+    normal = np.empty((R, C2, 3), np.float32)
+    rng = np.empty((R, C2), np.float32)
+    zmin = np.empty((R, C2), np.float32)
+    zmax = np.empty((R, C2), np.float32)
+    jump = np.empty((R, C2), np.bool_)
+    labels = np.empty((R, C2), np.int8)
+    nr = R if want_rules else 0
+    nc = C2 if want_rules else 0
+    p1a = np.zeros((nr, nc), np.bool_)
+    p2a = np.zeros((nr, nc), np.bool_)
+    p3a = np.zeros((nr, nc), np.bool_)
+    p4a = np.zeros((nr, nc), np.bool_)
+    p5a = np.zeros((nr, nc), np.bool_)
+    third = np.float32(1.0 / 3.0)
+    one = np.float32(1.0)
+    ox32 = np.float32(origin[0])
+    oy32 = np.float32(origin[1])
+    huge = 1.0e6
+    seg_w = 1.0e7
+    tiny = np.float32(1e-9)
+    if use_robust and R > 0:
+        _robust_row(
+            0,
+            X,
+            Y,
+            Z,
+            Df,
+            vn,
+            n_az,
+            n_el,
+            ox32,
+            oy32,
+            k_scale,
+            m_col,
+            wrap,
+            max_stride,
+            jump_h,
+            jump_f,
+            ratio,
+            use_ratio,
+        )
+    for r in range(R):
+        r1 = r + 1
+        if r1 == n_az:
+            r1 = 0
+        if use_robust and r1 != 0:
+            _robust_row(
+                r1,
+                X,
+                Y,
+                Z,
+                Df,
+                vn,
+                n_az,
+                n_el,
+                ox32,
+                oy32,
+                k_scale,
+                m_col,
+                wrap,
+                max_stride,
+                jump_h,
+                jump_f,
+                ratio,
+                use_ratio,
+            )
+        seg = 0
+        run_min = huge
+        b0 = r * n_el
+        b1 = r1 * n_el
+        for c in range(C):
+            f00 = b0 + c
+            f01 = f00 + 1
+            f10 = b1 + c
+            f11 = f10 + 1
+            x00, x01, x10, x11 = X[f00], X[f01], X[f10], X[f11]
+            y00, y01, y10, y11 = Y[f00], Y[f01], Y[f10], Y[f11]
+            z00, z01, z10, z11 = Z[f00], Z[f01], Z[f10], Z[f11]
+            d00, d01, d10, d11 = D[f00], D[f01], D[f10], D[f11]
+            v00, v01, v10, v11 = valid[r, c], valid[r, c + 1], valid[r1, c], valid[r1, c + 1]
+            ex, ey, ez = x01 - x10, y01 - y10, z01 - z10
+            ax, ay, az = x00 - x10, y00 - y10, z00 - z10
+            bx, by, bz = x11 - x10, y11 - y10, z11 - z10
+            dsh = d01 + d10
+            zmn = _min_nan(z01, z10)
+            zmx = _max_nan(z01, z10)
+            rz_cell = _NAN32
+            if use_robust:  # the cell's robust normal: the normalised sum of its corners'
+                sx = vn[f00, 0] + vn[f01, 0] + vn[f10, 0] + vn[f11, 0]
+                sy = vn[f00, 1] + vn[f01, 1] + vn[f10, 1] + vn[f11, 1]
+                sz = vn[f00, 2] + vn[f01, 2] + vn[f10, 2] + vn[f11, 2]
+                nrm_c = np.float32(math.sqrt(sx * sx + sy * sy + sz * sz))
+                if nrm_c == 0:
+                    nrm_c = _NAN32
+                rz_cell = sz / nrm_c
+            for t in range(2):
+                k = 2 * c + t
+                # ---- stages 2-4 (mesh_kernel)
+                if t == 0:
+                    nx = ay * ez - az * ey
+                    ny = az * ex - ax * ez
+                    nz = ax * ey - ay * ex
+                    vt = v00 and v01 and v10
+                    rg = (dsh + d00) * third
+                    lo = _min_nan(zmn, z00)
+                    hi = _max_nan(zmx, z00)
+                else:
+                    nx = ey * bz - ez * by
+                    ny = ez * bx - ex * bz
+                    nz = ex * by - ey * bx
+                    vt = v10 and v01 and v11
+                    rg = (dsh + d11) * third
+                    lo = _min_nan(zmn, z11)
+                    hi = _max_nan(zmx, z11)
+                nrm = np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
+                good = vt and nrm > 0
+                if good:
+                    s = one / nrm
+                    if nz < 0:
+                        s = -s
+                else:
+                    s = _NAN32
+                n0 = nx * s
+                n1 = ny * s
+                nzz = nz * s
+                normal[r, k, 0] = n0
+                normal[r, k, 1] = n1
+                normal[r, k, 2] = nzz
+                rng[r, k] = rg
+                zmin[r, k] = lo
+                zmax[r, k] = hi
+                ok[r, k] = good
+                jp = False
+                if good:
+                    jp = hi - lo > jump_h32 + jump_f32 * rg
+                    if use_ratio:
+                        if t == 0:
+                            jp = jp or abs(d00 - d10) > ratio32 * min(d00, d10)
+                        else:
+                            jp = jp or abs(d01 - d11) > ratio32 * min(d01, d11)
+                        if use_steep and not jp:
+                            if t == 0:
+                                e = abs(d00 - d01) > ratio32 * min(d00, d01)
+                            else:
+                                e = abs(d01 - d11) > ratio32 * min(d01, d11)
+                            jp = e and (abs(nzz) < steep_cos or lo > jump_h32)
+                jump[r, k] = jp
+                # ---- stage 5 (classify_kernel)
+                p2 = False
+                p3 = False
+                if jp:
+                    vi = r if t == 0 else r1  # the first vertex's line of sight
+                    q0, q1 = vray[vi, c, 0], vray[vi, c, 1]
+                    num = n0 * q0 + n1 * q1
+                    den = np.float32(math.sqrt(n0 * n0 + n1 * n1)) * np.float32(
+                        math.sqrt(q0 * q0 + q1 * q1)
+                    )
+                    if den > tiny:
+                        cosz = np.float64(num / den)
+                    else:
+                        cosz = 0.0
+                    p2 = cosz > c2
+                    p3 = cosz < -c2
+                p4 = good and not jp
+                behind = good and p2 and not p4
+                side = good and not p2 and not p3 and not p4
+                shadow = behind or side
+                if jp or not use_robust:
+                    nzr = nzz
+                else:
+                    nzr = rz_cell
+                    if not math.isfinite(nzr):
+                        nzr = nzz
+                p1 = good and not shadow and nzr < cos_c1
+                breaker = (not good) or shadow
+                if breaker:
+                    seg += 1
+                    run_min = huge
+                elif p1:
+                    v = np.float64(lo)
+                    if v < run_min:
+                        run_min = v
+                p5 = False
+                if not breaker:
+                    sw = seg * seg_w
+                    base = (run_min - sw) + sw
+                    p5 = base < huge / 2 and np.float64(lo) - base >= chain_min
+                if not good:
+                    lab = -1
+                elif behind:
+                    lab = -4
+                elif side:
+                    lab = -3
+                elif p1 or p5:
+                    lab = -2
+                else:
+                    lab = 0
+                labels[r, k] = lab
+                if want_rules:
+                    p1a[r, k] = p1
+                    p2a[r, k] = p2
+                    p3a[r, k] = p3
+                    p4a[r, k] = p4
+                    p5a[r, k] = p5
+    return ok, normal, vray, rng, zmin, zmax, jump, labels, p1a, p2a, p3a, p4a, p5a
 
 
 # ------------------------------------------------------------------------------------------
