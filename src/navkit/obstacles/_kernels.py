@@ -521,18 +521,44 @@ def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # 
     return dalpha, m_col
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _robust_row(  # type: ignore[no-untyped-def]
-    i,
+@njit(cache=True, error_model="numpy")
+def _vertex_pass(pf, vf, origin, nv, n_el, X, Y, Z, V, D, vr):  # type: ignore[no-untyped-def]
+    """Stage 2-5 pass 1: float32 coordinates, validity, range and line of sight per vertex, in
+    flat arrays with one extra row (row 0 again: the seam) and one more vertex (padding)."""
+    o0 = np.float32(origin[0])
+    o1 = np.float32(origin[1])
+    o2 = np.float32(origin[2])
+    for f in range(nv):
+        X[f] = np.float32(pf[f, 0])
+        Y[f] = np.float32(pf[f, 1])
+        Z[f] = np.float32(pf[f, 2])
+        V[f] = vf[f]
+    for f in range(nv):
+        rx = X[f] - o0
+        ry = Y[f] - o1
+        rz = Z[f] - o2
+        d = np.float32(math.sqrt(rx * rx + ry * ry + rz * rz))
+        D[f] = d
+        vr[3 * f] = rx / d
+        vr[3 * f + 1] = ry / d
+        vr[3 * f + 2] = rz / d
+    for f in range(n_el + 1):
+        g = f if f < nv else nv - 1
+        X[nv + f] = X[g]
+        Y[nv + f] = Y[g]
+        Z[nv + f] = Z[g]
+        D[nv + f] = D[g]
+        V[nv + f] = V[g] if f < n_el else False
+
+
+@njit(cache=True, error_model="numpy")
+def _robust_vertex_pass(  # type: ignore[no-untyped-def]
     X,
     Y,
     Z,
-    Df,
-    vn,
+    origin,
     n_az,
     n_el,
-    ox32,
-    oy32,
     k_scale,
     m_col,
     wrap,
@@ -541,73 +567,341 @@ def _robust_row(  # type: ignore[no-untyped-def]
     jump_f,
     ratio,
     use_ratio,
+    Df,
+    kst,
+    nvx,
+    nvy,
+    nvz,
 ):
-    """Row ``i`` of the robust vertex normals (the first loop of :func:`robust_normals_kernel`)."""
-    for j in range(n_el):
-        f = i * n_el + j
+    """Stage 2-5 pass 2: the robust vertex normals of :func:`robust_normals_kernel` (first
+    loop) into ``nvx, nvy, nvz`` (flat float32, with the extra row of :func:`_vertex_pass`);
+    ``Df (nv,) float64`` and ``kst (nv,) int64`` are work arrays."""
+    nv = n_az * n_el
+    ne = nv + n_el + 1
+    for f in range(nv):
+        dx = np.float64(X[f]) - origin[0]
+        dy = np.float64(Y[f]) - origin[1]
+        dz = np.float64(Z[f]) - origin[2]
+        Df[f] = math.sqrt(dx * dx + dy * dy + dz * dz)
+    ox32 = np.float32(origin[0])
+    oy32 = np.float32(origin[1])
+    fmax = np.float32(max_stride)
+    for f in range(nv):  # the azimuth strides (vectorised)
         hx = np.float64(X[f] - ox32)
         hy = np.float64(Y[f] - oy32)
         rh = np.float32(math.sqrt(hx * hx + hy * hy))
         kf = np.rint(k_scale / rh)
-        if kf != kf:
-            k = 1
-        elif kf > max_stride:
-            k = max_stride
-        elif kf < 1:
-            k = 1
-        else:
-            k = int(kf)
-        if wrap:
-            ip = i + k
-            if ip >= n_az:
-                ip %= n_az
-            im = i - k
-            if im < 0:
-                im %= n_az
-        else:
-            ip = min(i + k, n_az - 1)
-            im = max(i - k, 0)
-        m = m_col[j]
-        jp = min(j + m, n_el - 1)
-        jm = max(j - m, 0)
-        zc = Z[f]
-        dc = Df[f]
-        lim = jump_h + jump_f * dc
-        e0 = ip * n_el + j
-        d0 = Df[e0]
-        if not (
-            np.float64(abs(Z[e0] - zc)) <= lim
-            and (not use_ratio or abs(d0 - dc) <= ratio * min(d0, dc))
-        ):
-            e0 = f
-        e1 = im * n_el + j
-        d1 = Df[e1]
-        if not (
-            np.float64(abs(Z[e1] - zc)) <= lim
-            and (not use_ratio or abs(d1 - dc) <= ratio * min(d1, dc))
-        ):
-            e1 = f
-        e2 = i * n_el + jp
-        if not np.float64(abs(Z[e2] - zc)) <= lim:
-            e2 = f
-        e3 = i * n_el + jm
-        if not np.float64(abs(Z[e3] - zc)) <= lim:
-            e3 = f
-        tax = X[e0] - X[e1]
-        tay = Y[e0] - Y[e1]
-        taz = Z[e0] - Z[e1]
-        tex = X[e2] - X[e3]
-        tey = Y[e2] - Y[e3]
-        tez = Z[e2] - Z[e3]
-        nx = tay * tez - taz * tey
-        ny = taz * tex - tax * tez
-        nz = tax * tey - tay * tex
-        sgn = np.float32(-1.0) if nz < 0 else np.float32(1.0)
-        inv = sgn / np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
-        cx, cy, cz = nx * inv, ny * inv, nz * inv
-        vn[f, 0] = cx if math.isfinite(cx) else np.float32(0.0)
-        vn[f, 1] = cy if math.isfinite(cy) else np.float32(0.0)
-        vn[f, 2] = cz if math.isfinite(cz) else np.float32(0.0)
+        kf = kf if kf >= 1 else np.float32(1.0)  # NaN -> 1
+        kf = kf if kf <= fmax else fmax
+        kst[f] = int(kf)
+    jp_tab = np.empty(n_el, np.int64)
+    jm_tab = np.empty(n_el, np.int64)
+    for j in range(n_el):
+        jp_tab[j] = min(j + m_col[j], n_el - 1)
+        jm_tab[j] = max(j - m_col[j], 0)
+    big = n_az > max_stride
+    for i in range(n_az):
+        base = i * n_el
+        for j in range(n_el):
+            f = base + j
+            k = kst[f]
+            if wrap:
+                ip = i + k
+                im = i - k
+                if big:
+                    ip = ip - n_az if ip >= n_az else ip
+                    im = im + n_az if im < 0 else im
+                else:
+                    ip = ip % n_az
+                    im = im % n_az
+            else:
+                ip = min(i + k, n_az - 1)
+                im = max(i - k, 0)
+            zc = Z[f]
+            dc = Df[f]
+            lim = jump_h + jump_f * dc
+            e0 = ip * n_el + j
+            e1 = im * n_el + j
+            e2 = base + jp_tab[j]
+            e3 = base + jm_tab[j]
+            d0 = Df[e0]
+            d1 = Df[e1]
+            t0 = np.float64(abs(Z[e0] - zc)) <= lim
+            t1 = np.float64(abs(Z[e1] - zc)) <= lim
+            if use_ratio:
+                t0 = t0 and abs(d0 - dc) <= ratio * min(d0, dc)
+                t1 = t1 and abs(d1 - dc) <= ratio * min(d1, dc)
+            e0 = e0 if t0 else f
+            e1 = e1 if t1 else f
+            e2 = e2 if np.float64(abs(Z[e2] - zc)) <= lim else f
+            e3 = e3 if np.float64(abs(Z[e3] - zc)) <= lim else f
+            tax = X[e0] - X[e1]
+            tay = Y[e0] - Y[e1]
+            taz = Z[e0] - Z[e1]
+            tex = X[e2] - X[e3]
+            tey = Y[e2] - Y[e3]
+            tez = Z[e2] - Z[e3]
+            nx = tay * tez - taz * tey
+            ny = taz * tex - tax * tez
+            nz = tax * tey - tay * tex
+            sgn = np.float32(-1.0) if nz < 0 else np.float32(1.0)
+            inv = sgn / np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
+            cx = nx * inv
+            cy = ny * inv
+            cz = nz * inv
+            nvx[f] = cx if math.isfinite(cx) else np.float32(0.0)
+            nvy[f] = cy if math.isfinite(cy) else np.float32(0.0)
+            nvz[f] = cz if math.isfinite(cz) else np.float32(0.0)
+    for f in range(ne - nv):
+        g = f if f < nv else nv - 1
+        nvx[nv + f] = nvx[g]
+        nvy[nv + f] = nvy[g]
+        nvz[nv + f] = nvz[g]
+
+
+@njit(cache=True, error_model="numpy")
+def _robust_cell_z(nvx, nvy, nvz, M, n_el, out):  # type: ignore[no-untyped-def]
+    """Vertical component of the robust cell normals (the normalised sum of the four corners'),
+    per cell of the padded layout, into ``out (M,)``."""
+    ax, ax1, ax2, ax3 = nvx, nvx[1:], nvx[n_el:], nvx[n_el + 1 :]
+    ay, ay1, ay2, ay3 = nvy, nvy[1:], nvy[n_el:], nvy[n_el + 1 :]
+    az, az1, az2, az3 = nvz, nvz[1:], nvz[n_el:], nvz[n_el + 1 :]
+    for f in range(M):
+        sx = ax[f] + ax1[f] + ax2[f] + ax3[f]
+        sy = ay[f] + ay1[f] + ay2[f] + ay3[f]
+        sz = az[f] + az1[f] + az2[f] + az3[f]
+        nc = np.float32(math.sqrt(sx * sx + sy * sy + sz * sz))
+        nc = nc if nc != 0 else _NAN32
+        out[f] = sz / nc
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _normal_pass(X, Y, Z, V, M, n_el, nx_o, ny_o, nz_o, ok_o):  # type: ignore[no-untyped-def]
+    """Pass 3a: unit normals (sign: z up, NaN where unreliable) and C_d of both triangles of
+    every cell, written at ``2 f`` and ``2 f + 1`` (``f`` the cell's first vertex)."""
+    one = np.float32(1.0)
+    X1, X2, X3 = X[1:], X[n_el:], X[n_el + 1 :]
+    Y1, Y2, Y3 = Y[1:], Y[n_el:], Y[n_el + 1 :]
+    Z1, Z2, Z3 = Z[1:], Z[n_el:], Z[n_el + 1 :]
+    V1, V2, V3 = V[1:], V[n_el:], V[n_el + 1 :]
+    for f in range(M):
+        x00, x01, x10, x11 = X[f], X1[f], X2[f], X3[f]
+        y00, y01, y10, y11 = Y[f], Y1[f], Y2[f], Y3[f]
+        z00, z01, z10, z11 = Z[f], Z1[f], Z2[f], Z3[f]
+        v01 = V1[f] & V2[f]
+        ex, ey, ez = x01 - x10, y01 - y10, z01 - z10
+        ax, ay, az = x00 - x10, y00 - y10, z00 - z10
+        bx, by, bz = x11 - x10, y11 - y10, z11 - z10
+        # T_k = (00, 01, 10)
+        nx = ay * ez - az * ey
+        ny = az * ex - ax * ez
+        nz = ax * ey - ay * ex
+        nrm = np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
+        good = v01 & V[f] & (nrm > 0)
+        s = one / nrm
+        s = -s if nz < 0 else s
+        s = s if good else _NAN32
+        nx_o[2 * f] = nx * s
+        ny_o[2 * f] = ny * s
+        nz_o[2 * f] = nz * s
+        ok_o[2 * f] = good
+        # T_{k+1} = (10, 01, 11)
+        nx = ey * bz - ez * by
+        ny = ez * bx - ex * bz
+        nz = ex * by - ey * bx
+        nrm = np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
+        good = v01 & V3[f] & (nrm > 0)
+        s = one / nrm
+        s = -s if nz < 0 else s
+        s = s if good else _NAN32
+        nx_o[2 * f + 1] = nx * s
+        ny_o[2 * f + 1] = ny * s
+        nz_o[2 * f + 1] = nz * s
+        ok_o[2 * f + 1] = good
+
+
+@njit(cache=True, error_model="numpy")
+def _extent_pass(Z, D, M, n_el, lo_o, hi_o, rg_o):  # type: ignore[no-untyped-def]
+    """Pass 3b: z extrema (NaN wins, as ``np.minimum``) and mean range of both triangles."""
+    third = np.float32(1.0 / 3.0)
+    Z1, Z2, Z3 = Z[1:], Z[n_el:], Z[n_el + 1 :]
+    D1, D2, D3 = D[1:], D[n_el:], D[n_el + 1 :]
+    for f in range(M):
+        z00, z01, z10, z11 = Z[f], Z1[f], Z2[f], Z3[f]
+        dsh = D1[f] + D2[f]
+        zmn = z01 if (z01 <= z10 or z01 != z01) else z10
+        zmx = z01 if (z01 >= z10 or z01 != z01) else z10
+        lo_o[2 * f] = zmn if (zmn <= z00 or zmn != zmn) else z00
+        hi_o[2 * f] = zmx if (zmx >= z00 or zmx != zmx) else z00
+        rg_o[2 * f] = (dsh + D[f]) * third
+        lo_o[2 * f + 1] = zmn if (zmn <= z11 or zmn != zmn) else z11
+        hi_o[2 * f + 1] = zmx if (zmx >= z11 or zmx != zmx) else z11
+        rg_o[2 * f + 1] = (dsh + D3[f]) * third
+
+
+@njit(cache=True, error_model="numpy")
+def _jump_pass(  # type: ignore[no-untyped-def]
+    D, M, n_el, lo, hi, rg, nz, ok, jump_h, jump_f, ratio, use_ratio, steep_cos, use_steep, jp_o
+):
+    """Pass 3c: the height-jump code of H_s (:func:`mesh_kernel`'s tests) of both triangles."""
+    D1, D2, D3 = D[1:], D[n_el:], D[n_el + 1 :]
+    for f in range(M):
+        d00, d01, d10, d11 = D[f], D1[f], D2[f], D3[f]
+        for t in range(2):
+            k = 2 * f + t
+            lo_k = lo[k]
+            jp = hi[k] - lo_k > jump_h + jump_f * rg[k]
+            if use_ratio:
+                if t == 0:
+                    a0, a1, e0, e1 = d00, d10, d00, d01  # azimuth edge, elevation edge
+                else:
+                    a0, a1, e0, e1 = d01, d11, d01, d11
+                jp = jp | (abs(a0 - a1) > ratio * min(a0, a1))
+                if use_steep:
+                    e = abs(e0 - e1) > ratio * min(e0, e1)
+                    jp = jp | (e & ((abs(nz[k]) < steep_cos) | (lo_k > jump_h)))
+            jp_o[k] = jp & ok[k]
+
+
+@njit(cache=True, error_model="numpy")
+def _class_pass(  # type: ignore[no-untyped-def]
+    X, Y, D, origin, M, n_el, nx, ny, nz, ok, jump, rzc, use_robust, c2, cos_c1, lab_o
+):
+    """Pass 3d: rules P1-P4 and the class without P5 (-1 unreliable, -4 shadow behind, -3 side
+    shadow, -2 P1, 0) of both triangles (:func:`classify_kernel`'s tests)."""
+    o0 = np.float32(origin[0])
+    o1 = np.float32(origin[1])
+    tiny = np.float32(1e-9)
+    X2, Y2, D2 = X[n_el:], Y[n_el:], D[n_el:]
+    for f in range(M):
+        rz = rzc[f] if use_robust else np.float32(0.0)
+        for t in range(2):
+            k = 2 * f + t
+            if t == 0:  # the first vertex's line of sight
+                qx, qy, qd = X[f] - o0, Y[f] - o1, D[f]
+            else:
+                qx, qy, qd = X2[f] - o0, Y2[f] - o1, D2[f]
+            q0 = qx / qd
+            q1 = qy / qd
+            n0 = nx[k]
+            n1 = ny[k]
+            nzz = nz[k]
+            good = ok[k]
+            jp = jump[k]
+            num = n0 * q0 + n1 * q1
+            den = np.float32(math.sqrt(n0 * n0 + n1 * n1)) * np.float32(
+                math.sqrt(q0 * q0 + q1 * q1)
+            )
+            cosz = np.float64(num / den) if den > tiny else 0.0
+            p2 = jp & (cosz > c2)
+            p3 = jp & (cosz < -c2)
+            behind = good & p2
+            side = jp and not p2 and not p3
+            nzr = nzz
+            if use_robust:
+                nzr = rz if (not jp and math.isfinite(rz)) else nzz
+            p1 = good and not behind and not side and nzr < cos_c1
+            lab = np.int8(0)
+            lab = np.int8(-2) if p1 else lab
+            lab = np.int8(-3) if side else lab
+            lab = np.int8(-4) if behind else lab
+            lab = np.int8(-1) if not good else lab
+            lab_o[k] = lab
+
+
+@njit(cache=True, error_model="numpy")
+def _rules_pass(X, Y, D, origin, M, n_el, nx, ny, ok, jump, lab, c2, p1_o, p2_o, p3_o, p4_o):  # type: ignore[no-untyped-def]
+    """The rules P1-P4 for inspection (``want_rules``): the zone tests again, P1 from the class."""
+    o0 = np.float32(origin[0])
+    o1 = np.float32(origin[1])
+    tiny = np.float32(1e-9)
+    X2, Y2, D2 = X[n_el:], Y[n_el:], D[n_el:]
+    for f in range(M):
+        for t in range(2):
+            k = 2 * f + t
+            if t == 0:
+                qx, qy, qd = X[f] - o0, Y[f] - o1, D[f]
+            else:
+                qx, qy, qd = X2[f] - o0, Y2[f] - o1, D2[f]
+            q0 = qx / qd
+            q1 = qy / qd
+            n0 = nx[k]
+            n1 = ny[k]
+            num = n0 * q0 + n1 * q1
+            den = np.float32(math.sqrt(n0 * n0 + n1 * n1)) * np.float32(
+                math.sqrt(q0 * q0 + q1 * q1)
+            )
+            cosz = np.float64(num / den) if den > tiny else 0.0
+            jp = jump[k]
+            p1_o[k] = lab[k] == -2
+            p2_o[k] = jp & (cosz > c2)
+            p3_o[k] = jp & (cosz < -c2)
+            p4_o[k] = ok[k] and not jp
+
+
+@njit(cache=True, error_model="numpy")
+def _chain_pass(lab, lo, R, n_el, C2, chain_min, p5_o, want_rules):  # type: ignore[no-untyped-def]
+    """Pass 4, P5 along each row of the padded layout: an earlier P1 triangle in the same run
+    of non-shadow reliable triangles, with the twin's segmented running minimum (its ``(min -
+    s 1e7) + s 1e7`` rounding included)."""
+    huge = 1.0e6
+    seg_w = 1.0e7
+    for r in range(R):
+        b0 = 2 * r * n_el
+        first = -1
+        for k in range(b0, b0 + C2):
+            if lab[k] == -2:
+                first = k
+                break
+        if first < 0:
+            continue  # no P1 triangle in the row: no P5
+        seg = 0
+        for k in range(b0, first):
+            lk = lab[k]
+            seg += 1 if (lk == -1 or lk <= -3) else 0
+        run_min = huge
+        for k in range(first, b0 + C2):
+            lk = lab[k]
+            if lk == -1 or lk <= -3:  # a breaker: unreliable or a shadow
+                seg += 1
+                run_min = huge
+                continue
+            v = np.float64(lo[k])
+            if lk == -2:
+                if v < run_min:
+                    run_min = v
+                if not want_rules:
+                    continue
+            if run_min < huge:
+                sw = seg * seg_w
+                b = (run_min - sw) + sw
+                if b < huge / 2 and v - b >= chain_min:
+                    lab[k] = -2
+                    if want_rules:
+                        p5_o[k] = True
+
+
+@njit(cache=True)
+def _compact(src, R, n_el, C2, dst):  # type: ignore[no-untyped-def]
+    """Rows of the padded layout (``2 n_el`` per row) into ``dst (R * C2,)`` (drop the padding)."""
+    for r in range(R):
+        a = 2 * r * n_el
+        b = r * C2
+        for kk in range(C2):
+            dst[b + kk] = src[a + kk]
+
+
+@njit(cache=True)
+def _compact_normals(nx, ny, nz, R, n_el, C2, dst):  # type: ignore[no-untyped-def]
+    """The three padded components into ``dst (R * C2 * 3,)`` (the ``(R, 2C, 3)`` layout)."""
+    for r in range(R):
+        a = 2 * r * n_el
+        b = 3 * r * C2
+        for kk in range(C2):
+            dst[b + 3 * kk] = nx[a + kk]
+            dst[b + 3 * kk + 1] = ny[a + kk]
+            dst[b + 3 * kk + 2] = nz[a + kk]
 
 
 @njit(cache=True, error_model="numpy")
@@ -633,87 +927,67 @@ def stages_2_5_kernel(  # type: ignore[no-untyped-def]
     cos_c1,
     chain_min,
     want_rules,
+    F,
+    B,
+    lab,
+    PR,
+    Df,
+    kst,
+    ok,
+    normal,
+    vray,
+    rng,
+    zmin,
+    zmax,
+    jump,
+    labels,
+    rules,
 ):
-    """Stages 2-5 in one pass over the cells: :func:`mesh_kernel`, the robust normals of
-    :func:`robust_normals_kernel` (with ``use_robust``; only their vertical component is kept)
-    and :func:`classify_kernel`, cell by cell along each row, with no per-triangle temporaries.
+    """Stages 2-5 over the grid in short passes that the compiler vectorises: the results of
+    :func:`mesh_kernel`, :func:`robust_normals_kernel` (with ``use_robust``; only the vertical
+    component of the cell normals is used) and :func:`classify_kernel`, bit for bit.
+
+    1. per vertex: float32 coordinates, validity, range, line of sight, in flat arrays with one
+       extra row (row 0 again, for the seam);
+    2. with ``use_robust``: the robust vertex normals, then the cells' vertical components;
+    3. per cell, branch-free, both triangles written at ``2 f, 2 f + 1`` of a padded layout
+       (each row has ``n_el`` cells, the last one padding): normals and C_d; z extrema and mean
+       range; jumps; zone cosines, rules P1-P4 and the class without P5 - each pass writes at
+       most four arrays (more defeat the compiler's vectoriser);
+    4. per row, in order along the rising ray: P5's running minimum (rows without a P1
+       triangle skipped);
+    5. the padded rows copied into the outputs.
 
     Mesh arguments as :func:`mesh_kernel` (``jump_h32, jump_f32, ratio32, steep_cos`` float32),
     robust ones as :func:`robust_normals_kernel` (``k_scale`` float32, ``jump_h, jump_f, ratio``
-    float64), rule ones as :func:`classify_kernel`. Returns ``ok, normal, vray, rng, z_min,
-    z_max, jump`` (as :func:`mesh_kernel`), ``labels`` and the rules ``p1 .. p5`` (``(0, 0)``
-    arrays unless ``want_rules``). The same values as the three kernels one after the other.
+    float64), rule ones as :func:`classify_kernel`. Work arrays (any content; ``ne = n_az n_el +
+    n_el + 1``, ``M = R n_el``, ``L >= max(ne, 2 M)``): ``F (14, L) float32``, ``B (3, L)
+    bool``, ``lab (2 M,) int8``, ``PR (5, 2 M or 0) bool``, ``Df, kst (n_az n_el,)`` float64
+    and int64. Outputs, filled: ``ok, normal, vray, rng, zmin, zmax, jump`` as
+    :func:`mesh_kernel` returns them, ``labels (R, 2C) int8`` and ``rules (5, R, 2C) bool``
+    (P1-P5; ``(5, 0, 0)`` unless ``want_rules``).
     """
     n_az, n_el = valid.shape
     R = n_az if wrap else n_az - 1
-    C = n_el - 1
-    C2 = 2 * C
+    C2 = 2 * (n_el - 1)
     nv = n_az * n_el
-    o0 = np.float32(origin[0])
-    o1 = np.float32(origin[1])
-    o2 = np.float32(origin[2])
-    X = np.empty(nv, np.float32)
-    Y = np.empty(nv, np.float32)
-    Z = np.empty(nv, np.float32)
-    D = np.empty(nv, np.float32)
-    Df = np.empty(nv if use_robust else 0, np.float64)
-    vray = np.empty((n_az, n_el, 3), np.float32)
-    for i in range(n_az):
-        for j in range(n_el):
-            f = i * n_el + j
-            x = np.float32(points[i, j, 0])
-            y = np.float32(points[i, j, 1])
-            z = np.float32(points[i, j, 2])
-            X[f] = x
-            Y[f] = y
-            Z[f] = z
-            rx = x - o0
-            ry = y - o1
-            rz = z - o2
-            d = np.float32(math.sqrt(rx * rx + ry * ry + rz * rz))
-            D[f] = d
-            vray[i, j, 0] = rx / d
-            vray[i, j, 1] = ry / d
-            vray[i, j, 2] = rz / d
-            if use_robust:
-                dx = np.float64(x) - origin[0]
-                dy = np.float64(y) - origin[1]
-                dz = np.float64(z) - origin[2]
-                Df[f] = math.sqrt(dx * dx + dy * dy + dz * dz)
-    vn = np.empty((nv if use_robust else 0, 3), np.float32)
-    ok = np.empty((R, C2), np.bool_)
-    normal = np.empty((R, C2, 3), np.float32)
-    rng = np.empty((R, C2), np.float32)
-    zmin = np.empty((R, C2), np.float32)
-    zmax = np.empty((R, C2), np.float32)
-    jump = np.empty((R, C2), np.bool_)
-    labels = np.empty((R, C2), np.int8)
-    nr = R if want_rules else 0
-    nc = C2 if want_rules else 0
-    p1a = np.zeros((nr, nc), np.bool_)
-    p2a = np.zeros((nr, nc), np.bool_)
-    p3a = np.zeros((nr, nc), np.bool_)
-    p4a = np.zeros((nr, nc), np.bool_)
-    p5a = np.zeros((nr, nc), np.bool_)
-    third = np.float32(1.0 / 3.0)
-    one = np.float32(1.0)
-    ox32 = np.float32(origin[0])
-    oy32 = np.float32(origin[1])
-    huge = 1.0e6
-    seg_w = 1.0e7
-    tiny = np.float32(1e-9)
-    if use_robust and R > 0:
-        _robust_row(
-            0,
+    M = R * n_el  # cells of the padded layout
+    P2 = 2 * M
+    X, Y, Z, D = F[0], F[1], F[2], F[3]
+    V = B[0]
+    _vertex_pass(
+        points.reshape(nv, 3), valid.reshape(nv), origin, nv, n_el, X, Y, Z, V, D, vray.reshape(-1)
+    )
+    rzc = F[7]
+    if use_robust:
+        nvx, nvy, nvz = F[4], F[5], F[6]
+        _robust_vertex_pass(
             X,
             Y,
             Z,
-            Df,
-            vn,
+            origin,
             n_az,
             n_el,
-            ox32,
-            oy32,
             k_scale,
             m_col,
             wrap,
@@ -722,171 +996,50 @@ def stages_2_5_kernel(  # type: ignore[no-untyped-def]
             jump_f,
             ratio,
             use_ratio,
+            Df,
+            kst,
+            nvx,
+            nvy,
+            nvz,
         )
-    for r in range(R):
-        r1 = r + 1
-        if r1 == n_az:
-            r1 = 0
-        if use_robust and r1 != 0:
-            _robust_row(
-                r1,
-                X,
-                Y,
-                Z,
-                Df,
-                vn,
-                n_az,
-                n_el,
-                ox32,
-                oy32,
-                k_scale,
-                m_col,
-                wrap,
-                max_stride,
-                jump_h,
-                jump_f,
-                ratio,
-                use_ratio,
-            )
-        seg = 0
-        run_min = huge
-        b0 = r * n_el
-        b1 = r1 * n_el
-        for c in range(C):
-            f00 = b0 + c
-            f01 = f00 + 1
-            f10 = b1 + c
-            f11 = f10 + 1
-            x00, x01, x10, x11 = X[f00], X[f01], X[f10], X[f11]
-            y00, y01, y10, y11 = Y[f00], Y[f01], Y[f10], Y[f11]
-            z00, z01, z10, z11 = Z[f00], Z[f01], Z[f10], Z[f11]
-            d00, d01, d10, d11 = D[f00], D[f01], D[f10], D[f11]
-            v00, v01, v10, v11 = valid[r, c], valid[r, c + 1], valid[r1, c], valid[r1, c + 1]
-            ex, ey, ez = x01 - x10, y01 - y10, z01 - z10
-            ax, ay, az = x00 - x10, y00 - y10, z00 - z10
-            bx, by, bz = x11 - x10, y11 - y10, z11 - z10
-            dsh = d01 + d10
-            zmn = _min_nan(z01, z10)
-            zmx = _max_nan(z01, z10)
-            rz_cell = _NAN32
-            if use_robust:  # the cell's robust normal: the normalised sum of its corners'
-                sx = vn[f00, 0] + vn[f01, 0] + vn[f10, 0] + vn[f11, 0]
-                sy = vn[f00, 1] + vn[f01, 1] + vn[f10, 1] + vn[f11, 1]
-                sz = vn[f00, 2] + vn[f01, 2] + vn[f10, 2] + vn[f11, 2]
-                nrm_c = np.float32(math.sqrt(sx * sx + sy * sy + sz * sz))
-                if nrm_c == 0:
-                    nrm_c = _NAN32
-                rz_cell = sz / nrm_c
-            for t in range(2):
-                k = 2 * c + t
-                # ---- stages 2-4 (mesh_kernel)
-                if t == 0:
-                    nx = ay * ez - az * ey
-                    ny = az * ex - ax * ez
-                    nz = ax * ey - ay * ex
-                    vt = v00 and v01 and v10
-                    rg = (dsh + d00) * third
-                    lo = _min_nan(zmn, z00)
-                    hi = _max_nan(zmx, z00)
-                else:
-                    nx = ey * bz - ez * by
-                    ny = ez * bx - ex * bz
-                    nz = ex * by - ey * bx
-                    vt = v10 and v01 and v11
-                    rg = (dsh + d11) * third
-                    lo = _min_nan(zmn, z11)
-                    hi = _max_nan(zmx, z11)
-                nrm = np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
-                good = vt and nrm > 0
-                if good:
-                    s = one / nrm
-                    if nz < 0:
-                        s = -s
-                else:
-                    s = _NAN32
-                n0 = nx * s
-                n1 = ny * s
-                nzz = nz * s
-                normal[r, k, 0] = n0
-                normal[r, k, 1] = n1
-                normal[r, k, 2] = nzz
-                rng[r, k] = rg
-                zmin[r, k] = lo
-                zmax[r, k] = hi
-                ok[r, k] = good
-                jp = False
-                if good:
-                    jp = hi - lo > jump_h32 + jump_f32 * rg
-                    if use_ratio:
-                        if t == 0:
-                            jp = jp or abs(d00 - d10) > ratio32 * min(d00, d10)
-                        else:
-                            jp = jp or abs(d01 - d11) > ratio32 * min(d01, d11)
-                        if use_steep and not jp:
-                            if t == 0:
-                                e = abs(d00 - d01) > ratio32 * min(d00, d01)
-                            else:
-                                e = abs(d01 - d11) > ratio32 * min(d01, d11)
-                            jp = e and (abs(nzz) < steep_cos or lo > jump_h32)
-                jump[r, k] = jp
-                # ---- stage 5 (classify_kernel)
-                p2 = False
-                p3 = False
-                if jp:
-                    vi = r if t == 0 else r1  # the first vertex's line of sight
-                    q0, q1 = vray[vi, c, 0], vray[vi, c, 1]
-                    num = n0 * q0 + n1 * q1
-                    den = np.float32(math.sqrt(n0 * n0 + n1 * n1)) * np.float32(
-                        math.sqrt(q0 * q0 + q1 * q1)
-                    )
-                    if den > tiny:
-                        cosz = np.float64(num / den)
-                    else:
-                        cosz = 0.0
-                    p2 = cosz > c2
-                    p3 = cosz < -c2
-                p4 = good and not jp
-                behind = good and p2 and not p4
-                side = good and not p2 and not p3 and not p4
-                shadow = behind or side
-                if jp or not use_robust:
-                    nzr = nzz
-                else:
-                    nzr = rz_cell
-                    if not math.isfinite(nzr):
-                        nzr = nzz
-                p1 = good and not shadow and nzr < cos_c1
-                breaker = (not good) or shadow
-                if breaker:
-                    seg += 1
-                    run_min = huge
-                elif p1:
-                    v = np.float64(lo)
-                    if v < run_min:
-                        run_min = v
-                p5 = False
-                if not breaker:
-                    sw = seg * seg_w
-                    base = (run_min - sw) + sw
-                    p5 = base < huge / 2 and np.float64(lo) - base >= chain_min
-                if not good:
-                    lab = -1
-                elif behind:
-                    lab = -4
-                elif side:
-                    lab = -3
-                elif p1 or p5:
-                    lab = -2
-                else:
-                    lab = 0
-                labels[r, k] = lab
-                if want_rules:
-                    p1a[r, k] = p1
-                    p2a[r, k] = p2
-                    p3a[r, k] = p3
-                    p4a[r, k] = p4
-                    p5a[r, k] = p5
-    return ok, normal, vray, rng, zmin, zmax, jump, labels, p1a, p2a, p3a, p4a, p5a
+        _robust_cell_z(nvx, nvy, nvz, M, n_el, rzc)
+    nx, ny, nz = F[8], F[9], F[10]
+    okp, jp = B[1], B[2]
+    _normal_pass(X, Y, Z, V, M, n_el, nx, ny, nz, okp)
+    lo, hi, rg = F[11], F[12], F[13]
+    _extent_pass(Z, D, M, n_el, lo, hi, rg)
+    _jump_pass(
+        D,
+        M,
+        n_el,
+        lo,
+        hi,
+        rg,
+        nz,
+        okp,
+        jump_h32,
+        jump_f32,
+        ratio32,
+        use_ratio,
+        steep_cos,
+        use_steep,
+        jp,
+    )
+    _class_pass(X, Y, D, origin, M, n_el, nx, ny, nz, okp, jp, rzc, use_robust, c2, cos_c1, lab)
+    if want_rules:
+        PR[4, :P2] = False
+        _rules_pass(X, Y, D, origin, M, n_el, nx, ny, okp, jp, lab, c2, PR[0], PR[1], PR[2], PR[3])
+    _chain_pass(lab, lo, R, n_el, C2, chain_min, PR[4], want_rules)
+    _compact_normals(nx, ny, nz, R, n_el, C2, normal.reshape(-1))
+    _compact(lo, R, n_el, C2, zmin.reshape(-1))
+    _compact(hi, R, n_el, C2, zmax.reshape(-1))
+    _compact(rg, R, n_el, C2, rng.reshape(-1))
+    _compact(okp, R, n_el, C2, ok.reshape(-1))
+    _compact(jp, R, n_el, C2, jump.reshape(-1))
+    _compact(lab, R, n_el, C2, labels.reshape(-1))
+    if want_rules:
+        for q in range(5):
+            _compact(PR[q], R, n_el, C2, rules[q].reshape(-1))
 
 
 # ------------------------------------------------------------------------------------------

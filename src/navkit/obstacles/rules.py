@@ -236,14 +236,17 @@ def mesh_and_classes(
                 sensor_origin,
                 support_m=settings.normal_support_m,
                 wrap=wrap,
+                jump_height_m=settings.jump_height_m,
+                jump_range_fraction=settings.jump_range_fraction,
+                jump_range_ratio=settings.jump_range_ratio,
                 backend=settings.backend,
-                **jump_kw,
             )
         labels, found = classify(
             mesh, settings, wrap=wrap, robust_cells=robust, backend=settings.backend
         )
         return mesh, labels, found if rules else {}
     from navkit.obstacles import _kernels
+    from navkit.obstacles._buffers import arena, cached_work
 
     n_az, n_el = valid.shape
     origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
@@ -257,7 +260,40 @@ def mesh_and_classes(
         k_scale, m_col = np.float32(1.0), np.ones(n_el, dtype=np.intp)
     use_ratio = bool(np.isfinite(settings.jump_range_ratio))
     ratio = settings.jump_range_ratio if use_ratio else 0.0
-    out = _kernels.stages_2_5_kernel(
+    R = n_az if wrap else n_az - 1
+    C2 = 2 * (n_el - 1)
+    nv = n_az * n_el
+    P2 = 2 * R * n_el
+    L = max(nv + n_el + 1, P2)
+    nr = P2 if rules else 0
+    work = cached_work(
+        ("stages 2-5", n_az, n_el, bool(wrap), bool(rules)),
+        lambda: arena(
+            [
+                ((14, L), np.float32),
+                ((3, L), np.bool_),
+                ((P2,), np.int8),
+                ((5, nr), np.bool_),
+                ((nv,), np.float64),
+                ((nv,), np.int64),
+            ]
+        ),
+    )
+    rr, rc = (R, C2) if rules else (0, 0)
+    outs = arena(
+        [
+            ((R, C2), np.bool_),
+            ((R, C2, 3), np.float32),
+            ((n_az, n_el, 3), np.float32),
+            ((R, C2), np.float32),
+            ((R, C2), np.float32),
+            ((R, C2), np.float32),
+            ((R, C2), np.bool_),
+            ((R, C2), np.int8),
+            ((5, rr, rc), np.bool_),
+        ]
+    )
+    _kernels.stages_2_5_kernel(
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(valid, dtype=np.bool_),
         origin,
@@ -279,9 +315,11 @@ def mesh_and_classes(
         np.float32(math.cos(settings.c1_rad)),
         float(settings.chain_min_height_m),
         bool(rules),
+        *work,
+        *outs,
     )
-    ok, normal, vray, rng, z_min, z_max, jump, labels = out[:8]
+    ok, normal, vray, rng, z_min, z_max, jump, labels, found_rules = outs
     tri = triangle_indices(n_az, n_el, wrap)
     mesh = MeshCharacteristics(tri, ok, normal, vray, rng, z_min, z_max, jump)
-    found = dict(zip(("P1", "P2", "P3", "P4", "P5"), out[8:], strict=True)) if rules else {}
+    found = dict(zip(("P1", "P2", "P3", "P4", "P5"), found_rules, strict=True)) if rules else {}
     return mesh, labels, found
