@@ -33,15 +33,19 @@ __all__ = [
     "boundary_kernel",
     "classify_kernel",
     "cloud_prep_kernel",
+    "cloud_valid_kernel",
     "components_kernel",
     "grid_cells_kernel",
     "grid_fill_kernel",
+    "grid_order_fill_kernel",
     "ground_cells_kernel",
     "map_groups_kernel",
     "mesh_kernel",
+    "phase_fractions_kernel",
     "points_kernel",
     "refine_kernel",
     "rings_by_order_kernel",
+    "rings_order_kernel",
     "robust_normals_kernel",
     "robust_strides_kernel",
     "split_kernel",
@@ -1077,6 +1081,181 @@ def grid_fill_kernel(Q, rh, cell, n_cells):  # type: ignore[no-untyped-def]
 
 
 # ------------------------------------------------------------------------------------------
+# stage 1 input, fast path: rings from the storage order, columns, cells and the fill in three
+# kernels writing into caller-provided arrays (twin: grids.cloud_to_grid, ring_method "order")
+
+
+@njit(cache=True, error_model="numpy")
+def cloud_valid_kernel(P, far, qx, qy, qz, rh, idx):  # type: ignore[no-untyped-def]
+    """The valid points of ``P (N, >=3)`` (finite, not ``(0, 0, 0)``, every coordinate below
+    ``far`` in magnitude - the twin NaNs the others) as float64 columns ``qx, qy, qz``, their
+    horizontal range ``rh`` (``math.hypot`` = ``np.hypot``) and input index ``idx``. Returns how
+    many."""
+    n = P.shape[0]
+    m = 0
+    for p in range(n):
+        x = np.float64(P[p, 0])
+        y = np.float64(P[p, 1])
+        z = np.float64(P[p, 2])
+        ok = abs(x) < far and abs(y) < far and abs(z) < far  # False for NaN
+        ok = ok and (x != 0 or y != 0 or z != 0)
+        if ok:
+            qx[m] = x
+            qy[m] = y
+            qz[m] = z
+            idx[m] = p
+            m += 1
+    for k in range(m):
+        rh[k] = math.hypot(qx[k], qy[k])
+    return m
+
+
+@njit(cache=True)
+def _kth_banded(values, k, work):  # type: ignore[no-untyped-def]
+    """The k-th smallest of ``values`` (0-based; no NaN), exactly: a strided sample brackets
+    the k-th value, one pass counts what lies below the bracket and copies what lies inside it
+    into ``work``, and a selection runs on that copy only (the whole array when the bracket
+    misses)."""
+    n = len(values)
+    s = min(n, 2048)
+    stride = max(n // s, 1)
+    sample = np.empty(s)
+    for q in range(s):
+        sample[q] = values[q * stride]
+    sample.sort()
+    pos = int(s * (k / n))
+    lo = sample[max(pos - 64, 0)]
+    hi = sample[min(pos + 64, s - 1)]
+    below = 0
+    m = 0
+    for q in range(n):
+        v = values[q]
+        if v < lo:
+            below += 1
+        elif v <= hi:
+            work[m] = v
+            m += 1
+    if below <= k < below + m:
+        return _kth(work[:m], k - below)
+    for q in range(n):
+        work[q] = values[q]
+    return _kth(work[:n], k)
+
+
+@njit(cache=True, error_model="numpy")
+def rings_order_kernel(az, qz, rh, d, ad, work, ring, sums, counts):  # type: ignore[no-untyped-def]
+    """``grids._rings_by_order`` on ``az (n,)``: ``(found, azimuth step, number of rings)``,
+    the ring of every point in ``ring`` and, per ring, the count and the sum of ``z / max(r_h,
+    1e-9)`` (the twin's ``bincount`` weights, in point order) in ``counts`` and ``sums`` (at
+    least 513 long). ``d, work`` are float64 work arrays of ``n``."""
+    n = len(az)
+    two_pi = 2 * np.pi
+    if n < 100:
+        return False, 0.0, 0
+    pos = 0
+    for k in range(n - 1):
+        v = az[k + 1] - az[k]
+        v = v - two_pi if v >= np.pi else v
+        v = v + two_pi if v < -np.pi else v
+        d[k] = v
+        pos += 1 if v > 0 else 0
+    ad = ad[: n - 1]
+    for k in range(n - 1):
+        ad[k] = abs(d[k])
+    h = (n - 1) // 2
+    if (n - 1) % 2:
+        step = _kth_banded(ad, h, work)
+    else:
+        a = _kth_banded(ad, h - 1, work)
+        b = _kth_banded(ad, h, work)
+        step = (a + b) / 2
+    if not step > 0:
+        return False, 0.0, 0
+    direction = 1.0 if 2 * pos > n - 1 else -1.0
+    fwd = 0
+    lim = -0.5 * step
+    for k in range(n - 1):
+        fwd += 1 if direction * d[k] > lim else 0
+    if step > two_pi / 64 or fwd / (n - 1) < 0.9:
+        return False, 0.0, 0
+    acc = 0.0
+    half = 0.5 * step
+    lo = np.iinfo(np.int64).max
+    hi = np.iinfo(np.int64).min
+    for k in range(n):
+        if k > 0:
+            acc += d[k - 1]
+        r = math.floor((direction * acc + half) / two_pi)
+        ring[k] = r
+        lo = min(lo, r)
+        hi = max(hi, r)
+    n_r = hi - lo + 1
+    if n_r < 2 or n_r > 512:
+        return False, 0.0, 0
+    for r in range(n_r):
+        sums[r] = 0.0
+        counts[r] = 0
+    for k in range(n):
+        r = ring[k] - lo
+        ring[k] = r
+        counts[r] += 1
+        sums[r] += qz[k] / max(rh[k], 1e-9)
+    return True, step, n_r
+
+
+@njit(cache=True, error_model="numpy")
+def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
+    qx, qy, qz, rh, az, idx, ring, sums, counts, n_r, n_columns, phase, win, grid, cell_of_point
+):
+    """Rings ranked by rising mean ``z / r_h`` (stable), the column of every point, its cell,
+    the nearest point per cell into ``grid (n_columns n_el, 3)`` (NaN rows if empty; among
+    points at the same range the last one wins, as in the twin) and ``cell_of_point (N,)``
+    (-1 for the points that are not valid). ``win`` is an int64 work array of the cells.
+    Returns ``n_el``."""
+    n = len(az)
+    key = np.empty(n_r)
+    n_el = 0
+    for r in range(n_r):
+        if counts[r] > 0:
+            key[r] = sums[r] / max(counts[r], 1)
+            n_el += 1
+        else:
+            key[r] = np.inf
+    rank = np.argsort(key, kind="mergesort")
+    lut = np.empty(n_r, np.int64)
+    for r in range(n_r):
+        lut[rank[r]] = r
+    n_cells = n_columns * n_el
+    for c in range(n_cells):
+        win[c] = -1
+    for p in range(len(cell_of_point)):
+        cell_of_point[p] = -1
+    scale = 2 * np.pi
+    for k in range(n):
+        x = (az[k] + np.pi) / scale * n_columns
+        i = math.floor(x - phase + 0.5)
+        if i >= n_columns or i < 0:
+            i = i % n_columns
+        c = i * n_el + lut[ring[k]]
+        cell_of_point[idx[k]] = c
+        w = win[c]
+        rk = math.sqrt(rh[k] * rh[k] + qz[k] * qz[k])
+        if w < 0 or rk <= math.sqrt(rh[w] * rh[w] + qz[w] * qz[w]):
+            win[c] = k
+    for c in range(n_cells):
+        w = win[c]
+        if w < 0:
+            grid[c, 0] = np.nan
+            grid[c, 1] = np.nan
+            grid[c, 2] = np.nan
+        else:
+            grid[c, 0] = qx[w]
+            grid[c, 1] = qy[w]
+            grid[c, 2] = qz[w]
+    return n_el
+
+
+# ------------------------------------------------------------------------------------------
 # stage 6: components (union-find), filters, merging, shadow owners (twin: detector + segment)
 
 
@@ -1797,17 +1976,18 @@ def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ign
 
 
 @njit(cache=True)
-def points_kernel(P):  # type: ignore[no-untyped-def]
+def points_kernel(P, out, valid):  # type: ignore[no-untyped-def]
     """Stage 1's validity codes C_d: ``valid`` = all three coordinates finite, and the points
-    with NaN rows where not valid (``detector.detect_obstacles_grid``)."""
+    with NaN rows where not valid (``detector.detect_obstacles_grid``), written into ``out
+    (n_az, n_el, 3) float64`` and ``valid (n_az, n_el) bool``. Returns whether any is valid."""
     n_az, n_el = P.shape[0], P.shape[1]
-    out = np.empty((n_az, n_el, 3), np.float64)
-    valid = np.empty((n_az, n_el), np.bool_)
+    any_ok = False
     for i in range(n_az):
         for j in range(n_el):
             x, y, z = P[i, j, 0], P[i, j, 1], P[i, j, 2]
             ok = math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
             valid[i, j] = ok
+            any_ok = any_ok or ok
             if ok:
                 out[i, j, 0] = x
                 out[i, j, 1] = y
@@ -1816,4 +1996,18 @@ def points_kernel(P):  # type: ignore[no-untyped-def]
                 out[i, j, 0] = np.nan
                 out[i, j, 1] = np.nan
                 out[i, j, 2] = np.nan
-    return out, valid
+    return any_ok
+
+
+@njit(cache=True)
+def phase_fractions_kernel(az, step, n_columns, out):  # type: ignore[no-untyped-def]
+    """``2 pi ((az[::step] + pi) / (2 pi) n_columns % 1)`` into ``out`` (the subsample whose
+    circular mean gives the columns' phase in ``grids.cloud_to_grid``; the same values as the
+    twin's NumPy expression: ``%`` of a positive value is exact). Returns how many."""
+    m = 0
+    two_pi = 2 * np.pi
+    for k in range(0, len(az), step):
+        xs = (az[k] + np.pi) / two_pi * n_columns
+        out[m] = two_pi * (xs % 1.0)
+        m += 1
+    return m

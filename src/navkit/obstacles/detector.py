@@ -251,11 +251,15 @@ def detect_obstacles_grid(
     origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
     if settings.backend == "compiled":
         from navkit.obstacles import _kernels
+        from navkit.obstacles._buffers import arena
 
-        P, valid = _kernels.points_kernel(P)
+        P_in = P
+        P, valid = arena([(P_in.shape, np.float64), (P_in.shape[:2], np.bool_)])
+        any_valid = _kernels.points_kernel(P_in, P, valid)
     else:
         valid = np.isfinite(P[..., 0]) & np.isfinite(P[..., 1]) & np.isfinite(P[..., 2])
-    if not valid.any():
+        any_valid = bool(valid.any())
+    if not any_valid:
         raise InputError(
             "has no valid point (all NaN / no return)",
             source=source,
