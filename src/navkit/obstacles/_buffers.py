@@ -25,6 +25,7 @@ __all__ = ["arena", "cached_work"]
 
 _ALIGN = 64  # bytes: every array starts on a cache line
 _HUGE = 1 << 22  # NumPy madvises huge pages from 4 MiB on
+_PAGE = 1 << 21  # a huge page
 _LOCAL = threading.local()
 _KEEP = 4
 
@@ -32,8 +33,9 @@ _KEEP = 4
 def arena(specs: Sequence[tuple[tuple[int, ...], DTypeLike]]) -> list[NDArray[Any]]:
     """Uninitialised C-contiguous arrays ``(shape, dtype)``, all views of one allocation.
 
-    Allocations from 1 MiB on are rounded up to 4 MiB, so that NumPy backs them with huge pages
-    (a few page faults instead of one per 4 KiB); the untouched rest costs no memory.
+    Allocations from 1 MiB on are rounded up to whole 2 MiB pages (at least 4 MiB, from a 2 MiB
+    boundary), so that NumPy backs them with huge pages (a few page faults instead of one per
+    4 KiB); the untouched rest costs no memory.
     """
     offsets = []
     total = 0
@@ -41,9 +43,15 @@ def arena(specs: Sequence[tuple[tuple[int, ...], DTypeLike]]) -> list[NDArray[An
         offsets.append(total)
         n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
         total += -(-n // _ALIGN) * _ALIGN
-    size = max(total, _HUGE) if total >= (1 << 20) else total
-    raw = np.empty(size + _ALIGN, dtype=np.uint8)
-    skip = -raw.ctypes.data % _ALIGN
+    if total >= (1 << 20):
+        # whole 2 MiB pages, from a 2 MiB boundary: the kernel backs every page of them with a
+        # huge page (the ends of an unaligned region would fault 4 KiB at a time)
+        size = max(-(-total // _PAGE) * _PAGE, _HUGE)
+        raw = np.empty(size + _PAGE, dtype=np.uint8)
+        skip = -raw.ctypes.data % _PAGE
+    else:
+        raw = np.empty(total + _ALIGN, dtype=np.uint8)
+        skip = -raw.ctypes.data % _ALIGN
     out = []
     for (shape, dtype), off in zip(specs, offsets, strict=True):
         dt = np.dtype(dtype)

@@ -556,32 +556,10 @@ def _vertex_pass(pf, vf, origin, nv, n_el, X, Y, Z, V, D, vr):  # type: ignore[n
 
 
 @njit(cache=True, error_model="numpy")
-def _robust_vertex_pass(  # type: ignore[no-untyped-def]
-    X,
-    Y,
-    Z,
-    origin,
-    n_az,
-    n_el,
-    k_scale,
-    m_col,
-    wrap,
-    max_stride,
-    jump_h,
-    jump_f,
-    ratio,
-    use_ratio,
-    Df,
-    kst,
-    nvx,
-    nvy,
-    nvz,
-):
-    """Stage 2-5 pass 2: the robust vertex normals of :func:`robust_normals_kernel` (first
-    loop) into ``nvx, nvy, nvz`` (flat float32, with the extra row of :func:`_vertex_pass`);
-    ``Df (nv,) float64`` and ``kst (nv,) int64`` are work arrays."""
-    nv = n_az * n_el
-    ne = nv + n_el + 1
+def _robust_prep(X, Y, Z, origin, nv, k_scale, max_stride, Df, kst):  # type: ignore[no-untyped-def]
+    """Stage 2-5 pass 2a: per vertex, the float64 range ``Df`` and the azimuth stride ``kst``
+    of :func:`robust_normals_kernel` (``rint(k_scale / r_h)`` clipped to ``[1, max_stride]``,
+    1 for NaN)."""
     for f in range(nv):
         dx = np.float64(X[f]) - origin[0]
         dy = np.float64(Y[f]) - origin[1]
@@ -590,7 +568,7 @@ def _robust_vertex_pass(  # type: ignore[no-untyped-def]
     ox32 = np.float32(origin[0])
     oy32 = np.float32(origin[1])
     fmax = np.float32(max_stride)
-    for f in range(nv):  # the azimuth strides (vectorised)
+    for f in range(nv):
         hx = np.float64(X[f] - ox32)
         hy = np.float64(Y[f] - oy32)
         rh = np.float32(math.sqrt(hx * hx + hy * hy))
@@ -598,13 +576,35 @@ def _robust_vertex_pass(  # type: ignore[no-untyped-def]
         kf = kf if kf >= 1 else np.float32(1.0)  # NaN -> 1
         kf = kf if kf <= fmax else fmax
         kst[f] = int(kf)
-    jp_tab = np.empty(n_el, np.int64)
-    jm_tab = np.empty(n_el, np.int64)
-    for j in range(n_el):
-        jp_tab[j] = min(j + m_col[j], n_el - 1)
-        jm_tab[j] = max(j - m_col[j], 0)
+
+
+@njit(cache=True, error_model="numpy")
+def _robust_rows(  # type: ignore[no-untyped-def]
+    i0,
+    i1,
+    X,
+    Y,
+    Z,
+    Df,
+    kst,
+    n_az,
+    n_el,
+    jp_tab,
+    jm_tab,
+    wrap,
+    max_stride,
+    jump_h,
+    jump_f,
+    ratio,
+    use_ratio,
+    nvx,
+    nvy,
+    nvz,
+):
+    """Stage 2-5 pass 2b: the robust vertex normals of rows ``i0 .. i1 - 1`` (the first loop of
+    :func:`robust_normals_kernel`) into the flat ``nvx, nvy, nvz``."""
     big = n_az > max_stride
-    for i in range(n_az):
+    for i in range(i0, i1):
         base = i * n_el
         for j in range(n_el):
             f = base + j
@@ -630,15 +630,21 @@ def _robust_vertex_pass(  # type: ignore[no-untyped-def]
             e3 = base + jm_tab[j]
             d0 = Df[e0]
             d1 = Df[e1]
+            # the end-point tests without short-circuits (no branches; a NaN fails them all,
+            # as in the twin)
             t0 = np.float64(abs(Z[e0] - zc)) <= lim
             t1 = np.float64(abs(Z[e1] - zc)) <= lim
             if use_ratio:
-                t0 = t0 and abs(d0 - dc) <= ratio * min(d0, dc)
-                t1 = t1 and abs(d1 - dc) <= ratio * min(d1, dc)
+                m0 = d0 if d0 < dc else dc
+                m1 = d1 if d1 < dc else dc
+                t0 = t0 & (abs(d0 - dc) <= ratio * m0)
+                t1 = t1 & (abs(d1 - dc) <= ratio * m1)
+            t2 = np.float64(abs(Z[e2] - zc)) <= lim
+            t3 = np.float64(abs(Z[e3] - zc)) <= lim
             e0 = e0 if t0 else f
             e1 = e1 if t1 else f
-            e2 = e2 if np.float64(abs(Z[e2] - zc)) <= lim else f
-            e3 = e3 if np.float64(abs(Z[e3] - zc)) <= lim else f
+            e2 = e2 if t2 else f
+            e3 = e3 if t3 else f
             tax = X[e0] - X[e1]
             tay = Y[e0] - Y[e1]
             taz = Z[e0] - Z[e1]
@@ -656,11 +662,6 @@ def _robust_vertex_pass(  # type: ignore[no-untyped-def]
             nvx[f] = cx if math.isfinite(cx) else np.float32(0.0)
             nvy[f] = cy if math.isfinite(cy) else np.float32(0.0)
             nvz[f] = cz if math.isfinite(cz) else np.float32(0.0)
-    for f in range(ne - nv):
-        g = f if f < nv else nv - 1
-        nvx[nv + f] = nvx[g]
-        nvy[nv + f] = nvy[g]
-        nvz[nv + f] = nvz[g]
 
 
 @njit(cache=True, error_model="numpy")
@@ -953,14 +954,18 @@ def stages_2_5_kernel(  # type: ignore[no-untyped-def]
 
     1. per vertex: float32 coordinates, validity, range, line of sight, in flat arrays with one
        extra row (row 0 again, for the seam);
-    2. with ``use_robust``: the robust vertex normals, then the cells' vertical components;
-    3. per cell, branch-free, both triangles written at ``2 f, 2 f + 1`` of a padded layout
+    2. with ``use_robust``: per vertex the float64 range and the azimuth stride;
+    then, block by block of rows (about 4096 cells, so that the per-cell work arrays stay in
+    the cache):
+    3. with ``use_robust``: the robust vertex normals of the rows the block needs (each row
+       once), then the cells' vertical components;
+    4. per cell, branch-free, both triangles written at ``2 f, 2 f + 1`` of a padded layout
        (each row has ``n_el`` cells, the last one padding): normals and C_d; z extrema and mean
        range; jumps; zone cosines, rules P1-P4 and the class without P5 - each pass writes at
        most four arrays (more defeat the compiler's vectoriser);
-    4. per row, in order along the rising ray: P5's running minimum (rows without a P1
+    5. per row, in order along the rising ray: P5's running minimum (rows without a P1
        triangle skipped);
-    5. the padded rows copied into the outputs.
+    6. the padded rows copied into the outputs.
 
     Mesh arguments as :func:`mesh_kernel` (``jump_h32, jump_f32, ratio32, steep_cos`` float32),
     robust ones as :func:`robust_normals_kernel` (``k_scale`` float32, ``jump_h, jump_f, ratio``
@@ -975,75 +980,104 @@ def stages_2_5_kernel(  # type: ignore[no-untyped-def]
     R = n_az if wrap else n_az - 1
     C2 = 2 * (n_el - 1)
     nv = n_az * n_el
-    M = R * n_el  # cells of the padded layout
-    P2 = 2 * M
     X, Y, Z, D = F[0], F[1], F[2], F[3]
     V = B[0]
     _vertex_pass(
         points.reshape(nv, 3), valid.reshape(nv), origin, nv, n_el, X, Y, Z, V, D, vray.reshape(-1)
     )
-    rzc = F[7]
+    nvx, nvy, nvz = F[4], F[5], F[6]
+    jp_tab = np.empty(n_el, np.int64)
+    jm_tab = np.empty(n_el, np.int64)
     if use_robust:
-        nvx, nvy, nvz = F[4], F[5], F[6]
-        _robust_vertex_pass(
-            X,
-            Y,
-            Z,
-            origin,
-            n_az,
-            n_el,
-            k_scale,
-            m_col,
-            wrap,
-            max_stride,
-            jump_h,
-            jump_f,
-            ratio,
-            use_ratio,
-            Df,
-            kst,
-            nvx,
-            nvy,
-            nvz,
-        )
-        _robust_cell_z(nvx, nvy, nvz, M, n_el, rzc)
-    nx, ny, nz = F[8], F[9], F[10]
+        _robust_prep(X, Y, Z, origin, nv, k_scale, max_stride, Df, kst)
+        for j in range(n_el):
+            jp_tab[j] = min(j + m_col[j], n_el - 1)
+            jm_tab[j] = max(j - m_col[j], 0)
+    # per-cell work arrays of one block of rows (they stay in the cache)
+    rzc, nx, ny, nz, lo, hi, rg = F[7], F[8], F[9], F[10], F[11], F[12], F[13]
     okp, jp = B[1], B[2]
-    _normal_pass(X, Y, Z, V, M, n_el, nx, ny, nz, okp)
-    lo, hi, rg = F[11], F[12], F[13]
-    _extent_pass(Z, D, M, n_el, lo, hi, rg)
-    _jump_pass(
-        D,
-        M,
-        n_el,
-        lo,
-        hi,
-        rg,
-        nz,
-        okp,
-        jump_h32,
-        jump_f32,
-        ratio32,
-        use_ratio,
-        steep_cos,
-        use_steep,
-        jp,
-    )
-    _class_pass(X, Y, D, origin, M, n_el, nx, ny, nz, okp, jp, rzc, use_robust, c2, cos_c1, lab)
-    if want_rules:
-        PR[4, :P2] = False
-        _rules_pass(X, Y, D, origin, M, n_el, nx, ny, okp, jp, lab, c2, PR[0], PR[1], PR[2], PR[3])
-    _chain_pass(lab, lo, R, n_el, C2, chain_min, PR[4], want_rules)
-    _compact_normals(nx, ny, nz, R, n_el, C2, normal.reshape(-1))
-    _compact(lo, R, n_el, C2, zmin.reshape(-1))
-    _compact(hi, R, n_el, C2, zmax.reshape(-1))
-    _compact(rg, R, n_el, C2, rng.reshape(-1))
-    _compact(okp, R, n_el, C2, ok.reshape(-1))
-    _compact(jp, R, n_el, C2, jump.reshape(-1))
-    _compact(lab, R, n_el, C2, labels.reshape(-1))
-    if want_rules:
-        for q in range(5):
-            _compact(PR[q], R, n_el, C2, rules[q].reshape(-1))
+    rows_b = max(1, 4096 // n_el)
+    done = 0  # vertex rows with robust normals
+    normal_f = normal.reshape(-1)
+    outs_f = (zmin.reshape(-1), zmax.reshape(-1), rng.reshape(-1))
+    ok_f, jump_f_out, labels_f = ok.reshape(-1), jump.reshape(-1), labels.reshape(-1)
+    for r0 in range(0, R, rows_b):
+        r1 = min(r0 + rows_b, R)
+        nb = r1 - r0
+        Mb = nb * n_el
+        f0 = r0 * n_el
+        if use_robust:
+            need = min(r1 + 1, n_az)  # vertex rows r0 .. r1 (the cells' upper corners)
+            if need > done:
+                _robust_rows(
+                    done,
+                    need,
+                    X,
+                    Y,
+                    Z,
+                    Df,
+                    kst,
+                    n_az,
+                    n_el,
+                    jp_tab,
+                    jm_tab,
+                    wrap,
+                    max_stride,
+                    jump_h,
+                    jump_f,
+                    ratio,
+                    use_ratio,
+                    nvx,
+                    nvy,
+                    nvz,
+                )
+                done = need
+            if r1 == n_az:  # the seam: row 0 again as the extra row
+                for f in range(n_el + 1):
+                    nvx[nv + f] = nvx[f]
+                    nvy[nv + f] = nvy[f]
+                    nvz[nv + f] = nvz[f]
+            _robust_cell_z(nvx[f0:], nvy[f0:], nvz[f0:], Mb, n_el, rzc)
+        Xb, Yb, Zb, Db, Vb = X[f0:], Y[f0:], Z[f0:], D[f0:], V[f0:]
+        _normal_pass(Xb, Yb, Zb, Vb, Mb, n_el, nx, ny, nz, okp)
+        _extent_pass(Zb, Db, Mb, n_el, lo, hi, rg)
+        _jump_pass(
+            Db,
+            Mb,
+            n_el,
+            lo,
+            hi,
+            rg,
+            nz,
+            okp,
+            jump_h32,
+            jump_f32,
+            ratio32,
+            use_ratio,
+            steep_cos,
+            use_steep,
+            jp,
+        )
+        _class_pass(
+            Xb, Yb, Db, origin, Mb, n_el, nx, ny, nz, okp, jp, rzc, use_robust, c2, cos_c1, lab
+        )
+        if want_rules:
+            PR[4, : 2 * Mb] = False
+            _rules_pass(
+                Xb, Yb, Db, origin, Mb, n_el, nx, ny, okp, jp, lab, c2, PR[0], PR[1], PR[2], PR[3]
+            )
+        _chain_pass(lab, lo, nb, n_el, C2, chain_min, PR[4], want_rules)
+        o = r0 * C2
+        _compact_normals(nx, ny, nz, nb, n_el, C2, normal_f[3 * o :])
+        _compact(lo, nb, n_el, C2, outs_f[0][o:])
+        _compact(hi, nb, n_el, C2, outs_f[1][o:])
+        _compact(rg, nb, n_el, C2, outs_f[2][o:])
+        _compact(okp, nb, n_el, C2, ok_f[o:])
+        _compact(jp, nb, n_el, C2, jump_f_out[o:])
+        _compact(lab, nb, n_el, C2, labels_f[o:])
+        if want_rules:
+            for q in range(5):
+                _compact(PR[q], nb, n_el, C2, rules[q].reshape(-1)[o:])
 
 
 # ------------------------------------------------------------------------------------------
