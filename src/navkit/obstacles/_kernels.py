@@ -1260,8 +1260,10 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
     for r in range(n_r):
         lut[rank[r]] = r
     n_cells = n_columns * n_el
+    best = np.empty(n_cells)  # the range of each cell's current winner
     for c in range(n_cells):
         win[c] = -1
+        best[c] = np.inf
     for p in range(len(cell_of_point)):
         cell_of_point[p] = -1
     scale = 2 * np.pi
@@ -1270,22 +1272,26 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
         i = math.floor(x - phase + 0.5)
         if i >= n_columns or i < 0:
             i = i % n_columns
-        c = i * n_el + lut[ring[k]]
-        cell_of_point[idx[k]] = c
-        w = win[c]
+        j = lut[ring[k]]
+        cell_of_point[idx[k]] = i * n_el + j
+        # the winners are kept ring-major: the points of a ring fall into neighbouring entries
+        c = j * n_columns + i
         rk = math.sqrt(rh[k] * rh[k] + qz[k] * qz[k])
-        if w < 0 or rk <= math.sqrt(rh[w] * rh[w] + qz[w] * qz[w]):
+        if win[c] < 0 or rk <= best[c]:
             win[c] = k
-    for c in range(n_cells):
-        w = win[c]
-        if w < 0:
-            grid[c, 0] = np.nan
-            grid[c, 1] = np.nan
-            grid[c, 2] = np.nan
-        else:
-            grid[c, 0] = qx[w]
-            grid[c, 1] = qy[w]
-            grid[c, 2] = qz[w]
+            best[c] = rk
+    for i in range(n_columns):
+        for j in range(n_el):
+            w = win[j * n_columns + i]
+            c = i * n_el + j
+            if w < 0:
+                grid[c, 0] = np.nan
+                grid[c, 1] = np.nan
+                grid[c, 2] = np.nan
+            else:
+                grid[c, 0] = qx[w]
+                grid[c, 1] = qy[w]
+                grid[c, 2] = qz[w]
     return n_el
 
 
