@@ -467,21 +467,26 @@ def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # 
     ox32 = np.float32(origin[0])
     oy32 = np.float32(origin[1])
     n4 = (n_az + 3) // 4
-    col = np.empty(n4, np.float32)
-    xp = np.empty(n_el, np.float64)
-    fp = np.empty(n_el, np.float64)
-    n_cols = 0
-    for j in range(n_el):
-        cnt = 0
-        for i in range(0, n_az, 4):
+    # the float32 horizontal ranges of every 4th row, gathered per column (row by row: in
+    # memory order)
+    cols = np.empty((n_el, n4), np.float32)
+    cnts = np.zeros(n_el, np.int64)
+    for i in range(0, n_az, 4):
+        for j in range(n_el):
             if valid[i, j]:
                 # float32 hypot as glibc's hypotf computes it: in double, rounded once
                 hx = np.float64(np.float32(points[i, j, 0]) - ox32)
                 hy = np.float64(np.float32(points[i, j, 1]) - oy32)
-                col[cnt] = np.float32(math.sqrt(hx * hx + hy * hy))
-                cnt += 1
+                cols[j, cnts[j]] = np.float32(math.sqrt(hx * hx + hy * hy))
+                cnts[j] += 1
+    xp = np.empty(n_el, np.float64)
+    fp = np.empty(n_el, np.float64)
+    n_cols = 0
+    for j in range(n_el):
+        cnt = cnts[j]
         if cnt == 0:
             continue
+        col = cols[j]
         lo = _kth(col[:cnt], (cnt - 1) // 2)
         hi = _kth(col[:cnt], cnt // 2)
         xp[n_cols] = j
