@@ -458,8 +458,14 @@ def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # 
     m = 0
     for i in range(n_az - 1):
         for s in range(S):
-            v = ((az[i + 1, s] - az[i, s]) + np.pi) % two_pi - np.pi
-            v = abs(v)
+            # NumPy's ``(d + pi) % (2 pi) - pi`` for d + pi in (-2 pi, 4 pi), without fmod: the
+            # same result (x - 2 pi is exact there, Sterbenz; x + 2 pi is NumPy's own step)
+            x = (az[i + 1, s] - az[i, s]) + np.pi
+            if x >= two_pi:
+                x = x - two_pi
+            elif not x >= 0:  # negative or NaN
+                x = x + two_pi
+            v = abs(x - np.pi)
             if math.isfinite(v) and v > 0:
                 dal[m] = v
                 m += 1
