@@ -469,7 +469,14 @@ def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # 
             if math.isfinite(v) and v > 0:
                 dal[m] = v
                 m += 1
-    dalpha = _median(dal[:m]) if m > 0 else 1.0
+    dalpha = 1.0
+    if m > 0:  # np.median: the middle order statistic(s), exactly
+        work = np.empty(m)
+        h = m // 2
+        if m % 2:
+            dalpha = _kth_banded(dal[:m], h, work)
+        else:
+            dalpha = (_kth_banded(dal[:m], h - 1, work) + _kth_banded(dal[:m], h, work)) / 2
     ox32 = np.float32(origin[0])
     oy32 = np.float32(origin[1])
     n4 = (n_az + 3) // 4
@@ -1173,13 +1180,11 @@ def _kth_banded(values, k, work):  # type: ignore[no-untyped-def]
     hi = sample[min(pos + 64, s - 1)]
     below = 0
     m = 0
-    for q in range(n):
+    for q in range(n):  # branch-free: always write, advance when inside the bracket
         v = values[q]
-        if v < lo:
-            below += 1
-        elif v <= hi:
-            work[m] = v
-            m += 1
+        below += 1 if v < lo else 0
+        work[m] = v
+        m += 1 if (v >= lo and v <= hi) else 0
     if below <= k < below + m:
         return _kth(work[:m], k - below)
     for q in range(n):
