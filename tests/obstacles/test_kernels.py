@@ -27,7 +27,7 @@ from navkit.obstacles import (
 )
 from navkit.obstacles.detector import ObstacleDetection
 from navkit.obstacles.mesh import build_mesh, robust_cell_normals
-from navkit.obstacles.rules import classify
+from navkit.obstacles.rules import classify, mesh_and_classes
 
 pytest.importorskip("numba")
 
@@ -150,6 +150,79 @@ def test_stage_kernels_equal_numpy_on_kitti(data_path):
         for k in rules_a:
             np.testing.assert_array_equal(rules_a[k], rules_b[k], err_msg=f"{name} {k}")
         assert (la == -2).sum() > 1000 and (la == 0).sum() > 50000  # a real frame, not empty
+        _same_stages_2_5(P, valid, o, name)
+
+
+_MESH_FIELDS = (
+    "triangles",
+    "valid",
+    "normal",
+    "vertex_ray",
+    "range_mean",
+    "z_min",
+    "z_max",
+    "jump",
+)
+
+
+def _same_stages_2_5(P, valid, o, name, settings=None):  # type: ignore[no-untyped-def]
+    """The fused stage 2-5 kernel against the twin's three functions: every mesh field, the
+    classes and the rules P1-P5 bit for bit, wrapped and not, with and without robust normals
+    and the range-ratio test."""
+    base = settings or ObstacleSettings()
+    variants = [base, replace(base, normal_support_m=0.0), replace(base, jump_range_ratio=math.inf)]
+    for s in variants:
+        for wrap in (True, False):
+            ma, la, ra = mesh_and_classes(
+                P, valid, o, replace(s, backend="numpy"), wrap=wrap, rules=True
+            )
+            mb, lb, rb = mesh_and_classes(
+                P, valid, o, replace(s, backend="compiled"), wrap=wrap, rules=True
+            )
+            what = f"{name} wrap={wrap} {s.normal_support_m} {s.jump_range_ratio}"
+            for f in _MESH_FIELDS:
+                np.testing.assert_array_equal(getattr(ma, f), getattr(mb, f), err_msg=f"{what} {f}")
+            np.testing.assert_array_equal(la, lb, err_msg=f"{what} labels")
+            assert ra.keys() == rb.keys() == {"P1", "P2", "P3", "P4", "P5"}
+            for k in ra:
+                np.testing.assert_array_equal(ra[k], rb[k], err_msg=f"{what} {k}")
+            # without the rules, the same mesh and labels
+            mc, lc, rc = mesh_and_classes(P, valid, o, replace(s, backend="compiled"), wrap=wrap)
+            np.testing.assert_array_equal(lc, lb, err_msg=what)
+            for f in _MESH_FIELDS:
+                np.testing.assert_array_equal(getattr(mc, f), getattr(mb, f), err_msg=what)
+            assert rc == {}
+
+
+def test_fused_stages_equal_numpy_on_simulated_grids():
+    """The fused kernel on simulated grids with holes, both scanners, 1-2 % range noise, a
+    grid with empty elevation columns (``np.interp`` of the strides) and a tiny grid."""
+    from navkit.experiments.obstacles import paper_scenes, scanners
+    from navkit.geometry import se3_from_rt
+    from navkit.sim import RangeNoise, render_scan
+
+    P = o = None
+    for scene, scanner, noise in (("four", "tilting", 0.01), ("box", "spinning64", 0.02)):
+        sc, height = scanners()[scanner]
+        T = se3_from_rt(np.eye(3), [0.0, 0.0, height])
+        sim = render_scan(
+            paper_scenes()[scene],
+            sc,
+            T,
+            noise=RangeNoise(relative_sigma=noise),
+            rng=3,
+            max_range=60.0,
+        )
+        det = detect_obstacles(sim.scan, replace(FAST, backend="numpy"))  # stage 1's grid
+        P, valid, o = det.points, det.valid, det.sensor_origin
+        _same_stages_2_5(P, valid, o, f"{scene} {scanner}")
+        holes = P.copy()
+        holes[::3, 5:9] = np.nan  # whole elevation columns empty on every 4th row and more
+        holes[:, 2] = np.nan
+        _same_stages_2_5(holes, np.isfinite(holes).all(axis=-1), o, f"{scene} holes")
+    assert P is not None
+    tiny = P[:3, :4].copy()
+    _same_stages_2_5(tiny, np.isfinite(tiny).all(axis=-1), o, "3 x 4 grid")
 
 
 def test_compiled_equals_numpy_on_kitti(data_path):

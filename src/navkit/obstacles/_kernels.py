@@ -33,17 +33,23 @@ __all__ = [
     "boundary_kernel",
     "classify_kernel",
     "cloud_prep_kernel",
+    "cloud_valid_kernel",
     "components_kernel",
     "grid_cells_kernel",
     "grid_fill_kernel",
+    "grid_order_fill_kernel",
     "ground_cells_kernel",
     "map_groups_kernel",
     "mesh_kernel",
+    "phase_fractions_kernel",
     "points_kernel",
     "refine_kernel",
     "rings_by_order_kernel",
+    "rings_order_kernel",
     "robust_normals_kernel",
+    "robust_strides_kernel",
     "split_kernel",
+    "stages_2_5_kernel",
     "vertex_kernel",
 ]
 
@@ -431,6 +437,668 @@ def classify_kernel(  # type: ignore[no-untyped-def]
 
 
 # ------------------------------------------------------------------------------------------
+# stages 2-5 fused: mesh, robust normals, H_s, rules, classes in one pass over the grid
+# (twins: mesh.build_mesh, mesh.robust_cell_normals, rules.classify with normal_support = 0)
+
+
+@njit(cache=True, error_model="numpy")
+def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # type: ignore[no-untyped-def]
+    """The strides of :func:`~navkit.obstacles.mesh.robust_cell_normals` from the grid.
+
+    ``az (n_az, S) float64`` are NumPy's ``arctan2`` of the sampled columns (``points[:,
+    ::step]`` as float32, minus the origin in float64). Returns ``(dalpha, m_col)``: the median
+    azimuth step (rad, 1.0 when none) and the elevation stride per column ``(n_el,) intp``,
+    computed as the twin computes them (float32 horizontal ranges of every 4th row, their
+    per-column medians, ``np.interp`` over the empty columns, the clipped ``rint``).
+    """
+    n_az, n_el = valid.shape
+    two_pi = 2 * np.pi
+    S = az.shape[1]
+    dal = np.empty(max(n_az - 1, 0) * S)
+    m = 0
+    for i in range(n_az - 1):
+        for s in range(S):
+            # NumPy's ``(d + pi) % (2 pi) - pi`` for d + pi in (-2 pi, 4 pi), without fmod: the
+            # same result (x - 2 pi is exact there, Sterbenz; x + 2 pi is NumPy's own step)
+            x = (az[i + 1, s] - az[i, s]) + np.pi
+            if x >= two_pi:
+                x = x - two_pi
+            elif not x >= 0:  # negative or NaN
+                x = x + two_pi
+            v = abs(x - np.pi)
+            if math.isfinite(v) and v > 0:
+                dal[m] = v
+                m += 1
+    dalpha = 1.0
+    if m > 0:  # np.median: the middle order statistic(s), exactly
+        work = np.empty(m)
+        h = m // 2
+        if m % 2:
+            dalpha = _kth_banded(dal[:m], h, work)
+        else:
+            dalpha = (_kth_banded(dal[:m], h - 1, work) + _kth_banded(dal[:m], h, work)) / 2
+    ox32 = np.float32(origin[0])
+    oy32 = np.float32(origin[1])
+    n4 = (n_az + 3) // 4
+    # the float32 horizontal ranges of every 4th row, gathered per column (row by row: in
+    # memory order)
+    cols = np.empty((n_el, n4), np.float32)
+    cnts = np.zeros(n_el, np.int64)
+    for i in range(0, n_az, 4):
+        for j in range(n_el):
+            if valid[i, j]:
+                # float32 hypot as glibc's hypotf computes it: in double, rounded once
+                hx = np.float64(np.float32(points[i, j, 0]) - ox32)
+                hy = np.float64(np.float32(points[i, j, 1]) - oy32)
+                cols[j, cnts[j]] = np.float32(math.sqrt(hx * hx + hy * hy))
+                cnts[j] += 1
+    xp = np.empty(n_el, np.float64)
+    fp = np.empty(n_el, np.float64)
+    n_cols = 0
+    for j in range(n_el):
+        cnt = cnts[j]
+        if cnt == 0:
+            continue
+        col = cols[j]
+        lo = _kth(col[:cnt], (cnt - 1) // 2)
+        hi = _kth(col[:cnt], cnt // 2)
+        xp[n_cols] = j
+        fp[n_cols] = np.float64((lo + hi) / np.float32(2))
+        n_cols += 1
+    rh_col = np.ones(n_el)
+    if n_cols == 1:
+        for j in range(n_el):
+            rh_col[j] = fp[0]
+    elif n_cols > 1:
+        # np.interp at the integers 0 .. n_el - 1 (left / right: the end values)
+        k = 0
+        for j in range(n_el):
+            x = np.float64(j)
+            if x <= xp[0]:
+                rh_col[j] = fp[0]
+                continue
+            if x >= xp[n_cols - 1]:
+                rh_col[j] = fp[n_cols - 1]
+                continue
+            while xp[k + 1] <= x:
+                k += 1
+            if xp[k] == x:
+                rh_col[j] = fp[k]
+            else:
+                slope = (fp[k + 1] - fp[k]) / (xp[k + 1] - xp[k])
+                rh_col[j] = slope * (x - xp[k]) + fp[k]
+    se = np.empty(n_el)
+    for j in range(n_el - 1):
+        se[j] = abs(rh_col[j + 1] - rh_col[j])
+    se[n_el - 1] = se[n_el - 2] if n_el > 1 else 0.0
+    m_col = np.empty(n_el, np.intp)
+    for j in range(n_el):
+        a = se[j]
+        b = se[j - 1] if j > 0 else se[n_el - 1]
+        f = b if (a != a or b < a) else a  # np.fmin
+        if f != f or f < 1e-3:
+            f = 1e-3
+        v = np.rint(support_m / (2.0 * f))
+        m_col[j] = min(max(int(v), 1), max_stride)
+    return dalpha, m_col
+
+
+@njit(cache=True, error_model="numpy")
+def _vertex_pass(pf, vf, origin, nv, n_el, X, Y, Z, V, D, vr):  # type: ignore[no-untyped-def]
+    """Stage 2-5 pass 1: float32 coordinates, validity, range and line of sight per vertex, in
+    flat arrays with one extra row (row 0 again: the seam) and one more vertex (padding)."""
+    o0 = np.float32(origin[0])
+    o1 = np.float32(origin[1])
+    o2 = np.float32(origin[2])
+    for f in range(nv):
+        X[f] = np.float32(pf[f, 0])
+        Y[f] = np.float32(pf[f, 1])
+        Z[f] = np.float32(pf[f, 2])
+        V[f] = vf[f]
+    for f in range(nv):
+        rx = X[f] - o0
+        ry = Y[f] - o1
+        rz = Z[f] - o2
+        d = np.float32(math.sqrt(rx * rx + ry * ry + rz * rz))
+        D[f] = d
+        vr[3 * f] = rx / d
+        vr[3 * f + 1] = ry / d
+        vr[3 * f + 2] = rz / d
+    for f in range(n_el + 1):
+        g = f if f < nv else nv - 1
+        X[nv + f] = X[g]
+        Y[nv + f] = Y[g]
+        Z[nv + f] = Z[g]
+        D[nv + f] = D[g]
+        V[nv + f] = V[g] if f < n_el else False
+
+
+@njit(cache=True, error_model="numpy")
+def _robust_prep(X, Y, Z, origin, nv, k_scale, max_stride, Df, kst):  # type: ignore[no-untyped-def]
+    """Stage 2-5 pass 2a: per vertex, the float64 range ``Df`` and the azimuth stride ``kst``
+    of :func:`robust_normals_kernel` (``rint(k_scale / r_h)`` clipped to ``[1, max_stride]``,
+    1 for NaN)."""
+    for f in range(nv):
+        dx = np.float64(X[f]) - origin[0]
+        dy = np.float64(Y[f]) - origin[1]
+        dz = np.float64(Z[f]) - origin[2]
+        Df[f] = math.sqrt(dx * dx + dy * dy + dz * dz)
+    ox32 = np.float32(origin[0])
+    oy32 = np.float32(origin[1])
+    fmax = np.float32(max_stride)
+    for f in range(nv):
+        hx = np.float64(X[f] - ox32)
+        hy = np.float64(Y[f] - oy32)
+        rh = np.float32(math.sqrt(hx * hx + hy * hy))
+        kf = np.rint(k_scale / rh)
+        kf = kf if kf >= 1 else np.float32(1.0)  # NaN -> 1
+        kf = kf if kf <= fmax else fmax
+        kst[f] = int(kf)
+
+
+@njit(cache=True, error_model="numpy")
+def _robust_rows(  # type: ignore[no-untyped-def]
+    i0,
+    i1,
+    X,
+    Y,
+    Z,
+    Df,
+    kst,
+    n_az,
+    n_el,
+    jp_tab,
+    jm_tab,
+    wrap,
+    max_stride,
+    jump_h,
+    jump_f,
+    ratio,
+    use_ratio,
+    nvx,
+    nvy,
+    nvz,
+):
+    """Stage 2-5 pass 2b: the robust vertex normals of rows ``i0 .. i1 - 1`` (the first loop of
+    :func:`robust_normals_kernel`) into the flat ``nvx, nvy, nvz``."""
+    big = n_az > max_stride
+    for i in range(i0, i1):
+        base = i * n_el
+        for j in range(n_el):
+            f = base + j
+            k = kst[f]
+            if wrap:
+                ip = i + k
+                im = i - k
+                if big:
+                    ip = ip - n_az if ip >= n_az else ip
+                    im = im + n_az if im < 0 else im
+                else:
+                    ip = ip % n_az
+                    im = im % n_az
+            else:
+                ip = min(i + k, n_az - 1)
+                im = max(i - k, 0)
+            zc = Z[f]
+            dc = Df[f]
+            lim = jump_h + jump_f * dc
+            e0 = ip * n_el + j
+            e1 = im * n_el + j
+            e2 = base + jp_tab[j]
+            e3 = base + jm_tab[j]
+            d0 = Df[e0]
+            d1 = Df[e1]
+            # the end-point tests without short-circuits (no branches; a NaN fails them all,
+            # as in the twin)
+            t0 = np.float64(abs(Z[e0] - zc)) <= lim
+            t1 = np.float64(abs(Z[e1] - zc)) <= lim
+            if use_ratio:
+                m0 = d0 if d0 < dc else dc
+                m1 = d1 if d1 < dc else dc
+                t0 = t0 & (abs(d0 - dc) <= ratio * m0)
+                t1 = t1 & (abs(d1 - dc) <= ratio * m1)
+            t2 = np.float64(abs(Z[e2] - zc)) <= lim
+            t3 = np.float64(abs(Z[e3] - zc)) <= lim
+            e0 = e0 if t0 else f
+            e1 = e1 if t1 else f
+            e2 = e2 if t2 else f
+            e3 = e3 if t3 else f
+            tax = X[e0] - X[e1]
+            tay = Y[e0] - Y[e1]
+            taz = Z[e0] - Z[e1]
+            tex = X[e2] - X[e3]
+            tey = Y[e2] - Y[e3]
+            tez = Z[e2] - Z[e3]
+            nx = tay * tez - taz * tey
+            ny = taz * tex - tax * tez
+            nz = tax * tey - tay * tex
+            sgn = np.float32(-1.0) if nz < 0 else np.float32(1.0)
+            inv = sgn / np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
+            cx = nx * inv
+            cy = ny * inv
+            cz = nz * inv
+            nvx[f] = cx if math.isfinite(cx) else np.float32(0.0)
+            nvy[f] = cy if math.isfinite(cy) else np.float32(0.0)
+            nvz[f] = cz if math.isfinite(cz) else np.float32(0.0)
+
+
+@njit(cache=True, error_model="numpy")
+def _robust_cell_z(nvx, nvy, nvz, M, n_el, out):  # type: ignore[no-untyped-def]
+    """Vertical component of the robust cell normals (the normalised sum of the four corners'),
+    per cell of the padded layout, into ``out (M,)``."""
+    ax, ax1, ax2, ax3 = nvx, nvx[1:], nvx[n_el:], nvx[n_el + 1 :]
+    ay, ay1, ay2, ay3 = nvy, nvy[1:], nvy[n_el:], nvy[n_el + 1 :]
+    az, az1, az2, az3 = nvz, nvz[1:], nvz[n_el:], nvz[n_el + 1 :]
+    for f in range(M):
+        sx = ax[f] + ax1[f] + ax2[f] + ax3[f]
+        sy = ay[f] + ay1[f] + ay2[f] + ay3[f]
+        sz = az[f] + az1[f] + az2[f] + az3[f]
+        nc = np.float32(math.sqrt(sx * sx + sy * sy + sz * sz))
+        nc = nc if nc != 0 else _NAN32
+        out[f] = sz / nc
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _normal_pass(X, Y, Z, V, M, n_el, nx_o, ny_o, nz_o, ok_o):  # type: ignore[no-untyped-def]
+    """Pass 3a: unit normals (sign: z up, NaN where unreliable) and C_d of both triangles of
+    every cell, written at ``2 f`` and ``2 f + 1`` (``f`` the cell's first vertex)."""
+    one = np.float32(1.0)
+    X1, X2, X3 = X[1:], X[n_el:], X[n_el + 1 :]
+    Y1, Y2, Y3 = Y[1:], Y[n_el:], Y[n_el + 1 :]
+    Z1, Z2, Z3 = Z[1:], Z[n_el:], Z[n_el + 1 :]
+    V1, V2, V3 = V[1:], V[n_el:], V[n_el + 1 :]
+    for f in range(M):
+        x00, x01, x10, x11 = X[f], X1[f], X2[f], X3[f]
+        y00, y01, y10, y11 = Y[f], Y1[f], Y2[f], Y3[f]
+        z00, z01, z10, z11 = Z[f], Z1[f], Z2[f], Z3[f]
+        v01 = V1[f] & V2[f]
+        ex, ey, ez = x01 - x10, y01 - y10, z01 - z10
+        ax, ay, az = x00 - x10, y00 - y10, z00 - z10
+        bx, by, bz = x11 - x10, y11 - y10, z11 - z10
+        # T_k = (00, 01, 10)
+        nx = ay * ez - az * ey
+        ny = az * ex - ax * ez
+        nz = ax * ey - ay * ex
+        nrm = np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
+        good = v01 & V[f] & (nrm > 0)
+        s = one / nrm
+        s = -s if nz < 0 else s
+        s = s if good else _NAN32
+        nx_o[2 * f] = nx * s
+        ny_o[2 * f] = ny * s
+        nz_o[2 * f] = nz * s
+        ok_o[2 * f] = good
+        # T_{k+1} = (10, 01, 11)
+        nx = ey * bz - ez * by
+        ny = ez * bx - ex * bz
+        nz = ex * by - ey * bx
+        nrm = np.float32(math.sqrt(nx * nx + ny * ny + nz * nz))
+        good = v01 & V3[f] & (nrm > 0)
+        s = one / nrm
+        s = -s if nz < 0 else s
+        s = s if good else _NAN32
+        nx_o[2 * f + 1] = nx * s
+        ny_o[2 * f + 1] = ny * s
+        nz_o[2 * f + 1] = nz * s
+        ok_o[2 * f + 1] = good
+
+
+@njit(cache=True, error_model="numpy")
+def _extent_pass(Z, D, M, n_el, lo_o, hi_o, rg_o):  # type: ignore[no-untyped-def]
+    """Pass 3b: z extrema (NaN wins, as ``np.minimum``) and mean range of both triangles."""
+    third = np.float32(1.0 / 3.0)
+    Z1, Z2, Z3 = Z[1:], Z[n_el:], Z[n_el + 1 :]
+    D1, D2, D3 = D[1:], D[n_el:], D[n_el + 1 :]
+    for f in range(M):
+        z00, z01, z10, z11 = Z[f], Z1[f], Z2[f], Z3[f]
+        dsh = D1[f] + D2[f]
+        zmn = z01 if (z01 <= z10 or z01 != z01) else z10
+        zmx = z01 if (z01 >= z10 or z01 != z01) else z10
+        lo_o[2 * f] = zmn if (zmn <= z00 or zmn != zmn) else z00
+        hi_o[2 * f] = zmx if (zmx >= z00 or zmx != zmx) else z00
+        rg_o[2 * f] = (dsh + D[f]) * third
+        lo_o[2 * f + 1] = zmn if (zmn <= z11 or zmn != zmn) else z11
+        hi_o[2 * f + 1] = zmx if (zmx >= z11 or zmx != zmx) else z11
+        rg_o[2 * f + 1] = (dsh + D3[f]) * third
+
+
+@njit(cache=True, error_model="numpy")
+def _jump_pass(  # type: ignore[no-untyped-def]
+    D, M, n_el, lo, hi, rg, nz, ok, jump_h, jump_f, ratio, use_ratio, steep_cos, use_steep, jp_o
+):
+    """Pass 3c: the height-jump code of H_s (:func:`mesh_kernel`'s tests) of both triangles."""
+    D1, D2, D3 = D[1:], D[n_el:], D[n_el + 1 :]
+    for f in range(M):
+        d00, d01, d10, d11 = D[f], D1[f], D2[f], D3[f]
+        for t in range(2):
+            k = 2 * f + t
+            lo_k = lo[k]
+            jp = hi[k] - lo_k > jump_h + jump_f * rg[k]
+            if use_ratio:
+                if t == 0:
+                    a0, a1, e0, e1 = d00, d10, d00, d01  # azimuth edge, elevation edge
+                else:
+                    a0, a1, e0, e1 = d01, d11, d01, d11
+                jp = jp | (abs(a0 - a1) > ratio * min(a0, a1))
+                if use_steep:
+                    e = abs(e0 - e1) > ratio * min(e0, e1)
+                    jp = jp | (e & ((abs(nz[k]) < steep_cos) | (lo_k > jump_h)))
+            jp_o[k] = jp & ok[k]
+
+
+@njit(cache=True, error_model="numpy")
+def _class_pass(  # type: ignore[no-untyped-def]
+    X, Y, D, origin, M, n_el, nx, ny, nz, ok, jump, rzc, use_robust, c2, cos_c1, lab_o
+):
+    """Pass 3d: rules P1-P4 and the class without P5 (-1 unreliable, -4 shadow behind, -3 side
+    shadow, -2 P1, 0) of both triangles (:func:`classify_kernel`'s tests)."""
+    o0 = np.float32(origin[0])
+    o1 = np.float32(origin[1])
+    tiny = np.float32(1e-9)
+    X2, Y2, D2 = X[n_el:], Y[n_el:], D[n_el:]
+    for f in range(M):
+        rz = rzc[f] if use_robust else np.float32(0.0)
+        for t in range(2):
+            k = 2 * f + t
+            if t == 0:  # the first vertex's line of sight
+                qx, qy, qd = X[f] - o0, Y[f] - o1, D[f]
+            else:
+                qx, qy, qd = X2[f] - o0, Y2[f] - o1, D2[f]
+            q0 = qx / qd
+            q1 = qy / qd
+            n0 = nx[k]
+            n1 = ny[k]
+            nzz = nz[k]
+            good = ok[k]
+            jp = jump[k]
+            num = n0 * q0 + n1 * q1
+            den = np.float32(math.sqrt(n0 * n0 + n1 * n1)) * np.float32(
+                math.sqrt(q0 * q0 + q1 * q1)
+            )
+            cosz = np.float64(num / den) if den > tiny else 0.0
+            p2 = jp & (cosz > c2)
+            p3 = jp & (cosz < -c2)
+            behind = good & p2
+            side = jp and not p2 and not p3
+            nzr = nzz
+            if use_robust:
+                nzr = rz if (not jp and math.isfinite(rz)) else nzz
+            p1 = good and not behind and not side and nzr < cos_c1
+            lab = np.int8(0)
+            lab = np.int8(-2) if p1 else lab
+            lab = np.int8(-3) if side else lab
+            lab = np.int8(-4) if behind else lab
+            lab = np.int8(-1) if not good else lab
+            lab_o[k] = lab
+
+
+@njit(cache=True, error_model="numpy")
+def _rules_pass(X, Y, D, origin, M, n_el, nx, ny, ok, jump, lab, c2, p1_o, p2_o, p3_o, p4_o):  # type: ignore[no-untyped-def]
+    """The rules P1-P4 for inspection (``want_rules``): the zone tests again, P1 from the class."""
+    o0 = np.float32(origin[0])
+    o1 = np.float32(origin[1])
+    tiny = np.float32(1e-9)
+    X2, Y2, D2 = X[n_el:], Y[n_el:], D[n_el:]
+    for f in range(M):
+        for t in range(2):
+            k = 2 * f + t
+            if t == 0:
+                qx, qy, qd = X[f] - o0, Y[f] - o1, D[f]
+            else:
+                qx, qy, qd = X2[f] - o0, Y2[f] - o1, D2[f]
+            q0 = qx / qd
+            q1 = qy / qd
+            n0 = nx[k]
+            n1 = ny[k]
+            num = n0 * q0 + n1 * q1
+            den = np.float32(math.sqrt(n0 * n0 + n1 * n1)) * np.float32(
+                math.sqrt(q0 * q0 + q1 * q1)
+            )
+            cosz = np.float64(num / den) if den > tiny else 0.0
+            jp = jump[k]
+            p1_o[k] = lab[k] == -2
+            p2_o[k] = jp & (cosz > c2)
+            p3_o[k] = jp & (cosz < -c2)
+            p4_o[k] = ok[k] and not jp
+
+
+@njit(cache=True, error_model="numpy")
+def _chain_pass(lab, lo, R, n_el, C2, chain_min, p5_o, want_rules):  # type: ignore[no-untyped-def]
+    """Pass 4, P5 along each row of the padded layout: an earlier P1 triangle in the same run
+    of non-shadow reliable triangles, with the twin's segmented running minimum (its ``(min -
+    s 1e7) + s 1e7`` rounding included)."""
+    huge = 1.0e6
+    seg_w = 1.0e7
+    for r in range(R):
+        b0 = 2 * r * n_el
+        first = -1
+        for k in range(b0, b0 + C2):
+            if lab[k] == -2:
+                first = k
+                break
+        if first < 0:
+            continue  # no P1 triangle in the row: no P5
+        seg = 0
+        for k in range(b0, first):
+            lk = lab[k]
+            seg += 1 if (lk == -1 or lk <= -3) else 0
+        run_min = huge
+        for k in range(first, b0 + C2):
+            lk = lab[k]
+            if lk == -1 or lk <= -3:  # a breaker: unreliable or a shadow
+                seg += 1
+                run_min = huge
+                continue
+            v = np.float64(lo[k])
+            if lk == -2:
+                if v < run_min:
+                    run_min = v
+                if not want_rules:
+                    continue
+            if run_min < huge:
+                sw = seg * seg_w
+                b = (run_min - sw) + sw
+                if b < huge / 2 and v - b >= chain_min:
+                    lab[k] = -2
+                    if want_rules:
+                        p5_o[k] = True
+
+
+@njit(cache=True)
+def _compact(src, R, n_el, C2, dst):  # type: ignore[no-untyped-def]
+    """Rows of the padded layout (``2 n_el`` per row) into ``dst (R * C2,)`` (drop the padding)."""
+    for r in range(R):
+        a = 2 * r * n_el
+        b = r * C2
+        for kk in range(C2):
+            dst[b + kk] = src[a + kk]
+
+
+@njit(cache=True)
+def _compact_normals(nx, ny, nz, R, n_el, C2, dst):  # type: ignore[no-untyped-def]
+    """The three padded components into ``dst (R * C2 * 3,)`` (the ``(R, 2C, 3)`` layout)."""
+    for r in range(R):
+        a = 2 * r * n_el
+        b = 3 * r * C2
+        for kk in range(C2):
+            dst[b + 3 * kk] = nx[a + kk]
+            dst[b + 3 * kk + 1] = ny[a + kk]
+            dst[b + 3 * kk + 2] = nz[a + kk]
+
+
+@njit(cache=True, error_model="numpy")
+def stages_2_5_kernel(  # type: ignore[no-untyped-def]
+    points,
+    valid,
+    origin,
+    wrap,
+    jump_h32,
+    jump_f32,
+    ratio32,
+    use_ratio,
+    steep_cos,
+    use_steep,
+    use_robust,
+    k_scale,
+    m_col,
+    max_stride,
+    jump_h,
+    jump_f,
+    ratio,
+    c2,
+    cos_c1,
+    chain_min,
+    want_rules,
+    F,
+    B,
+    lab,
+    PR,
+    Df,
+    kst,
+    ok,
+    normal,
+    vray,
+    rng,
+    zmin,
+    zmax,
+    jump,
+    labels,
+    rules,
+):
+    """Stages 2-5 over the grid in short passes that the compiler vectorises: the results of
+    :func:`mesh_kernel`, :func:`robust_normals_kernel` (with ``use_robust``; only the vertical
+    component of the cell normals is used) and :func:`classify_kernel`, bit for bit.
+
+    1. per vertex: float32 coordinates, validity, range, line of sight, in flat arrays with one
+       extra row (row 0 again, for the seam);
+    2. with ``use_robust``: per vertex the float64 range and the azimuth stride;
+    then, block by block of rows (about 4096 cells, so that the per-cell work arrays stay in
+    the cache):
+    3. with ``use_robust``: the robust vertex normals of the rows the block needs (each row
+       once), then the cells' vertical components;
+    4. per cell, branch-free, both triangles written at ``2 f, 2 f + 1`` of a padded layout
+       (each row has ``n_el`` cells, the last one padding): normals and C_d; z extrema and mean
+       range; jumps; zone cosines, rules P1-P4 and the class without P5 - each pass writes at
+       most four arrays (more defeat the compiler's vectoriser);
+    5. per row, in order along the rising ray: P5's running minimum (rows without a P1
+       triangle skipped);
+    6. the padded rows copied into the outputs.
+
+    Mesh arguments as :func:`mesh_kernel` (``jump_h32, jump_f32, ratio32, steep_cos`` float32),
+    robust ones as :func:`robust_normals_kernel` (``k_scale`` float32, ``jump_h, jump_f, ratio``
+    float64), rule ones as :func:`classify_kernel`. Work arrays (any content; ``ne = n_az n_el +
+    n_el + 1``, ``M = R n_el``, ``L >= max(ne, 2 M)``): ``F (14, L) float32``, ``B (3, L)
+    bool``, ``lab (2 M,) int8``, ``PR (5, 2 M or 0) bool``, ``Df, kst (n_az n_el,)`` float64
+    and int64. Outputs, filled: ``ok, normal, vray, rng, zmin, zmax, jump`` as
+    :func:`mesh_kernel` returns them, ``labels (R, 2C) int8`` and ``rules (5, R, 2C) bool``
+    (P1-P5; ``(5, 0, 0)`` unless ``want_rules``).
+    """
+    n_az, n_el = valid.shape
+    R = n_az if wrap else n_az - 1
+    C2 = 2 * (n_el - 1)
+    nv = n_az * n_el
+    X, Y, Z, D = F[0], F[1], F[2], F[3]
+    V = B[0]
+    _vertex_pass(
+        points.reshape(nv, 3), valid.reshape(nv), origin, nv, n_el, X, Y, Z, V, D, vray.reshape(-1)
+    )
+    nvx, nvy, nvz = F[4], F[5], F[6]
+    jp_tab = np.empty(n_el, np.int64)
+    jm_tab = np.empty(n_el, np.int64)
+    if use_robust:
+        _robust_prep(X, Y, Z, origin, nv, k_scale, max_stride, Df, kst)
+        for j in range(n_el):
+            jp_tab[j] = min(j + m_col[j], n_el - 1)
+            jm_tab[j] = max(j - m_col[j], 0)
+    # per-cell work arrays of one block of rows (they stay in the cache)
+    rzc, nx, ny, nz, lo, hi, rg = F[7], F[8], F[9], F[10], F[11], F[12], F[13]
+    okp, jp = B[1], B[2]
+    rows_b = max(1, 4096 // n_el)
+    done = 0  # vertex rows with robust normals
+    normal_f = normal.reshape(-1)
+    outs_f = (zmin.reshape(-1), zmax.reshape(-1), rng.reshape(-1))
+    ok_f, jump_f_out, labels_f = ok.reshape(-1), jump.reshape(-1), labels.reshape(-1)
+    for r0 in range(0, R, rows_b):
+        r1 = min(r0 + rows_b, R)
+        nb = r1 - r0
+        Mb = nb * n_el
+        f0 = r0 * n_el
+        if use_robust:
+            need = min(r1 + 1, n_az)  # vertex rows r0 .. r1 (the cells' upper corners)
+            if need > done:
+                _robust_rows(
+                    done,
+                    need,
+                    X,
+                    Y,
+                    Z,
+                    Df,
+                    kst,
+                    n_az,
+                    n_el,
+                    jp_tab,
+                    jm_tab,
+                    wrap,
+                    max_stride,
+                    jump_h,
+                    jump_f,
+                    ratio,
+                    use_ratio,
+                    nvx,
+                    nvy,
+                    nvz,
+                )
+                done = need
+            if r1 == n_az:  # the seam: row 0 again as the extra row
+                for f in range(n_el + 1):
+                    nvx[nv + f] = nvx[f]
+                    nvy[nv + f] = nvy[f]
+                    nvz[nv + f] = nvz[f]
+            _robust_cell_z(nvx[f0:], nvy[f0:], nvz[f0:], Mb, n_el, rzc)
+        Xb, Yb, Zb, Db, Vb = X[f0:], Y[f0:], Z[f0:], D[f0:], V[f0:]
+        _normal_pass(Xb, Yb, Zb, Vb, Mb, n_el, nx, ny, nz, okp)
+        _extent_pass(Zb, Db, Mb, n_el, lo, hi, rg)
+        _jump_pass(
+            Db,
+            Mb,
+            n_el,
+            lo,
+            hi,
+            rg,
+            nz,
+            okp,
+            jump_h32,
+            jump_f32,
+            ratio32,
+            use_ratio,
+            steep_cos,
+            use_steep,
+            jp,
+        )
+        _class_pass(
+            Xb, Yb, Db, origin, Mb, n_el, nx, ny, nz, okp, jp, rzc, use_robust, c2, cos_c1, lab
+        )
+        if want_rules:
+            PR[4, : 2 * Mb] = False
+            _rules_pass(
+                Xb, Yb, Db, origin, Mb, n_el, nx, ny, okp, jp, lab, c2, PR[0], PR[1], PR[2], PR[3]
+            )
+        _chain_pass(lab, lo, nb, n_el, C2, chain_min, PR[4], want_rules)
+        o = r0 * C2
+        _compact_normals(nx, ny, nz, nb, n_el, C2, normal_f[3 * o :])
+        _compact(lo, nb, n_el, C2, outs_f[0][o:])
+        _compact(hi, nb, n_el, C2, outs_f[1][o:])
+        _compact(rg, nb, n_el, C2, outs_f[2][o:])
+        _compact(okp, nb, n_el, C2, ok_f[o:])
+        _compact(jp, nb, n_el, C2, jump_f_out[o:])
+        _compact(lab, nb, n_el, C2, labels_f[o:])
+        if want_rules:
+            for q in range(5):
+                _compact(PR[q], nb, n_el, C2, rules[q].reshape(-1)[o:])
+
+
+# ------------------------------------------------------------------------------------------
 # stage 1 input: the cloud-to-grid fill (twin: the end of grids.cloud_to_grid)
 
 
@@ -462,6 +1130,185 @@ def grid_fill_kernel(Q, rh, cell, n_cells):  # type: ignore[no-untyped-def]
             out[c, 1] = Q[w, 1]
             out[c, 2] = Q[w, 2]
     return out
+
+
+# ------------------------------------------------------------------------------------------
+# stage 1 input, fast path: rings from the storage order, columns, cells and the fill in three
+# kernels writing into caller-provided arrays (twin: grids.cloud_to_grid, ring_method "order")
+
+
+@njit(cache=True, error_model="numpy")
+def cloud_valid_kernel(P, far, qx, qy, qz, rh, idx):  # type: ignore[no-untyped-def]
+    """The valid points of ``P (N, >=3)`` (finite, not ``(0, 0, 0)``, every coordinate below
+    ``far`` in magnitude - the twin NaNs the others) as float64 columns ``qx, qy, qz``, their
+    horizontal range ``rh`` (``math.hypot`` = ``np.hypot``) and input index ``idx``. Returns how
+    many."""
+    n = P.shape[0]
+    m = 0
+    for p in range(n):
+        x = np.float64(P[p, 0])
+        y = np.float64(P[p, 1])
+        z = np.float64(P[p, 2])
+        ok = abs(x) < far and abs(y) < far and abs(z) < far  # False for NaN
+        ok = ok and (x != 0 or y != 0 or z != 0)
+        if ok:
+            qx[m] = x
+            qy[m] = y
+            qz[m] = z
+            idx[m] = p
+            m += 1
+    for k in range(m):
+        rh[k] = math.hypot(qx[k], qy[k])
+    return m
+
+
+@njit(cache=True)
+def _kth_banded(values, k, work):  # type: ignore[no-untyped-def]
+    """The k-th smallest of ``values`` (0-based; no NaN), exactly: a strided sample brackets
+    the k-th value, one pass counts what lies below the bracket and copies what lies inside it
+    into ``work``, and a selection runs on that copy only (the whole array when the bracket
+    misses)."""
+    n = len(values)
+    s = min(n, 2048)
+    stride = max(n // s, 1)
+    sample = np.empty(s)
+    for q in range(s):
+        sample[q] = values[q * stride]
+    sample.sort()
+    pos = int(s * (k / n))
+    lo = sample[max(pos - 64, 0)]
+    hi = sample[min(pos + 64, s - 1)]
+    below = 0
+    m = 0
+    for q in range(n):  # branch-free: always write, advance when inside the bracket
+        v = values[q]
+        below += 1 if v < lo else 0
+        work[m] = v
+        m += 1 if (v >= lo and v <= hi) else 0
+    if below <= k < below + m:
+        return _kth(work[:m], k - below)
+    for q in range(n):
+        work[q] = values[q]
+    return _kth(work[:n], k)
+
+
+@njit(cache=True, error_model="numpy")
+def rings_order_kernel(az, qz, rh, d, ad, work, ring, sums, counts):  # type: ignore[no-untyped-def]
+    """``grids._rings_by_order`` on ``az (n,)``: ``(found, azimuth step, number of rings)``,
+    the ring of every point in ``ring`` and, per ring, the count and the sum of ``z / max(r_h,
+    1e-9)`` (the twin's ``bincount`` weights, in point order) in ``counts`` and ``sums`` (at
+    least 513 long). ``d, work`` are float64 work arrays of ``n``."""
+    n = len(az)
+    two_pi = 2 * np.pi
+    if n < 100:
+        return False, 0.0, 0
+    pos = 0
+    for k in range(n - 1):
+        v = az[k + 1] - az[k]
+        v = v - two_pi if v >= np.pi else v
+        v = v + two_pi if v < -np.pi else v
+        d[k] = v
+        pos += 1 if v > 0 else 0
+    ad = ad[: n - 1]
+    for k in range(n - 1):
+        ad[k] = abs(d[k])
+    h = (n - 1) // 2
+    if (n - 1) % 2:
+        step = _kth_banded(ad, h, work)
+    else:
+        a = _kth_banded(ad, h - 1, work)
+        b = _kth_banded(ad, h, work)
+        step = (a + b) / 2
+    if not step > 0:
+        return False, 0.0, 0
+    direction = 1.0 if 2 * pos > n - 1 else -1.0
+    fwd = 0
+    lim = -0.5 * step
+    for k in range(n - 1):
+        fwd += 1 if direction * d[k] > lim else 0
+    if step > two_pi / 64 or fwd / (n - 1) < 0.9:
+        return False, 0.0, 0
+    acc = 0.0
+    half = 0.5 * step
+    lo = np.iinfo(np.int64).max
+    hi = np.iinfo(np.int64).min
+    for k in range(n):
+        if k > 0:
+            acc += d[k - 1]
+        r = math.floor((direction * acc + half) / two_pi)
+        ring[k] = r
+        lo = min(lo, r)
+        hi = max(hi, r)
+    n_r = hi - lo + 1
+    if n_r < 2 or n_r > 512:
+        return False, 0.0, 0
+    for r in range(n_r):
+        sums[r] = 0.0
+        counts[r] = 0
+    for k in range(n):
+        r = ring[k] - lo
+        ring[k] = r
+        counts[r] += 1
+        sums[r] += qz[k] / max(rh[k], 1e-9)
+    return True, step, n_r
+
+
+@njit(cache=True, error_model="numpy")
+def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
+    qx, qy, qz, rh, az, idx, ring, sums, counts, n_r, n_columns, phase, win, grid, cell_of_point
+):
+    """Rings ranked by rising mean ``z / r_h`` (stable), the column of every point, its cell,
+    the nearest point per cell into ``grid (n_columns n_el, 3)`` (NaN rows if empty; among
+    points at the same range the last one wins, as in the twin) and ``cell_of_point (N,)``
+    (-1 for the points that are not valid). ``win`` is an int64 work array of the cells.
+    Returns ``n_el``."""
+    n = len(az)
+    key = np.empty(n_r)
+    n_el = 0
+    for r in range(n_r):
+        if counts[r] > 0:
+            key[r] = sums[r] / max(counts[r], 1)
+            n_el += 1
+        else:
+            key[r] = np.inf
+    rank = np.argsort(key, kind="mergesort")
+    lut = np.empty(n_r, np.int64)
+    for r in range(n_r):
+        lut[rank[r]] = r
+    n_cells = n_columns * n_el
+    best = np.empty(n_cells)  # the range of each cell's current winner
+    for c in range(n_cells):
+        win[c] = -1
+        best[c] = np.inf
+    for p in range(len(cell_of_point)):
+        cell_of_point[p] = -1
+    scale = 2 * np.pi
+    for k in range(n):
+        x = (az[k] + np.pi) / scale * n_columns
+        i = math.floor(x - phase + 0.5)
+        if i >= n_columns or i < 0:
+            i = i % n_columns
+        j = lut[ring[k]]
+        cell_of_point[idx[k]] = i * n_el + j
+        # the winners are kept ring-major: the points of a ring fall into neighbouring entries
+        c = j * n_columns + i
+        rk = math.sqrt(rh[k] * rh[k] + qz[k] * qz[k])
+        if win[c] < 0 or rk <= best[c]:
+            win[c] = k
+            best[c] = rk
+    for i in range(n_columns):
+        for j in range(n_el):
+            w = win[j * n_columns + i]
+            c = i * n_el + j
+            if w < 0:
+                grid[c, 0] = np.nan
+                grid[c, 1] = np.nan
+                grid[c, 2] = np.nan
+            else:
+                grid[c, 0] = qx[w]
+                grid[c, 1] = qy[w]
+                grid[c, 2] = qz[w]
+    return n_el
 
 
 # ------------------------------------------------------------------------------------------
@@ -1185,17 +2032,18 @@ def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ign
 
 
 @njit(cache=True)
-def points_kernel(P):  # type: ignore[no-untyped-def]
+def points_kernel(P, out, valid):  # type: ignore[no-untyped-def]
     """Stage 1's validity codes C_d: ``valid`` = all three coordinates finite, and the points
-    with NaN rows where not valid (``detector.detect_obstacles_grid``)."""
+    with NaN rows where not valid (``detector.detect_obstacles_grid``), written into ``out
+    (n_az, n_el, 3) float64`` and ``valid (n_az, n_el) bool``. Returns whether any is valid."""
     n_az, n_el = P.shape[0], P.shape[1]
-    out = np.empty((n_az, n_el, 3), np.float64)
-    valid = np.empty((n_az, n_el), np.bool_)
+    any_ok = False
     for i in range(n_az):
         for j in range(n_el):
             x, y, z = P[i, j, 0], P[i, j, 1], P[i, j, 2]
             ok = math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
             valid[i, j] = ok
+            any_ok = any_ok or ok
             if ok:
                 out[i, j, 0] = x
                 out[i, j, 1] = y
@@ -1204,4 +2052,18 @@ def points_kernel(P):  # type: ignore[no-untyped-def]
                 out[i, j, 0] = np.nan
                 out[i, j, 1] = np.nan
                 out[i, j, 2] = np.nan
-    return out, valid
+    return any_ok
+
+
+@njit(cache=True)
+def phase_fractions_kernel(az, step, n_columns, out):  # type: ignore[no-untyped-def]
+    """``2 pi ((az[::step] + pi) / (2 pi) n_columns % 1)`` into ``out`` (the subsample whose
+    circular mean gives the columns' phase in ``grids.cloud_to_grid``; the same values as the
+    twin's NumPy expression: ``%`` of a positive value is exact). Returns how many."""
+    m = 0
+    two_pi = 2 * np.pi
+    for k in range(0, len(az), step):
+        xs = (az[k] + np.pi) / two_pi * n_columns
+        out[m] = two_pi * (xs % 1.0)
+        m += 1
+    return m

@@ -15,9 +15,9 @@ from navkit.errors import InputError
 from navkit.geometry.shapes import compute_shapes, hull_points, hulls_csr, shapes_csr
 from navkit.obstacles.grids import ScanGrid
 from navkit.obstacles.ground import refine_by_ground_height
-from navkit.obstacles.mesh import MeshCharacteristics, build_mesh, robust_cell_normals
+from navkit.obstacles.mesh import MeshCharacteristics
 from navkit.obstacles.mounting import Mounting
-from navkit.obstacles.rules import GROUND, OBSTACLE, classify
+from navkit.obstacles.rules import GROUND, OBSTACLE, mesh_and_classes
 from navkit.obstacles.segment import (
     assign_shadows,
     boundary_vertices,
@@ -45,7 +45,8 @@ MAIN_GROUND_SHARE = 0.1
 (``segment.main_ground_vertices``' default; the compiled stage 6 finds them)."""
 
 STAGES = ("points", "mesh", "classes", "split", "boundaries", "map")
-"""Stage names used as keys of :attr:`ObstacleDetection.timings` (stages 3-4 are in "mesh")."""
+"""Stage names used as keys of :attr:`ObstacleDetection.timings` (stages 3-4 are in "mesh"; with
+the compiled backend stages 2-5 run as one kernel, charged to "mesh", and "classes" is ~0)."""
 
 
 @dataclass(frozen=True)
@@ -254,11 +255,15 @@ def detect_obstacles_grid(
     origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
     if settings.backend == "compiled":
         from navkit.obstacles import _kernels
+        from navkit.obstacles._buffers import arena
 
-        P, valid = _kernels.points_kernel(P)
+        P_in = P
+        P, valid = arena([(P_in.shape, np.float64), (P_in.shape[:2], np.bool_)])
+        any_valid = _kernels.points_kernel(P_in, P, valid)
     else:
         valid = np.isfinite(P[..., 0]) & np.isfinite(P[..., 1]) & np.isfinite(P[..., 2])
-    if not valid.any():
+        any_valid = bool(valid.any())
+    if not any_valid:
         raise InputError(
             "has no valid point (all NaN / no return)",
             source=source,
@@ -275,37 +280,10 @@ def detect_obstacles_grid(
     wrap = bool(wrap and P.shape[0] > 2)
     clock.lap("points")
 
-    # stages 2-4: mesh, normals, characteristic parameters H_s and validity codes C_d
-    mesh = build_mesh(
-        P,
-        valid,
-        origin,
-        wrap=wrap,
-        jump_height_m=settings.jump_height_m,
-        jump_range_fraction=settings.jump_range_fraction,
-        jump_range_ratio=settings.jump_range_ratio,
-        steep_cos=math.cos(settings.c1_rad),
-        backend=settings.backend,
-    )
+    # stages 2-5: mesh, normals, characteristic parameters H_s, validity codes C_d, production
+    # rules P1-P5 -> classes (compiled: one pass over the grid, all charged to "mesh")
+    mesh, labels, _rules = mesh_and_classes(P, valid, origin, settings, wrap=wrap)
     clock.lap("mesh")
-
-    # stage 5: production rules P1-P5 -> classes
-    robust = None
-    if settings.normal_support_m > 0:
-        robust = robust_cell_normals(
-            P,
-            valid,
-            origin,
-            support_m=settings.normal_support_m,
-            wrap=wrap,
-            jump_height_m=settings.jump_height_m,
-            jump_range_fraction=settings.jump_range_fraction,
-            jump_range_ratio=settings.jump_range_ratio,
-            backend=settings.backend,
-        )
-    labels, _rules = classify(
-        mesh, settings, wrap=wrap, robust_cells=robust, backend=settings.backend
-    )
     clock.lap("classes")
 
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner

@@ -214,7 +214,15 @@ def cloud_to_grid(
         its nearest point.
     """
     compiled = check_backend(backend) == "compiled"
+    if ring_method not in ("auto", "order", "elevation"):
+        raise InputError(
+            f"= {ring_method!r}", field="ring_method", expected="'auto', 'order' or 'elevation'"
+        )
     P = _as_cloud(points, source, convert=not compiled)
+    if compiled and ring_method in ("auto", "order") and n_columns is None:
+        fast = _grid_by_order_compiled(P, source)
+        if fast is not None:
+            return fast
     N = len(P)
     far = np.abs(P) >= _FAR  # NaN compares False
     if far.any():  # a "return" beyond 1e9 m is a corrupt value, not a point (both backends)
@@ -245,10 +253,6 @@ def cloud_to_grid(
         Q = P if all_ok else P[idx]
         rh = np.hypot(Q[:, 0], Q[:, 1])
     az = np.arctan2(Q[:, 1], Q[:, 0])
-    if ring_method not in ("auto", "order", "elevation"):
-        raise InputError(
-            f"= {ring_method!r}", field="ring_method", expected="'auto', 'order' or 'elevation'"
-        )
     if compiled and ring_method in ("auto", "order"):
         found, ring_o, step_o = _kernels.rings_by_order_kernel(az)
         by_order = (ring_o, float(step_o)) if found else None
@@ -333,6 +337,67 @@ def cloud_to_grid(
         # contiguous ``take`` is ~3x cheaper than a masked fancy-indexed row assignment
         grid = np.concatenate([Q, np.full((1, 3), np.nan)]).take(win, axis=0)
     return _finish_grid(grid, idx, cell, N, n_columns, n_el, phase, method)
+
+
+def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
+    """:func:`cloud_to_grid` with rings from the storage order, compiled: three kernels over
+    caller-provided arrays (:mod:`navkit.obstacles._buffers`) and NumPy's ``arctan2`` (whose
+    SIMD results the twin uses) in place. ``None`` when the order is not a sweep (the caller then
+    takes the general path). The same grid as the twin, bit for bit."""
+    from navkit.obstacles import _kernels
+    from navkit.obstacles._buffers import arena, cached_work
+
+    N = len(P)
+    cap = -(-N // 65536) * 65536  # work arrays reused across clouds of about the same size
+    (work_f, work_i) = cached_work(
+        ("cloud_to_grid", cap), lambda: arena([((8, cap), np.float64), ((2, cap), np.int64)])
+    )
+    qx, qy, qz, rh, az_buf, d, ad, tmp = work_f
+    idx, ring = work_i
+    m = _kernels.cloud_valid_kernel(P, _FAR, qx, qy, qz, rh, idx)
+    if m < 4:
+        raise InputError(
+            f"has {m} valid points",
+            source=source,
+            field="points",
+            expected="at least 4 points that are not NaN or (0, 0, 0)",
+        )
+    az = np.arctan2(qy[:m], qx[:m], out=az_buf[:m])
+    sums = np.empty(513)
+    counts = np.empty(513, dtype=np.int64)
+    found, step, n_r = _kernels.rings_order_kernel(
+        az, qz[:m], rh[:m], d, ad, tmp, ring, sums, counts
+    )
+    if not found:
+        return None
+    n_columns = max(3, round(2 * np.pi / step))
+    frac = tmp[: _kernels.phase_fractions_kernel(az, max(1, m // 20000), n_columns, tmp)]
+    phase = float(np.arctan2(np.sin(frac).mean(), np.cos(frac).mean()) / (2 * np.pi))
+    (win,) = cached_work(
+        ("cloud_to_grid cells", n_columns * n_r), lambda: arena([((n_columns * n_r,), np.int64)])
+    )
+    grid, cell_of_point = arena([((n_columns * n_r, 3), np.float64), ((N,), np.int64)])
+    n_el = _kernels.grid_order_fill_kernel(
+        qx,
+        qy,
+        qz,
+        rh,
+        az,
+        idx,
+        ring,
+        sums,
+        counts,
+        n_r,
+        n_columns,
+        phase,
+        win,
+        grid,
+        cell_of_point,
+    )
+    azimuth = -np.pi + (np.arange(n_columns) + phase) * 2 * np.pi / n_columns
+    log.debug("cloud_to_grid: %d points -> %d x %d grid by order", N, n_columns, n_el)
+    points = grid[: n_columns * n_el].reshape(n_columns, n_el, 3)
+    return ScanGrid(points, cell_of_point, azimuth, True, "order")
 
 
 def _finish_grid(

@@ -271,6 +271,33 @@ def _nanmedian_rows(a: NDArray[Any]) -> NDArray[Any]:
     return np.where(cnt > 0, out, np.nan)
 
 
+def robust_strides_compiled(
+    points: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    sensor_origin: NDArray[np.float64],
+    support_m: float,
+    max_stride: int,
+) -> tuple[np.float32, NDArray[np.intp]]:
+    """The strides of :func:`robust_cell_normals` (``k_scale`` float32 and the elevation stride
+    per column), computed by :func:`navkit.obstacles._kernels.robust_strides_kernel` - the same
+    values as the NumPy twin's. NumPy computes only the ``arctan2`` of the sampled columns (its
+    SIMD ``arctan2`` differs from libm's in the last bit)."""
+    from navkit.obstacles import _kernels
+
+    step = max(1, valid.shape[1] // 8)
+    Xs, Ys = (points[:, ::step, k].astype(np.float32) for k in range(2))
+    az = np.arctan2(Ys - sensor_origin[1], Xs - sensor_origin[0])
+    dalpha, m_col = _kernels.robust_strides_kernel(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(valid, dtype=np.bool_),
+        np.asarray(sensor_origin, dtype=np.float64).reshape(3),
+        az,
+        float(support_m),
+        int(max_stride),
+    )
+    return np.float32(support_m / (2.0 * dalpha)), m_col
+
+
 def robust_cell_normals(
     points: NDArray[np.float64],
     valid: NDArray[np.bool_],
@@ -302,20 +329,33 @@ def robust_cell_normals(
 
     ``backend="compiled"`` runs the per-vertex and per-cell passes as one kernel
     (:func:`navkit.obstacles._kernels.robust_normals_kernel`, the same float32 results bit for
-    bit); the strides' medians stay in NumPy.
+    bit), and the strides by :func:`robust_strides_compiled`.
     """
     n_az, n_el = valid.shape
-    compiled = check_backend(backend) == "compiled"
+    if check_backend(backend) == "compiled":
+        from navkit.obstacles import _kernels
+
+        k_scale, m_col = robust_strides_compiled(
+            points, valid, sensor_origin, support_m, max_stride
+        )
+        use_ratio = bool(np.isfinite(jump_range_ratio))
+        return _kernels.robust_normals_kernel(  # type: ignore[no-any-return]
+            np.ascontiguousarray(points, dtype=np.float64),
+            np.asarray(sensor_origin, dtype=np.float64).reshape(3),
+            k_scale,
+            m_col,
+            bool(wrap),
+            int(max_stride),
+            float(jump_height_m),
+            float(jump_range_fraction),
+            float(jump_range_ratio) if use_ratio else 0.0,
+            use_ratio,
+        )
     step = max(1, n_el // 8)
-    if compiled:  # only the subsamples the strides need; the kernel reads the grid itself
-        X4, Y4 = (points[::4, :, k].astype(np.float32) for k in range(2))
-        rh4 = np.hypot(X4 - np.float32(sensor_origin[0]), Y4 - np.float32(sensor_origin[1]))
-        Xs, Ys = (points[:, ::step, k].astype(np.float32) for k in range(2))
-    else:
-        X, Y, Z = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(3))
-        rh = np.hypot(X - np.float32(sensor_origin[0]), Y - np.float32(sensor_origin[1]))
-        rh4 = rh[::4]
-        Xs, Ys = X[:, ::step], Y[:, ::step]
+    X, Y, Z = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(3))
+    rh = np.hypot(X - np.float32(sensor_origin[0]), Y - np.float32(sensor_origin[1]))
+    rh4 = rh[::4]
+    Xs, Ys = X[:, ::step], Y[:, ::step]
     # azimuth step from neighbouring rows: angles, not distances (range noise moves a point
     # along its ray, which changes the distance to its neighbour but not its azimuth)
     az = np.arctan2(Ys - sensor_origin[1], Xs - sensor_origin[0])
@@ -337,22 +377,6 @@ def robust_cell_normals(
         se_col = np.concatenate([se_col, se_col[-1:]])
         se_col = np.maximum(np.fmin(se_col, np.roll(se_col, 1)), 1e-3)
         m_col = np.clip(np.rint(support_m / (2.0 * se_col)), 1, max_stride).astype(np.intp)
-    if compiled:
-        from navkit.obstacles import _kernels
-
-        use_ratio = bool(np.isfinite(jump_range_ratio))
-        return _kernels.robust_normals_kernel(  # type: ignore[no-any-return]
-            np.ascontiguousarray(points, dtype=np.float64),
-            np.asarray(sensor_origin, dtype=np.float64).reshape(3),
-            k_scale,
-            m_col,
-            bool(wrap),
-            int(max_stride),
-            float(jump_height_m),
-            float(jump_range_fraction),
-            float(jump_range_ratio) if use_ratio else 0.0,
-            use_ratio,
-        )
     with np.errstate(invalid="ignore", divide="ignore"):
         k = np.rint(k_scale / rh)
     k = np.clip(np.nan_to_num(k, nan=1.0, posinf=max_stride), 1, max_stride).astype(np.intp)

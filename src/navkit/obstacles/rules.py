@@ -8,7 +8,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.obstacles.mesh import MeshCharacteristics, smooth_normals
+from navkit.obstacles.mesh import (
+    MeshCharacteristics,
+    build_mesh,
+    robust_cell_normals,
+    robust_strides_compiled,
+    smooth_normals,
+    triangle_indices,
+)
 from navkit.obstacles.settings import ObstacleSettings, check_backend
 
 __all__ = [
@@ -18,6 +25,7 @@ __all__ = [
     "SIDE_SHADOW",
     "UNRELIABLE",
     "classify",
+    "mesh_and_classes",
     "zone_cosine",
 ]
 
@@ -161,3 +169,157 @@ def classify(
     labels[side_shadow] = SIDE_SHADOW
     labels[shadow_behind] = SHADOW_BEHIND
     return labels, {"P1": p1, "P2": p2, "P3": p3, "P4": p4, "P5": p5}
+
+
+def mesh_and_classes(
+    points: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    sensor_origin: NDArray[np.float64],
+    settings: ObstacleSettings,
+    *,
+    wrap: bool,
+    rules: bool = False,
+) -> tuple[MeshCharacteristics, NDArray[np.int8], dict[str, NDArray[np.bool_]]]:
+    """Stages 2-5: the mesh with H_s and C_d (:func:`~navkit.obstacles.mesh.build_mesh`), the
+    robust normals (:func:`~navkit.obstacles.mesh.robust_cell_normals`, when
+    ``settings.normal_support_m > 0``) and the classes (:func:`classify`).
+
+    With ``settings.backend = "compiled"`` (and ``normal_support = 0``) the three run as one
+    pass over the grid (:func:`navkit.obstacles._kernels.stages_2_5_kernel`): each cell's two
+    triangles get their normal, jump test, robust normal and class at once, and the robust
+    vertex normals are computed one row ahead of the cells that use them. The results are those
+    of the three functions one after the other (``"numpy"``, the reference), bit for bit.
+
+    Parameters
+    ----------
+    points : (n_az, n_el, 3) float
+        Body-frame points (NaN where invalid), as stage 1 leaves them.
+    valid : (n_az, n_el) bool
+        Validity codes C_d.
+    sensor_origin : (3,) float
+        Sensor position in the body frame.
+    settings : ObstacleSettings
+    wrap : bool
+        The mesh closes across the azimuth seam.
+    rules : bool
+        Also return the rules P1-P5 (the compiled pass writes them only when asked).
+
+    Returns
+    -------
+    mesh : MeshCharacteristics
+    labels : (R, 2C) int8
+        Classes m_t.
+    rules : dict of (R, 2C) bool
+        ``P1 .. P5`` (empty unless ``rules``).
+    """
+    jump_kw = {
+        "jump_height_m": settings.jump_height_m,
+        "jump_range_fraction": settings.jump_range_fraction,
+        "jump_range_ratio": settings.jump_range_ratio,
+    }
+    steep_cos = math.cos(settings.c1_rad)
+    if check_backend(settings.backend) != "compiled" or settings.normal_support > 0:
+        mesh = build_mesh(
+            points,
+            valid,
+            sensor_origin,
+            wrap=wrap,
+            steep_cos=steep_cos,
+            backend=settings.backend,
+            **jump_kw,
+        )
+        robust = None
+        if settings.normal_support_m > 0:
+            robust = robust_cell_normals(
+                points,
+                valid,
+                sensor_origin,
+                support_m=settings.normal_support_m,
+                wrap=wrap,
+                jump_height_m=settings.jump_height_m,
+                jump_range_fraction=settings.jump_range_fraction,
+                jump_range_ratio=settings.jump_range_ratio,
+                backend=settings.backend,
+            )
+        labels, found = classify(
+            mesh, settings, wrap=wrap, robust_cells=robust, backend=settings.backend
+        )
+        return mesh, labels, found if rules else {}
+    from navkit.obstacles import _kernels
+    from navkit.obstacles._buffers import arena, cached_work
+
+    n_az, n_el = valid.shape
+    origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
+    use_robust = settings.normal_support_m > 0
+    max_stride = 32  # robust_cell_normals' default
+    if use_robust:
+        k_scale, m_col = robust_strides_compiled(
+            points, valid, origin, settings.normal_support_m, max_stride
+        )
+    else:
+        k_scale, m_col = np.float32(1.0), np.ones(n_el, dtype=np.intp)
+    use_ratio = bool(np.isfinite(settings.jump_range_ratio))
+    ratio = settings.jump_range_ratio if use_ratio else 0.0
+    R = n_az if wrap else n_az - 1
+    C2 = 2 * (n_el - 1)
+    nv = n_az * n_el
+    P2 = 2 * R * n_el
+    L = max(nv + n_el + 1, P2)
+    nr = P2 if rules else 0
+    work = cached_work(
+        ("stages 2-5", n_az, n_el, bool(wrap), bool(rules)),
+        lambda: arena(
+            [
+                ((14, L), np.float32),
+                ((3, L), np.bool_),
+                ((P2,), np.int8),
+                ((5, nr), np.bool_),
+                ((nv,), np.float64),
+                ((nv,), np.int64),
+            ]
+        ),
+    )
+    rr, rc = (R, C2) if rules else (0, 0)
+    outs = arena(
+        [
+            ((R, C2), np.bool_),
+            ((R, C2, 3), np.float32),
+            ((n_az, n_el, 3), np.float32),
+            ((R, C2), np.float32),
+            ((R, C2), np.float32),
+            ((R, C2), np.float32),
+            ((R, C2), np.bool_),
+            ((R, C2), np.int8),
+            ((5, rr, rc), np.bool_),
+        ]
+    )
+    _kernels.stages_2_5_kernel(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(valid, dtype=np.bool_),
+        origin,
+        bool(wrap),
+        np.float32(settings.jump_height_m),
+        np.float32(settings.jump_range_fraction),
+        np.float32(ratio),
+        use_ratio,
+        np.float32(steep_cos),
+        True,
+        use_robust,
+        k_scale,
+        m_col,
+        max_stride,
+        float(settings.jump_height_m),
+        float(settings.jump_range_fraction),
+        float(ratio),
+        float(settings.c2),
+        np.float32(math.cos(settings.c1_rad)),
+        float(settings.chain_min_height_m),
+        bool(rules),
+        *work,
+        *outs,
+    )
+    ok, normal, vray, rng, z_min, z_max, jump, labels, found_rules = outs
+    tri = triangle_indices(n_az, n_el, wrap)
+    mesh = MeshCharacteristics(tri, ok, normal, vray, rng, z_min, z_max, jump)
+    found = dict(zip(("P1", "P2", "P3", "P4", "P5"), found_rules, strict=True)) if rules else {}
+    return mesh, labels, found
