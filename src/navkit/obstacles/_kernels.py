@@ -34,12 +34,9 @@ __all__ = [
     "classify_kernel",
     "cloud_prep_kernel",
     "cloud_valid_kernel",
-    "components_kernel",
     "grid_cells_kernel",
     "grid_fill_kernel",
     "grid_order_fill_kernel",
-    "ground_cells_kernel",
-    "map_groups_kernel",
     "mesh_kernel",
     "phase_fractions_kernel",
     "points_kernel",
@@ -48,9 +45,7 @@ __all__ = [
     "rings_order_kernel",
     "robust_normals_kernel",
     "robust_strides_kernel",
-    "split_kernel",
     "stages_2_5_kernel",
-    "vertex_kernel",
 ]
 
 _NAN32 = np.float32(np.nan)
@@ -1335,54 +1330,6 @@ def _union(parent, a, b):  # type: ignore[no-untyped-def]
         parent[ra] = rb
 
 
-@njit(cache=True)
-def _mesh_roots(mask, wrap):  # type: ignore[no-untyped-def]
-    """Union-find over the mesh neighbourhood (``segment.MESH_STRUCTURE``, rows cyclic with
-    ``wrap``): the flat index of each masked triangle's root (the component's first triangle
-    in raster order), -1 elsewhere."""
-    R, C = mask.shape
-    parent = np.arange(R * C, dtype=np.int32)
-    seam = wrap and R > 1
-    for i in range(R):
-        for j in range(C):
-            if not mask[i, j]:
-                continue
-            f = i * C + j
-            if j > 0 and mask[i, j - 1]:
-                _union(parent, f, f - 1)
-            if i > 0 and j + 1 < C and mask[i - 1, j + 1]:
-                _union(parent, f, f - C + 1)
-            if seam and i == R - 1 and j > 0 and mask[0, j - 1]:
-                _union(parent, f, j - 1)
-    root = np.full(R * C, -1, np.int32)
-    for i in range(R):
-        for j in range(C):
-            if mask[i, j]:
-                f = i * C + j
-                root[f] = _find(parent, f)
-    return root
-
-
-@njit(cache=True)
-def components_kernel(mask, wrap):  # type: ignore[no-untyped-def]
-    """``segment.label_components``: labels 1..n numbered by first appearance in raster order
-    (what ``ndimage.label`` and the twin's renumbering after closing the seam give)."""
-    R, C = mask.shape
-    root = _mesh_roots(mask, wrap)
-    lab = np.zeros((R, C), np.int32)
-    new = np.zeros(R * C, np.int32)
-    n = 0
-    for f in range(R * C):
-        r = root[f]
-        if r < 0:
-            continue
-        if new[r] == 0:
-            n += 1
-            new[r] = n
-        lab[f // C, f % C] = new[r]
-    return lab, n
-
-
 _OFF_I = (0, 0, 1, -1)
 _OFF_J = (1, -1, -1, 1)
 
@@ -1492,34 +1439,6 @@ def _merge_close(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyp
 
 
 @njit(cache=True)
-def _pairs_from(sel, R, C, wrap):  # type: ignore[no-untyped-def]
-    """Mesh-adjacent pairs whose first triangle is in ``sel`` (flat indices, raster order), in
-    the twin's order (``segment._pairs``): per offset, the pairs inside the array in raster
-    order, then the ones across the seam. Returns ``(first, second)`` flat indices."""
-    fa = np.empty(4 * len(sel), np.int64)
-    fb = np.empty(4 * len(sel), np.int64)
-    m = 0
-    for o in range(4):
-        di, dj = _OFF_I[o], _OFF_J[o]
-        for seam in range(2 if (wrap and di != 0) else 1):
-            for f in sel:
-                i, j = f // C, f % C
-                tj = j + dj
-                if tj < 0 or tj >= C:
-                    continue
-                ti = i + di
-                crosses = ti < 0 or ti >= R
-                if crosses != (seam == 1):
-                    continue
-                if crosses:
-                    ti = ti % R
-                fa[m] = f
-                fb[m] = ti * C + tj
-                m += 1
-    return fa[:m], fb[:m]
-
-
-@njit(cache=True)
 def _kth(values, k):  # type: ignore[no-untyped-def]
     """The k-th smallest of ``values`` (0-based), by a selection in place (reorders them)."""
     lo, hi = 0, len(values) - 1
@@ -1544,258 +1463,8 @@ def _kth(values, k):  # type: ignore[no-untyped-def]
     return values[k]
 
 
-@njit(cache=True)
-def split_kernel(  # type: ignore[no-untyped-def]
-    labels,
-    zmin,
-    zmax,
-    P,
-    wrap,
-    min_triangles,
-    min_height32,
-    half,
-    distance_m,
-    gap,
-):
-    """Stage 6 of the detector: obstacle components, the size / height / noise-patch filters,
-    merging of close components and the shadows' owners. ``labels`` is changed in place
-    (dropped components back to ground). Returns ``obs_lab, n, owner``."""
-    R, C = labels.shape
-    lab, n = components_kernel(labels == -2, wrap)
-    if n:
-        size = np.zeros(n + 1, np.int64)
-        hi = np.full(n + 1, -np.inf, np.float32)
-        lo = np.full(n + 1, np.inf, np.float32)
-        cnt = np.zeros(n + 1, np.int64)
-        sm = np.zeros(n + 1, np.float64)
-        zmid = np.empty((R, C), np.float32)
-        h = np.float32(0.5)
-        for i in range(R):
-            for j in range(C):
-                zmid[i, j] = h * (zmax[i, j] + zmin[i, j])
-        for i in range(R):
-            for j in range(C):
-                a = lab[i, j]
-                if a == 0:
-                    continue
-                size[a] += 1
-                hi[a] = _max_nan(hi[a], zmax[i, j])
-                lo[a] = _min_nan(lo[a], zmin[i, j])
-                cnt[a] += 1
-                sm[a] += np.float64(zmid[i, j])
-        # 10th / 90th percentile of the mid heights per label (a counting sort, then each run)
-        start = np.zeros(n + 2, np.int64)
-        for a in range(1, n + 1):
-            start[a + 1] = start[a] + size[a]
-        fill = start.copy()
-        zs = np.empty(start[n + 1], np.float64)
-        for i in range(R):
-            for j in range(C):
-                a = lab[i, j]
-                if a:
-                    zs[fill[a]] = np.float64(zmid[i, j])
-                    fill[a] += 1
-        spread = np.empty(n + 1, np.float64)
-        for a in range(1, n + 1):
-            k = size[a] - 1
-            spread[a] = _kth(zs[start[a] : start[a + 1]], math.floor(0.9 * k)) - _kth(
-                zs[start[a] : start[a + 1]], math.floor(0.1 * k)
-            )
-        # lift over the adjacent ground, the sums in the twin's pair order
-        cnt_g = np.zeros(n + 1, np.int64)
-        sum_g = np.zeros(n + 1, np.float64)
-        for o in range(4):
-            di, dj = _OFF_I[o], _OFF_J[o]
-            j0, j1 = max(0, -dj), C - max(0, dj)
-            for seam in range(2 if (wrap and di != 0) else 1):
-                if seam == 0:
-                    i0, i1 = max(0, -di), R - max(0, di)
-                else:
-                    i0 = R - 1 if di == 1 else 0
-                    i1 = i0 + 1
-                for i in range(i0, i1):
-                    bi = (i + di) % R
-                    for j in range(j0, j1):
-                        a = lab[i, j]
-                        if a and labels[bi, j + dj] == 0:
-                            cnt_g[a] += 1
-                            sum_g[a] += np.float64(zmid[bi, j + dj])
-        lut = np.zeros(n + 1, np.int32)
-        m2 = 0
-        for a in range(1, n + 1):
-            lift = sm[a] / max(cnt[a], 1) - sum_g[a] / cnt_g[a] if cnt_g[a] > 0 else np.inf
-            noise_patch = spread[a] < half and lift < half
-            if size[a] >= min_triangles and (hi[a] - lo[a]) >= min_height32 and not noise_patch:
-                m2 += 1
-                lut[a] = m2
-        for i in range(R):
-            for j in range(C):
-                a = lab[i, j]
-                if a:
-                    if lut[a] == 0:
-                        labels[i, j] = 0
-                    lab[i, j] = lut[a]
-        n = m2
-        if n >= 2 and gap >= 1 and distance_m > 0:
-            lab, n = _merge_close(lab, n, P, wrap, distance_m, gap)
-    owner = np.zeros((R, C), np.int32)
-    nobs = 0
-    has_shadow = False
-    for i in range(R):
-        for j in range(C):
-            if lab[i, j] > nobs:
-                nobs = lab[i, j]
-            if labels[i, j] == -3 or labels[i, j] == -4:
-                has_shadow = True
-    if not has_shadow or nobs == 0:
-        return lab, n, owner
-    sl, ns = components_kernel((labels == -3) | (labels == -4), wrap)
-    nobs += 1
-    fa, fb = _pairs_from(np.flatnonzero(sl), R, C, wrap)
-    keys = np.empty(len(fa), np.int64)
-    k = 0
-    for m in range(len(fa)):
-        z = sl[fa[m] // C, fa[m] % C]
-        b = lab[fb[m] // C, fb[m] % C]
-        if b > 0:
-            keys[k] = np.int64(z) * nobs + b
-            k += 1
-    if k == 0:
-        return lab, n, owner
-    keys = np.sort(keys[:k])
-    best = np.zeros(ns + 1, np.int32)
-    best_count = np.zeros(ns + 1, np.int64)
-    run = 1
-    for m in range(1, k + 1):
-        if m < k and keys[m] == keys[m - 1]:
-            run += 1
-            continue
-        z = keys[m - 1] // nobs
-        b = keys[m - 1] % nobs
-        if run >= best_count[z]:  # ties: the larger obstacle id (the twin's stable lexsort)
-            best_count[z] = run
-            best[z] = b
-        run = 1
-    for i in range(R):
-        for j in range(C):
-            if sl[i, j]:
-                owner[i, j] = best[sl[i, j]]
-    return lab, n, owner
-
-
 # ------------------------------------------------------------------------------------------
 # stage 7: boundaries, per-vertex classes, main ground, refinement by height above the ground
-
-
-@njit(cache=True)
-def vertex_kernel(labels, obs_lab, valid, wrap, main_share):  # type: ignore[no-untyped-def]
-    """``boundary_vertices`` + ``vertex_labels`` + ``main_ground_vertices`` in one pass over the
-    vertices. Returns ``vid, boundary, vertex labels, main ground vertices``."""
-    n_az, n_el = valid.shape
-    R = labels.shape[0]
-    C = labels.shape[1] // 2
-    vid, bnd = boundary_kernel(obs_lab, n_az, n_el, wrap)
-    # the main ground zones: component sizes of the ground triangles
-    root = _mesh_roots(labels == 0, wrap)
-    size = np.zeros(R * 2 * C, np.int32)
-    for f in range(R * 2 * C):
-        if root[f] >= 0:
-            size[root[f]] += 1
-    big = 0
-    for f in range(R * 2 * C):
-        if size[f] > big:
-            big = size[f]
-    main_tri = np.zeros((R, 2 * C), np.uint8)
-    if big > 0:
-        for f in range(R * 2 * C):
-            if root[f] >= 0 and size[root[f]] >= main_share * big:
-                main_tri[f // (2 * C), f % (2 * C)] = 1
-    vlab = np.empty((n_az, n_el), np.int8)
-    main = np.zeros((n_az, n_el), np.bool_)
-    for p in range(n_az):
-        for q in range(n_el):
-            flags = 0
-            mflag = 0
-            for k in range(6):
-                t = _incident(labels, p, q, k, R, C, wrap, 1)  # 1: no triangle
-                if t == 0:
-                    flags |= 1
-                elif t == -4:
-                    flags |= 2
-                elif t == -3:
-                    flags |= 4
-                elif t == -2:
-                    flags |= 8
-                mflag |= _incident(main_tri, p, q, k, R, C, wrap, 0)
-            main[p, q] = mflag > 0
-            if not valid[p, q]:
-                vlab[p, q] = -1
-            elif flags & 8:
-                vlab[p, q] = -2
-            elif flags & 1:
-                vlab[p, q] = 0
-            elif flags & 2:
-                vlab[p, q] = -4
-            elif flags & 4:
-                vlab[p, q] = -3
-            else:
-                vlab[p, q] = -1
-    return vid, bnd, vlab, main
-
-
-@njit(cache=True)
-def ground_cells_kernel(P, ref, cell_m, quantile):  # type: ignore[no-untyped-def]
-    """``ground.ground_height_map`` before its hole filling: the ``quantile`` of the reference
-    points' z per horizontal cell ``(nx, ny)`` (NaN: no point), and the grid's origin."""
-    n = P.shape[0]
-    m = 0
-    gx_min = np.inf
-    gy_min = np.inf
-    for p in range(n):
-        if ref[p] and math.isfinite(P[p, 0] + P[p, 1] + P[p, 2]):
-            m += 1
-            gx_min = min(gx_min, P[p, 0])
-            gy_min = min(gy_min, P[p, 1])
-    if m == 0:
-        return np.zeros((1, 1)), np.zeros(2), False
-    sel = np.empty(m, np.int64)
-    m = 0
-    for p in range(n):
-        if ref[p] and math.isfinite(P[p, 0] + P[p, 1] + P[p, 2]):
-            sel[m] = p
-            m += 1
-    ix = np.empty(m, np.int64)
-    iy = np.empty(m, np.int64)
-    nx = 0
-    ny = 0
-    for k in range(m):
-        p = sel[k]
-        ix[k] = math.floor((P[p, 0] - gx_min) / cell_m)
-        iy[k] = math.floor((P[p, 1] - gy_min) / cell_m)
-        nx = max(nx, ix[k] + 1)
-        ny = max(ny, iy[k] + 1)
-    counts = np.zeros(nx * ny + 1, np.int64)
-    for k in range(m):
-        counts[ix[k] * ny + iy[k] + 1] += 1
-    start = np.cumsum(counts)
-    fill = start.copy()
-    zs = np.empty(m, np.float64)
-    for k in range(m):
-        c = ix[k] * ny + iy[k]
-        zs[fill[c]] = P[sel[k], 2]
-        fill[c] += 1
-    heights = np.full((nx, ny), np.nan)
-    missing = False
-    for c in range(nx * ny):
-        a, b = start[c], start[c + 1]
-        if b > a:
-            heights[c // ny, c % ny] = _kth(zs[a:b], math.floor(quantile * (b - a - 1)))
-        else:
-            missing = True
-    origin = np.empty(2)
-    origin[0] = gx_min
-    origin[1] = gy_min
-    return heights, origin, missing
 
 
 @njit(cache=True)
@@ -1947,88 +1616,6 @@ def cloud_prep_kernel(P):  # type: ignore[no-untyped-def]
 
 # ------------------------------------------------------------------------------------------
 # stage 8 input: per-obstacle vertex sets (twin: detector._build_obstacles' groupings)
-
-
-@njit(cache=True)
-def _stable_group(ids, n):  # type: ignore[no-untyped-def]
-    """Counting sort of ``ids`` (1..n, 0 = none): ``(start (n + 2,), order)`` with the members
-    of each id in input order (what a stable argsort gives)."""
-    start = np.zeros(n + 2, np.int64)
-    for v in ids:
-        if v > 0:
-            start[v + 1] += 1
-    for a in range(1, n + 2):
-        start[a] += start[a - 1]
-    fill = start.copy()
-    order = np.empty(start[n + 1], np.int64)
-    for k in range(len(ids)):
-        v = ids[k]
-        if v > 0:
-            order[fill[v]] = k
-            fill[v] += 1
-    return start, order
-
-
-@njit(cache=True, error_model="numpy")
-def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ignore[no-untyped-def]
-    """Boundary vertices ``(x, y)``, all vertices ``(x, y, z)`` and obstacle-plus-shadow vertex
-    sets ``(x, y)`` of obstacles 1..n (each with ``start`` offsets), the shadow areas and the
-    triangle counts, in the twin's orders."""
-    vf = vid.ravel()
-    bf = boundary.ravel()
-    bid = np.where(bf, vf, 0)
-    b_start, b_order = _stable_group(bid, n)
-    b_xy = np.empty((len(b_order), 2))
-    for k in range(len(b_order)):
-        b_xy[k, 0] = flat[b_order[k], 0]
-        b_xy[k, 1] = flat[b_order[k], 1]
-    v_start, v_order = _stable_group(vf, n)
-    v_xyz = np.empty((len(v_order), 3))
-    for k in range(len(v_order)):
-        for c in range(3):
-            v_xyz[k, c] = flat[v_order[k], c]
-    of = owner.ravel()
-    lf = obs_lab.ravel()
-    ntri = np.zeros(n + 1, np.int64)
-    for t in range(len(lf)):
-        ntri[lf[t]] += 1
-    area = np.zeros(n + 1)
-    t_start, t_order = _stable_group(of, n)
-    R2 = tri.shape[1]
-    for t in range(len(of)):  # raster order, as the twin's bincount
-        a = of[t]
-        if a > 0:
-            r, c = t // R2, t % R2
-            i0, i1, i2 = tri[r, c, 0], tri[r, c, 1], tri[r, c, 2]
-            v0x, v0y = flat[i0, 0], flat[i0, 1]
-            area[a] += 0.5 * abs(
-                (flat[i1, 0] - v0x) * (flat[i2, 1] - v0y)
-                - (flat[i2, 0] - v0x) * (flat[i1, 1] - v0y)
-            )
-    s_start = np.zeros(n + 2, np.int64)
-    verts = np.empty(3 * len(t_order), np.int64)
-    m = 0
-    for a in range(1, n + 1):
-        seg0 = m
-        for k in range(t_start[a], t_start[a + 1]):
-            t = t_order[k]
-            r, c = t // R2, t % R2
-            for q in range(3):
-                verts[m] = tri[r, c, q]
-                m += 1
-        seg = np.sort(verts[seg0:m])
-        u = seg0
-        for k in range(len(seg)):
-            if k == 0 or seg[k] != seg[k - 1]:
-                verts[u] = seg[k]
-                u += 1
-        m = u
-        s_start[a + 1] = m
-    s_xy = np.empty((m, 2))
-    for k in range(m):
-        s_xy[k, 0] = flat[verts[k], 0]
-        s_xy[k, 1] = flat[verts[k], 1]
-    return b_start, b_xy, v_start, v_xyz, s_start, s_xy, area[1:], ntri[1:]
 
 
 @njit(cache=True)
