@@ -120,6 +120,44 @@ class PoseBuffer:
 
 
 # --------------------------------------------------------------------------- obstacles
+def obstacle_lines(
+    obstacles: Any,
+    z: float = 0.0,
+    T: NDArray[np.float64] | None = None,
+    names: tuple[str, ...] | None = None,
+) -> list[Polyline]:
+    """Outlines of the bounding shapes A1-A6 (+ MEC, MVEE; ns ``shape/<name>``) and A7
+    (``shape/A7:<name>``) of detected obstacles at height ``z`` of their (level body) frame;
+    ``T`` (4, 4), optional, maps them into another frame; ``names``, optional, keeps only these
+    shapes (``"A7"`` keeps every A7 outline)."""
+    lines = []
+    for ob in obstacles:
+        items = [
+            (f"shape/{n}", shp, SHAPE_COLORS.get(n, (1, 1, 1, 1)))
+            for n, shp in ob.shapes.items()
+            if names is None or n in names
+        ]
+        if names is None or "A7" in names:
+            items += [(f"shape/A7:{n}", shp, A7_COLOR) for n, shp in ob.guaranteed.items()]
+        for ns, shp, color in items:
+            xy = shp.outline(36)
+            P = np.c_[xy, np.full(len(xy), z)]
+            if T is not None:
+                P = P @ T[:3, :3].T + T[:3, 3]
+            lines.append(Polyline(ns, ob.id, P, color))
+    return lines
+
+
+def obstacle_map_output(mapper: Any, stamp_ns: int, frame_id: str) -> Output:
+    """An :class:`~navkit.obstacles.ObstacleMapper`'s grid as ``/navkit/obstacle_map``
+    (-1 never seen, 0 seen free, 100 occupied)."""
+    g = mapper.grid()
+    occ = np.full(g.shape, -1, dtype=np.int8)
+    occ[g.seen > 0] = 0
+    occ[g.occupied] = 100
+    return Output("/navkit/obstacle_map", "grid", stamp_ns, frame_id, (occ, g.resolution, g.origin))
+
+
 class ObstaclesStage:
     """Paper 1 on every ``PointCloud2``: per-point classes, bounding shapes A1-A7, and (with a
     pose topic) the fused 2D obstacle map (:class:`navkit.obstacles.ObstacleMapper`, the object
@@ -185,17 +223,7 @@ class ObstaclesStage:
         return self.mapper
 
     def grid_output(self, stamp_ns: int) -> Output:
-        g = self.mapper.grid()
-        occ = np.full(g.shape, -1, dtype=np.int8)
-        occ[g.seen > 0] = 0
-        occ[g.occupied] = 100
-        return Output(
-            "/navkit/obstacle_map",
-            "grid",
-            stamp_ns,
-            self.map_frame,
-            (occ, g.resolution, g.origin),
-        )
+        return obstacle_map_output(self.mapper, stamp_ns, self.map_frame)
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
         from navkit.io.atomic import atomic_path, write_json
@@ -222,23 +250,7 @@ class ObstaclesStage:
             )
         ]
         z = -self.mounting.height_m  # shapes lie on the ground, in the level body frame
-        lines = []
-        for ob in det.obstacles:
-            for name, shp in ob.shapes.items():
-                xy = shp.outline(36)
-                lines.append(
-                    Polyline(
-                        f"shape/{name}",
-                        ob.id,
-                        np.c_[xy, np.full(len(xy), z)],
-                        SHAPE_COLORS.get(name, (1, 1, 1, 1)),
-                    )
-                )
-            for name, shp in ob.guaranteed.items():
-                xy = shp.outline(36)
-                lines.append(
-                    Polyline(f"shape/A7:{name}", ob.id, np.c_[xy, np.full(len(xy), z)], A7_COLOR)
-                )
+        lines = obstacle_lines(det.obstacles, z)
         outs.append(
             Output("/navkit/obstacles/shapes", "markers", msg.stamp_ns, msg.frame_id, lines)
         )
