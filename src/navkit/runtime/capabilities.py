@@ -71,16 +71,68 @@ def planar(T: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 class PoseBuffer:
-    """The recent poses of each pose topic, bounded, interpolated at a stamp.
+    """The recent poses of each pose topic, bounded, interpolated at a stamp, and the
+    recording's TF tree (:class:`~navkit.runtime.tf.TransformTree`, ``/tf`` + ``/tf_static``).
 
     ``at(topic, stamp)`` interpolates linearly (translation) and by slerp (rotation) between the
     two poses around the stamp; before the first / after the last pose it holds the nearest one.
+    ``sensor_pose(topic, stamp, frame)`` carries the pose topic's child frame to a sensor frame
+    through the TF tree.
     """
 
     def __init__(self, maxlen: int = 256) -> None:
+        from navkit.runtime.tf import TransformTree
+
         self.maxlen = maxlen
         self.poses: dict[str, deque[tuple[int, NDArray[np.float64]]]] = {}
         self.frames: dict[str, str] = {}
+        self.children: dict[str, str] = {}
+        self.tf = TransformTree(maxlen)
+        self.warned: set[tuple[str, str]] = set()
+
+    def add_tf(self, msg: Message) -> None:
+        """One transform of a ``tf`` message (static when its topic is ``/tf_static``)."""
+        static = msg.topic.rstrip("/").endswith("tf_static")
+        self.tf.add(msg.frame_id, msg.child_frame_id, msg.stamp_ns, msg.data, static)
+
+    def _child(self, topic: str, frame: str) -> str:
+        """The pose topic's child frame when it differs from ``frame`` (else "")."""
+        child = self.children.get(topic, "").lstrip("/")
+        frame = frame.lstrip("/")
+        return child if child and frame and child != frame else ""
+
+    def sensor_pose(self, topic: str, stamp_ns: int, frame: str) -> NDArray[np.float64] | None:
+        """``T_world_frame`` at ``stamp_ns``: the pose topic's ``T_world_child`` times the TF
+        tree's ``T_child_frame`` (interpolated at the stamp). Without a child frame, with the
+        same frame, or when the TF tree does not connect them (warned once), the pose topic is
+        taken as the sensor's pose."""
+        T = self.at(topic, stamp_ns)
+        child = self._child(topic, frame)
+        if T is None or not child:
+            return T
+        T_child_frame = self.tf.lookup(child, frame, stamp_ns)
+        if T_child_frame is None:
+            if (child, frame) not in self.warned:
+                self.warned.add((child, frame))
+                log.warning(
+                    "no TF between %s (child frame of %s) and %s: %s taken as the pose of %s",
+                    child,
+                    topic,
+                    frame,
+                    topic,
+                    frame,
+                )
+            return T
+        return T @ T_child_frame
+
+    def tf_ready(self, topic: str, stamp_ns: int, frame: str) -> bool:
+        """Whether every dynamic TF edge between the pose topic's child frame and ``frame`` has a
+        transform at or after ``stamp_ns`` (True when no TF connects them)."""
+        child = self._child(topic, frame)
+        if not child:
+            return True
+        latest = self.tf.latest_stamp(child, frame)
+        return latest is None or latest >= stamp_ns
 
     def add(self, msg: Message) -> None:
         buf = self.poses.setdefault(msg.topic, deque(maxlen=self.maxlen))
@@ -91,6 +143,7 @@ class PoseBuffer:
             return
         buf.append((msg.stamp_ns, np.asarray(msg.data, dtype=np.float64)))
         self.frames[msg.topic] = msg.frame_id
+        self.children[msg.topic] = msg.child_frame_id
 
     def latest_stamp(self, topic: str) -> int | None:
         buf = self.poses.get(topic)
@@ -109,14 +162,9 @@ class PoseBuffer:
         if i >= len(stamps):
             return buf[-1][1]
         (s0, T0), (s1, T1) = buf[i - 1], buf[i]
-        w = (stamp_ns - s0) / (s1 - s0)
-        from scipy.spatial.transform import Rotation, Slerp
+        from navkit.runtime.tf import interpolate_pose
 
-        rot = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([T0[:3, :3], T1[:3, :3]])))([w])
-        T = np.eye(4)
-        T[:3, :3] = rot.as_matrix()[0]
-        T[:3, 3] = (1 - w) * T0[:3, 3] + w * T1[:3, 3]
-        return T
+        return interpolate_pose(s0, T0, s1, T1, stamp_ns)
 
 
 # --------------------------------------------------------------------------- obstacles
@@ -278,7 +326,11 @@ class ObstaclesStage:
                     "obstacles": [ob.to_dict() for ob in det.obstacles],
                 },
             )
-        T = poses.at(self.pose_topic, msg.stamp_ns) if self.with_map else None
+        T = (
+            poses.sensor_pose(self.pose_topic, msg.stamp_ns, msg.frame_id)
+            if self.with_map
+            else None
+        )
         if T is not None:
             self.map_frame = poses.frames.get(self.pose_topic, "map") or "map"
             self._mapper(T).add_scan(det, T @ self.T_sensor_body)
@@ -342,7 +394,7 @@ class LaserMappingStage:
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
         scan: ScanData = msg.data
-        T = poses.at(self.pose_topic, msg.stamp_ns)
+        T = poses.sensor_pose(self.pose_topic, msg.stamp_ns, msg.frame_id)
         self.n += 1
         if T is None:
             return StageResult(record={"used": False, "reason": "no pose yet"})

@@ -13,6 +13,8 @@ Kinds and their ``data``:
 - ``"depth"``: ``(H, W)`` float64 depth, metres, NaN = no return.
 - ``"color"``: ``(H, W, 3)`` uint8 RGB.
 - ``"camera_info"``: :class:`CameraData`.
+- ``"tf"``: one transform of a ``tf2_msgs/TFMessage``: ``(4, 4)`` ``T_parent_child``, parent
+  ``frame_id``, child ``child_frame_id``; static when the topic is ``/tf_static``.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ from numpy.typing import NDArray
 
 __all__ = ["KINDS", "OUTPUT_KINDS", "CameraData", "Message", "Output", "Polyline", "ScanData"]
 
-KINDS = ("cloud", "scan", "pose", "depth", "color", "camera_info")
+KINDS = ("cloud", "scan", "pose", "depth", "color", "camera_info", "tf")
 
 
 @dataclass(frozen=True, eq=False)

@@ -134,9 +134,12 @@ class _Run:
             self.emit(res, stage.name, msg, item)
 
     def ready(self, msg: Message) -> bool:
+        poses = self.s.poses
         for topic in needs_pose(self.pipe, self.s.stages, msg):
-            latest = self.s.poses.latest_stamp(topic)
+            latest = poses.latest_stamp(topic)
             if latest is None or latest < msg.stamp_ns:
+                return False
+            if not poses.tf_ready(topic, msg.stamp_ns, msg.frame_id):
                 return False
         return True
 
@@ -154,7 +157,10 @@ class _Run:
         self.logger.set_time(msg.stamp_ns)
         self.logger.log_message(msg)
         self.log_seconds += time.perf_counter() - t0
-        if msg.kind == "pose":
+        if msg.kind == "tf":
+            s.poses.add_tf(msg)
+            self.drain(item)
+        elif msg.kind == "pose":
             s.poses.add(msg)
             self.process(msg, item)
             self.drain(item)
