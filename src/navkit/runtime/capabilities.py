@@ -586,18 +586,47 @@ class PlanesStage:
         from navkit.planes.motion import MotionSettings
         from navkit.planes.solve import SolverSettings
 
-        self.cfg = pipe.planes
+        c = self.cfg = pipe.planes
         self.topics = pipe.topics
-        self.es = ExtractionSettings(cell=self.cfg.cell)
+        self.es = ExtractionSettings(cell=c.cell)
         self.odo = PlaneOdometry(
-            OdometrySettings(motion=MotionSettings(solver=SolverSettings(nu=self.cfg.nu)))
+            OdometrySettings(
+                motion=MotionSettings(solver=SolverSettings(nu=c.nu)),
+                max_keyframes=c.max_keyframes,
+                max_history=c.max_history,
+                max_map_planes=c.max_map_planes,
+            )
         )
         self.camera: CameraData | None = None
         self.depth: Message | None = None
         self.color: Message | None = None
         self.n = self.n_ok = 0
         self.out = out / "planes"
-        self.trajectory: list[tuple[int, NDArray[np.float64]]] = []
+        # the trajectory is streamed to trajectory.tum (bounded memory); its size at the last
+        # line this stage wrote (a resumed run truncates what a killed run wrote after it)
+        self.traj_bytes = 0
+        self.last_stamp_ns: int | None = None
+
+    def _append_pose(self, stamp_ns: int, T: NDArray[np.float64]) -> None:
+        """One TUM line (``t tx ty tz qx qy qz qw``, as :func:`navkit.io.trajectory.write_tum`);
+        a stamp not after the last one is skipped (the TUM reader refuses repeats)."""
+        from navkit.geometry import se3_to_xyz_quat
+
+        if self.last_stamp_ns is not None and stamp_ns <= self.last_stamp_ns:
+            return
+        self.last_stamp_ns = stamp_ns
+        xyz, q = se3_to_xyz_quat(T[None])
+        vals = " ".join(f"{v:.12g}" for v in (*xyz[0], *q[0]))
+        line = f"{stamp_ns * 1e-9:.9f} {vals}\n"
+        if self.traj_bytes == 0:
+            line = "# timestamp tx ty tz qx qy qz qw\n" + line
+        self.out.mkdir(parents=True, exist_ok=True)
+        path = self.out / "trajectory.tum"
+        with open(path, "r+b" if path.exists() else "wb") as fh:
+            fh.truncate(self.traj_bytes)
+            fh.seek(self.traj_bytes)
+            fh.write(line.encode())
+            self.traj_bytes = fh.tell()
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
         if msg.kind == "camera_info":
@@ -634,7 +663,7 @@ class PlanesStage:
         r = self.odo.register_frame(obs)
         self.n += 1
         self.n_ok += str(r.status).startswith(("ok", "first"))
-        self.trajectory.append((d.stamp_ns, r.T_world_frame.copy()))
+        self._append_pose(d.stamp_ns, r.T_world_frame)
         outs = [Output("/navkit/planes/pose", "pose", d.stamp_ns, "planes_odom", r.T_world_frame)]
         lines = []
         R, t = r.T_world_frame[:3, :3], r.T_world_frame[:3, 3]
@@ -658,16 +687,11 @@ class PlanesStage:
         )
 
     def finish(self, out: Path, stamp_ns: int) -> StageResult:
-        if not self.trajectory:
+        if not self.n:
             return StageResult(record={"frames": 0})
         from navkit.io.atomic import write_json
-        from navkit.io.trajectory import Trajectory, write_tum
 
         self.out.mkdir(parents=True, exist_ok=True)
-        t = np.array([s for s, _ in self.trajectory]) * 1e-9
-        P = np.stack([T for _, T in self.trajectory])
-        keep = np.r_[True, np.diff(t) > 0]
-        write_tum(self.out / "trajectory.tum", Trajectory(t[keep], P[keep]))
         write_json(self.out / "map.json", self.odo.map.to_dict())
         return StageResult(
             record={"frames": self.n, "tracked": self.n_ok, "map_planes": len(self.odo.map.planes)}
