@@ -26,7 +26,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.runtime.messages import CameraData, Message, Output, Polyline, ScanData
+from navkit.runtime.messages import (
+    CameraData,
+    Message,
+    Output,
+    Polyline,
+    ScanData,
+    TexturedPlane,
+)
 from navkit.runtime.pipeline import Pipeline
 
 __all__ = [
@@ -575,6 +582,66 @@ class LaserLocalizationStage:
 
 
 # --------------------------------------------------------------------------- planes
+def textured_planes(
+    obs: Any,
+    color: NDArray[np.uint8],
+    T_world_frame: NDArray[np.float64],
+    step: int = 8,
+    max_texture_px: int = 128,
+) -> list[TexturedPlane]:
+    """Each plane of an RGB-D frame as a mesh textured with the colour pixels of its region.
+
+    Vertices: the region's pixels every ``step`` pixels (both ways), each where the pixel's ray
+    (through its depth point) meets the plane's fit (flat, no depth noise), in the world frame; triangles: two
+    per grid square whose four corners are in the region; texture: the colour image's crop
+    around the region, decimated so its longer side is at most ``max_texture_px``.
+
+    Parameters
+    ----------
+    obs : PlaneObservation
+        The frame's planes (organised ``points (H, W, 3)`` in the camera frame).
+    color : (H, W, 3) uint8
+    T_world_frame : (4, 4)
+    """
+    P = np.asarray(obs.points)
+    if P.ndim != 3 or color.shape[:2] != P.shape[:2]:
+        return []
+    H, W = P.shape[:2]
+    R, t = T_world_frame[:3, :3], T_world_frame[:3, 3]
+    out = []
+    for k, seg in enumerate(obs.segments):
+        rows, cols = np.divmod(np.asarray(seg.inliers, dtype=np.int64), W)
+        if rows.size < 16:
+            continue
+        r0, c0 = int(rows.min()), int(cols.min())
+        r0, c0 = r0 - r0 % step, c0 - c0 % step  # the vertex grid: multiples of step
+        mask = np.zeros((H, W), bool)
+        mask[rows, cols] = True
+        rr, cc = np.mgrid[r0 : rows.max() + 1 : step, c0 : cols.max() + 1 : step]
+        X = P[rr, cc]
+        ok = mask[rr, cc] & np.all(np.isfinite(X), axis=-1)
+        n, rho = np.asarray(seg.plane.normal, dtype=np.float64), float(seg.plane.rho)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            X = X * (rho / (X @ n))[..., None]  # along the pixel's ray onto the plane
+        ok &= np.all(np.isfinite(X), axis=-1)
+        idx = -np.ones(ok.shape, np.int64)
+        idx[ok] = np.arange(int(ok.sum()))
+        a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
+        quad = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
+        if not quad.any():
+            continue
+        tris = np.concatenate(
+            [np.stack([a[quad], c[quad], b[quad]], 1), np.stack([b[quad], c[quad], d[quad]], 1)]
+        )
+        r1, c1 = int(rr.max()) + 1, int(cc.max()) + 1
+        dec = max(1, int(np.ceil(max(r1 - r0, c1 - c0) / max_texture_px)))
+        tex = np.ascontiguousarray(color[r0:r1:dec, c0:c1:dec])
+        h, w = tex.shape[0] * dec, tex.shape[1] * dec  # the pixels the texels cover
+        uv = np.c_[(cc[ok] - c0 + 0.5) / w, (rr[ok] - r0 + 0.5) / h]
+        out.append(TexturedPlane(k, X[ok] @ R.T + t, tris, uv, tex))
+    return out
+
+
 class PlanesStage:
     """Paper 2's plane odometry on depth (+ colour) frames with ``CameraInfo``
     (``planes.PlaneOdometry.register_frame``); publishes the camera pose and the frame's planes."""
@@ -675,6 +742,18 @@ class PlanesStage:
             outs.append(
                 Output("/navkit/planes/outlines", "markers", d.stamp_ns, "planes_odom", lines)
             )
+        if c is not None and self.cfg.textures:
+            planes = textured_planes(obs, color, r.T_world_frame)
+            if planes:
+                outs.append(
+                    Output(
+                        "/navkit/planes/textured",
+                        "textured_planes",
+                        d.stamp_ns,
+                        "planes_odom",
+                        planes,
+                    )
+                )
         return StageResult(
             outs,
             {

@@ -11,7 +11,8 @@ The TOML has one table per part, the same tables the resolved ``settings.toml`` 
     [obstacles]  sensor_height_m, roll_deg, pitch_deg, rings, columns, ring_method, map_*
     [obstacles.detector]        # keys of navkit.obstacles.ObstacleSettings
     [laser]      max_range_m, map_resolution_m, keyframe_*, sigma_m, prior, success_*
-    [planes]     cell, nu, max_time_offset_s, max_keyframes, max_history, max_map_planes
+    [planes]     cell, nu, max_time_offset_s, max_keyframes, max_history, max_map_planes,
+                 textures
     [path]       tolerance_m, publish_every
     [run]        capabilities, checkpoint_every, write_frames
 
@@ -129,6 +130,8 @@ class PlanesConfig:
     640 x 480), ``max_history`` poses / results / per-plane observation numbers kept by the
     odometry object (the trajectory is streamed to ``planes/trajectory.tum`` instead), and
     ``max_map_planes`` planes in the merged map (beyond, the least recently observed is dropped).
+    ``textures``: each frame's planes as meshes textured with their colour pixels for the viewer
+    (``--rerun``; not in ``results.mcap``).
     """
 
     cell: int = 20
@@ -137,6 +140,7 @@ class PlanesConfig:
     max_keyframes: int = 20
     max_history: int = 100
     max_map_planes: int = 200
+    textures: bool = True
 
 
 @dataclass(frozen=True)

@@ -103,9 +103,12 @@ class _Run:
         return self.seg_dir / f"segment-{k:05d}.mcap"
 
     def emit(self, res: StageResult, cap: str, msg: Message | None, item: int) -> None:
+        from navkit.io.results_mcap import ROS_TYPES
+
         t0 = time.perf_counter()
         for o in res.outputs:
-            self.writer.write(o.topic, o.kind, o.stamp_ns, o.frame_id, o.data)
+            if o.kind in ROS_TYPES:  # textured planes are for the viewer only
+                self.writer.write(o.topic, o.kind, o.stamp_ns, o.frame_id, o.data)
         t1 = time.perf_counter()
         for o in res.outputs:
             self.logger.log_output(o)
