@@ -771,6 +771,10 @@ class PlanesStage:
         from navkit.io.atomic import write_json
 
         self.out.mkdir(parents=True, exist_ok=True)
+        traj = self.out / "trajectory.tum"
+        if traj.exists() and traj.stat().st_size > self.traj_bytes:
+            with open(traj, "r+b") as fh:  # lines a killed run wrote after its checkpoint
+                fh.truncate(self.traj_bytes)
         write_json(self.out / "map.json", self.odo.map.to_dict())
         return StageResult(
             record={"frames": self.n, "tracked": self.n_ok, "map_planes": len(self.odo.map.planes)}
