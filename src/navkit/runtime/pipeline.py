@@ -23,8 +23,9 @@ Decisions (also in ``docs/runtime.md``):
   pose topics, one whose name says ground truth (``truth``, ``gt``, ``ground``, ``corrected``,
   ``reference``) is the *reference* and the *pose*; one whose name says ``odom`` is the
   *odometry*; a single pose topic is both pose and odometry.
-- A pose topic gives ``T_world_sensor`` of the sensor whose data it accompanies (no TF tree is
-  walked: a static base -> sensor offset must be folded into the pose topic).
+- A pose topic gives ``T_world_<child frame>``; the recording's TF tree (``/tf``, ``/tf_static``,
+  :mod:`navkit.runtime.tf`) carries it to the frame of each cloud or scan; without a connecting
+  TF (or a child frame) the pose topic is taken as the sensor's pose.
 - ``LaserScan`` with ``--map`` is localized; without, with a pose topic, it builds a wall map.
 """
 
