@@ -218,7 +218,8 @@ class ObstaclesStage:
     pose topic) the fused 2D obstacle map (:class:`navkit.obstacles.ObstacleMapper`, the object
     the mission uses, on a fixed window around the first pose).
 
-    The pose topic gives ``T_world_sensor``; the detection's points are in the level body frame
+    The pose topic and the TF tree give ``T_world_sensor``
+    (:meth:`PoseBuffer.sensor_pose`); the detection's points are in the level body frame
     (:class:`~navkit.obstacles.Mounting`), so the mapper gets
     ``T_world_sensor @ inv(T_body_sensor)``."""
 

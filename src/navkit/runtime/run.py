@@ -46,7 +46,8 @@ __all__ = ["STATE_DIR", "NullLogger", "run_recording"]
 log = logging.getLogger(__name__)
 
 STATE_DIR = ".navkit-run"
-CHECKPOINT_VERSION = 1
+# 2: the pose buffer holds the TF tree, the planes stage streams its trajectory
+CHECKPOINT_VERSION = 2
 
 
 class NullLogger:
