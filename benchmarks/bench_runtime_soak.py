@@ -3,7 +3,7 @@
 The 7-Scenes frames (``rgbd/7scenes-tsdf``, 100 frames at 30 Hz) are streamed again and again
 (restamped, so the recording is 2,000 frames long; ``--quick``: 300) through
 :func:`navkit.runtime.run_recording` with the planes stage only, once with the run's default
-memory bounds (``[planes] max_keyframes = 20, max_history = 100, max_map_planes = 200``) and
+memory bounds (``[planes] max_keyframes = 20, max_history = 100, max_map_planes = 40``) and
 once unbounded (``max_keyframes = 200`` as ``OdometrySettings``' default, ``max_history = 0``,
 ``max_map_planes = 0``). Resident memory (``/proc/self/statm``, after ``gc.collect()``) is
 sampled every 100 frames; the figure is the growth from frame 500 (or the first sample in

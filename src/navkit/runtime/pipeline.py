@@ -140,7 +140,7 @@ class PlanesConfig:
     max_time_offset_s: float = 0.02
     max_keyframes: int = 20
     max_history: int = 100
-    max_map_planes: int = 200
+    max_map_planes: int = 40
     textures: bool = True
 
 
