@@ -123,7 +123,9 @@ def test_cli_mission_run_on_a_users_scene(cli, tmp_path):
     out = tmp_path / "out"
     config = tmp_path / "config.toml"  # --config: the [mission] table of a settings.toml
     config.write_text("[mission.obstacle_map]\nmatch_tolerance = 0.55\n[route]\nignored = 1\n")
-    res = cli("mission", "run", scene_file, "--out", out, "--small", "--config", config)
+    rrd = tmp_path / "mission.rrd"
+    args = ("--out", out, "--small", "--config", config, "--rerun-save", rrd)
+    res = cli("mission", "run", scene_file, *args)
     assert res.exit_code == 0, res.output
     assert "from the operator" in res.output
     summary = json.loads((out / "summary.json").read_text())
@@ -136,6 +138,15 @@ def test_cli_mission_run_on_a_users_scene(cli, tmp_path):
     assert "seed = 5" in settings and "n_beams = 16" in settings
     assert "match_tolerance = 0.55" in settings
     assert (out / "report.html").is_file()
+    # the runtime's results: one estimate pose per control step, as in estimate.tum; the .rrd
+    assert "results.mcap" in summary["outputs"] and rrd.stat().st_size > 0
+    from navkit.io.results_mcap import read_messages
+
+    est = [
+        r.message.pose.position for r in read_messages(out / "results.mcap", ["/navkit/estimate"])
+    ]
+    tum = np.loadtxt(out / "estimate.tum", comments="#")
+    np.testing.assert_allclose([[p.x, p.y] for p in est], tum[:, 1:3], atol=1e-9)
     # the outputs of a run are not overwritten silently
     before = (out / "summary.json").read_text()
     res = cli("mission", "run", scene_file, "--out", out, "--small")

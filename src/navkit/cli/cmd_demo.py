@@ -2,8 +2,9 @@
 
 Runs :func:`navkit.mission.run_demo` (the "yard" world by default: the robot is driven out
 through the yard into the room, the link is lost, it returns along its stored path) and writes
-``report.html``, ``metrics.json``, the trajectories, the stored path and the obstacle map into
-``--out``; then, as before, one picture per simulated sensor at the start pose (lidar, tilting
+``report.html``, ``metrics.json``, the trajectories, the stored path, the obstacle map and
+``results.mcap`` (the runtime's result topics, :mod:`navkit.runtime.mission_sink`; an ``.rrd``
+with ``--rerun-save``, the live viewer with ``--rerun``) into ``--out``; then, as before, one picture per simulated sensor at the start pose (lidar, tilting
 scanner, RGB-D, stereo, the world) with the truth. ``settings.toml`` / ``summary.json`` hold both.
 """
 
@@ -46,6 +47,14 @@ def register(app: typer.Typer) -> None:
         y: float = typer.Option(None, "--y", help="Robot y (m); default: the world's start."),  # type: ignore[assignment]
         heading_deg: float = typer.Option(None, "--heading-deg", help="Robot heading (deg)."),  # type: ignore[assignment]
         small: bool = typer.Option(False, "--small", help="Low resolution (fast; for tests)."),
+        rerun: bool = typer.Option(
+            False, "--rerun", help="Stream the mission to the Rerun viewer (extra 'rerun')."
+        ),
+        rerun_save: Path | None = typer.Option(
+            None,
+            "--rerun-save",
+            help="Record the mission to this .rrd file for the Rerun viewer (headless).",
+        ),
     ) -> None:
         """Run the built-in mission (out, map, localize, come back) into report.html, metrics.json
         and maps; then save a picture of every simulated sensor at the start, with the truth.
@@ -59,6 +68,7 @@ def register(app: typer.Typer) -> None:
             from navkit.io.atomic import read_json
             from navkit.mission import run_demo
             from navkit.mission.settings import DemoSettings, tomllib
+            from navkit.runtime.mission_sink import open_mission_sink
             from navkit.sim import load_scene
             from navkit.viz.demo import render_sensor_pictures
             from navkit.viz.mission import write_report
@@ -71,7 +81,8 @@ def register(app: typer.Typer) -> None:
                 start[2] if heading_deg is None else math.radians(heading_deg),
             )
             settings = DemoSettings.make(scene, seed, small, pose)
-            # the mission (report.html, metrics.json, maps) ...
+            sink = open_mission_sink(out, rerun, rerun_save)
+            # the mission (report.html, metrics.json, maps, results.mcap) ...
             metrics = run_demo(
                 out,
                 seed,
@@ -81,6 +92,7 @@ def register(app: typer.Typer) -> None:
                 start=pose,
                 report=write_report,
                 config=config,
+                sink=sink,
             )
             mission_summary = read_json(out / "summary.json")
             mission_settings = tomllib.loads((out / "settings.toml").read_text(encoding="utf-8"))

@@ -48,9 +48,18 @@ def run(
     ),
     seed: int = typer.Option(None, "--seed", help="Seed of every random draw."),  # type: ignore[assignment]
     small: bool = typer.Option(False, "--small", help="Reduced sensor resolutions (quick runs)."),
+    rerun: bool = typer.Option(
+        False, "--rerun", help="Stream the mission to the Rerun viewer (extra 'rerun')."
+    ),
+    rerun_save: Path | None = typer.Option(
+        None,
+        "--rerun-save",
+        help="Record the mission to this .rrd file for the Rerun viewer (headless).",
+    ),
 ) -> None:
     """Drive the robot out along the route, map, localize, lose the link, come back; write
-    report.html, metrics.json, trajectories (TUM), path.json and the obstacle map (PGM+YAML).
+    report.html, metrics.json, trajectories (TUM), path.json, the obstacle map (PGM+YAML) and
+    results.mcap (ROS 2 messages; --rerun-save FILE.rrd for Rerun).
 
     Example: navkit mission run yard --out out/mission --small
     """
@@ -58,9 +67,11 @@ def run(
 
     with cli_errors():
         from navkit.mission.demo import run_scene_file
+        from navkit.runtime.mission_sink import open_mission_sink
         from navkit.viz.mission import write_report
 
         check_out_dir(out, overwrite)
+        sink = open_mission_sink(out, rerun, rerun_save)
         m = run_scene_file(
             scene,
             out,
@@ -70,6 +81,7 @@ def run(
             progress=_progress(),
             report=write_report,
             config=config,
+            sink=sink,
         )
         r = m["return"]
         typer.echo(

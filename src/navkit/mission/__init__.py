@@ -15,7 +15,15 @@ composer (:meth:`Mission.step`: one line per capability, each an online object);
 from navkit.mission.demo import run_demo, run_scene_file, run_to_dir
 from navkit.mission.driver import PurePursuit
 from navkit.mission.metrics import mission_metrics
-from navkit.mission.run import Fix2D, Mission, MissionLog, PlaneStep, run_mission
+from navkit.mission.run import (
+    Fix2D,
+    Mission,
+    MissionLog,
+    PlaneStep,
+    StepRecord,
+    StepSink,
+    run_mission,
+)
 from navkit.mission.settings import (
     BlockSettings,
     CameraSettings,
@@ -45,6 +53,8 @@ __all__ = [
     "PurePursuit",
     "RobotSettings",
     "Route",
+    "StepRecord",
+    "StepSink",
     "StereoSettings",
     "VOSettings",
     "builtin_route_path",

@@ -8,7 +8,9 @@ Outputs of :func:`run_to_dir` (every file written atomically):
 - ``settings.toml`` - the resolved settings and the route; ``summary.json`` - the key figures;
 - ``truth.tum``, ``vo.tum``, ``estimate.tum`` - trajectories (TUM format, z = 0);
 - ``path.json`` - the stored spline (paper 4);
-- ``obstacle_map.pgm`` + ``obstacle_map.yaml`` - the fused obstacle map (ROS map_server).
+- ``obstacle_map.pgm`` + ``obstacle_map.yaml`` - the fused obstacle map (ROS map_server);
+- with a ``sink`` (the CLI passes :class:`navkit.runtime.mission_sink.MissionSink`): what it
+  writes from the per-step records, ``results.mcap`` (and an ``.rrd`` with a Rerun logger).
 """
 
 from __future__ import annotations
@@ -110,8 +112,12 @@ def run_to_dir(
     out: str | Path,
     progress: ProgressFn | None = None,
     report: ReportFn | None = None,
+    sink: Any = None,
 ) -> dict[str, Any]:
-    """Run the mission and write every output into ``out``; returns the metrics."""
+    """Run the mission and write every output into ``out``; returns the metrics.
+
+    ``sink``: a :class:`~navkit.mission.run.StepSink` fed every step's record during the run
+    and the log at the end (its files are listed in ``summary.json``)."""
     from navkit.errors import InputError
     from navkit.mission.metrics import mission_metrics
     from navkit.mission.run import run_mission
@@ -123,10 +129,11 @@ def run_to_dir(
         )
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    lg = run_mission(scene, route, settings, progress)
+    lg = run_mission(scene, route, settings, progress, sink.step if sink is not None else None)
+    sink_files = sink.finish(lg) if sink is not None else []
     metrics = mission_metrics(lg)
     metrics["wall_seconds_mission"] = time.perf_counter() - t0
-    files = write_outputs(lg, metrics, out, report)
+    files = write_outputs(lg, metrics, out, report) + list(sink_files)
     metrics["wall_seconds"] = time.perf_counter() - t0
     # the metrics file holds the total time too (rewritten atomically with it)
     from navkit.io.atomic import write_json, write_run_files
@@ -195,13 +202,14 @@ def run_scene_file(
     progress: ProgressFn | None = None,
     report: ReportFn | None = None,
     config: str | Path | None = None,
+    sink: Any = None,
 ) -> dict[str, Any]:
     """``navkit mission run``: a scene TOML (or built-in name) and its mission file
     (:func:`load_scene_file`), run into ``out``."""
     scene, route, settings = load_scene_file(
         scene_path, mission=mission, seed=seed, small=small, start=start, config=config
     )
-    return run_to_dir(scene, route, settings, out, progress, report)
+    return run_to_dir(scene, route, settings, out, progress, report, sink)
 
 
 def run_demo(
@@ -214,6 +222,7 @@ def run_demo(
     start: tuple[float, float, float] | None = None,
     report: ReportFn | None = None,
     config: str | Path | None = None,
+    sink: Any = None,
 ) -> dict[str, Any]:
     """The built-in mission (``navkit demo``): the yard world and its route, into ``out``.
 
@@ -228,8 +237,8 @@ def run_demo(
     scene, small, start
         Another built-in or TOML world (with its mission file), reduced resolutions, another
         start pose.
-    report, config
-        See :func:`run_scene_file`.
+    report, config, sink
+        See :func:`run_scene_file` and :func:`run_to_dir`.
     """
     return run_scene_file(
         scene,
@@ -240,4 +249,5 @@ def run_demo(
         progress=progress,
         report=report,
         config=config,
+        sink=sink,
     )

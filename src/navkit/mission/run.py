@@ -26,7 +26,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -46,7 +46,15 @@ from navkit.path.control import ReturnSettings
 from navkit.path.returning import ReturnTripSettings
 from navkit.timing import Timings, new_timings, timed
 
-__all__ = ["Fix2D", "Mission", "MissionLog", "PlaneStep", "run_mission"]
+__all__ = [
+    "Fix2D",
+    "Mission",
+    "MissionLog",
+    "PlaneStep",
+    "StepRecord",
+    "StepSink",
+    "run_mission",
+]
 
 log = logging.getLogger(__name__)
 
@@ -93,6 +101,71 @@ class MissionLog:
     timings: Timings = field(default_factory=new_timings)
 
 
+@dataclass(frozen=True, eq=False)
+class StepRecord:
+    """What one control step produced, capability by capability (:attr:`Mission.last_step`).
+
+    The mission's output stream: :func:`navkit.runtime.mission_sink` turns these records into
+    the same ``results.mcap`` / Rerun outputs as ``navkit run`` (the mission never imports the
+    runtime, io or viz layers for this; the CLI joins them). Arrays are copies; ``mapper`` and
+    ``path`` are the live online objects (read them during the callback, not later).
+
+    Attributes
+    ----------
+    k : int
+        Control step (0 = the start pose).
+    time : float
+        Simulated seconds.
+    phase : int
+        0 outbound, 1 return.
+    truth, vo, estimate : (3,) arrays
+        True pose, dead-reckoned VO and corrected estimate ``(x, y, theta)`` after the step.
+    detection : ObstacleDetection or None
+        Paper 1 on this step's lidar scan (level body frame), None without a scan.
+    scan_pose : (3,) array or None
+        The estimate the detection was fused into the obstacle map with.
+    mapper : ObstacleMapper or None
+        The obstacle map after the scan was fused (lidar steps only).
+    fixes : tuple of Fix2D
+        Paper 3's localization attempts of this step (room and map fixes).
+    plane_step : PlaneStep or None
+        Paper 2's plane motion of this step's RGB-D frame.
+    path : CubicSpline-like or None
+        Paper 4's stored spline when a point was accepted this step (outbound), or the final
+        stored path on the step the link was lost.
+    link_lost : bool
+        The link was lost on this step (the stored path is final, the return starts).
+    """
+
+    k: int
+    time: float
+    phase: int
+    truth: NDArray[np.float64]
+    vo: NDArray[np.float64]
+    estimate: NDArray[np.float64]
+    detection: Any = None
+    scan_pose: NDArray[np.float64] | None = None
+    mapper: ObstacleMapper | None = None
+    fixes: tuple[Fix2D, ...] = ()
+    plane_step: PlaneStep | None = None
+    path: Any = None
+    link_lost: bool = False
+
+
+StepFn = Callable[[StepRecord], None]
+
+
+class StepSink(Protocol):
+    """Where a mission's :class:`StepRecord` stream goes (e.g.
+    :class:`navkit.runtime.mission_sink.MissionSink`: ``results.mcap`` and Rerun)."""
+
+    def step(self, record: StepRecord) -> None:
+        """Take one step's record."""
+
+    def finish(self, log: MissionLog) -> list[str]:
+        """Publish the final results of the run; returns the names of the files written."""
+
+
 class Mission:
     """The integrated mission in a simulated ``scene`` along ``route`` (see the module docstring).
 
@@ -135,13 +208,25 @@ class Mission:
         self.rows: list[tuple[float, int, Any, Any, Any]] = []
         self._record()
         with timed(lg.timings, "path_record"):
-            self.recorder.add(self.est[:2])
+            added = self.recorder.add(self.est[:2])
+        self._det: Any = None
+        self._scan_pose: NDArray[np.float64] | None = None
+        self.last_step = self._step_record(added, False, 0, 0, 0)
 
     # --- one control step ----------------------------------------------------------------------
     def step(self) -> bool:
-        """One control step; False when the mission is over (``self.lg.outcome`` says why)."""
+        """One control step; False when the mission is over (``self.lg.outcome`` says why).
+
+        What the step produced is in :attr:`last_step` (a :class:`StepRecord`)."""
         self.k += 1
         self.t = self.k * self.s.robot.dt
+        n_fix, n_map_fix, n_plane = (
+            len(self.rooms.fixes),
+            len(self.rooms.map_fixes),
+            len(self.planes.steps),
+        )
+        phase_before = self.phase
+        self._det = self._scan_pose = None
         cmd = self._drive()  # 1. the operator / paper 4's return
         if cmd is None:
             return False
@@ -151,14 +236,42 @@ class Mission:
             self._lidar()  # 4. paper 1 map, paper 3 fixes, the way back checked on the map
         if self.k % self.every_cam == 0:
             self._camera()  # 5. paper 2 plane motion, paper 3 room views (stereo)
+        added = False
         if self.phase == OUTBOUND:
             with timed(self.lg.timings, "path_record"):
-                self.recorder.add(self.est[:2])  # 6. paper 4 path memory
+                added = self.recorder.add(self.est[:2])  # 6. paper 4 path memory
         self._record()
+        link_lost = phase_before == OUTBOUND and self.phase == RETURN
+        self.last_step = self._step_record(added, link_lost, n_fix, n_map_fix, n_plane)
         return True
 
-    def run(self, progress: ProgressFn | None = None) -> MissionLog:
-        """Step until home, blocked or out of time; returns the log."""
+    def _step_record(
+        self, path_added: bool, link_lost: bool, n_fix: int, n_map_fix: int, n_plane: int
+    ) -> StepRecord:
+        r = self.robot
+        fixes = (*self.rooms.fixes[n_fix:], *self.rooms.map_fixes[n_map_fix:])
+        path = self.lg.path if link_lost else (self.recorder.spline if path_added else None)
+        return StepRecord(
+            k=self.k,
+            time=self.t,
+            phase=self.phase,
+            truth=r.truth.copy(),
+            vo=r.vo.copy(),
+            estimate=self.est.copy(),
+            detection=self._det,
+            scan_pose=self._scan_pose,
+            mapper=self.mapper if self._det is not None else None,
+            fixes=tuple(fixes),
+            plane_step=self.planes.steps[-1] if len(self.planes.steps) > n_plane else None,
+            path=path,
+            link_lost=link_lost,
+        )
+
+    def run(self, progress: ProgressFn | None = None, on_step: StepFn | None = None) -> MissionLog:
+        """Step until home, blocked or out of time; returns the log.
+
+        ``on_step(record)`` is called with the start's and every step's :class:`StepRecord`
+        (e.g. :class:`navkit.runtime.mission_sink.MissionSink`, which writes ``results.mcap``)."""
         s = self.s
         n_max = int(np.ceil(2 * s.max_time / s.robot.dt))
         steps: Iterator[int] = iter(range(1, n_max + 1))
@@ -167,9 +280,13 @@ class Mission:
             # guide; the loop ends when the robot is home, blocked or out of time)
             expected = 2.0 * self.driver.length / (0.8 * s.robot.v_max) / s.robot.dt
             steps = progress(steps, "mission", int(min(n_max, max(expected, 1.0))))
+        if on_step is not None:
+            on_step(self.last_step)
         for _ in steps:
             if not self.step():
                 break
+            if on_step is not None:
+                on_step(self.last_step)
         else:
             self.lg.outcome = self.lg.outcome or "timeout"
         return self.finish()
@@ -210,6 +327,7 @@ class Mission:
             self.est = self.localizer.map_fix(body, self.est, truth, self.t)
         with timed(lg.timings, "obstacles_fuse"):
             self.mapper.add_scan(det, se2_from_xytheta(*self.est))
+        self._det, self._scan_pose = det, self.est.copy()
         if F.room_sensor == "lidar":  # the room (laser variant)
             B = sim.scan.points("body")[sim.scan.valid]
             z_ok = (B[:, 2] >= F.wall_z_min) & (B[:, 2] <= F.wall_z_max)
@@ -317,6 +435,7 @@ def run_mission(
     route: Route,
     settings: MissionSettings | None = None,
     progress: ProgressFn | None = None,
+    on_step: StepFn | None = None,
 ) -> MissionLog:
     """Run the integrated mission (:class:`Mission`) to its end.
 
@@ -327,13 +446,15 @@ def run_mission(
     settings : MissionSettings, optional
     progress : callable, optional
         ``progress(iterable, description, total)`` wrapping the step loop (a progress bar).
+    on_step : callable, optional
+        Called with every step's :class:`StepRecord` (see :meth:`Mission.run`).
 
     Returns
     -------
     MissionLog
         Trajectories, maps, fixes, timings; score it with :func:`navkit.mission.metrics.mission_metrics`.
     """
-    return Mission(scene, route, settings).run(progress)
+    return Mission(scene, route, settings).run(progress, on_step)
 
 
 def _empty_rows() -> tuple[Any, ...]:

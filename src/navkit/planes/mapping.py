@@ -42,7 +42,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from navkit.errors import InputError, NavkitError
+from navkit.errors import ConfigError, InputError, NavkitError
 from navkit.geometry import Plane, canonical_plane, points_in_polygon, se3_inverse
 from navkit.geometry._validate import check_settings
 from navkit.geometry.linalg import rows_matmul
@@ -161,6 +161,14 @@ class OdometrySettings:
         then, and the error does not grow with the way there and back.
     max_keyframes : int
         Keyframes kept for revisits (a pyramid is ~4 MB at 640 x 480; the first one is kept).
+    max_history : int
+        Poses and results kept (:attr:`PlaneOdometry.poses`, ``results``), and frame numbers
+        kept per map plane (``MapPlane.observations``): the most recent ones; 0 = all (the
+        default). Tracking only uses the last pose, so bounding it changes no pose; a long
+        stream (``navkit run``) sets it so memory stays flat.
+    max_map_planes : int
+        Map planes kept: beyond, the one observed least recently is dropped; 0 = all (the
+        default).
     """
 
     motion: MotionSettings = field(default_factory=MotionSettings)
@@ -178,9 +186,19 @@ class OdometrySettings:
     revisit_distance: float = 0.15
     revisit_angle_deg: float = 10.0
     max_keyframes: int = 200
+    max_history: int = 0
+    max_map_planes: int = 0
 
     def __post_init__(self) -> None:
         check_settings(self)
+        for name in ("max_history", "max_map_planes"):
+            if getattr(self, name) < 0:
+                raise ConfigError(
+                    f"is {getattr(self, name)}",
+                    source="OdometrySettings",
+                    field=name,
+                    expected="0 (unbounded) or a positive count",
+                )
 
 
 @dataclass
@@ -497,6 +515,8 @@ class PlaneOdometry:
         self._dense_reason = ""
         self._plane_overlap = 0.0
         self._depth_note = ""
+        self.n_frames = 0  # frames registered (frame numbers: poses may keep only the last ones)
+        self._next_plane_id = 0
 
     def register_frame(
         self, obs: PlaneObservation, prior: MotionPrior | ArrayLike | None = None
@@ -516,7 +536,8 @@ class PlaneOdometry:
             (``FrameResult.motion.prior_dof``; such a frame is not merged into the map).
         """
         t0 = time.perf_counter()
-        idx = len(self.poses)
+        idx = self.n_frames
+        self.n_frames += 1
         motion: MotionEstimate | MotionFailure | None = None
         source, reason = "", ""
         dof_sources: dict[str, str] = {}
@@ -616,7 +637,23 @@ class PlaneOdometry:
             ref_idx,
         )
         self.results.append(res)
+        self._bound()
         return res
+
+    def _bound(self) -> None:
+        """Apply ``max_history`` and ``max_map_planes`` (:class:`OdometrySettings`)."""
+        s = self.settings
+        if s.max_history and len(self.poses) > s.max_history:
+            del self.poses[: len(self.poses) - s.max_history]
+            del self.results[: len(self.results) - s.max_history]
+        if s.max_history:
+            for mp in self.map.planes:
+                if len(mp.observations) > s.max_history:
+                    del mp.observations[: len(mp.observations) - s.max_history]
+        if s.max_map_planes and len(self.map.planes) > s.max_map_planes:
+            keep = sorted(self.map.planes, key=lambda mp: mp.observations[-1], reverse=True)
+            kept = {id(mp) for mp in keep[: s.max_map_planes]}
+            self.map.planes = [mp for mp in self.map.planes if id(mp) in kept]
 
     def _planes(
         self,
@@ -877,7 +914,7 @@ class PlaneOdometry:
             if target is None:
                 plane = Plane(n, rho, pts.mean(0), seg.rms, seg.plane.count)
                 mp = MapPlane(
-                    len(self.map.planes),
+                    self._next_plane_id,
                     plane,
                     pts,
                     np.zeros((0, 2)),
@@ -887,6 +924,7 @@ class PlaneOdometry:
                     tex_axes=plane.basis(),
                 )
                 self.map.planes.append(mp)
+                self._next_plane_id += 1
             else:
                 mp = target
                 mp.points = np.vstack([mp.points, pts])

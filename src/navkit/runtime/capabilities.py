@@ -26,7 +26,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.runtime.messages import CameraData, Message, Output, Polyline, ScanData
+from navkit.runtime.messages import (
+    CameraData,
+    Message,
+    Output,
+    Polyline,
+    ScanData,
+    TexturedPlane,
+)
 from navkit.runtime.pipeline import Pipeline
 
 __all__ = [
@@ -71,16 +78,68 @@ def planar(T: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 class PoseBuffer:
-    """The recent poses of each pose topic, bounded, interpolated at a stamp.
+    """The recent poses of each pose topic, bounded, interpolated at a stamp, and the
+    recording's TF tree (:class:`~navkit.runtime.tf.TransformTree`, ``/tf`` + ``/tf_static``).
 
     ``at(topic, stamp)`` interpolates linearly (translation) and by slerp (rotation) between the
     two poses around the stamp; before the first / after the last pose it holds the nearest one.
+    ``sensor_pose(topic, stamp, frame)`` carries the pose topic's child frame to a sensor frame
+    through the TF tree.
     """
 
     def __init__(self, maxlen: int = 256) -> None:
+        from navkit.runtime.tf import TransformTree
+
         self.maxlen = maxlen
         self.poses: dict[str, deque[tuple[int, NDArray[np.float64]]]] = {}
         self.frames: dict[str, str] = {}
+        self.children: dict[str, str] = {}
+        self.tf = TransformTree(maxlen)
+        self.warned: set[tuple[str, str]] = set()
+
+    def add_tf(self, msg: Message) -> None:
+        """One transform of a ``tf`` message (static when its topic is ``/tf_static``)."""
+        static = msg.topic.rstrip("/").endswith("tf_static")
+        self.tf.add(msg.frame_id, msg.child_frame_id, msg.stamp_ns, msg.data, static)
+
+    def _child(self, topic: str, frame: str) -> str:
+        """The pose topic's child frame when it differs from ``frame`` (else "")."""
+        child = self.children.get(topic, "").lstrip("/")
+        frame = frame.lstrip("/")
+        return child if child and frame and child != frame else ""
+
+    def sensor_pose(self, topic: str, stamp_ns: int, frame: str) -> NDArray[np.float64] | None:
+        """``T_world_frame`` at ``stamp_ns``: the pose topic's ``T_world_child`` times the TF
+        tree's ``T_child_frame`` (interpolated at the stamp). Without a child frame, with the
+        same frame, or when the TF tree does not connect them (warned once), the pose topic is
+        taken as the sensor's pose."""
+        T = self.at(topic, stamp_ns)
+        child = self._child(topic, frame)
+        if T is None or not child:
+            return T
+        T_child_frame = self.tf.lookup(child, frame, stamp_ns)
+        if T_child_frame is None:
+            if (child, frame) not in self.warned:
+                self.warned.add((child, frame))
+                log.warning(
+                    "no TF between %s (child frame of %s) and %s: %s taken as the pose of %s",
+                    child,
+                    topic,
+                    frame,
+                    topic,
+                    frame,
+                )
+            return T
+        return T @ T_child_frame
+
+    def tf_ready(self, topic: str, stamp_ns: int, frame: str) -> bool:
+        """Whether every dynamic TF edge between the pose topic's child frame and ``frame`` has a
+        transform at or after ``stamp_ns`` (True when no TF connects them)."""
+        child = self._child(topic, frame)
+        if not child:
+            return True
+        latest = self.tf.latest_stamp(child, frame)
+        return latest is None or latest >= stamp_ns
 
     def add(self, msg: Message) -> None:
         buf = self.poses.setdefault(msg.topic, deque(maxlen=self.maxlen))
@@ -91,6 +150,7 @@ class PoseBuffer:
             return
         buf.append((msg.stamp_ns, np.asarray(msg.data, dtype=np.float64)))
         self.frames[msg.topic] = msg.frame_id
+        self.children[msg.topic] = msg.child_frame_id
 
     def latest_stamp(self, topic: str) -> int | None:
         buf = self.poses.get(topic)
@@ -109,23 +169,57 @@ class PoseBuffer:
         if i >= len(stamps):
             return buf[-1][1]
         (s0, T0), (s1, T1) = buf[i - 1], buf[i]
-        w = (stamp_ns - s0) / (s1 - s0)
-        from scipy.spatial.transform import Rotation, Slerp
+        from navkit.runtime.tf import interpolate_pose
 
-        rot = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([T0[:3, :3], T1[:3, :3]])))([w])
-        T = np.eye(4)
-        T[:3, :3] = rot.as_matrix()[0]
-        T[:3, 3] = (1 - w) * T0[:3, 3] + w * T1[:3, 3]
-        return T
+        return interpolate_pose(s0, T0, s1, T1, stamp_ns)
 
 
 # --------------------------------------------------------------------------- obstacles
+def obstacle_lines(
+    obstacles: Any,
+    z: float = 0.0,
+    T: NDArray[np.float64] | None = None,
+    names: tuple[str, ...] | None = None,
+) -> list[Polyline]:
+    """Outlines of the bounding shapes A1-A6 (+ MEC, MVEE; ns ``shape/<name>``) and A7
+    (``shape/A7:<name>``) of detected obstacles at height ``z`` of their (level body) frame;
+    ``T`` (4, 4), optional, maps them into another frame; ``names``, optional, keeps only these
+    shapes (``"A7"`` keeps every A7 outline)."""
+    lines = []
+    for ob in obstacles:
+        items = [
+            (f"shape/{n}", shp, SHAPE_COLORS.get(n, (1, 1, 1, 1)))
+            for n, shp in ob.shapes.items()
+            if names is None or n in names
+        ]
+        if names is None or "A7" in names:
+            items += [(f"shape/A7:{n}", shp, A7_COLOR) for n, shp in ob.guaranteed.items()]
+        for ns, shp, color in items:
+            xy = shp.outline(36)
+            P = np.c_[xy, np.full(len(xy), z)]
+            if T is not None:
+                P = P @ T[:3, :3].T + T[:3, 3]
+            lines.append(Polyline(ns, ob.id, P, color))
+    return lines
+
+
+def obstacle_map_output(mapper: Any, stamp_ns: int, frame_id: str) -> Output:
+    """An :class:`~navkit.obstacles.ObstacleMapper`'s grid as ``/navkit/obstacle_map``
+    (-1 never seen, 0 seen free, 100 occupied)."""
+    g = mapper.grid()
+    occ = np.full(g.shape, -1, dtype=np.int8)
+    occ[g.seen > 0] = 0
+    occ[g.occupied] = 100
+    return Output("/navkit/obstacle_map", "grid", stamp_ns, frame_id, (occ, g.resolution, g.origin))
+
+
 class ObstaclesStage:
     """Paper 1 on every ``PointCloud2``: per-point classes, bounding shapes A1-A7, and (with a
     pose topic) the fused 2D obstacle map (:class:`navkit.obstacles.ObstacleMapper`, the object
     the mission uses, on a fixed window around the first pose).
 
-    The pose topic gives ``T_world_sensor``; the detection's points are in the level body frame
+    The pose topic and the TF tree give ``T_world_sensor``
+    (:meth:`PoseBuffer.sensor_pose`); the detection's points are in the level body frame
     (:class:`~navkit.obstacles.Mounting`), so the mapper gets
     ``T_world_sensor @ inv(T_body_sensor)``."""
 
@@ -185,17 +279,7 @@ class ObstaclesStage:
         return self.mapper
 
     def grid_output(self, stamp_ns: int) -> Output:
-        g = self.mapper.grid()
-        occ = np.full(g.shape, -1, dtype=np.int8)
-        occ[g.seen > 0] = 0
-        occ[g.occupied] = 100
-        return Output(
-            "/navkit/obstacle_map",
-            "grid",
-            stamp_ns,
-            self.map_frame,
-            (occ, g.resolution, g.origin),
-        )
+        return obstacle_map_output(self.mapper, stamp_ns, self.map_frame)
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
         from navkit.io.atomic import atomic_path, write_json
@@ -222,23 +306,7 @@ class ObstaclesStage:
             )
         ]
         z = -self.mounting.height_m  # shapes lie on the ground, in the level body frame
-        lines = []
-        for ob in det.obstacles:
-            for name, shp in ob.shapes.items():
-                xy = shp.outline(36)
-                lines.append(
-                    Polyline(
-                        f"shape/{name}",
-                        ob.id,
-                        np.c_[xy, np.full(len(xy), z)],
-                        SHAPE_COLORS.get(name, (1, 1, 1, 1)),
-                    )
-                )
-            for name, shp in ob.guaranteed.items():
-                xy = shp.outline(36)
-                lines.append(
-                    Polyline(f"shape/A7:{name}", ob.id, np.c_[xy, np.full(len(xy), z)], A7_COLOR)
-                )
+        lines = obstacle_lines(det.obstacles, z)
         outs.append(
             Output("/navkit/obstacles/shapes", "markers", msg.stamp_ns, msg.frame_id, lines)
         )
@@ -266,7 +334,11 @@ class ObstaclesStage:
                     "obstacles": [ob.to_dict() for ob in det.obstacles],
                 },
             )
-        T = poses.at(self.pose_topic, msg.stamp_ns) if self.with_map else None
+        T = (
+            poses.sensor_pose(self.pose_topic, msg.stamp_ns, msg.frame_id)
+            if self.with_map
+            else None
+        )
         if T is not None:
             self.map_frame = poses.frames.get(self.pose_topic, "map") or "map"
             self._mapper(T).add_scan(det, T @ self.T_sensor_body)
@@ -330,7 +402,7 @@ class LaserMappingStage:
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
         scan: ScanData = msg.data
-        T = poses.at(self.pose_topic, msg.stamp_ns)
+        T = poses.sensor_pose(self.pose_topic, msg.stamp_ns, msg.frame_id)
         self.n += 1
         if T is None:
             return StageResult(record={"used": False, "reason": "no pose yet"})
@@ -511,6 +583,66 @@ class LaserLocalizationStage:
 
 
 # --------------------------------------------------------------------------- planes
+def textured_planes(
+    obs: Any,
+    color: NDArray[np.uint8],
+    T_world_frame: NDArray[np.float64],
+    step: int = 8,
+    max_texture_px: int = 128,
+) -> list[TexturedPlane]:
+    """Each plane of an RGB-D frame as a mesh textured with the colour pixels of its region.
+
+    Vertices: the region's pixels every ``step`` pixels (both ways), each where the pixel's ray
+    (through its depth point) meets the plane's fit (flat, no depth noise), in the world frame; triangles: two
+    per grid square whose four corners are in the region; texture: the colour image's crop
+    around the region, decimated so its longer side is at most ``max_texture_px``.
+
+    Parameters
+    ----------
+    obs : PlaneObservation
+        The frame's planes (organised ``points (H, W, 3)`` in the camera frame).
+    color : (H, W, 3) uint8
+    T_world_frame : (4, 4)
+    """
+    P = np.asarray(obs.points)
+    if P.ndim != 3 or color.shape[:2] != P.shape[:2]:
+        return []
+    H, W = P.shape[:2]
+    R, t = T_world_frame[:3, :3], T_world_frame[:3, 3]
+    out = []
+    for k, seg in enumerate(obs.segments):
+        rows, cols = np.divmod(np.asarray(seg.inliers, dtype=np.int64), W)
+        if rows.size < 16:
+            continue
+        r0, c0 = int(rows.min()), int(cols.min())
+        r0, c0 = r0 - r0 % step, c0 - c0 % step  # the vertex grid: multiples of step
+        mask = np.zeros((H, W), bool)
+        mask[rows, cols] = True
+        rr, cc = np.mgrid[r0 : rows.max() + 1 : step, c0 : cols.max() + 1 : step]
+        X = P[rr, cc]
+        ok = mask[rr, cc] & np.all(np.isfinite(X), axis=-1)
+        n, rho = np.asarray(seg.plane.normal, dtype=np.float64), float(seg.plane.rho)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            X = X * (rho / (X @ n))[..., None]  # along the pixel's ray onto the plane
+        ok &= np.all(np.isfinite(X), axis=-1)
+        idx = -np.ones(ok.shape, np.int64)
+        idx[ok] = np.arange(int(ok.sum()))
+        a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
+        quad = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
+        if not quad.any():
+            continue
+        tris = np.concatenate(
+            [np.stack([a[quad], c[quad], b[quad]], 1), np.stack([b[quad], c[quad], d[quad]], 1)]
+        )
+        r1, c1 = int(rr.max()) + 1, int(cc.max()) + 1
+        dec = max(1, int(np.ceil(max(r1 - r0, c1 - c0) / max_texture_px)))
+        tex = np.ascontiguousarray(color[r0:r1:dec, c0:c1:dec])
+        h, w = tex.shape[0] * dec, tex.shape[1] * dec  # the pixels the texels cover
+        uv = np.c_[(cc[ok] - c0 + 0.5) / w, (rr[ok] - r0 + 0.5) / h]
+        out.append(TexturedPlane(k, X[ok] @ R.T + t, tris, uv, tex))
+    return out
+
+
 class PlanesStage:
     """Paper 2's plane odometry on depth (+ colour) frames with ``CameraInfo``
     (``planes.PlaneOdometry.register_frame``); publishes the camera pose and the frame's planes."""
@@ -522,18 +654,47 @@ class PlanesStage:
         from navkit.planes.motion import MotionSettings
         from navkit.planes.solve import SolverSettings
 
-        self.cfg = pipe.planes
+        c = self.cfg = pipe.planes
         self.topics = pipe.topics
-        self.es = ExtractionSettings(cell=self.cfg.cell)
+        self.es = ExtractionSettings(cell=c.cell)
         self.odo = PlaneOdometry(
-            OdometrySettings(motion=MotionSettings(solver=SolverSettings(nu=self.cfg.nu)))
+            OdometrySettings(
+                motion=MotionSettings(solver=SolverSettings(nu=c.nu)),
+                max_keyframes=c.max_keyframes,
+                max_history=c.max_history,
+                max_map_planes=c.max_map_planes,
+            )
         )
         self.camera: CameraData | None = None
         self.depth: Message | None = None
         self.color: Message | None = None
         self.n = self.n_ok = 0
         self.out = out / "planes"
-        self.trajectory: list[tuple[int, NDArray[np.float64]]] = []
+        # the trajectory is streamed to trajectory.tum (bounded memory); its size at the last
+        # line this stage wrote (a resumed run truncates what a killed run wrote after it)
+        self.traj_bytes = 0
+        self.last_stamp_ns: int | None = None
+
+    def _append_pose(self, stamp_ns: int, T: NDArray[np.float64]) -> None:
+        """One TUM line (``t tx ty tz qx qy qz qw``, as :func:`navkit.io.trajectory.write_tum`);
+        a stamp not after the last one is skipped (the TUM reader refuses repeats)."""
+        from navkit.geometry import se3_to_xyz_quat
+
+        if self.last_stamp_ns is not None and stamp_ns <= self.last_stamp_ns:
+            return
+        self.last_stamp_ns = stamp_ns
+        xyz, q = se3_to_xyz_quat(T[None])
+        vals = " ".join(f"{v:.12g}" for v in (*xyz[0], *q[0]))
+        line = f"{stamp_ns * 1e-9:.9f} {vals}\n"
+        if self.traj_bytes == 0:
+            line = "# timestamp tx ty tz qx qy qz qw\n" + line
+        self.out.mkdir(parents=True, exist_ok=True)
+        path = self.out / "trajectory.tum"
+        with open(path, "r+b" if path.exists() else "wb") as fh:
+            fh.truncate(self.traj_bytes)
+            fh.seek(self.traj_bytes)
+            fh.write(line.encode())
+            self.traj_bytes = fh.tell()
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
         if msg.kind == "camera_info":
@@ -570,7 +731,7 @@ class PlanesStage:
         r = self.odo.register_frame(obs)
         self.n += 1
         self.n_ok += str(r.status).startswith(("ok", "first"))
-        self.trajectory.append((d.stamp_ns, r.T_world_frame.copy()))
+        self._append_pose(d.stamp_ns, r.T_world_frame)
         outs = [Output("/navkit/planes/pose", "pose", d.stamp_ns, "planes_odom", r.T_world_frame)]
         lines = []
         R, t = r.T_world_frame[:3, :3], r.T_world_frame[:3, 3]
@@ -582,6 +743,18 @@ class PlanesStage:
             outs.append(
                 Output("/navkit/planes/outlines", "markers", d.stamp_ns, "planes_odom", lines)
             )
+        if c is not None and self.cfg.textures:
+            planes = textured_planes(obs, color, r.T_world_frame)
+            if planes:
+                outs.append(
+                    Output(
+                        "/navkit/planes/textured",
+                        "textured_planes",
+                        d.stamp_ns,
+                        "planes_odom",
+                        planes,
+                    )
+                )
         return StageResult(
             outs,
             {
@@ -594,16 +767,15 @@ class PlanesStage:
         )
 
     def finish(self, out: Path, stamp_ns: int) -> StageResult:
-        if not self.trajectory:
+        if not self.n:
             return StageResult(record={"frames": 0})
         from navkit.io.atomic import write_json
-        from navkit.io.trajectory import Trajectory, write_tum
 
         self.out.mkdir(parents=True, exist_ok=True)
-        t = np.array([s for s, _ in self.trajectory]) * 1e-9
-        P = np.stack([T for _, T in self.trajectory])
-        keep = np.r_[True, np.diff(t) > 0]
-        write_tum(self.out / "trajectory.tum", Trajectory(t[keep], P[keep]))
+        traj = self.out / "trajectory.tum"
+        if traj.exists() and traj.stat().st_size > self.traj_bytes:
+            with open(traj, "r+b") as fh:  # lines a killed run wrote after its checkpoint
+                fh.truncate(self.traj_bytes)
         write_json(self.out / "map.json", self.odo.map.to_dict())
         return StageResult(
             record={"frames": self.n, "tracked": self.n_ok, "map_planes": len(self.odo.map.planes)}

@@ -13,6 +13,8 @@ Kinds and their ``data``:
 - ``"depth"``: ``(H, W)`` float64 depth, metres, NaN = no return.
 - ``"color"``: ``(H, W, 3)`` uint8 RGB.
 - ``"camera_info"``: :class:`CameraData`.
+- ``"tf"``: one transform of a ``tf2_msgs/TFMessage``: ``(4, 4)`` ``T_parent_child``, parent
+  ``frame_id``, child ``child_frame_id``; static when the topic is ``/tf_static``.
 """
 
 from __future__ import annotations
@@ -23,9 +25,18 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["KINDS", "OUTPUT_KINDS", "CameraData", "Message", "Output", "Polyline", "ScanData"]
+__all__ = [
+    "KINDS",
+    "OUTPUT_KINDS",
+    "CameraData",
+    "Message",
+    "Output",
+    "Polyline",
+    "ScanData",
+    "TexturedPlane",
+]
 
-KINDS = ("cloud", "scan", "pose", "depth", "color", "camera_info")
+KINDS = ("cloud", "scan", "pose", "depth", "color", "camera_info", "tf")
 
 
 @dataclass(frozen=True, eq=False)
@@ -72,7 +83,23 @@ class Message:
         return self.stamp_ns * 1e-9
 
 
-OUTPUT_KINDS = ("classified_cloud", "markers", "grid", "path", "pose")
+OUTPUT_KINDS = ("classified_cloud", "markers", "grid", "path", "pose", "textured_planes")
+
+
+@dataclass(frozen=True, eq=False)
+class TexturedPlane:
+    """A plane of one RGB-D frame as a mesh with its texture: the colour pixels of its region.
+
+    ``vertices (V, 3)`` metres (on the fitted plane, in the output's frame), ``triangles (F, 3)``
+    vertex indices, ``texcoords (V, 2)`` in ``texture`` (U right, V down, origin at the top-left
+    corner, 0..1), ``texture (h, w, 3)`` uint8 RGB: the image crop around the region.
+    """
+
+    id: int
+    vertices: NDArray[np.float64]
+    triangles: NDArray[np.int64]
+    texcoords: NDArray[np.float64]
+    texture: NDArray[np.uint8]
 
 
 @dataclass(frozen=True, eq=False)
@@ -92,7 +119,9 @@ class Output:
 
     ``data`` by kind: ``classified_cloud`` ``(points (N, 3), classes (N,) int8)``; ``markers`` a
     list of :class:`Polyline`; ``grid`` ``(occupancy (H, W) int8 -1/0/100, resolution m,
-    origin (2,) m)``; ``path`` ``(N, 3)`` points; ``pose`` ``(4, 4)`` ``T_frame_child``.
+    origin (2,) m)``; ``path`` ``(N, 3)`` points; ``pose`` ``(4, 4)`` ``T_frame_child``;
+    ``textured_planes`` a list of :class:`TexturedPlane` (viewer only: ``results.mcap`` has the
+    planes' outlines, see ``docs/runtime.md``).
     """
 
     topic: str

@@ -11,7 +11,8 @@ The TOML has one table per part, the same tables the resolved ``settings.toml`` 
     [obstacles]  sensor_height_m, roll_deg, pitch_deg, rings, columns, ring_method, map_*
     [obstacles.detector]        # keys of navkit.obstacles.ObstacleSettings
     [laser]      max_range_m, map_resolution_m, keyframe_*, sigma_m, prior, success_*
-    [planes]     cell, nu, max_time_offset_s
+    [planes]     cell, nu, max_time_offset_s, max_keyframes, max_history, max_map_planes,
+                 textures
     [path]       tolerance_m, publish_every
     [run]        capabilities, checkpoint_every, write_frames
 
@@ -22,8 +23,9 @@ Decisions (also in ``docs/runtime.md``):
   pose topics, one whose name says ground truth (``truth``, ``gt``, ``ground``, ``corrected``,
   ``reference``) is the *reference* and the *pose*; one whose name says ``odom`` is the
   *odometry*; a single pose topic is both pose and odometry.
-- A pose topic gives ``T_world_sensor`` of the sensor whose data it accompanies (no TF tree is
-  walked: a static base -> sensor offset must be folded into the pose topic).
+- A pose topic gives ``T_world_<child frame>``; the recording's TF tree (``/tf``, ``/tf_static``,
+  :mod:`navkit.runtime.tf`) carries it to the frame of each cloud or scan; without a connecting
+  TF (or a child frame) the pose topic is taken as the sensor's pose.
 - ``LaserScan`` with ``--map`` is localized; without, with a pose topic, it builds a wall map.
 """
 
@@ -122,11 +124,24 @@ class LaserConfig:
 class PlanesConfig:
     """Plane odometry on depth (+ colour) frames: extraction patch ``cell`` (px), texture pixel
     ``nu`` (m); colour and depth are paired when their stamps differ by at most
-    ``max_time_offset_s`` (a depth frame without colour is used alone)."""
+    ``max_time_offset_s`` (a depth frame without colour is used alone).
+
+    Memory bounds (``navkit.planes.OdometrySettings``; a run of any length stays flat):
+    ``max_keyframes`` dense keyframes kept for revisits (an image pyramid each, ~4 MB at
+    640 x 480), ``max_history`` poses / results / per-plane observation numbers kept by the
+    odometry object (the trajectory is streamed to ``planes/trajectory.tum`` instead), and
+    ``max_map_planes`` planes in the merged map (beyond, the least recently observed is dropped).
+    ``textures``: each frame's planes as meshes textured with their colour pixels for the viewer
+    (``--rerun``; not in ``results.mcap``).
+    """
 
     cell: int = 20
     nu: float = 0.01
     max_time_offset_s: float = 0.02
+    max_keyframes: int = 20
+    max_history: int = 100
+    max_map_planes: int = 40
+    textures: bool = True
 
 
 @dataclass(frozen=True)

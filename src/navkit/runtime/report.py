@@ -126,13 +126,16 @@ def render_results(
                 lw=0.8 if "walls" in topic else 1.0,
                 color=(mk.color.r, mk.color.g, mk.color.b),
             )
-    for topic, pth in paths.items():
+    for k, (topic, pth) in enumerate(paths.items()):
         P = np.array([[q.pose.position.x, q.pose.position.y] for q in pth.poses])
         if len(P):
-            ax.plot(P[:, 0], P[:, 1], "-", color="#0078ff", lw=1.5, label=f"{topic} (stored path)")
-    for topic, xy in poses.items():
+            name = "stored path" if topic == "/navkit/path" else "path"
+            color = "#0078ff" if k == 0 else "#00c8ff"
+            ax.plot(P[:, 0], P[:, 1], "-", color=color, lw=1.5, label=f"{topic} ({name})")
+    palette = ("#ff00aa", "#00a0a0", "#ff8c00", "#6a3d9a", "#8c564b")
+    for k, (topic, xy) in enumerate(poses.items()):
         P = np.array(xy)
-        ax.plot(P[:, 0], P[:, 1], ".", ms=3, color="#ff00aa", label=topic)
+        ax.plot(P[:, 0], P[:, 1], ".", ms=3, color=palette[k % len(palette)], label=topic)
     if extent_m is not None:
         ax.set_xlim(-extent_m, extent_m)
         ax.set_ylim(-extent_m, extent_m)

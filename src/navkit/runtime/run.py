@@ -46,7 +46,8 @@ __all__ = ["STATE_DIR", "NullLogger", "run_recording"]
 log = logging.getLogger(__name__)
 
 STATE_DIR = ".navkit-run"
-CHECKPOINT_VERSION = 1
+# 2: the pose buffer holds the TF tree, the planes stage streams its trajectory
+CHECKPOINT_VERSION = 2
 
 
 class NullLogger:
@@ -103,9 +104,12 @@ class _Run:
         return self.seg_dir / f"segment-{k:05d}.mcap"
 
     def emit(self, res: StageResult, cap: str, msg: Message | None, item: int) -> None:
+        from navkit.io.results_mcap import ROS_TYPES
+
         t0 = time.perf_counter()
         for o in res.outputs:
-            self.writer.write(o.topic, o.kind, o.stamp_ns, o.frame_id, o.data)
+            if o.kind in ROS_TYPES:  # textured planes are for the viewer only
+                self.writer.write(o.topic, o.kind, o.stamp_ns, o.frame_id, o.data)
         t1 = time.perf_counter()
         for o in res.outputs:
             self.logger.log_output(o)
@@ -134,9 +138,12 @@ class _Run:
             self.emit(res, stage.name, msg, item)
 
     def ready(self, msg: Message) -> bool:
+        poses = self.s.poses
         for topic in needs_pose(self.pipe, self.s.stages, msg):
-            latest = self.s.poses.latest_stamp(topic)
+            latest = poses.latest_stamp(topic)
             if latest is None or latest < msg.stamp_ns:
+                return False
+            if not poses.tf_ready(topic, msg.stamp_ns, msg.frame_id):
                 return False
         return True
 
@@ -154,7 +161,10 @@ class _Run:
         self.logger.set_time(msg.stamp_ns)
         self.logger.log_message(msg)
         self.log_seconds += time.perf_counter() - t0
-        if msg.kind == "pose":
+        if msg.kind == "tf":
+            s.poses.add_tf(msg)
+            self.drain(item)
+        elif msg.kind == "pose":
             s.poses.add(msg)
             self.process(msg, item)
             self.drain(item)

@@ -7,8 +7,9 @@ input                                        topics
 ==========================================  ================================================
 ROS 1 ``.bag``, ROS 2 bag folder (sqlite3    the bag's own; by type: PointCloud2 -> cloud,
 or mcap storage), plain ``.mcap``            LaserScan -> scan, Odometry / PoseStamped /
-(``rosbags`` AnyReader)                      PoseWithCovarianceStamped -> pose, TF -> pose
-                                             (topic ``/tf/<child frame>``), Image -> depth
+(``rosbags`` AnyReader)                      PoseWithCovarianceStamped -> pose, TFMessage ->
+                                             tf (one per transform; the TF tree,
+                                             :mod:`navkit.runtime.tf`), Image -> depth
                                              (16UC1, mono16, 32FC1) or color, CameraInfo
 KITTI sequence folder (``*.bin``, optional   ``/velodyne_points`` (cloud), ``/ground_truth``
 ``poses*.txt``, ``calib*.txt``,              (pose of the Velodyne relative to its first
@@ -108,7 +109,7 @@ class BagSource:
             rb.ODOMETRY: "pose",
             rb.POSESTAMPED: "pose",
             rb.POSECOVSTAMPED: "pose",
-            rb.TFMESSAGE: "pose",
+            rb.TFMESSAGE: "tf",
             rb.IMAGE: "image",
             rb.CAMERAINFO: "camera_info",
         }
@@ -137,7 +138,7 @@ class BagSource:
                 out = [Message(topic, "scan", stamp, frame, ScanData(r, b, rmax))]
             elif typ == rb.TFMESSAGE:
                 out = [
-                    Message(f"/tf/{child}", "pose", st or bag_ns, parent, T, child)
+                    Message(topic, "tf", st or bag_ns, parent, T, child)
                     for st, parent, child, T in rb.transforms_from_msg(msg)
                 ]
             elif typ == rb.CAMERAINFO:

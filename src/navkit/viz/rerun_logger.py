@@ -11,7 +11,9 @@ never branches on whether anything is viewed (kiss-icp style). One timeline, ``r
   PNG: twelve overlapping outlines per obstacle hide the scene; ``results.mcap`` has them all);
 - ``world/<topic>/grid``: occupancy grids as the occupied cells' centres;
 - ``world/path``: the stored path; ``world/<topic>``: poses (fixes, plane odometry, input poses)
-  as transforms with a short axis triad.
+  as transforms with a short axis triad;
+- ``world/planes/textured/<k>``: each RGB-D frame's planes as meshes textured with the colour
+  pixels of their regions (``rr.Mesh3D`` with ``albedo_texture``), replaced every frame.
 
 Everything is drawn in the frame of its message; frames are not chained (the recording's world
 frame and the sensor frames are shown side by side, as the MCAP holds them).
@@ -140,6 +142,18 @@ class RerunLogger:
             )
         elif o.kind == "pose":
             self._pose(ent, o.data)
+        elif o.kind == "textured_planes":
+            self.rec.log(ent, rr.Clear(recursive=True))  # this frame's planes replace the last
+            for p in o.data:
+                self.rec.log(
+                    f"{ent}/{p.id}",
+                    rr.Mesh3D(
+                        vertex_positions=np.asarray(p.vertices, np.float32),
+                        triangle_indices=np.asarray(p.triangles, np.uint32),
+                        vertex_texcoords=np.asarray(p.texcoords, np.float32),
+                        albedo_texture=np.asarray(p.texture, np.uint8),
+                    ),
+                )
 
     def close(self) -> None:
         """Flush and close the recording (the ``.rrd`` is complete after this)."""
