@@ -616,31 +616,36 @@ def _robust_rows(  # type: ignore[no-untyped-def]
 ):
     """Stage 2-5 pass 2b: the robust vertex normals of rows ``i0 .. i1 - 1`` (the first loop of
     :func:`robust_normals_kernel`) into the flat ``nvx, nvy, nvz``."""
+    # unsigned indices: Numba then skips its negative-index fix-up on every gather (~25 %
+    # faster on KITTI); every end point is a valid index (>= 0) by construction
     big = n_az > max_stride
+    naz = np.uint64(n_az)
+    nel = np.uint64(n_el)
     for i in range(i0, i1):
-        base = i * n_el
-        for j in range(n_el):
+        ii = np.uint64(i)
+        base = ii * nel
+        for jj in range(n_el):
+            j = np.uint64(jj)
             f = base + j
-            k = kst[f]
-            if wrap:
-                ip = i + k
-                im = i - k
-                if big:
-                    ip = ip - n_az if ip >= n_az else ip
-                    im = im + n_az if im < 0 else im
-                else:
-                    ip = ip % n_az
-                    im = im % n_az
+            k = np.uint64(kst[f])
+            if wrap and big:  # 1 <= k <= max_stride < n_az
+                ip = ii + k
+                im = ii + naz - k
+                ip = ip - naz if ip >= naz else ip
+                im = im - naz if im >= naz else im
+            elif wrap:
+                ip = np.uint64((i + kst[f]) % n_az)
+                im = np.uint64((i - kst[f]) % n_az)
             else:
-                ip = min(i + k, n_az - 1)
-                im = max(i - k, 0)
+                ip = np.uint64(min(i + kst[f], n_az - 1))
+                im = np.uint64(max(i - kst[f], 0))
             zc = Z[f]
             dc = Df[f]
             lim = jump_h + jump_f * dc
-            e0 = ip * n_el + j
-            e1 = im * n_el + j
-            e2 = base + jp_tab[j]
-            e3 = base + jm_tab[j]
+            e0 = ip * nel + j
+            e1 = im * nel + j
+            e2 = base + np.uint64(jp_tab[jj])
+            e3 = base + np.uint64(jm_tab[jj])
             d0 = Df[e0]
             d1 = Df[e1]
             # the end-point tests without short-circuits (no branches; a NaN fails them all,
