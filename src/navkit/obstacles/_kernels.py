@@ -1659,3 +1659,43 @@ def phase_fractions_kernel(az, step, n_columns, out):  # type: ignore[no-untyped
         out[m] = two_pi * (xs % 1.0)
         m += 1
     return m
+
+
+@njit(cache=True)
+def body_points_kernel(S, R, h, out, valid):  # type: ignore[no-untyped-def]
+    """Stage 1 from sensor-frame points: ``Mounting.to_body`` (``S @ R.T``, then ``z += h``)
+    and :func:`points_kernel` in one pass, into ``out (n_az, n_el, 3) float64`` and ``valid
+    (n_az, n_el) bool``. Returns whether any point is valid.
+
+    Only for a rotation ``R`` whose rows each hold one entry +-1 and two +-0 (the identity of a
+    level mounting, axis swaps): every product is then exact and the sum of one value and two
+    signed zeros does not depend on the order of the terms, so the result is the matmul's bit
+    for bit, whatever order or fused multiply-adds BLAS uses (the sums start from +0 as BLAS's
+    accumulators do; `tests/obstacles/test_kernels.py` checks signed zeros). Other rotations go
+    through NumPy.
+    """
+    n_az, n_el = S.shape[0], S.shape[1]
+    r00, r01, r02 = R[0, 0], R[0, 1], R[0, 2]
+    r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
+    r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
+    any_ok = False
+    for i in range(n_az):
+        for j in range(n_el):
+            sx, sy, sz = S[i, j, 0], S[i, j, 1], S[i, j, 2]
+            # sums started from +0, as BLAS's accumulators: an all-zero row gives +0 (a plain
+            # sum of three -0 products would give -0)
+            x = ((0.0 + sx * r00) + sy * r01) + sz * r02
+            y = ((0.0 + sx * r10) + sy * r11) + sz * r12
+            z = (((0.0 + sx * r20) + sy * r21) + sz * r22) + h
+            ok = math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
+            valid[i, j] = ok
+            any_ok = any_ok or ok
+            if ok:
+                out[i, j, 0] = x
+                out[i, j, 1] = y
+                out[i, j, 2] = z
+            else:
+                out[i, j, 0] = np.nan
+                out[i, j, 1] = np.nan
+                out[i, j, 2] = np.nan
+    return any_ok
