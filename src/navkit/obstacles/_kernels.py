@@ -1283,15 +1283,18 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
     for p in range(len(cell_of_point)):
         cell_of_point[p] = -1
     scale = 2 * np.pi
+    # unsigned indices (all >= 0 by construction): no negative-index fix-up per access
+    ncol = np.uint64(n_columns)
     for k in range(n):
         x = (az[k] + np.pi) / scale * n_columns
         i = math.floor(x - phase + 0.5)
         if i >= n_columns or i < 0:
             i = i % n_columns
-        j = lut[ring[k]]
-        cell_of_point[idx[k]] = i * n_el + j
+        ui = np.uint64(i)
+        j = lut[np.uint64(ring[k])]
+        cell_of_point[np.uint64(idx[k])] = i * n_el + j
         # the winners are kept ring-major: the points of a ring fall into neighbouring entries
-        c = j * n_columns + i
+        c = np.uint64(j) * ncol + ui
         rk = math.sqrt(rh[k] * rh[k] + qz[k] * qz[k])
         if win[c] < 0 or rk <= best[c]:
             win[c] = k
