@@ -338,3 +338,12 @@ def test_stage_1_from_sensor_points_equals_to_body(rng):
         assert ok.sum() < ok.size - 40  # the holes stay holes
         assert np.array_equal(out.view(np.int64)[ok], ref.view(np.int64)[ok])  # same bits
         assert np.isnan(out[~ok]).all()
+    # stage 1 on body points (detect_obstacles_grid): the same codes and NaN rows as the twin
+    ok_ref = np.isfinite(S).all(axis=2)
+    out = np.empty_like(S)
+    ok = np.empty(S.shape[:2], dtype=bool)
+    assert _kernels.points_kernel(S, out, ok)
+    np.testing.assert_array_equal(ok, ok_ref)
+    ref = np.where(ok_ref[..., None], S, np.nan)
+    assert np.array_equal(out.view(np.int64)[ok], ref.view(np.int64)[ok])
+    assert np.isnan(out[~ok]).all()

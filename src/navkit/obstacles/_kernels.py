@@ -1626,28 +1626,24 @@ def cloud_prep_kernel(P):  # type: ignore[no-untyped-def]
 # stage 8 input: per-obstacle vertex sets (twin: detector._build_obstacles' groupings)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def points_kernel(P, out, valid):  # type: ignore[no-untyped-def]
     """Stage 1's validity codes C_d: ``valid`` = all three coordinates finite, and the points
     with NaN rows where not valid (``detector.detect_obstacles_grid``), written into ``out
     (n_az, n_el, 3) float64`` and ``valid (n_az, n_el) bool``. Returns whether any is valid."""
     n_az, n_el = P.shape[0], P.shape[1]
-    any_ok = False
+    inf = np.inf
+    count = 0
     for i in range(n_az):
-        for j in range(n_el):
+        for j in range(n_el):  # branch-free (selects): the loop vectorises
             x, y, z = P[i, j, 0], P[i, j, 1], P[i, j, 2]
-            ok = math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
+            ok = (abs(x) < inf) & (abs(y) < inf) & (abs(z) < inf)  # finite; NaN fails
             valid[i, j] = ok
-            any_ok = any_ok or ok
-            if ok:
-                out[i, j, 0] = x
-                out[i, j, 1] = y
-                out[i, j, 2] = z
-            else:
-                out[i, j, 0] = np.nan
-                out[i, j, 1] = np.nan
-                out[i, j, 2] = np.nan
-    return any_ok
+            count += 1 if ok else 0
+            out[i, j, 0] = x if ok else np.nan
+            out[i, j, 1] = y if ok else np.nan
+            out[i, j, 2] = z if ok else np.nan
+    return count > 0
 
 
 @njit(cache=True)
@@ -1664,7 +1660,7 @@ def phase_fractions_kernel(az, step, n_columns, out):  # type: ignore[no-untyped
     return m
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def body_points_kernel(S, R, h, out, valid):  # type: ignore[no-untyped-def]
     """Stage 1 from sensor-frame points: ``Mounting.to_body`` (``S @ R.T``, then ``z += h``)
     and :func:`points_kernel` in one pass, into ``out (n_az, n_el, 3) float64`` and ``valid
@@ -1677,28 +1673,28 @@ def body_points_kernel(S, R, h, out, valid):  # type: ignore[no-untyped-def]
     accumulators do; `tests/obstacles/test_kernels.py` checks signed zeros). Other rotations go
     through NumPy.
     """
-    n_az, n_el = S.shape[0], S.shape[1]
+    n = S.shape[0] * S.shape[1]
+    s = S.reshape(n * 3)
+    o = out.reshape(n * 3)
+    v = valid.reshape(n)
     r00, r01, r02 = R[0, 0], R[0, 1], R[0, 2]
     r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
     r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
-    any_ok = False
-    for i in range(n_az):
-        for j in range(n_el):
-            sx, sy, sz = S[i, j, 0], S[i, j, 1], S[i, j, 2]
-            # sums started from +0, as BLAS's accumulators: an all-zero row gives +0 (a plain
-            # sum of three -0 products would give -0)
-            x = ((0.0 + sx * r00) + sy * r01) + sz * r02
-            y = ((0.0 + sx * r10) + sy * r11) + sz * r12
-            z = (((0.0 + sx * r20) + sy * r21) + sz * r22) + h
-            ok = math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
-            valid[i, j] = ok
-            any_ok = any_ok or ok
-            if ok:
-                out[i, j, 0] = x
-                out[i, j, 1] = y
-                out[i, j, 2] = z
-            else:
-                out[i, j, 0] = np.nan
-                out[i, j, 1] = np.nan
-                out[i, j, 2] = np.nan
-    return any_ok
+    inf = np.inf
+    count = 0
+    # branch-free (finite = |v| < inf, NaN fails; selects, not ifs): the loop vectorises, ~3x
+    # faster than with branches
+    for p in range(n):
+        sx, sy, sz = s[3 * p], s[3 * p + 1], s[3 * p + 2]
+        # sums started from +0, as BLAS's accumulators: an all-zero row gives +0 (a plain
+        # sum of three -0 products would give -0)
+        x = ((0.0 + sx * r00) + sy * r01) + sz * r02
+        y = ((0.0 + sx * r10) + sy * r11) + sz * r12
+        z = (((0.0 + sx * r20) + sy * r21) + sz * r22) + h
+        ok = (abs(x) < inf) & (abs(y) < inf) & (abs(z) < inf)
+        v[p] = ok
+        count += 1 if ok else 0
+        o[3 * p] = x if ok else np.nan
+        o[3 * p + 1] = y if ok else np.nan
+        o[3 * p + 2] = z if ok else np.nan
+    return count > 0
