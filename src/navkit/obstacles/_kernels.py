@@ -1166,10 +1166,11 @@ def cloud_valid_kernel(P, far, qx, qy, qz, rh, idx):  # type: ignore[no-untyped-
         ok = abs(x) < far and abs(y) < far and abs(z) < far  # False for NaN
         ok = ok and (x != 0 or y != 0 or z != 0)
         if ok:
-            qx[m] = x
-            qy[m] = y
-            qz[m] = z
-            idx[m] = p
+            um = np.uint64(m)  # >= 0: no negative-index fix-up
+            qx[um] = x
+            qy[um] = y
+            qz[um] = z
+            idx[um] = p
             m += 1
     for k in range(m):
         rh[k] = math.hypot(qx[k], qy[k])
@@ -1197,7 +1198,7 @@ def _kth_banded(values, k, work):  # type: ignore[no-untyped-def]
     for q in range(n):  # branch-free: always write, advance when inside the bracket
         v = values[q]
         below += 1 if v < lo else 0
-        work[m] = v
+        work[np.uint64(m)] = v  # m >= 0: no negative-index fix-up
         m += 1 if (v >= lo and v <= hi) else 0
     if below <= k < below + m:
         return _kth(work[:m], k - below)
@@ -1262,8 +1263,9 @@ def rings_order_kernel(az, qz, rh, d, ad, work, ring, sums, counts):  # type: ig
     for k in range(n):
         r = ring[k] - lo
         ring[k] = r
-        counts[r] += 1
-        sums[r] += qz[k] / max(rh[k], 1e-9)
+        ur = np.uint64(r)  # >= 0: no negative-index fix-up
+        counts[ur] += 1
+        sums[ur] += qz[k] / max(rh[k], 1e-9)
     return True, step, n_r
 
 
@@ -1313,18 +1315,22 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
         if win[c] < 0 or rk <= best[c]:
             win[c] = k
             best[c] = rk
+    g = grid.reshape(-1)
+    nel = np.uint64(n_el)
+    three = np.uint64(3)
     for i in range(n_columns):
         for j in range(n_el):
-            w = win[j * n_columns + i]
-            c = i * n_el + j
+            w = win[np.uint64(j) * ncol + np.uint64(i)]
+            c = three * (np.uint64(i) * nel + np.uint64(j))
             if w < 0:
-                grid[c, 0] = np.nan
-                grid[c, 1] = np.nan
-                grid[c, 2] = np.nan
+                g[c] = np.nan
+                g[c + np.uint64(1)] = np.nan
+                g[c + np.uint64(2)] = np.nan
             else:
-                grid[c, 0] = qx[w]
-                grid[c, 1] = qy[w]
-                grid[c, 2] = qz[w]
+                uw = np.uint64(w)
+                g[c] = qx[uw]
+                g[c + np.uint64(1)] = qy[uw]
+                g[c + np.uint64(2)] = qz[uw]
     return n_el
 
 
