@@ -347,3 +347,17 @@ def test_stage_1_from_sensor_points_equals_to_body(rng):
     ref = np.where(ok_ref[..., None], S, np.nan)
     assert np.array_equal(out.view(np.int64)[ok], ref.view(np.int64)[ok])
     assert np.isnan(out[~ok]).all()
+
+
+def test_banded_median_equals_numpy(rng):
+    """The exact median of the ring recovery and the strides (one bracket pass for both middle
+    order statistics) is ``np.median`` on odd and even sizes, ties, and brackets that miss."""
+    from navkit.obstacles import _kernels
+
+    cases = [rng.random(n) for n in (1, 2, 3, 4, 5, 100, 101, 4096, 4097, 20000, 20001)]
+    cases += [rng.integers(0, 3, n).astype(float) for n in (10, 11, 5000, 5001)]  # ties
+    cases += [np.sort(rng.random(30000)), np.sort(rng.random(30001))[::-1].copy()]
+    cases += [np.r_[np.zeros(9000), rng.random(9000) * 1e-3 + 1.0]]  # the middle at a jump
+    for values in cases:
+        got = _kernels._median_banded(values.copy(), np.empty(len(values)))
+        assert got == np.median(values), len(values)

@@ -466,12 +466,7 @@ def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # 
                 m += 1
     dalpha = 1.0
     if m > 0:  # np.median: the middle order statistic(s), exactly
-        work = np.empty(m)
-        h = m // 2
-        if m % 2:
-            dalpha = _kth_banded(dal[:m], h, work)
-        else:
-            dalpha = (_kth_banded(dal[:m], h - 1, work) + _kth_banded(dal[:m], h, work)) / 2
+        dalpha = _median_banded(dal[:m], np.empty(m))
     ox32 = np.float32(origin[0])
     oy32 = np.float32(origin[1])
     n4 = (n_az + 3) // 4
@@ -1207,6 +1202,48 @@ def _kth_banded(values, k, work):  # type: ignore[no-untyped-def]
     return _kth(work[:n], k)
 
 
+@njit(cache=True)
+def _median_banded(values, work):  # type: ignore[no-untyped-def]
+    """``np.median`` of ``values`` (no NaN, at least one), exactly: the middle order statistic,
+    or the mean of the two middle ones from **one** bracket pass (:func:`_kth_banded`): after
+    the selection of the lower one in the bracket's copy, every later entry of the copy is at
+    least as large, so the upper one is their minimum."""
+    n = len(values)
+    h = n // 2
+    if n % 2:
+        return _kth_banded(values, h, work)
+    k = h - 1
+    s = min(n, 2048)
+    stride = max(n // s, 1)
+    sample = np.empty(s)
+    for q in range(s):
+        sample[q] = values[q * stride]
+    sample.sort()
+    pos = int(s * (k / n))
+    lo = sample[max(pos - 64, 0)]
+    hi = sample[min(pos + 64, s - 1)]
+    below = 0
+    m = 0
+    for q in range(n):  # branch-free: always write, advance when inside the bracket
+        v = values[q]
+        below += 1 if v < lo else 0
+        work[np.uint64(m)] = v
+        m += 1 if (v >= lo and v <= hi) else 0
+    if below <= k and k + 1 < below + m:
+        a = _kth(work[:m], k - below)
+        b = work[k - below + 1]
+        for q in range(k - below + 2, m):
+            b = work[q] if work[q] < b else b
+        return (a + b) / 2
+    for q in range(n):
+        work[q] = values[q]
+    a = _kth(work[:n], k)
+    b = work[k + 1]
+    for q in range(k + 2, n):
+        b = work[q] if work[q] < b else b
+    return (a + b) / 2
+
+
 @njit(cache=True, error_model="numpy")
 def rings_order_kernel(az, qz, rh, d, ad, work, ring, sums, counts):  # type: ignore[no-untyped-def]
     """``grids._rings_by_order`` on ``az (n,)``: ``(found, azimuth step, number of rings)``,
@@ -1227,13 +1264,7 @@ def rings_order_kernel(az, qz, rh, d, ad, work, ring, sums, counts):  # type: ig
     ad = ad[: n - 1]
     for k in range(n - 1):
         ad[k] = abs(d[k])
-    h = (n - 1) // 2
-    if (n - 1) % 2:
-        step = _kth_banded(ad, h, work)
-    else:
-        a = _kth_banded(ad, h - 1, work)
-        b = _kth_banded(ad, h, work)
-        step = (a + b) / 2
+    step = _median_banded(ad, work)
     if not step > 0:
         return False, 0.0, 0
     direction = 1.0 if 2 * pos > n - 1 else -1.0
