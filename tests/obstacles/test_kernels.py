@@ -308,3 +308,56 @@ def test_mvee_and_a6_compiled_equal_numpy(rng):
         for f in pa:
             if not isinstance(pa[f], str):
                 np.testing.assert_allclose(pa[f], pb[f], rtol=1e-9, atol=1e-12, err_msg=f)
+
+
+def test_stage_1_from_sensor_points_equals_to_body(rng):
+    """The fused stage 1 (``body_points_kernel``) gives ``Mounting.to_body`` + the validity
+    codes bit for bit (signed zeros included) for the rotations it takes (identity, axis swaps),
+    with holes, infinities and zeros in the input; whole detections through it are compared with
+    the twin in ``test_compiled_equals_numpy_on_kitti``."""
+    from navkit.obstacles import _kernels
+
+    S = rng.normal(scale=20.0, size=(40, 16, 3))
+    S[rng.random((40, 16)) < 0.1] = np.nan
+    S[3, 4, 1] = np.inf
+    S[5, 6, 0] = -np.inf
+    S[7, 8] = (-0.0, 0.0, -0.0)
+    S[9, 10] = (0.0, -0.0, -1.73)
+    S[11, :, 2] = np.nan
+    swap = ((0.0, -1.0, 0.0), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0))
+    for mounting in (Mounting(1.73), Mounting(0.5, rotation=swap), Mounting(2.0, roll_deg=0.0)):
+        R = mounting.R_body_sensor
+        with np.errstate(invalid="ignore"):  # inf * 0 in the matmul
+            ref = mounting.to_body(S)
+        ref_ok = np.isfinite(ref).all(axis=2)
+        ref[~ref_ok] = np.nan
+        out = np.empty_like(S)
+        ok = np.empty(S.shape[:2], dtype=bool)
+        assert _kernels.body_points_kernel(S, R, float(mounting.height_m), out, ok)
+        np.testing.assert_array_equal(ok, ref_ok)
+        assert ok.sum() < ok.size - 40  # the holes stay holes
+        assert np.array_equal(out.view(np.int64)[ok], ref.view(np.int64)[ok])  # same bits
+        assert np.isnan(out[~ok]).all()
+    # stage 1 on body points (detect_obstacles_grid): the same codes and NaN rows as the twin
+    ok_ref = np.isfinite(S).all(axis=2)
+    out = np.empty_like(S)
+    ok = np.empty(S.shape[:2], dtype=bool)
+    assert _kernels.points_kernel(S, out, ok)
+    np.testing.assert_array_equal(ok, ok_ref)
+    ref = np.where(ok_ref[..., None], S, np.nan)
+    assert np.array_equal(out.view(np.int64)[ok], ref.view(np.int64)[ok])
+    assert np.isnan(out[~ok]).all()
+
+
+def test_banded_median_equals_numpy(rng):
+    """The exact median of the ring recovery and the strides (one bracket pass for both middle
+    order statistics) is ``np.median`` on odd and even sizes, ties, and brackets that miss."""
+    from navkit.obstacles import _kernels
+
+    cases = [rng.random(n) for n in (1, 2, 3, 4, 5, 100, 101, 4096, 4097, 20000, 20001)]
+    cases += [rng.integers(0, 3, n).astype(float) for n in (10, 11, 5000, 5001)]  # ties
+    cases += [np.sort(rng.random(30000)), np.sort(rng.random(30001))[::-1].copy()]
+    cases += [np.r_[np.zeros(9000), rng.random(9000) * 1e-3 + 1.0]]  # the middle at a jump
+    for values in cases:
+        got = _kernels._median_banded(values.copy(), np.empty(len(values)))
+        assert got == np.median(values), len(values)

@@ -466,12 +466,7 @@ def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # 
                 m += 1
     dalpha = 1.0
     if m > 0:  # np.median: the middle order statistic(s), exactly
-        work = np.empty(m)
-        h = m // 2
-        if m % 2:
-            dalpha = _kth_banded(dal[:m], h, work)
-        else:
-            dalpha = (_kth_banded(dal[:m], h - 1, work) + _kth_banded(dal[:m], h, work)) / 2
+        dalpha = _median_banded(dal[:m], np.empty(m))
     ox32 = np.float32(origin[0])
     oy32 = np.float32(origin[1])
     n4 = (n_az + 3) // 4
@@ -616,31 +611,36 @@ def _robust_rows(  # type: ignore[no-untyped-def]
 ):
     """Stage 2-5 pass 2b: the robust vertex normals of rows ``i0 .. i1 - 1`` (the first loop of
     :func:`robust_normals_kernel`) into the flat ``nvx, nvy, nvz``."""
+    # unsigned indices: Numba then skips its negative-index fix-up on every gather (~25 %
+    # faster on KITTI); every end point is a valid index (>= 0) by construction
     big = n_az > max_stride
+    naz = np.uint64(n_az)
+    nel = np.uint64(n_el)
     for i in range(i0, i1):
-        base = i * n_el
-        for j in range(n_el):
+        ii = np.uint64(i)
+        base = ii * nel
+        for jj in range(n_el):
+            j = np.uint64(jj)
             f = base + j
-            k = kst[f]
-            if wrap:
-                ip = i + k
-                im = i - k
-                if big:
-                    ip = ip - n_az if ip >= n_az else ip
-                    im = im + n_az if im < 0 else im
-                else:
-                    ip = ip % n_az
-                    im = im % n_az
+            k = np.uint64(kst[f])
+            if wrap and big:  # 1 <= k <= max_stride < n_az
+                ip = ii + k
+                im = ii + naz - k
+                ip = ip - naz if ip >= naz else ip
+                im = im - naz if im >= naz else im
+            elif wrap:
+                ip = np.uint64((i + kst[f]) % n_az)
+                im = np.uint64((i - kst[f]) % n_az)
             else:
-                ip = min(i + k, n_az - 1)
-                im = max(i - k, 0)
+                ip = np.uint64(min(i + kst[f], n_az - 1))
+                im = np.uint64(max(i - kst[f], 0))
             zc = Z[f]
             dc = Df[f]
             lim = jump_h + jump_f * dc
-            e0 = ip * n_el + j
-            e1 = im * n_el + j
-            e2 = base + jp_tab[j]
-            e3 = base + jm_tab[j]
+            e0 = ip * nel + j
+            e1 = im * nel + j
+            e2 = base + np.uint64(jp_tab[jj])
+            e3 = base + np.uint64(jm_tab[jj])
             d0 = Df[e0]
             d1 = Df[e1]
             # the end-point tests without short-circuits (no branches; a NaN fails them all,
@@ -902,24 +902,38 @@ def _chain_pass(lab, lo, R, n_el, C2, chain_min, p5_o, want_rules):  # type: ign
 
 @njit(cache=True)
 def _compact(src, R, n_el, C2, dst):  # type: ignore[no-untyped-def]
-    """Rows of the padded layout (``2 n_el`` per row) into ``dst (R * C2,)`` (drop the padding)."""
+    """Rows of the padded layout (``2 n_el`` per row) into ``dst (R * C2,)`` (drop the padding).
+
+    Unsigned indices: with signed ones Numba's negative-index fix-up keeps the copy scalar
+    (4-10x slower on a KITTI grid's arrays)."""
+    nel2 = np.uint64(2 * n_el)
+    c2 = np.uint64(C2)
     for r in range(R):
-        a = 2 * r * n_el
-        b = r * C2
+        a = np.uint64(r) * nel2
+        b = np.uint64(r) * c2
         for kk in range(C2):
-            dst[b + kk] = src[a + kk]
+            q = np.uint64(kk)
+            dst[b + q] = src[a + q]
 
 
 @njit(cache=True)
 def _compact_normals(nx, ny, nz, R, n_el, C2, dst):  # type: ignore[no-untyped-def]
-    """The three padded components into ``dst (R * C2 * 3,)`` (the ``(R, 2C, 3)`` layout)."""
+    """The three padded components into ``dst (R * C2 * 3,)`` (the ``(R, 2C, 3)`` layout;
+    unsigned indices as :func:`_compact`)."""
+    nel2 = np.uint64(2 * n_el)
+    c6 = np.uint64(3 * C2)
+    one = np.uint64(1)
+    two = np.uint64(2)
+    three = np.uint64(3)
     for r in range(R):
-        a = 2 * r * n_el
-        b = 3 * r * C2
+        a = np.uint64(r) * nel2
+        b = np.uint64(r) * c6
         for kk in range(C2):
-            dst[b + 3 * kk] = nx[a + kk]
-            dst[b + 3 * kk + 1] = ny[a + kk]
-            dst[b + 3 * kk + 2] = nz[a + kk]
+            q = np.uint64(kk)
+            o = b + three * q
+            dst[o] = nx[a + q]
+            dst[o + one] = ny[a + q]
+            dst[o + two] = nz[a + q]
 
 
 @njit(cache=True, error_model="numpy")
@@ -1147,10 +1161,11 @@ def cloud_valid_kernel(P, far, qx, qy, qz, rh, idx):  # type: ignore[no-untyped-
         ok = abs(x) < far and abs(y) < far and abs(z) < far  # False for NaN
         ok = ok and (x != 0 or y != 0 or z != 0)
         if ok:
-            qx[m] = x
-            qy[m] = y
-            qz[m] = z
-            idx[m] = p
+            um = np.uint64(m)  # >= 0: no negative-index fix-up
+            qx[um] = x
+            qy[um] = y
+            qz[um] = z
+            idx[um] = p
             m += 1
     for k in range(m):
         rh[k] = math.hypot(qx[k], qy[k])
@@ -1178,13 +1193,55 @@ def _kth_banded(values, k, work):  # type: ignore[no-untyped-def]
     for q in range(n):  # branch-free: always write, advance when inside the bracket
         v = values[q]
         below += 1 if v < lo else 0
-        work[m] = v
+        work[np.uint64(m)] = v  # m >= 0: no negative-index fix-up
         m += 1 if (v >= lo and v <= hi) else 0
     if below <= k < below + m:
         return _kth(work[:m], k - below)
     for q in range(n):
         work[q] = values[q]
     return _kth(work[:n], k)
+
+
+@njit(cache=True)
+def _median_banded(values, work):  # type: ignore[no-untyped-def]
+    """``np.median`` of ``values`` (no NaN, at least one), exactly: the middle order statistic,
+    or the mean of the two middle ones from **one** bracket pass (:func:`_kth_banded`): after
+    the selection of the lower one in the bracket's copy, every later entry of the copy is at
+    least as large, so the upper one is their minimum."""
+    n = len(values)
+    h = n // 2
+    if n % 2:
+        return _kth_banded(values, h, work)
+    k = h - 1
+    s = min(n, 2048)
+    stride = max(n // s, 1)
+    sample = np.empty(s)
+    for q in range(s):
+        sample[q] = values[q * stride]
+    sample.sort()
+    pos = int(s * (k / n))
+    lo = sample[max(pos - 64, 0)]
+    hi = sample[min(pos + 64, s - 1)]
+    below = 0
+    m = 0
+    for q in range(n):  # branch-free: always write, advance when inside the bracket
+        v = values[q]
+        below += 1 if v < lo else 0
+        work[np.uint64(m)] = v
+        m += 1 if (v >= lo and v <= hi) else 0
+    if below <= k and k + 1 < below + m:
+        a = _kth(work[:m], k - below)
+        b = work[k - below + 1]
+        for q in range(k - below + 2, m):
+            b = work[q] if work[q] < b else b
+        return (a + b) / 2
+    for q in range(n):
+        work[q] = values[q]
+    a = _kth(work[:n], k)
+    b = work[k + 1]
+    for q in range(k + 2, n):
+        b = work[q] if work[q] < b else b
+    return (a + b) / 2
 
 
 @njit(cache=True, error_model="numpy")
@@ -1207,13 +1264,7 @@ def rings_order_kernel(az, qz, rh, d, ad, work, ring, sums, counts):  # type: ig
     ad = ad[: n - 1]
     for k in range(n - 1):
         ad[k] = abs(d[k])
-    h = (n - 1) // 2
-    if (n - 1) % 2:
-        step = _kth_banded(ad, h, work)
-    else:
-        a = _kth_banded(ad, h - 1, work)
-        b = _kth_banded(ad, h, work)
-        step = (a + b) / 2
+    step = _median_banded(ad, work)
     if not step > 0:
         return False, 0.0, 0
     direction = 1.0 if 2 * pos > n - 1 else -1.0
@@ -1243,8 +1294,9 @@ def rings_order_kernel(az, qz, rh, d, ad, work, ring, sums, counts):  # type: ig
     for k in range(n):
         r = ring[k] - lo
         ring[k] = r
-        counts[r] += 1
-        sums[r] += qz[k] / max(rh[k], 1e-9)
+        ur = np.uint64(r)  # >= 0: no negative-index fix-up
+        counts[ur] += 1
+        sums[ur] += qz[k] / max(rh[k], 1e-9)
     return True, step, n_r
 
 
@@ -1278,31 +1330,38 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
     for p in range(len(cell_of_point)):
         cell_of_point[p] = -1
     scale = 2 * np.pi
+    # unsigned indices (all >= 0 by construction): no negative-index fix-up per access
+    ncol = np.uint64(n_columns)
     for k in range(n):
         x = (az[k] + np.pi) / scale * n_columns
         i = math.floor(x - phase + 0.5)
         if i >= n_columns or i < 0:
             i = i % n_columns
-        j = lut[ring[k]]
-        cell_of_point[idx[k]] = i * n_el + j
+        ui = np.uint64(i)
+        j = lut[np.uint64(ring[k])]
+        cell_of_point[np.uint64(idx[k])] = i * n_el + j
         # the winners are kept ring-major: the points of a ring fall into neighbouring entries
-        c = j * n_columns + i
+        c = np.uint64(j) * ncol + ui
         rk = math.sqrt(rh[k] * rh[k] + qz[k] * qz[k])
         if win[c] < 0 or rk <= best[c]:
             win[c] = k
             best[c] = rk
+    g = grid.reshape(-1)
+    nel = np.uint64(n_el)
+    three = np.uint64(3)
     for i in range(n_columns):
         for j in range(n_el):
-            w = win[j * n_columns + i]
-            c = i * n_el + j
+            w = win[np.uint64(j) * ncol + np.uint64(i)]
+            c = three * (np.uint64(i) * nel + np.uint64(j))
             if w < 0:
-                grid[c, 0] = np.nan
-                grid[c, 1] = np.nan
-                grid[c, 2] = np.nan
+                g[c] = np.nan
+                g[c + np.uint64(1)] = np.nan
+                g[c + np.uint64(2)] = np.nan
             else:
-                grid[c, 0] = qx[w]
-                grid[c, 1] = qy[w]
-                grid[c, 2] = qz[w]
+                uw = np.uint64(w)
+                g[c] = qx[uw]
+                g[c + np.uint64(1)] = qy[uw]
+                g[c + np.uint64(2)] = qz[uw]
     return n_el
 
 
@@ -1618,28 +1677,24 @@ def cloud_prep_kernel(P):  # type: ignore[no-untyped-def]
 # stage 8 input: per-obstacle vertex sets (twin: detector._build_obstacles' groupings)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def points_kernel(P, out, valid):  # type: ignore[no-untyped-def]
     """Stage 1's validity codes C_d: ``valid`` = all three coordinates finite, and the points
     with NaN rows where not valid (``detector.detect_obstacles_grid``), written into ``out
     (n_az, n_el, 3) float64`` and ``valid (n_az, n_el) bool``. Returns whether any is valid."""
     n_az, n_el = P.shape[0], P.shape[1]
-    any_ok = False
+    inf = np.inf
+    count = 0
     for i in range(n_az):
-        for j in range(n_el):
+        for j in range(n_el):  # branch-free (selects): the loop vectorises
             x, y, z = P[i, j, 0], P[i, j, 1], P[i, j, 2]
-            ok = math.isfinite(x) and math.isfinite(y) and math.isfinite(z)
+            ok = (abs(x) < inf) & (abs(y) < inf) & (abs(z) < inf)  # finite; NaN fails
             valid[i, j] = ok
-            any_ok = any_ok or ok
-            if ok:
-                out[i, j, 0] = x
-                out[i, j, 1] = y
-                out[i, j, 2] = z
-            else:
-                out[i, j, 0] = np.nan
-                out[i, j, 1] = np.nan
-                out[i, j, 2] = np.nan
-    return any_ok
+            count += 1 if ok else 0
+            out[i, j, 0] = x if ok else np.nan
+            out[i, j, 1] = y if ok else np.nan
+            out[i, j, 2] = z if ok else np.nan
+    return count > 0
 
 
 @njit(cache=True)
@@ -1654,3 +1709,43 @@ def phase_fractions_kernel(az, step, n_columns, out):  # type: ignore[no-untyped
         out[m] = two_pi * (xs % 1.0)
         m += 1
     return m
+
+
+@njit(cache=True, error_model="numpy")
+def body_points_kernel(S, R, h, out, valid):  # type: ignore[no-untyped-def]
+    """Stage 1 from sensor-frame points: ``Mounting.to_body`` (``S @ R.T``, then ``z += h``)
+    and :func:`points_kernel` in one pass, into ``out (n_az, n_el, 3) float64`` and ``valid
+    (n_az, n_el) bool``. Returns whether any point is valid.
+
+    Only for a rotation ``R`` whose rows each hold one entry +-1 and two +-0 (the identity of a
+    level mounting, axis swaps): every product is then exact and the sum of one value and two
+    signed zeros does not depend on the order of the terms, so the result is the matmul's bit
+    for bit, whatever order or fused multiply-adds BLAS uses (the sums start from +0 as BLAS's
+    accumulators do; `tests/obstacles/test_kernels.py` checks signed zeros). Other rotations go
+    through NumPy.
+    """
+    n = S.shape[0] * S.shape[1]
+    s = S.reshape(n * 3)
+    o = out.reshape(n * 3)
+    v = valid.reshape(n)
+    r00, r01, r02 = R[0, 0], R[0, 1], R[0, 2]
+    r10, r11, r12 = R[1, 0], R[1, 1], R[1, 2]
+    r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
+    inf = np.inf
+    count = 0
+    # branch-free (finite = |v| < inf, NaN fails; selects, not ifs): the loop vectorises, ~3x
+    # faster than with branches
+    for p in range(n):
+        sx, sy, sz = s[3 * p], s[3 * p + 1], s[3 * p + 2]
+        # sums started from +0, as BLAS's accumulators: an all-zero row gives +0 (a plain
+        # sum of three -0 products would give -0)
+        x = ((0.0 + sx * r00) + sy * r01) + sz * r02
+        y = ((0.0 + sx * r10) + sy * r11) + sz * r12
+        z = (((0.0 + sx * r20) + sy * r21) + sz * r22) + h
+        ok = (abs(x) < inf) & (abs(y) < inf) & (abs(z) < inf)
+        v[p] = ok
+        count += 1 if ok else 0
+        o[3 * p] = x if ok else np.nan
+        o[3 * p + 1] = y if ok else np.nan
+        o[3 * p + 2] = z if ok else np.nan
+    return count > 0

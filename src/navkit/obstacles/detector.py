@@ -272,6 +272,19 @@ def detect_obstacles_grid(
         )
     if settings.backend != "compiled":
         P = np.where(valid[..., None], P, np.nan)
+    return _detect_from_stage_1(P, valid, origin, settings, azimuth, clock)
+
+
+def _detect_from_stage_1(
+    P: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    origin: NDArray[np.float64],
+    settings: ObstacleSettings,
+    azimuth: ArrayLike | None,
+    clock: _Clock,
+) -> ObstacleDetection:
+    """Stages 2-8 of :func:`detect_obstacles_grid` after stage 1 (``P`` with NaN rows where not
+    ``valid``, at least one valid point)."""
     wrap = (
         settings.wrap_azimuth
         if settings.wrap_azimuth is not None
@@ -727,9 +740,35 @@ def detect_obstacles_in_grid(
     mounting = mounting or Mounting()
     settings = settings or ObstacleSettings()
     t0, c0 = time.perf_counter(), time.process_time()
-    P = mounting.to_body(grid.points)
+    clock = _Clock()  # the compiled stage 1 below charges it
     if settings.wrap_azimuth is None:
         settings = replace(settings, wrap_azimuth=grid.wraps)
+    R = mounting.R_body_sensor
+    S = grid.points
+    if (
+        settings.backend == "compiled"
+        and S.ndim == 3
+        and S.shape[2] == 3
+        and min(S.shape[:2]) >= 2
+        and np.all((np.abs(R) == 1).sum(axis=1) == 1)
+        and np.all((R == 0).sum(axis=1) == 2)
+    ):
+        # stage 1 in one pass (mounting.to_body + the validity codes, the same bits: R only
+        # permutes and flips axes, see _kernels.body_points_kernel)
+        from navkit.obstacles import _kernels
+        from navkit.obstacles._buffers import arena
+
+        P, valid = arena([(S.shape, np.float64), (S.shape[:2], np.bool_)])
+        any_valid = _kernels.body_points_kernel(
+            np.ascontiguousarray(S, dtype=np.float64), R, float(mounting.height_m), P, valid
+        )
+        if any_valid:
+            clock.lap("points")
+            res = _detect_from_stage_1(
+                P, valid, mounting.T_body_sensor[:3, 3], settings, None, clock
+            )
+            return res
+    P = mounting.to_body(grid.points)
     t_points, c_points = time.perf_counter() - t0, time.process_time() - c0
     res = detect_obstacles_grid(P, mounting.T_body_sensor[:3, 3], settings, source=source)
     res.timings["points"] += t_points
