@@ -75,18 +75,18 @@ def _class_of(label):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def _class_union_find(labels, wrap):  # type: ignore[no-untyped-def]
+def _class_union_find(labels, wrap, cls, parent):  # type: ignore[no-untyped-def]
     """The mesh components of the ground, obstacle and shadow triangles in one union-find
     (``segment.MESH_STRUCTURE``, rows cyclic with ``wrap``; a union only joins triangles of one
     class, so the components are those of three separate passes). Returns the class per
-    triangle (flat, -1: none) and the parent array (every root is its set's smallest member).
+    triangle (flat, -1: none) and the parent array (every root is its set's smallest member, and
+    ``parent[f] <= f`` everywhere), written into ``cls (R * C,) int8`` and ``parent (R * C,)
+    int32``.
 
     One raster scan: a triangle is a new singleton when reached, so it takes its left
     neighbour's root (kept from the previous step) and joins the upper-right and seam
     neighbours' sets by a find each."""
     R, C = labels.shape
-    cls = np.empty(R * C, np.int8)
-    parent = np.empty(R * C, np.int32)
     seam = wrap and R > 1
     for i in range(R):
         prev = -1
@@ -155,11 +155,14 @@ def split_kernel(  # type: ignore[no-untyped-def]
     distance_m,
     gap,
     main_share,
+    work_i8,
+    work_i32,
 ):
     """Stage 6 (twin: ``detector._split``): obstacle components, the size / height /
     noise-patch filters, merging of close components and the shadows' owners, with the ground
     components of stage 7 from the same union-find. ``labels`` is changed in place (dropped
-    components back to ground).
+    components back to ground). ``work_i8 (R * C,) int8`` and ``work_i32 (6, R * C) int32``
+    are work arrays (any content; kept between calls by the caller).
 
     Returns ``obs_lab, n, owner, tri_obstacle, tcode``: ``tri_obstacle`` the obstacle id of
     obstacle triangles and the owner of shadow triangles; ``tcode (R, 2C) int8`` each
@@ -167,39 +170,52 @@ def split_kernel(  # type: ignore[no-untyped-def]
     0 unreliable) with ``_MAIN`` (= 1 | 16) for a ground triangle of a main ground zone (a
     ground component after the drop with at least ``main_share`` of the largest one's
     triangles; ``segment.main_ground_vertices``).
+
+    Every root of the union-find is its set's smallest member and ``parent[f] <= f``, so one
+    raster pass ``parent[f] = parent[parent[f]]`` points every triangle at its root (no
+    ``find``), a set is numbered when its root is reached (the first member in raster order)
+    and per-set arrays indexed by the root need no clearing.
     """
     R, C = labels.shape
-    cls, parent = _class_union_find(labels, wrap)
-    # obstacle and shadow components numbered by first appearance in raster order
-    new = np.zeros(R * C, np.int32)
-    lab = np.zeros((R, C), np.int32)
-    sl = np.zeros((R, C), np.int32)
+    cls = work_i8
+    parent = work_i32[0]
+    new = work_i32[1]  # per root: the component's number (written at the root first)
+    sl = work_i32[2]  # per shadow triangle: its shadow zone
+    shf = work_i32[3]  # the shadow triangles in raster order
+    obf = work_i32[4]  # the obstacle triangles in raster order
+    ground_size = work_i32[5]  # per ground root: the component's size
+    _class_union_find(labels, wrap, cls, parent)
+    # obstacle and shadow components numbered by first appearance in raster order; every
+    # triangle pointed at its root on the way
+    lab = np.empty((R, C), np.int32)
+    labf = lab.ravel()
     n = 0
     ns = 0
-    sh_i = np.empty(R * C, np.int32)  # the shadow triangles in raster order
-    sh_j = np.empty(R * C, np.int32)
     nsh = 0
-    for i in range(R):
-        for j in range(C):
-            f = i * C + j
-            c = cls[f]
-            if c <= 0:
-                continue
-            r = _find(parent, f)
-            if new[r] == 0:
-                if c == _OBSTACLE:
-                    n += 1
-                    new[r] = n
-                else:
-                    ns += 1
-                    new[r] = ns
+    nt = 0
+    for f in range(R * C):
+        r = parent[parent[f]]
+        parent[f] = r
+        c = cls[f]
+        if c <= 0:
+            labf[f] = 0
+            continue
+        if r == f:
             if c == _OBSTACLE:
-                lab[i, j] = new[r]
+                n += 1
+                new[f] = n
             else:
-                sl[i, j] = new[r]
-                sh_i[nsh] = i
-                sh_j[nsh] = j
-                nsh += 1
+                ns += 1
+                new[f] = ns
+        if c == _OBSTACLE:
+            labf[f] = new[r]
+            obf[nt] = f
+            nt += 1
+        else:
+            labf[f] = 0
+            sl[f] = new[r]
+            shf[nsh] = f
+            nsh += 1
     dropped_any = False
     if n:
         size = np.zeros(n + 1, np.int64)
@@ -207,51 +223,41 @@ def split_kernel(  # type: ignore[no-untyped-def]
         lo = np.full(n + 1, np.inf, np.float32)
         sm = np.zeros(n + 1, np.float64)
         h = np.float32(0.5)
-        # obstacle triangles in raster order, grouped by label (a counting sort)
-        for i in range(R):
-            for j in range(C):
-                a = lab[i, j]
-                if a:
-                    size[a] += 1
+        # obstacle triangles (raster order) grouped by label: a counting sort
+        for k in range(nt):
+            size[labf[obf[k]]] += 1
         start = np.zeros(n + 2, np.int64)
         for a in range(1, n + 1):
             start[a + 1] = start[a] + size[a]
         fill = start.copy()
-        nt = start[n + 1]
-        ti_ = np.empty(nt, np.int64)  # the obstacle triangles in raster order
-        tj_ = np.empty(nt, np.int64)
         zs = np.empty(nt, np.float64)  # their mid heights by label
         bi_ = np.empty(nt, np.int64)  # those with a ground neighbour (the lift's pairs)
         bj_ = np.empty(nt, np.int64)
         cyc = wrap and R > 1
-        m = 0
         nbd = 0
-        for i in range(R):
-            for j in range(C):
-                a = lab[i, j]
-                if a == 0:
-                    continue
-                ti_[m] = i
-                tj_[m] = j
-                m += 1
-                # a ground neighbour (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)?
-                up = i - 1 if i > 0 else (R - 1 if cyc else -1)
-                dn = i + 1 if i + 1 < R else (0 if cyc else -1)
-                if (
-                    (j + 1 < C and labels[i, j + 1] == 0)
-                    or (j > 0 and labels[i, j - 1] == 0)
-                    or (dn >= 0 and j > 0 and labels[dn, j - 1] == 0)
-                    or (up >= 0 and j + 1 < C and labels[up, j + 1] == 0)
-                ):
-                    bi_[nbd] = i
-                    bj_[nbd] = j
-                    nbd += 1
-                hi[a] = _max_nan(hi[a], zmax[i, j])
-                lo[a] = _min_nan(lo[a], zmin[i, j])
-                zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
-                sm[a] += zm
-                zs[fill[a]] = zm
-                fill[a] += 1
+        for k in range(nt):
+            f = obf[k]
+            i = f // C
+            j = f - i * C
+            a = labf[f]
+            # a ground neighbour (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)?
+            up = i - 1 if i > 0 else (R - 1 if cyc else -1)
+            dn = i + 1 if i + 1 < R else (0 if cyc else -1)
+            if (
+                (j + 1 < C and labels[i, j + 1] == 0)
+                or (j > 0 and labels[i, j - 1] == 0)
+                or (dn >= 0 and j > 0 and labels[dn, j - 1] == 0)
+                or (up >= 0 and j + 1 < C and labels[up, j + 1] == 0)
+            ):
+                bi_[nbd] = i
+                bj_[nbd] = j
+                nbd += 1
+            hi[a] = _max_nan(hi[a], zmax[i, j])
+            lo[a] = _min_nan(lo[a], zmin[i, j])
+            zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
+            sm[a] += zm
+            zs[fill[a]] = zm
+            fill[a] += 1
         # lift over the adjacent ground, the sums in the twin's pair order (per offset: the
         # pairs inside the array in raster order, then the ones across the seam)
         cnt_g = np.zeros(n + 1, np.int64)
@@ -298,21 +304,21 @@ def split_kernel(  # type: ignore[no-untyped-def]
             m2 += 1
             lut[a] = m2
         for k in range(nt):
-            i, j = ti_[k], tj_[k]
-            a = lab[i, j]
+            f = obf[k]
+            a = labf[f]
             if lut[a] == 0:
-                labels[i, j] = 0
-                cls[i * C + j] = _GROUND
+                labels[f // C, f % C] = 0
+                cls[f] = _GROUND
                 dropped_any = True
-            lab[i, j] = lut[a]
+            labf[f] = lut[a]
         if dropped_any:  # the dropped triangles join the ground around them
             nb = np.empty(4, np.int64)
             for k in range(nt):
-                i, j = ti_[k], tj_[k]
-                f = i * C + j
+                f = obf[k]
                 if cls[f] != _GROUND:
                     continue
-                for q in range(_neighbours(i, j, R, C, wrap, nb)):
+                i = f // C
+                for q in range(_neighbours(i, f - i * C, R, C, wrap, nb)):
                     if cls[nb[q]] == _GROUND:
                         _union(parent, f, nb[q])
         n = m2
@@ -320,13 +326,15 @@ def split_kernel(  # type: ignore[no-untyped-def]
             lab, n = _merge_close(lab, n, P, wrap, distance_m, gap)
     # ground components: the main ground zones (>= main_share of the largest one's triangles)
     # and each triangle's code for stage 7 (class flag, main ground)
-    ground_size = np.zeros(R * C, np.int32)
     big = 0
     for f in range(R * C):
         if cls[f] == _GROUND:
-            r = _find(parent, f)
+            r = parent[parent[f]]  # the unions above keep parent[x] <= x and roots smallest
             parent[f] = r
-            ground_size[r] += 1
+            if r == f:
+                ground_size[f] = 1
+            else:
+                ground_size[r] += 1
             big = max(big, ground_size[r])
     thr = main_share * big
     tcode = np.empty((R, C), np.int8)
@@ -357,9 +365,10 @@ def split_kernel(  # type: ignore[no-untyped-def]
     nb = np.empty(4, np.int64)
     labf = lab.ravel()
     for t in range(nsh):
-        i, j = sh_i[t], sh_j[t]
-        z = sl[i, j]
-        for q in range(_neighbours(i, j, R, C, wrap, nb)):
+        f = shf[t]
+        i = f // C
+        z = sl[f]
+        for q in range(_neighbours(i, f - i * C, R, C, wrap, nb)):
             b = labf[nb[q]]
             if b <= 0:
                 continue
@@ -391,10 +400,12 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 best_count[z] = run
                 best[z] = b
             run = 1
+    ownf = owner.ravel()
+    trif = tri_obstacle.ravel()
     for t in range(nsh):
-        i, j = sh_i[t], sh_j[t]
-        owner[i, j] = best[sl[i, j]]
-        tri_obstacle[i, j] = owner[i, j]
+        f = shf[t]
+        ownf[f] = best[sl[f]]
+        trif[f] = ownf[f]
     return lab, n, owner, tri_obstacle, tcode
 
 

@@ -379,7 +379,13 @@ def _compiled_split(
     for stage 7 (class, main ground zone: the ground components come from the same union-find
     as the obstacle and shadow components)."""
     from navkit.obstacles import _kernels_map
+    from navkit.obstacles._buffers import cached_work
 
+    R, C = labels.shape
+    work_i8, work_i32 = cached_work(
+        ("split", R, C),
+        lambda: [np.empty(R * C, np.int8), np.empty((6, R * C), np.int32)],
+    )
     obs_lab, n, owner, tri_obstacle, tcode = _kernels_map.split_kernel(
         labels,
         mesh.z_min.astype(np.float32, copy=False),
@@ -392,6 +398,8 @@ def _compiled_split(
         float(settings.merge_distance_m),
         int(settings.merge_gap_cells),
         MAIN_GROUND_SHARE,
+        work_i8,
+        work_i32,
     )
     return obs_lab, int(n), owner, tri_obstacle, tcode
 
