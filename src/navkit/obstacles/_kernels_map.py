@@ -18,8 +18,8 @@ from navkit.obstacles._kernels import (
     _find,
     _kth,
     _max_nan,
-    _merge_close,
     _min_nan,
+    _renumber_by_min,
     _union,
 )
 
@@ -53,6 +53,95 @@ def guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off):  # type: ignore[no-untype
             g[p, 1] = s_xy[r, 1]
             p += 1
     return g, g_off
+
+
+# ------------------------------------------------------------------------------------------
+# per-vertex windows: the six triangles around vertex (p, q) are three neighbours in row p
+# (columns 2q - 2 .. 2q) and three in row p - 1 (columns 2q - 1 .. 2q + 1)
+# (``segment._incident_slices``); with each triangle row copied into a buffer padded by two
+# zeros at both ends (a missing triangle counts as 0: no obstacle, no class), they are
+# ``row_p[2q : 2q + 3]`` and ``row_pm1[2q + 1 : 2q + 4]`` for every q, no branch.
+
+
+@njit(cache=True, inline="always")
+def _row_into(src, r, buf):  # type: ignore[no-untyped-def]
+    """Triangle row ``r`` of ``src`` into ``buf[2 : 2 + width]`` (zeros when ``r < 0``)."""
+    W = src.shape[1]
+    if r < 0:
+        for c in range(W):
+            buf[2 + c] = 0
+    else:
+        for c in range(W):
+            buf[2 + c] = src[r, c]
+
+
+@njit(cache=True)
+def _boundary_ids(obs_lab, n_az, n_el, wrap):  # type: ignore[no-untyped-def]
+    """``segment.boundary_vertices`` (as ``_kernels.boundary_kernel``) on the padded row
+    windows: obstacle id per vertex (the largest incident) and boundary."""
+    R, W = obs_lab.shape
+    vid = np.empty((n_az, n_el), np.int32)
+    bnd = np.empty((n_az, n_el), np.bool_)
+    bp = np.zeros(W + 4, np.int32)
+    bm = np.zeros(W + 4, np.int32)
+    _row_into(obs_lab, R - 1 if wrap else -1, bm)
+    for p in range(n_az):
+        _row_into(obs_lab, p if p < R else -1, bp)
+        for q in range(n_el):
+            a0, a1, a2 = bp[2 * q], bp[2 * q + 1], bp[2 * q + 2]
+            b0, b1, b2 = bm[2 * q + 1], bm[2 * q + 2], bm[2 * q + 3]
+            hi = max(max(max(a0, a1), max(a2, b0)), max(b1, b2))
+            lo = min(min(min(a0, a1), min(a2, b0)), min(b1, b2))
+            vid[p, q] = hi
+            bnd[p, q] = (hi > 0) & (lo != hi)
+        bp, bm = bm, bp
+    return vid, bnd
+
+
+@njit(cache=True)
+def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped-def]
+    """``segment.merge_close_components`` (as ``_kernels._merge_close``: a union-find on the
+    obstacle ids; the components do not depend on the order of the unions) with the boundary
+    vertices from :func:`_boundary_ids`."""
+    n_az, n_el = P.shape[0], P.shape[1]
+    vid, bnd = _boundary_ids(obs_lab, n_az, n_el, wrap)
+    parent = np.arange(n + 1).astype(np.int64)
+    merged = False
+    for si in range(n_az):
+        for sj in range(n_el):
+            if not bnd[si, sj]:
+                continue
+            va = vid[si, sj]
+            px, py, pz = P[si, sj, 0], P[si, sj, 1], P[si, sj, 2]
+            for di in range(0, gap + 1):
+                ti = si + di
+                if ti >= n_az:
+                    if not wrap:
+                        continue
+                    ti = ti % n_az
+                for dj in range(-gap, gap + 1):
+                    if di == 0 and dj <= 0:
+                        continue
+                    tj = sj + dj
+                    if tj < 0 or tj >= n_el:
+                        continue
+                    vb = vid[ti, tj]
+                    if vb <= 0 or vb == va:
+                        continue
+                    dx = px - P[ti, tj, 0]
+                    dy = py - P[ti, tj, 1]
+                    dz = pz - P[ti, tj, 2]
+                    if math.sqrt(dx * dx + dy * dy + dz * dz) < distance_m:
+                        _union(parent, va, vb)
+                        merged = True
+    if not merged:
+        return obs_lab, n
+    lut, m = _renumber_by_min(parent, n)
+    out = np.empty_like(obs_lab)
+    for i in range(obs_lab.shape[0]):
+        for j in range(obs_lab.shape[1]):
+            out[i, j] = lut[obs_lab[i, j]]
+    return out, m
 
 
 # ------------------------------------------------------------------------------------------
@@ -323,7 +412,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
                         _union(parent, f, nb[q])
         n = m2
         if n >= 2 and gap >= 1 and distance_m > 0:
-            lab, n = _merge_close(lab, n, P, wrap, distance_m, gap)
+            lab, n = _merge_close_rows(lab, n, P, wrap, distance_m, gap)
     # ground components: the main ground zones (>= main_share of the largest one's triangles)
     # and each triangle's code for stage 7 (class flag, main ground)
     big = 0
@@ -420,67 +509,53 @@ def vertex_kernel(tcode, obs_lab, valid, wrap):  # type: ignore[no-untyped-def]
     (``segment._incident_slices``' order; a missing triangle counts as obstacle id 0, no class,
     not main ground) in stage 6's codes ``tcode`` (:func:`split_kernel`). Returns ``vid,
     boundary, vertex labels, main ground vertices`` and the flat indices of the main ground
-    vertices labelled ground (the ground-height reference, raster order)."""
+    vertices labelled ground (the ground-height reference, raster order). Row by row on the
+    padded windows (:func:`_row_into`): no branch per triangle, the class from a table of the
+    16 flag combinations."""
     n_az, n_el = valid.shape
-    R = tcode.shape[0]
-    C = tcode.shape[1] // 2
-    vid = np.zeros((n_az, n_el), np.int32)
-    bnd = np.zeros((n_az, n_el), np.bool_)
+    R, W = tcode.shape
+    vid = np.empty((n_az, n_el), np.int32)
+    bnd = np.empty((n_az, n_el), np.bool_)
     vlab = np.empty((n_az, n_el), np.int8)
-    main = np.zeros((n_az, n_el), np.bool_)
+    main = np.empty((n_az, n_el), np.bool_)
     ref = np.empty(n_az * n_el, np.int64)
+    # the class of a valid vertex from the flags of its triangles: obstacle, ground, shadow
+    # behind, side shadow, else unreliable
+    table = np.empty(32, np.int8)
+    for fl in range(32):
+        table[fl] = -2 if fl & 8 else (0 if fl & 1 else (-4 if fl & 2 else (-3 if fl & 4 else -1)))
+    bp = np.zeros(W + 4, np.int32)
+    bm = np.zeros(W + 4, np.int32)
+    cp = np.zeros(W + 4, np.int8)
+    cm = np.zeros(W + 4, np.int8)
+    r0 = R - 1 if wrap else -1
+    _row_into(obs_lab, r0, bm)
+    _row_into(tcode, r0, cm)
     nref = 0
     for p in range(n_az):
         rp = p if p < R else -1
-        rm = p - 1 if p >= 1 else (R - 1 if wrap else -1)
+        _row_into(obs_lab, rp, bp)
+        _row_into(tcode, rp, cp)
         for q in range(n_el):
-            c0 = 2 * q if q < C else -1
-            cm = 2 * (q - 1) if q >= 1 else -1
-            flags = 0
-            hi = 0
-            lo = 0
-            for k in range(6):
-                if k == 0:
-                    r, c = rp, c0
-                elif k == 1:
-                    r, c = rp, cm
-                elif k == 2:
-                    r, c = rm, c0
-                elif k == 3:
-                    r, c = rm, c0 + 1
-                elif k == 4:
-                    r, c = rp, cm + 1
-                else:
-                    r, c = rm, cm + 1
-                v = 0
-                if r >= 0 and c >= 0 and (k < 3 or c > 0 or (k == 3 and c0 >= 0)):
-                    v = obs_lab[r, c]
-                    flags |= tcode[r, c]
-                if k == 0:
-                    hi = v
-                    lo = v
-                else:
-                    hi = max(hi, v)
-                    lo = min(lo, v)
+            a0, a1, a2 = bp[2 * q], bp[2 * q + 1], bp[2 * q + 2]
+            b0, b1, b2 = bm[2 * q + 1], bm[2 * q + 2], bm[2 * q + 3]
+            hi = max(max(max(a0, a1), max(a2, b0)), max(b1, b2))
+            lo = min(min(min(a0, a1), min(a2, b0)), min(b1, b2))
             vid[p, q] = hi
-            bnd[p, q] = hi > 0 and lo != hi
+            bnd[p, q] = (hi > 0) & (lo != hi)
+            flags = (cp[2 * q] | cp[2 * q + 1] | cp[2 * q + 2]) | (
+                cm[2 * q + 1] | cm[2 * q + 2] | cm[2 * q + 3]
+            )
+            ok = valid[p, q]
             is_main = (flags & 16) != 0
             main[p, q] = is_main
-            if not valid[p, q]:
-                vlab[p, q] = -1
-            elif flags & 8:
-                vlab[p, q] = -2
-            elif flags & 1:
-                vlab[p, q] = 0
-                if is_main:
-                    ref[nref] = p * n_el + q
-                    nref += 1
-            elif flags & 2:
-                vlab[p, q] = -4
-            elif flags & 4:
-                vlab[p, q] = -3
-            else:
-                vlab[p, q] = -1
+            cl = table[flags & 15] if ok else np.int8(-1)
+            vlab[p, q] = cl
+            # main ground vertices labelled ground: the ground-height reference, raster order
+            ref[nref] = p * n_el + q
+            nref += 1 if (is_main & (cl == 0)) else 0
+        bp, bm = bm, bp
+        cp, cm = cm, cp
     return vid, bnd, vlab, main, ref[:nref]
 
 
