@@ -56,45 +56,46 @@ def guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off):  # type: ignore[no-untype
 
 
 # ------------------------------------------------------------------------------------------
-# per-vertex windows: the six triangles around vertex (p, q) are three neighbours in row p
-# (columns 2q - 2 .. 2q) and three in row p - 1 (columns 2q - 1 .. 2q + 1)
-# (``segment._incident_slices``); with each triangle row copied into a buffer padded by two
-# zeros at both ends (a missing triangle counts as 0: no obstacle, no class), they are
-# ``row_p[2q : 2q + 3]`` and ``row_pm1[2q + 1 : 2q + 4]`` for every q, no branch.
+# per-vertex windows: the six triangles around vertex (p, q) are three neighbours in triangle
+# row p (columns 2q - 2 .. 2q) and three in row p - 1 (columns 2q - 1 .. 2q + 1)
+# (``segment._incident_slices``); a missing triangle counts as 0 (no obstacle, no class): a
+# missing row is a row of zeros, and only the first and last vertex of a row lose triangles.
 
 
 @njit(cache=True, inline="always")
-def _row_into(src, r, buf):  # type: ignore[no-untyped-def]
-    """Triangle row ``r`` of ``src`` into ``buf[2 : 2 + width]`` (zeros when ``r < 0``)."""
-    W = src.shape[1]
-    if r < 0:
-        for c in range(W):
-            buf[2 + c] = 0
-    else:
-        for c in range(W):
-            buf[2 + c] = src[r, c]
+def _window_ids(vid, bnd, p, rowp, rowm, n_el):  # type: ignore[no-untyped-def]
+    """Vertex row ``p`` of ``segment.boundary_vertices`` from triangle rows ``p`` and ``p - 1``
+    (zeros where missing): the largest incident obstacle id and the boundary flag."""
+    C = len(rowp) // 2
+    for q in range(n_el):
+        if q >= 1 and q < C:  # interior: the six triangles are there
+            a0, a1, a2 = rowp[2 * q - 2], rowp[2 * q - 1], rowp[2 * q]
+            b0, b1, b2 = rowm[2 * q - 1], rowm[2 * q], rowm[2 * q + 1]
+        elif q == 0:
+            a0, a1, a2 = 0, 0, rowp[0]
+            b0, b1, b2 = 0, rowm[0], rowm[1]
+        else:
+            a0, a1, a2 = rowp[2 * q - 2], rowp[2 * q - 1], 0
+            b0, b1, b2 = rowm[2 * q - 1], 0, 0
+        hi = max(max(max(a0, a1), max(a2, b0)), max(b1, b2))
+        lo = min(min(min(a0, a1), min(a2, b0)), min(b1, b2))
+        vid[p, q] = hi
+        bnd[p, q] = (hi > 0) & (lo != hi)
 
 
 @njit(cache=True)
 def _boundary_ids(obs_lab, n_az, n_el, wrap):  # type: ignore[no-untyped-def]
-    """``segment.boundary_vertices`` (as ``_kernels.boundary_kernel``) on the padded row
-    windows: obstacle id per vertex (the largest incident) and boundary."""
+    """``segment.boundary_vertices`` (as ``_kernels.boundary_kernel``), row by row: obstacle
+    id per vertex (the largest incident) and boundary."""
     R, W = obs_lab.shape
     vid = np.empty((n_az, n_el), np.int32)
     bnd = np.empty((n_az, n_el), np.bool_)
-    bp = np.zeros(W + 4, np.int32)
-    bm = np.zeros(W + 4, np.int32)
-    _row_into(obs_lab, R - 1 if wrap else -1, bm)
+    zero = np.zeros(W, obs_lab.dtype)
     for p in range(n_az):
-        _row_into(obs_lab, p if p < R else -1, bp)
-        for q in range(n_el):
-            a0, a1, a2 = bp[2 * q], bp[2 * q + 1], bp[2 * q + 2]
-            b0, b1, b2 = bm[2 * q + 1], bm[2 * q + 2], bm[2 * q + 3]
-            hi = max(max(max(a0, a1), max(a2, b0)), max(b1, b2))
-            lo = min(min(min(a0, a1), min(a2, b0)), min(b1, b2))
-            vid[p, q] = hi
-            bnd[p, q] = (hi > 0) & (lo != hi)
-        bp, bm = bm, bp
+        rowp = obs_lab[p] if p < R else zero
+        rm = p - 1 if p >= 1 else (R - 1 if wrap else -1)
+        rowm = obs_lab[rm] if rm >= 0 else zero
+        _window_ids(vid, bnd, p, rowp, rowm, n_el)
     return vid, bnd
 
 
@@ -119,12 +120,16 @@ def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-
                     if not wrap:
                         continue
                     ti = ti % n_az
-                for dj in range(-gap, gap + 1):
-                    if di == 0 and dj <= 0:
-                        continue
-                    tj = sj + dj
-                    if tj < 0 or tj >= n_el:
-                        continue
+                j0 = sj + 1 if di == 0 else max(sj - gap, 0)
+                j1 = min(sj + gap + 1, n_el)
+                # branch-free first look: another obstacle's vertex in this row of the window?
+                other = False
+                for tj in range(j0, j1):
+                    vb = vid[ti, tj]
+                    other |= (vb > 0) & (vb != va)
+                if not other:
+                    continue
+                for tj in range(j0, j1):
                     vb = vid[ti, tj]
                     if vb <= 0 or vb == va:
                         continue
@@ -510,7 +515,7 @@ def vertex_kernel(tcode, obs_lab, valid, wrap):  # type: ignore[no-untyped-def]
     not main ground) in stage 6's codes ``tcode`` (:func:`split_kernel`). Returns ``vid,
     boundary, vertex labels, main ground vertices`` and the flat indices of the main ground
     vertices labelled ground (the ground-height reference, raster order). Row by row on the
-    padded windows (:func:`_row_into`): no branch per triangle, the class from a table of the
+    row windows (:func:`_window_ids`): no branch per triangle, the class from a table of the
     16 flag combinations."""
     n_az, n_el = valid.shape
     R, W = tcode.shape
@@ -524,28 +529,26 @@ def vertex_kernel(tcode, obs_lab, valid, wrap):  # type: ignore[no-untyped-def]
     table = np.empty(32, np.int8)
     for fl in range(32):
         table[fl] = -2 if fl & 8 else (0 if fl & 1 else (-4 if fl & 2 else (-3 if fl & 4 else -1)))
-    bp = np.zeros(W + 4, np.int32)
-    bm = np.zeros(W + 4, np.int32)
-    cp = np.zeros(W + 4, np.int8)
-    cm = np.zeros(W + 4, np.int8)
-    r0 = R - 1 if wrap else -1
-    _row_into(obs_lab, r0, bm)
-    _row_into(tcode, r0, cm)
+    zero_i = np.zeros(W, obs_lab.dtype)
+    zero_c = np.zeros(W, tcode.dtype)
+    C = W // 2
     nref = 0
     for p in range(n_az):
-        rp = p if p < R else -1
-        _row_into(obs_lab, rp, bp)
-        _row_into(tcode, rp, cp)
+        rm = p - 1 if p >= 1 else (R - 1 if wrap else -1)
+        rowp = obs_lab[p] if p < R else zero_i
+        rowm = obs_lab[rm] if rm >= 0 else zero_i
+        _window_ids(vid, bnd, p, rowp, rowm, n_el)
+        cp = tcode[p] if p < R else zero_c
+        cm = tcode[rm] if rm >= 0 else zero_c
         for q in range(n_el):
-            a0, a1, a2 = bp[2 * q], bp[2 * q + 1], bp[2 * q + 2]
-            b0, b1, b2 = bm[2 * q + 1], bm[2 * q + 2], bm[2 * q + 3]
-            hi = max(max(max(a0, a1), max(a2, b0)), max(b1, b2))
-            lo = min(min(min(a0, a1), min(a2, b0)), min(b1, b2))
-            vid[p, q] = hi
-            bnd[p, q] = (hi > 0) & (lo != hi)
-            flags = (cp[2 * q] | cp[2 * q + 1] | cp[2 * q + 2]) | (
-                cm[2 * q + 1] | cm[2 * q + 2] | cm[2 * q + 3]
-            )
+            if q >= 1 and q < C:
+                flags = (cp[2 * q - 2] | cp[2 * q - 1] | cp[2 * q]) | (
+                    cm[2 * q - 1] | cm[2 * q] | cm[2 * q + 1]
+                )
+            elif q == 0:
+                flags = cp[0] | cm[0] | cm[1]
+            else:
+                flags = cp[2 * q - 2] | cp[2 * q - 1] | cm[2 * q - 1]
             ok = valid[p, q]
             is_main = (flags & 16) != 0
             main[p, q] = is_main
@@ -554,8 +557,6 @@ def vertex_kernel(tcode, obs_lab, valid, wrap):  # type: ignore[no-untyped-def]
             # main ground vertices labelled ground: the ground-height reference, raster order
             ref[nref] = p * n_el + q
             nref += 1 if (is_main & (cl == 0)) else 0
-        bp, bm = bm, bp
-        cp, cm = cm, cp
     return vid, bnd, vlab, main, ref[:nref]
 
 
