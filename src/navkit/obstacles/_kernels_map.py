@@ -182,12 +182,15 @@ def _class_union_find(labels, wrap, cls, parent):  # type: ignore[no-untyped-def
     neighbours' sets by a find each."""
     R, C = labels.shape
     seam = wrap and R > 1
+    # the component class of classes -4 .. 0 (shadow, shadow, obstacle, none, ground)
+    ctab = np.array([_SHADOW, _SHADOW, _OBSTACLE, -1, _GROUND], np.int8)
     for i in range(R):
         prev = -1
         cur = np.int32(0)
         for j in range(C):
             f = i * C + j
-            c = _class_of(labels[i, j])
+            t = labels[i, j]
+            c = ctab[t + 4] if (t >= -4) & (t <= 0) else np.int8(-1)
             cls[f] = c
             if c < 0:
                 parent[f] = f
@@ -329,9 +332,13 @@ def split_kernel(  # type: ignore[no-untyped-def]
         bj_ = np.empty(nt, np.int64)
         cyc = wrap and R > 1
         nbd = 0
+        i = 0
+        ca = 0  # the label of the current run
+        chi, clo, csm, cfill = hi[0], lo[0], sm[0], fill[0]
         for k in range(nt):
             f = obf[k]
-            i = f // C
+            while f >= (i + 1) * C:  # raster order: the row without a division
+                i += 1
             j = f - i * C
             a = labf[f]
             # a ground neighbour (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)?
@@ -346,12 +353,19 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 bi_[nbd] = i
                 bj_[nbd] = j
                 nbd += 1
-            hi[a] = _max_nan(hi[a], zmax[i, j])
-            lo[a] = _min_nan(lo[a], zmin[i, j])
+            if a != ca:  # a run of one label: its sums in registers, the same order
+                if ca:
+                    hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
+                ca = a
+                chi, clo, csm, cfill = hi[a], lo[a], sm[a], fill[a]
+            chi = _max_nan(chi, zmax[i, j])
+            clo = _min_nan(clo, zmin[i, j])
             zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
-            sm[a] += zm
-            zs[fill[a]] = zm
-            fill[a] += 1
+            csm += zm
+            zs[cfill] = zm
+            cfill += 1
+        if ca:
+            hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
         # lift over the adjacent ground, the sums in the twin's pair order (per offset: the
         # pairs inside the array in raster order, then the ones across the seam)
         cnt_g = np.zeros(n + 1, np.int64)
@@ -432,19 +446,17 @@ def split_kernel(  # type: ignore[no-untyped-def]
             big = max(big, ground_size[r])
     thr = main_share * big
     tcode = np.empty((R, C), np.int8)
+    tflat = tcode.ravel()
+    # the flag of classes -4 .. 0 (shadow behind, side shadow, obstacle, unreliable, ground)
+    flag = np.array([2, 4, 8, 0, 1], np.int8)
     for i in range(R):
         for j in range(C):
             t = labels[i, j]
-            if t == 0:
-                tcode[i, j] = _MAIN if ground_size[parent[i * C + j]] >= thr else 1
-            elif t == -4:
-                tcode[i, j] = 2
-            elif t == -3:
-                tcode[i, j] = 4
-            elif t == -2:
-                tcode[i, j] = 8
-            else:
-                tcode[i, j] = 0
+            f = i * C + j
+            code = flag[t + 4] if (t >= -4) & (t <= 0) else np.int8(0)
+            if t == 0 and ground_size[parent[f]] >= thr:
+                code = _MAIN
+            tflat[f] = code
     owner = np.zeros((R, C), np.int32)
     tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
     if ns == 0 or n == 0:
@@ -661,7 +673,9 @@ def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ign
     ns = 0
     for r in range(R):
         for c in range(C2):
-            ntri[obs_lab[r, c]] += 1
+            b = obs_lab[r, c]
+            if b > 0:  # (counting the many 0s would chain every increment on ntri[0])
+                ntri[b] += 1
             a = owner[r, c]
             if a > 0:
                 t_cnt[a] += 1
