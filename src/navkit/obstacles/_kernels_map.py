@@ -157,18 +157,6 @@ _MAIN = 17  # stage 7's code of a main-ground triangle: ground (1) | main (16)
 
 
 @njit(cache=True)
-def _class_of(label):  # type: ignore[no-untyped-def]
-    """Component class of a triangle class m_t: ground, obstacle, shadow (both kinds), or -1."""
-    if label == 0:
-        return _GROUND
-    if label == -2:
-        return _OBSTACLE
-    if label == -3 or label == -4:
-        return _SHADOW
-    return -1
-
-
-@njit(cache=True)
 def _class_union_find(labels, wrap, cls, parent):  # type: ignore[no-untyped-def]
     """The mesh components of the ground, obstacle and shadow triangles in one union-find
     (``segment.MESH_STRUCTURE``, rows cyclic with ``wrap``; a union only joins triangles of one
