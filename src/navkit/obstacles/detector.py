@@ -654,22 +654,29 @@ def _assemble_compiled(
     n_points = np.diff(v_off).tolist()
     n_tri = ntri.tolist()
     area = shadow_area.tolist()
-    return [
-        Obstacle(
+    bo, ho, go = b_off.tolist(), hoff.tolist(), g_off.tolist()
+    # the records without the frozen dataclass's ``__init__`` (its per-field
+    # ``object.__setattr__`` is ~5x the cost of filling ``__dict__``; Obstacle has no
+    # ``__post_init__``), as the shapes' records (``geometry.shapes._ellipses``)
+    new = object.__new__
+    out = []
+    for k in range(n):
+        o = new(Obstacle)
+        o.__dict__.update(
             id=k + 1,
             n_triangles=n_tri[k],
             n_points=n_points[k],
             z_min=z_min[k],
             z_max=z_max[k],
-            boundary_xy=b_xy[b_off[k] : b_off[k + 1]],
-            polygon_xy=H[hoff[k] : hoff[k + 1]],
-            shadow_xy=g_xy[g_off[k] : g_off[k + 1]],
+            boundary_xy=b_xy[bo[k] : bo[k + 1]],
+            polygon_xy=H[ho[k] : ho[k + 1]],
+            shadow_xy=g_xy[go[k] : go[k + 1]],
             shadow_area=area[k],
             shapes=shapes[k],
             guaranteed=guaranteed[k],
         )
-        for k in range(n)
-    ]
+        out.append(o)
+    return out
 
 
 def detect_obstacles(
