@@ -45,7 +45,10 @@ def counted(stage, fn):
 
 detector._compiled_split = counted("split", detector._compiled_split)
 detector._compiled_vertices = counted("boundaries", detector._compiled_vertices)
-detector._build_obstacles = counted("map", detector._build_obstacles)
+if hasattr(detector, "_build_compiled"):
+    detector._build_compiled = counted("map", detector._build_compiled)
+else:
+    detector._build_obstacles = counted("map", detector._build_obstacles)
 
 reps = int(sys.argv[1])
 params = pwpp.Parameters(); params.verbose = False; params.sensor_height = 1.73

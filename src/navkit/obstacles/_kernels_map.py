@@ -249,8 +249,9 @@ def split_kernel(  # type: ignore[no-untyped-def]
     components back to ground). ``work_i8 (R * C,) int8`` and ``work_i32 (6, R * C) int32``
     are work arrays (any content; kept between calls by the caller).
 
-    Returns ``obs_lab, n, owner, tri_obstacle, tcode``: ``tri_obstacle`` the obstacle id of
-    obstacle triangles and the owner of shadow triangles; ``tcode (R, 2C) int8`` each
+    Returns ``obs_lab, n, tri_obstacle, tcode``: ``tri_obstacle`` the obstacle id of
+    obstacle triangles and the owner of shadow triangles (the twin's ``owner`` is
+    ``tri_obstacle`` on the shadow triangles, 0 elsewhere); ``tcode (R, 2C) int8`` each
     triangle's class flag for stage 7 (1 ground, 2 shadow behind, 4 side shadow, 8 obstacle,
     0 unreliable) with ``_MAIN`` (= 1 | 16) for a ground triangle of a main ground zone (a
     ground component after the drop with at least ``main_share`` of the largest one's
@@ -445,10 +446,9 @@ def split_kernel(  # type: ignore[no-untyped-def]
             if t == 0 and ground_size[parent[f]] >= thr:
                 code = _MAIN
             tflat[f] = code
-    owner = np.zeros((R, C), np.int32)
     tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
     if ns == 0 or n == 0:
-        return lab, n, owner, tri_obstacle, tcode
+        return lab, n, tri_obstacle, tcode
     # shadow owners: per shadow zone, the obstacle it shares the most adjacencies with (ties:
     # the larger id, as the twin's stable lexsort)
     nobs = n + 1
@@ -494,13 +494,11 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 best_count[z] = run
                 best[z] = b
             run = 1
-    ownf = owner.ravel()
     trif = tri_obstacle.ravel()
     for t in range(nsh):
         f = shf[t]
-        ownf[f] = best[sl[f]]
-        trif[f] = ownf[f]
-    return lab, n, owner, tri_obstacle, tcode
+        trif[f] = best[sl[f]]
+    return lab, n, tri_obstacle, tcode
 
 
 # ------------------------------------------------------------------------------------------
@@ -614,12 +612,13 @@ def ground_cells_kernel(P, sel, cell_m, quantile):  # type: ignore[no-untyped-de
 
 
 @njit(cache=True, error_model="numpy")
-def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ignore[no-untyped-def]
+def map_groups_kernel(flat, tri, labels, tri_obstacle, vid, boundary, n):  # type: ignore[no-untyped-def]
     """Boundary vertices ``(x, y)``, all vertices ``(x, y, z)`` and shadow vertex sets
     ``(x, y)`` of obstacles 1..n in CSR layouts (each with offsets ``(n + 1,)``), the shadow
     areas and the triangle counts, in the twin's orders (vertices in raster order; a shadow
     set's vertices sorted by index, each once; areas summed in raster order). Two passes over
-    the vertices and one over the triangles."""
+    the vertices and one over the triangles; the triangles' obstacles and shadow owners are
+    read from ``tri_obstacle`` (:func:`split_kernel`) with the classes ``labels``."""
     vf = vid.ravel()
     bf = boundary.ravel()
     nv = len(vf)
@@ -653,7 +652,7 @@ def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ign
                 b_xy[q, 1] = flat[k, 1]
                 bfill[a - 1] = q + 1
     # triangles: counts per obstacle, shadow areas and the shadow triangles (raster order)
-    R, C2 = owner.shape
+    R, C2 = tri_obstacle.shape
     ntri = np.zeros(n + 1, np.int64)
     area = np.zeros(n + 1)
     t_cnt = np.zeros(n + 1, np.int64)
@@ -661,11 +660,14 @@ def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ign
     ns = 0
     for r in range(R):
         for c in range(C2):
-            b = obs_lab[r, c]
-            if b > 0:  # (counting the many 0s would chain every increment on ntri[0])
+            b = tri_obstacle[r, c]
+            if b <= 0:
+                continue
+            t = labels[r, c]
+            if t == -2:  # an obstacle triangle
                 ntri[b] += 1
-            a = owner[r, c]
-            if a > 0:
+            elif t == -3 or t == -4:  # a shadow triangle and its owner
+                a = b
                 t_cnt[a] += 1
                 sh[ns] = r * C2 + c
                 ns += 1
@@ -680,7 +682,7 @@ def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ign
         t_off[a + 1] = t_off[a] + 3 * t_cnt[a]
     fill = t_off.copy()
     verts = np.empty(3 * ns, np.int64)
-    ownf = owner.ravel()
+    ownf = tri_obstacle.ravel()
     for k in range(ns):
         t = sh[k]
         a = ownf[t]
