@@ -187,7 +187,9 @@ def _class_union_find(labels, wrap, cls, parent):  # type: ignore[no-untyped-def
             root = np.int32(f)
             if prev == c:
                 root = cur
-            if i > 0 and j + 1 < C and cls[f - C + 1] == c:
+            # the upper-right neighbour; already in this set when the left neighbour joined the
+            # upper one (f - C) and both upper triangles are of this class (no find)
+            if i > 0 and j + 1 < C and cls[f - C + 1] == c and not (prev == c and cls[f - C] == c):
                 rb = _find(parent, f - C + 1)
                 if rb < root:
                     if root != f:
