@@ -328,7 +328,7 @@ def test_stage_6_7_row_windows_equal_numpy(rng):
         np.testing.assert_array_equal(vid, vid_t)
         np.testing.assert_array_equal(bnd, bnd_t)
         P = rng.random((n_az, n_el, 3)) * 3.0
-        out, m = _kernels_map._merge_close_rows(ids, 4, P, wrap, 0.5, 2)
+        out, m = _kernels_map._merge_close_rows(ids.copy(), 4, P, wrap, 0.5, 2)
         out_t, m_t = merge_close_components(ids, 4, P, wrap, 0.5, 2)
         assert m == m_t
         np.testing.assert_array_equal(out, out_t)

@@ -103,7 +103,7 @@ def _boundary_ids(obs_lab, n_az, n_el, wrap):  # type: ignore[no-untyped-def]
 def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped-def]
     """``segment.merge_close_components`` (as ``_kernels._merge_close``: a union-find on the
     obstacle ids; the components do not depend on the order of the unions) with the boundary
-    vertices from :func:`_boundary_ids`."""
+    vertices from :func:`_boundary_ids`. ``obs_lab`` (C-contiguous) is relabelled in place."""
     n_az, n_el = P.shape[0], P.shape[1]
     vid, bnd = _boundary_ids(obs_lab, n_az, n_el, wrap)
     parent = np.arange(n + 1).astype(np.int64)
@@ -142,11 +142,10 @@ def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-
     if not merged:
         return obs_lab, n
     lut, m = _renumber_by_min(parent, n)
-    out = np.empty_like(obs_lab)
-    for i in range(obs_lab.shape[0]):
-        for j in range(obs_lab.shape[1]):
-            out[i, j] = lut[obs_lab[i, j]]
-    return out, m
+    flat = obs_lab.ravel()
+    for f in range(len(flat)):  # in place: the caller's array is the kernel's own
+        flat[f] = lut[flat[f]]
+    return obs_lab, m
 
 
 # ------------------------------------------------------------------------------------------
