@@ -361,3 +361,29 @@ def test_banded_median_equals_numpy(rng):
     for values in cases:
         got = _kernels._median_banded(values.copy(), np.empty(len(values)))
         assert got == np.median(values), len(values)
+
+
+def test_stage_6_7_row_windows_equal_numpy(rng):
+    """The row-window kernels of stages 6-7 (boundary ids, merging of close components) against
+    their NumPy twins on random small grids, wrapped and not, edges included."""
+    from navkit.obstacles import _kernels_map
+    from navkit.obstacles.segment import boundary_vertices, merge_close_components
+
+    merges = 0
+    for _ in range(150):
+        n_az, n_el = int(rng.integers(2, 24)), int(rng.integers(2, 10))
+        wrap = bool(rng.integers(2))
+        R, C = (n_az if wrap else n_az - 1), n_el - 1
+        ids = rng.integers(0, 5, size=(R, 2 * C)) * (rng.random((R, 2 * C)) < 0.5)
+        ids = ids.astype(np.int32)
+        vid, bnd = _kernels_map._boundary_ids(ids, n_az, n_el, wrap)
+        vid_t, bnd_t = boundary_vertices(ids, n_az, n_el, wrap)
+        np.testing.assert_array_equal(vid, vid_t)
+        np.testing.assert_array_equal(bnd, bnd_t)
+        P = rng.random((n_az, n_el, 3)) * 3.0
+        out, m = _kernels_map._merge_close_rows(ids.copy(), 4, P, wrap, 0.5, 2)
+        out_t, m_t = merge_close_components(ids, 4, P, wrap, 0.5, 2)
+        assert m == m_t
+        np.testing.assert_array_equal(out, out_t)
+        merges += m < 4
+    assert merges > 20  # the draws do merge components

@@ -18,8 +18,8 @@ from navkit.obstacles._kernels import (
     _find,
     _kth,
     _max_nan,
-    _merge_close,
     _min_nan,
+    _renumber_by_min,
     _union,
 )
 
@@ -56,6 +56,99 @@ def guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off):  # type: ignore[no-untype
 
 
 # ------------------------------------------------------------------------------------------
+# per-vertex windows: the six triangles around vertex (p, q) are three neighbours in triangle
+# row p (columns 2q - 2 .. 2q) and three in row p - 1 (columns 2q - 1 .. 2q + 1)
+# (``segment._incident_slices``); a missing triangle counts as 0 (no obstacle, no class): a
+# missing row is a row of zeros, and only the first and last vertex of a row lose triangles.
+
+
+@njit(cache=True, inline="always")
+def _window_ids(vid, bnd, p, rowp, rowm, n_el):  # type: ignore[no-untyped-def]
+    """Vertex row ``p`` of ``segment.boundary_vertices`` from triangle rows ``p`` and ``p - 1``
+    (zeros where missing): the largest incident obstacle id and the boundary flag."""
+    C = len(rowp) // 2
+    for q in range(n_el):
+        if q >= 1 and q < C:  # interior: the six triangles are there
+            a0, a1, a2 = rowp[2 * q - 2], rowp[2 * q - 1], rowp[2 * q]
+            b0, b1, b2 = rowm[2 * q - 1], rowm[2 * q], rowm[2 * q + 1]
+        elif q == 0:
+            a0, a1, a2 = 0, 0, rowp[0]
+            b0, b1, b2 = 0, rowm[0], rowm[1]
+        else:
+            a0, a1, a2 = rowp[2 * q - 2], rowp[2 * q - 1], 0
+            b0, b1, b2 = rowm[2 * q - 1], 0, 0
+        hi = max(max(max(a0, a1), max(a2, b0)), max(b1, b2))
+        lo = min(min(min(a0, a1), min(a2, b0)), min(b1, b2))
+        vid[p, q] = hi
+        bnd[p, q] = (hi > 0) & (lo != hi)
+
+
+@njit(cache=True)
+def _boundary_ids(obs_lab, n_az, n_el, wrap):  # type: ignore[no-untyped-def]
+    """``segment.boundary_vertices`` (as ``_kernels.boundary_kernel``), row by row: obstacle
+    id per vertex (the largest incident) and boundary."""
+    R, W = obs_lab.shape
+    vid = np.empty((n_az, n_el), np.int32)
+    bnd = np.empty((n_az, n_el), np.bool_)
+    zero = np.zeros(W, obs_lab.dtype)
+    for p in range(n_az):
+        rowp = obs_lab[p] if p < R else zero
+        rm = p - 1 if p >= 1 else (R - 1 if wrap else -1)
+        rowm = obs_lab[rm] if rm >= 0 else zero
+        _window_ids(vid, bnd, p, rowp, rowm, n_el)
+    return vid, bnd
+
+
+@njit(cache=True)
+def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped-def]
+    """``segment.merge_close_components`` (as ``_kernels._merge_close``: a union-find on the
+    obstacle ids; the components do not depend on the order of the unions) with the boundary
+    vertices from :func:`_boundary_ids`. ``obs_lab`` (C-contiguous) is relabelled in place."""
+    n_az, n_el = P.shape[0], P.shape[1]
+    vid, bnd = _boundary_ids(obs_lab, n_az, n_el, wrap)
+    parent = np.arange(n + 1).astype(np.int64)
+    merged = False
+    for si in range(n_az):
+        for sj in range(n_el):
+            if not bnd[si, sj]:
+                continue
+            va = vid[si, sj]
+            px, py, pz = P[si, sj, 0], P[si, sj, 1], P[si, sj, 2]
+            for di in range(0, gap + 1):
+                ti = si + di
+                if ti >= n_az:
+                    if not wrap:
+                        continue
+                    ti = ti % n_az
+                j0 = sj + 1 if di == 0 else max(sj - gap, 0)
+                j1 = min(sj + gap + 1, n_el)
+                # branch-free first look: another obstacle's vertex in this row of the window?
+                other = False
+                for tj in range(j0, j1):
+                    vb = vid[ti, tj]
+                    other |= (vb > 0) & (vb != va)
+                if not other:
+                    continue
+                for tj in range(j0, j1):
+                    vb = vid[ti, tj]
+                    if vb <= 0 or vb == va:
+                        continue
+                    dx = px - P[ti, tj, 0]
+                    dy = py - P[ti, tj, 1]
+                    dz = pz - P[ti, tj, 2]
+                    if math.sqrt(dx * dx + dy * dy + dz * dz) < distance_m:
+                        _union(parent, va, vb)
+                        merged = True
+    if not merged:
+        return obs_lab, n
+    lut, m = _renumber_by_min(parent, n)
+    flat = obs_lab.ravel()
+    for f in range(len(flat)):  # in place: the caller's array is the kernel's own
+        flat[f] = lut[flat[f]]
+    return obs_lab, m
+
+
+# ------------------------------------------------------------------------------------------
 # stage 6: one union-find for the obstacle, shadow and ground components
 
 _GROUND, _OBSTACLE, _SHADOW = 0, 1, 2
@@ -63,37 +156,28 @@ _MAIN = 17  # stage 7's code of a main-ground triangle: ground (1) | main (16)
 
 
 @njit(cache=True)
-def _class_of(label):  # type: ignore[no-untyped-def]
-    """Component class of a triangle class m_t: ground, obstacle, shadow (both kinds), or -1."""
-    if label == 0:
-        return _GROUND
-    if label == -2:
-        return _OBSTACLE
-    if label == -3 or label == -4:
-        return _SHADOW
-    return -1
-
-
-@njit(cache=True)
-def _class_union_find(labels, wrap):  # type: ignore[no-untyped-def]
+def _class_union_find(labels, wrap, cls, parent):  # type: ignore[no-untyped-def]
     """The mesh components of the ground, obstacle and shadow triangles in one union-find
     (``segment.MESH_STRUCTURE``, rows cyclic with ``wrap``; a union only joins triangles of one
     class, so the components are those of three separate passes). Returns the class per
-    triangle (flat, -1: none) and the parent array (every root is its set's smallest member).
+    triangle (flat, -1: none) and the parent array (every root is its set's smallest member, and
+    ``parent[f] <= f`` everywhere), written into ``cls (R * C,) int8`` and ``parent (R * C,)
+    int32``.
 
     One raster scan: a triangle is a new singleton when reached, so it takes its left
     neighbour's root (kept from the previous step) and joins the upper-right and seam
     neighbours' sets by a find each."""
     R, C = labels.shape
-    cls = np.empty(R * C, np.int8)
-    parent = np.empty(R * C, np.int32)
     seam = wrap and R > 1
+    # the component class of classes -4 .. 0 (shadow, shadow, obstacle, none, ground)
+    ctab = np.array([_SHADOW, _SHADOW, _OBSTACLE, -1, _GROUND], np.int8)
     for i in range(R):
         prev = -1
         cur = np.int32(0)
         for j in range(C):
             f = i * C + j
-            c = _class_of(labels[i, j])
+            t = labels[i, j]
+            c = ctab[t + 4] if (t >= -4) & (t <= 0) else np.int8(-1)
             cls[f] = c
             if c < 0:
                 parent[f] = f
@@ -102,7 +186,9 @@ def _class_union_find(labels, wrap):  # type: ignore[no-untyped-def]
             root = np.int32(f)
             if prev == c:
                 root = cur
-            if i > 0 and j + 1 < C and cls[f - C + 1] == c:
+            # the upper-right neighbour; already in this set when the left neighbour joined the
+            # upper one (f - C) and both upper triangles are of this class (no find)
+            if i > 0 and j + 1 < C and cls[f - C + 1] == c and not (prev == c and cls[f - C] == c):
                 rb = _find(parent, f - C + 1)
                 if rb < root:
                     if root != f:
@@ -155,51 +241,68 @@ def split_kernel(  # type: ignore[no-untyped-def]
     distance_m,
     gap,
     main_share,
+    work_i8,
+    work_i32,
 ):
     """Stage 6 (twin: ``detector._split``): obstacle components, the size / height /
     noise-patch filters, merging of close components and the shadows' owners, with the ground
     components of stage 7 from the same union-find. ``labels`` is changed in place (dropped
-    components back to ground).
+    components back to ground). ``work_i8 (R * C,) int8`` and ``work_i32 (6, R * C) int32``
+    are work arrays (any content; kept between calls by the caller).
 
-    Returns ``obs_lab, n, owner, tri_obstacle, tcode``: ``tri_obstacle`` the obstacle id of
-    obstacle triangles and the owner of shadow triangles; ``tcode (R, 2C) int8`` each
+    Returns ``obs_lab, n, tri_obstacle, tcode``: ``tri_obstacle`` the obstacle id of
+    obstacle triangles and the owner of shadow triangles (the twin's ``owner`` is
+    ``tri_obstacle`` on the shadow triangles, 0 elsewhere); ``tcode (R, 2C) int8`` each
     triangle's class flag for stage 7 (1 ground, 2 shadow behind, 4 side shadow, 8 obstacle,
     0 unreliable) with ``_MAIN`` (= 1 | 16) for a ground triangle of a main ground zone (a
     ground component after the drop with at least ``main_share`` of the largest one's
     triangles; ``segment.main_ground_vertices``).
+
+    Every root of the union-find is its set's smallest member and ``parent[f] <= f``, so one
+    raster pass ``parent[f] = parent[parent[f]]`` points every triangle at its root (no
+    ``find``), a set is numbered when its root is reached (the first member in raster order)
+    and per-set arrays indexed by the root need no clearing.
     """
     R, C = labels.shape
-    cls, parent = _class_union_find(labels, wrap)
-    # obstacle and shadow components numbered by first appearance in raster order
-    new = np.zeros(R * C, np.int32)
-    lab = np.zeros((R, C), np.int32)
-    sl = np.zeros((R, C), np.int32)
+    cls = work_i8
+    parent = work_i32[0]
+    new = work_i32[1]  # per root: the component's number (written at the root first)
+    sl = work_i32[2]  # per shadow triangle: its shadow zone
+    shf = work_i32[3]  # the shadow triangles in raster order
+    obf = work_i32[4]  # the obstacle triangles in raster order
+    ground_size = work_i32[5]  # per ground root: the component's size
+    _class_union_find(labels, wrap, cls, parent)
+    # obstacle and shadow components numbered by first appearance in raster order; every
+    # triangle pointed at its root on the way
+    lab = np.empty((R, C), np.int32)
+    labf = lab.ravel()
     n = 0
     ns = 0
-    sh_i = np.empty(R * C, np.int32)  # the shadow triangles in raster order
-    sh_j = np.empty(R * C, np.int32)
     nsh = 0
-    for i in range(R):
-        for j in range(C):
-            f = i * C + j
-            c = cls[f]
-            if c <= 0:
-                continue
-            r = _find(parent, f)
-            if new[r] == 0:
-                if c == _OBSTACLE:
-                    n += 1
-                    new[r] = n
-                else:
-                    ns += 1
-                    new[r] = ns
+    nt = 0
+    for f in range(R * C):
+        r = parent[parent[f]]
+        parent[f] = r
+        c = cls[f]
+        if c <= 0:
+            labf[f] = 0
+            continue
+        if r == f:
             if c == _OBSTACLE:
-                lab[i, j] = new[r]
+                n += 1
+                new[f] = n
             else:
-                sl[i, j] = new[r]
-                sh_i[nsh] = i
-                sh_j[nsh] = j
-                nsh += 1
+                ns += 1
+                new[f] = ns
+        if c == _OBSTACLE:
+            labf[f] = new[r]
+            obf[nt] = f
+            nt += 1
+        else:
+            labf[f] = 0
+            sl[f] = new[r]
+            shf[nsh] = f
+            nsh += 1
     dropped_any = False
     if n:
         size = np.zeros(n + 1, np.int64)
@@ -207,51 +310,52 @@ def split_kernel(  # type: ignore[no-untyped-def]
         lo = np.full(n + 1, np.inf, np.float32)
         sm = np.zeros(n + 1, np.float64)
         h = np.float32(0.5)
-        # obstacle triangles in raster order, grouped by label (a counting sort)
-        for i in range(R):
-            for j in range(C):
-                a = lab[i, j]
-                if a:
-                    size[a] += 1
+        # obstacle triangles (raster order) grouped by label: a counting sort
+        for k in range(nt):
+            size[labf[obf[k]]] += 1
         start = np.zeros(n + 2, np.int64)
         for a in range(1, n + 1):
             start[a + 1] = start[a] + size[a]
         fill = start.copy()
-        nt = start[n + 1]
-        ti_ = np.empty(nt, np.int64)  # the obstacle triangles in raster order
-        tj_ = np.empty(nt, np.int64)
         zs = np.empty(nt, np.float64)  # their mid heights by label
         bi_ = np.empty(nt, np.int64)  # those with a ground neighbour (the lift's pairs)
         bj_ = np.empty(nt, np.int64)
         cyc = wrap and R > 1
-        m = 0
         nbd = 0
-        for i in range(R):
-            for j in range(C):
-                a = lab[i, j]
-                if a == 0:
-                    continue
-                ti_[m] = i
-                tj_[m] = j
-                m += 1
-                # a ground neighbour (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)?
-                up = i - 1 if i > 0 else (R - 1 if cyc else -1)
-                dn = i + 1 if i + 1 < R else (0 if cyc else -1)
-                if (
-                    (j + 1 < C and labels[i, j + 1] == 0)
-                    or (j > 0 and labels[i, j - 1] == 0)
-                    or (dn >= 0 and j > 0 and labels[dn, j - 1] == 0)
-                    or (up >= 0 and j + 1 < C and labels[up, j + 1] == 0)
-                ):
-                    bi_[nbd] = i
-                    bj_[nbd] = j
-                    nbd += 1
-                hi[a] = _max_nan(hi[a], zmax[i, j])
-                lo[a] = _min_nan(lo[a], zmin[i, j])
-                zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
-                sm[a] += zm
-                zs[fill[a]] = zm
-                fill[a] += 1
+        i = 0
+        ca = 0  # the label of the current run
+        chi, clo, csm, cfill = hi[0], lo[0], sm[0], fill[0]
+        for k in range(nt):
+            f = obf[k]
+            while f >= (i + 1) * C:  # raster order: the row without a division
+                i += 1
+            j = f - i * C
+            a = labf[f]
+            # a ground neighbour (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)?
+            up = i - 1 if i > 0 else (R - 1 if cyc else -1)
+            dn = i + 1 if i + 1 < R else (0 if cyc else -1)
+            if (
+                (j + 1 < C and labels[i, j + 1] == 0)
+                or (j > 0 and labels[i, j - 1] == 0)
+                or (dn >= 0 and j > 0 and labels[dn, j - 1] == 0)
+                or (up >= 0 and j + 1 < C and labels[up, j + 1] == 0)
+            ):
+                bi_[nbd] = i
+                bj_[nbd] = j
+                nbd += 1
+            if a != ca:  # a run of one label: its sums in registers, the same order
+                if ca:
+                    hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
+                ca = a
+                chi, clo, csm, cfill = hi[a], lo[a], sm[a], fill[a]
+            chi = _max_nan(chi, zmax[i, j])
+            clo = _min_nan(clo, zmin[i, j])
+            zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
+            csm += zm
+            zs[cfill] = zm
+            cfill += 1
+        if ca:
+            hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
         # lift over the adjacent ground, the sums in the twin's pair order (per offset: the
         # pairs inside the array in raster order, then the ones across the seam)
         cnt_g = np.zeros(n + 1, np.int64)
@@ -298,55 +402,54 @@ def split_kernel(  # type: ignore[no-untyped-def]
             m2 += 1
             lut[a] = m2
         for k in range(nt):
-            i, j = ti_[k], tj_[k]
-            a = lab[i, j]
+            f = obf[k]
+            a = labf[f]
             if lut[a] == 0:
-                labels[i, j] = 0
-                cls[i * C + j] = _GROUND
+                labels[f // C, f % C] = 0
+                cls[f] = _GROUND
                 dropped_any = True
-            lab[i, j] = lut[a]
+            labf[f] = lut[a]
         if dropped_any:  # the dropped triangles join the ground around them
             nb = np.empty(4, np.int64)
             for k in range(nt):
-                i, j = ti_[k], tj_[k]
-                f = i * C + j
+                f = obf[k]
                 if cls[f] != _GROUND:
                     continue
-                for q in range(_neighbours(i, j, R, C, wrap, nb)):
+                i = f // C
+                for q in range(_neighbours(i, f - i * C, R, C, wrap, nb)):
                     if cls[nb[q]] == _GROUND:
                         _union(parent, f, nb[q])
         n = m2
         if n >= 2 and gap >= 1 and distance_m > 0:
-            lab, n = _merge_close(lab, n, P, wrap, distance_m, gap)
+            lab, n = _merge_close_rows(lab, n, P, wrap, distance_m, gap)
     # ground components: the main ground zones (>= main_share of the largest one's triangles)
     # and each triangle's code for stage 7 (class flag, main ground)
-    ground_size = np.zeros(R * C, np.int32)
     big = 0
     for f in range(R * C):
         if cls[f] == _GROUND:
-            r = _find(parent, f)
+            r = parent[parent[f]]  # the unions above keep parent[x] <= x and roots smallest
             parent[f] = r
-            ground_size[r] += 1
+            if r == f:
+                ground_size[f] = 1
+            else:
+                ground_size[r] += 1
             big = max(big, ground_size[r])
     thr = main_share * big
     tcode = np.empty((R, C), np.int8)
+    tflat = tcode.ravel()
+    # the flag of classes -4 .. 0 (shadow behind, side shadow, obstacle, unreliable, ground)
+    flag = np.array([2, 4, 8, 0, 1], np.int8)
     for i in range(R):
         for j in range(C):
             t = labels[i, j]
-            if t == 0:
-                tcode[i, j] = _MAIN if ground_size[parent[i * C + j]] >= thr else 1
-            elif t == -4:
-                tcode[i, j] = 2
-            elif t == -3:
-                tcode[i, j] = 4
-            elif t == -2:
-                tcode[i, j] = 8
-            else:
-                tcode[i, j] = 0
-    owner = np.zeros((R, C), np.int32)
+            f = i * C + j
+            code = flag[t + 4] if (t >= -4) & (t <= 0) else np.int8(0)
+            if t == 0 and ground_size[parent[f]] >= thr:
+                code = _MAIN
+            tflat[f] = code
     tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
     if ns == 0 or n == 0:
-        return lab, n, owner, tri_obstacle, tcode
+        return lab, n, tri_obstacle, tcode
     # shadow owners: per shadow zone, the obstacle it shares the most adjacencies with (ties:
     # the larger id, as the twin's stable lexsort)
     nobs = n + 1
@@ -357,9 +460,10 @@ def split_kernel(  # type: ignore[no-untyped-def]
     nb = np.empty(4, np.int64)
     labf = lab.ravel()
     for t in range(nsh):
-        i, j = sh_i[t], sh_j[t]
-        z = sl[i, j]
-        for q in range(_neighbours(i, j, R, C, wrap, nb)):
+        f = shf[t]
+        i = f // C
+        z = sl[f]
+        for q in range(_neighbours(i, f - i * C, R, C, wrap, nb)):
             b = labf[nb[q]]
             if b <= 0:
                 continue
@@ -391,11 +495,11 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 best_count[z] = run
                 best[z] = b
             run = 1
+    trif = tri_obstacle.ravel()
     for t in range(nsh):
-        i, j = sh_i[t], sh_j[t]
-        owner[i, j] = best[sl[i, j]]
-        tri_obstacle[i, j] = owner[i, j]
-    return lab, n, owner, tri_obstacle, tcode
+        f = shf[t]
+        trif[f] = best[sl[f]]
+    return lab, n, tri_obstacle, tcode
 
 
 # ------------------------------------------------------------------------------------------
@@ -409,67 +513,49 @@ def vertex_kernel(tcode, obs_lab, valid, wrap):  # type: ignore[no-untyped-def]
     (``segment._incident_slices``' order; a missing triangle counts as obstacle id 0, no class,
     not main ground) in stage 6's codes ``tcode`` (:func:`split_kernel`). Returns ``vid,
     boundary, vertex labels, main ground vertices`` and the flat indices of the main ground
-    vertices labelled ground (the ground-height reference, raster order)."""
+    vertices labelled ground (the ground-height reference, raster order). Row by row on the
+    row windows (:func:`_window_ids`): no branch per triangle, the class from a table of the
+    16 flag combinations."""
     n_az, n_el = valid.shape
-    R = tcode.shape[0]
-    C = tcode.shape[1] // 2
-    vid = np.zeros((n_az, n_el), np.int32)
-    bnd = np.zeros((n_az, n_el), np.bool_)
+    R, W = tcode.shape
+    vid = np.empty((n_az, n_el), np.int32)
+    bnd = np.empty((n_az, n_el), np.bool_)
     vlab = np.empty((n_az, n_el), np.int8)
-    main = np.zeros((n_az, n_el), np.bool_)
+    main = np.empty((n_az, n_el), np.bool_)
     ref = np.empty(n_az * n_el, np.int64)
+    # the class of a valid vertex from the flags of its triangles: obstacle, ground, shadow
+    # behind, side shadow, else unreliable
+    table = np.empty(32, np.int8)
+    for fl in range(32):
+        table[fl] = -2 if fl & 8 else (0 if fl & 1 else (-4 if fl & 2 else (-3 if fl & 4 else -1)))
+    zero_i = np.zeros(W, obs_lab.dtype)
+    zero_c = np.zeros(W, tcode.dtype)
+    C = W // 2
     nref = 0
     for p in range(n_az):
-        rp = p if p < R else -1
         rm = p - 1 if p >= 1 else (R - 1 if wrap else -1)
+        rowp = obs_lab[p] if p < R else zero_i
+        rowm = obs_lab[rm] if rm >= 0 else zero_i
+        _window_ids(vid, bnd, p, rowp, rowm, n_el)
+        cp = tcode[p] if p < R else zero_c
+        cm = tcode[rm] if rm >= 0 else zero_c
         for q in range(n_el):
-            c0 = 2 * q if q < C else -1
-            cm = 2 * (q - 1) if q >= 1 else -1
-            flags = 0
-            hi = 0
-            lo = 0
-            for k in range(6):
-                if k == 0:
-                    r, c = rp, c0
-                elif k == 1:
-                    r, c = rp, cm
-                elif k == 2:
-                    r, c = rm, c0
-                elif k == 3:
-                    r, c = rm, c0 + 1
-                elif k == 4:
-                    r, c = rp, cm + 1
-                else:
-                    r, c = rm, cm + 1
-                v = 0
-                if r >= 0 and c >= 0 and (k < 3 or c > 0 or (k == 3 and c0 >= 0)):
-                    v = obs_lab[r, c]
-                    flags |= tcode[r, c]
-                if k == 0:
-                    hi = v
-                    lo = v
-                else:
-                    hi = max(hi, v)
-                    lo = min(lo, v)
-            vid[p, q] = hi
-            bnd[p, q] = hi > 0 and lo != hi
+            if q >= 1 and q < C:
+                flags = (cp[2 * q - 2] | cp[2 * q - 1] | cp[2 * q]) | (
+                    cm[2 * q - 1] | cm[2 * q] | cm[2 * q + 1]
+                )
+            elif q == 0:
+                flags = cp[0] | cm[0] | cm[1]
+            else:
+                flags = cp[2 * q - 2] | cp[2 * q - 1] | cm[2 * q - 1]
+            ok = valid[p, q]
             is_main = (flags & 16) != 0
             main[p, q] = is_main
-            if not valid[p, q]:
-                vlab[p, q] = -1
-            elif flags & 8:
-                vlab[p, q] = -2
-            elif flags & 1:
-                vlab[p, q] = 0
-                if is_main:
-                    ref[nref] = p * n_el + q
-                    nref += 1
-            elif flags & 2:
-                vlab[p, q] = -4
-            elif flags & 4:
-                vlab[p, q] = -3
-            else:
-                vlab[p, q] = -1
+            cl = table[flags & 15] if ok else np.int8(-1)
+            vlab[p, q] = cl
+            # main ground vertices labelled ground: the ground-height reference, raster order
+            ref[nref] = p * n_el + q
+            nref += 1 if (is_main & (cl == 0)) else 0
     return vid, bnd, vlab, main, ref[:nref]
 
 
@@ -527,12 +613,13 @@ def ground_cells_kernel(P, sel, cell_m, quantile):  # type: ignore[no-untyped-de
 
 
 @njit(cache=True, error_model="numpy")
-def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ignore[no-untyped-def]
+def map_groups_kernel(flat, tri, labels, tri_obstacle, vid, boundary, n):  # type: ignore[no-untyped-def]
     """Boundary vertices ``(x, y)``, all vertices ``(x, y, z)`` and shadow vertex sets
     ``(x, y)`` of obstacles 1..n in CSR layouts (each with offsets ``(n + 1,)``), the shadow
     areas and the triangle counts, in the twin's orders (vertices in raster order; a shadow
     set's vertices sorted by index, each once; areas summed in raster order). Two passes over
-    the vertices and one over the triangles."""
+    the vertices and one over the triangles; the triangles' obstacles and shadow owners are
+    read from ``tri_obstacle`` (:func:`split_kernel`) with the classes ``labels``."""
     vf = vid.ravel()
     bf = boundary.ravel()
     nv = len(vf)
@@ -566,7 +653,7 @@ def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ign
                 b_xy[q, 1] = flat[k, 1]
                 bfill[a - 1] = q + 1
     # triangles: counts per obstacle, shadow areas and the shadow triangles (raster order)
-    R, C2 = owner.shape
+    R, C2 = tri_obstacle.shape
     ntri = np.zeros(n + 1, np.int64)
     area = np.zeros(n + 1)
     t_cnt = np.zeros(n + 1, np.int64)
@@ -574,9 +661,14 @@ def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ign
     ns = 0
     for r in range(R):
         for c in range(C2):
-            ntri[obs_lab[r, c]] += 1
-            a = owner[r, c]
-            if a > 0:
+            b = tri_obstacle[r, c]
+            if b <= 0:
+                continue
+            t = labels[r, c]
+            if t == -2:  # an obstacle triangle
+                ntri[b] += 1
+            elif t == -3 or t == -4:  # a shadow triangle and its owner
+                a = b
                 t_cnt[a] += 1
                 sh[ns] = r * C2 + c
                 ns += 1
@@ -591,7 +683,7 @@ def map_groups_kernel(flat, tri, obs_lab, owner, vid, boundary, n):  # type: ign
         t_off[a + 1] = t_off[a] + 3 * t_cnt[a]
     fill = t_off.copy()
     verts = np.empty(3 * ns, np.int64)
-    ownf = owner.ravel()
+    ownf = tri_obstacle.ravel()
     for k in range(ns):
         t = sh[k]
         a = ownf[t]

@@ -302,7 +302,7 @@ def _detect_from_stage_1(
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
     compiled = settings.backend == "compiled"
     if compiled:
-        obs_lab, n, owner, tri_obstacle, tcode = _compiled_split(labels, mesh, P, wrap, settings)
+        obs_lab, n, tri_obstacle, tcode = _compiled_split(labels, mesh, P, wrap, settings)
     else:
         obs_lab, n, owner = _split(labels, mesh, P, wrap, settings)
         tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
@@ -316,9 +316,14 @@ def _detect_from_stage_1(
     clock.lap("boundaries")
 
     # stage 8: the 2D map - bounding shapes of every obstacle
-    obstacles = _build_obstacles(
-        P, mesh.triangles, labels, obs_lab, owner, vid, boundary, n, settings
-    )
+    if compiled:
+        obstacles = _build_compiled(
+            P, mesh.triangles, labels, tri_obstacle, vid, boundary, n, settings
+        )
+    else:
+        obstacles = _build_obstacles(
+            P, mesh.triangles, labels, obs_lab, owner, vid, boundary, n, settings
+        )
     clock.lap("map")
     log.debug("obstacle detection: %d obstacles, timings %s", len(obstacles), clock.wall)
     return ObstacleDetection(
@@ -386,14 +391,21 @@ def _compiled_split(
     P: NDArray[np.float64],
     wrap: bool,
     settings: ObstacleSettings,
-) -> tuple[NDArray[np.int32], int, NDArray[np.int32], NDArray[np.int32], NDArray[np.int8]]:
+) -> tuple[NDArray[np.int32], int, NDArray[np.int32], NDArray[np.int8]]:
     """Stage 6 in one kernel (:func:`navkit.obstacles._kernels_map.split_kernel`), same answers;
-    also returns the triangles' obstacle ids with the shadows' owners, and each triangle's code
+    returns the obstacle ids, their number, the triangles' obstacle ids with the shadows'
+    owners (the twin's separate ``owner`` array is not built), and each triangle's code
     for stage 7 (class, main ground zone: the ground components come from the same union-find
     as the obstacle and shadow components)."""
     from navkit.obstacles import _kernels_map
+    from navkit.obstacles._buffers import cached_work
 
-    obs_lab, n, owner, tri_obstacle, tcode = _kernels_map.split_kernel(
+    R, C = labels.shape
+    work_i8, work_i32 = cached_work(
+        ("split", R, C),
+        lambda: [np.empty(R * C, np.int8), np.empty((6, R * C), np.int32)],
+    )
+    obs_lab, n, tri_obstacle, tcode = _kernels_map.split_kernel(
         labels,
         mesh.z_min.astype(np.float32, copy=False),
         mesh.z_max.astype(np.float32, copy=False),
@@ -405,8 +417,10 @@ def _compiled_split(
         float(settings.merge_distance_m),
         int(settings.merge_gap_cells),
         MAIN_GROUND_SHARE,
+        work_i8,
+        work_i32,
     )
-    return obs_lab, int(n), owner, tri_obstacle, tcode
+    return obs_lab, int(n), tri_obstacle, tcode
 
 
 def _vertices(
@@ -547,15 +561,6 @@ def _build_obstacles(
     if n == 0:
         return []
     flat = P.reshape(-1, 3)
-    if settings.backend == "compiled":
-        from navkit.obstacles import _kernels_map
-
-        b_off, b_xy, v_off, v_xyz, s_off, s_xy, shadow_area, ntri = _kernels_map.map_groups_kernel(
-            flat, tri, obs_lab, owner, vid, boundary, n
-        )
-        return _assemble_compiled(
-            b_xy, b_off, v_xyz, v_off, s_xy, s_off, shadow_area, ntri, settings
-        )
     # boundary vertices per obstacle
     bmask = boundary.ravel()
     bxy = _group(vid.ravel()[bmask].astype(np.int64), flat[bmask, :2], n)
@@ -578,6 +583,29 @@ def _build_obstacles(
     shadow_area = np.bincount(sh_ids, weights=area, minlength=n + 1)[1:]
     ntri = np.bincount(obs_lab.ravel(), minlength=n + 1)[1:]
     return _assemble_obstacles(bxy, vxyz, sxy, shadow_area, ntri, n, settings)
+
+
+def _build_compiled(
+    P: NDArray[np.float64],
+    tri: NDArray[np.int64],
+    labels: NDArray[np.int8],
+    tri_obstacle: NDArray[np.int32],
+    vid: NDArray[np.int32],
+    boundary: NDArray[np.bool_],
+    n: int,
+    settings: ObstacleSettings,
+) -> list[Obstacle]:
+    """:func:`_build_obstacles` on the compiled backend: the groupings in one kernel
+    (:func:`navkit.obstacles._kernels_map.map_groups_kernel`, on stage 6's ``tri_obstacle``),
+    then :func:`_assemble_compiled`; the same obstacles."""
+    if n == 0:
+        return []
+    from navkit.obstacles import _kernels_map
+
+    b_off, b_xy, v_off, v_xyz, s_off, s_xy, shadow_area, ntri = _kernels_map.map_groups_kernel(
+        P.reshape(-1, 3), tri, labels, tri_obstacle, vid, boundary, n
+    )
+    return _assemble_compiled(b_xy, b_off, v_xyz, v_off, s_xy, s_off, shadow_area, ntri, settings)
 
 
 def _assemble_obstacles(
@@ -659,22 +687,29 @@ def _assemble_compiled(
     n_points = np.diff(v_off).tolist()
     n_tri = ntri.tolist()
     area = shadow_area.tolist()
-    return [
-        Obstacle(
+    bo, ho, go = b_off.tolist(), hoff.tolist(), g_off.tolist()
+    # the records without the frozen dataclass's ``__init__`` (its per-field
+    # ``object.__setattr__`` is ~5x the cost of filling ``__dict__``; Obstacle has no
+    # ``__post_init__``), as the shapes' records (``geometry.shapes._ellipses``)
+    new = object.__new__
+    out = []
+    for k in range(n):
+        o = new(Obstacle)
+        o.__dict__.update(
             id=k + 1,
             n_triangles=n_tri[k],
             n_points=n_points[k],
             z_min=z_min[k],
             z_max=z_max[k],
-            boundary_xy=b_xy[b_off[k] : b_off[k + 1]],
-            polygon_xy=H[hoff[k] : hoff[k + 1]],
-            shadow_xy=g_xy[g_off[k] : g_off[k + 1]],
+            boundary_xy=b_xy[bo[k] : bo[k + 1]],
+            polygon_xy=H[ho[k] : ho[k + 1]],
+            shadow_xy=g_xy[go[k] : go[k + 1]],
             shadow_area=area[k],
             shapes=shapes[k],
             guaranteed=guaranteed[k],
         )
-        for k in range(n)
-    ]
+        out.append(o)
+    return out
 
 
 def detect_obstacles(
