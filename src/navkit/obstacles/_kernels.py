@@ -1456,48 +1456,6 @@ def boundary_kernel(obstacle_id, n_az, n_el, wrap):  # type: ignore[no-untyped-d
 
 
 @njit(cache=True)
-def _merge_close(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped-def]
-    """``segment.merge_close_components`` (a union-find on the obstacle ids)."""
-    n_az, n_el = P.shape[0], P.shape[1]
-    vid, bnd = boundary_kernel(obs_lab, n_az, n_el, wrap)
-    parent = np.arange(n + 1).astype(np.int64)
-    merged = False
-    for si in range(n_az):
-        for sj in range(n_el):
-            if not bnd[si, sj]:
-                continue
-            va = vid[si, sj]
-            for di in range(0, gap + 1):
-                for dj in range(-gap, gap + 1):
-                    if di == 0 and dj <= 0:
-                        continue
-                    ti, tj = si + di, sj + dj
-                    if tj < 0 or tj >= n_el:
-                        continue
-                    if ti >= n_az:
-                        if not wrap:
-                            continue
-                        ti = ti % n_az
-                    vb = vid[ti, tj]
-                    if vb <= 0 or vb == va:
-                        continue
-                    dx = P[si, sj, 0] - P[ti, tj, 0]
-                    dy = P[si, sj, 1] - P[ti, tj, 1]
-                    dz = P[si, sj, 2] - P[ti, tj, 2]
-                    if math.sqrt(dx * dx + dy * dy + dz * dz) < distance_m:
-                        _union(parent, va, vb)
-                        merged = True
-    if not merged:
-        return obs_lab, n
-    lut, m = _renumber_by_min(parent, n)
-    out = np.empty_like(obs_lab)
-    for i in range(obs_lab.shape[0]):
-        for j in range(obs_lab.shape[1]):
-            out[i, j] = lut[obs_lab[i, j]]
-    return out, m
-
-
-@njit(cache=True)
 def _kth(values, k):  # type: ignore[no-untyped-def]
     """The k-th smallest of ``values`` (0-based), by a selection in place (reorders them)."""
     lo, hi = 0, len(values) - 1

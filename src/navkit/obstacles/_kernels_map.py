@@ -85,7 +85,7 @@ def _window_ids(vid, bnd, p, rowp, rowm, n_el):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def _boundary_ids(obs_lab, n_az, n_el, wrap):  # type: ignore[no-untyped-def]
-    """``segment.boundary_vertices`` (as ``_kernels.boundary_kernel``), row by row: obstacle
+    """``segment.boundary_vertices``, row by row: obstacle
     id per vertex (the largest incident) and boundary."""
     R, W = obs_lab.shape
     vid = np.empty((n_az, n_el), np.int32)
@@ -101,7 +101,7 @@ def _boundary_ids(obs_lab, n_az, n_el, wrap):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped-def]
-    """``segment.merge_close_components`` (as ``_kernels._merge_close``: a union-find on the
+    """``segment.merge_close_components`` (a union-find on the
     obstacle ids; the components do not depend on the order of the unions) with the boundary
     vertices from :func:`_boundary_ids`. ``obs_lab`` (C-contiguous) is relabelled in place."""
     n_az, n_el = P.shape[0], P.shape[1]
