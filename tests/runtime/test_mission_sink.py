@@ -170,3 +170,17 @@ def test_mission_rrd_loads_back(sunk):
         timeout=300,
     )
     assert res.returncode == 0, res.stderr
+
+
+@pytest.mark.parametrize("command", [("demo", "--small"), ("run", "RECORDING")])
+def test_a_rerun_save_that_is_not_an_rrd_file_is_refused_before_the_run(cli, tmp_path, command):
+    """A typo in --rerun-save costs nothing: exit 2 naming the option, nothing written."""
+    args = [tmp_path / "rec.tum" if a == "RECORDING" else a for a in command]
+    if command[0] == "run":
+        (tmp_path / "rec.tum").write_text("0 0 0 0 0 0 0 1\n1 1 0 0 0 0 0 1\n")
+    for bad in (tmp_path / "view.txt", tmp_path):
+        out = tmp_path / "out"
+        r = cli(*args, "--rerun-save", bad, "-o", out)
+        assert r.exit_code == 2, r.output
+        assert "--rerun-save" in r.output
+        assert not out.exists() or not any(out.iterdir())

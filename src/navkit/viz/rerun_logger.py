@@ -28,9 +28,9 @@ from typing import Any
 
 import numpy as np
 
-from navkit.errors import require_module
+from navkit.errors import ConfigError, require_module
 
-__all__ = ["CLASS_COLORS", "RerunLogger"]
+__all__ = ["CLASS_COLORS", "RerunLogger", "check_rrd_path"]
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +47,19 @@ def _entity(topic: str) -> str:
     return "world/" + topic.strip("/").replace("navkit/", "")
 
 
+def check_rrd_path(save: str | os.PathLike[str]) -> Path:
+    """``save`` as the path of a Rerun recording: a file name ending in ``.rrd`` that is not a
+    folder (checked before a run starts, so a typo costs nothing)."""
+    p = Path(save)
+    if p.suffix.lower() != ".rrd":
+        raise ConfigError(
+            f"is {str(save)!r}", field="--rerun-save", expected="a file name ending in .rrd"
+        )
+    if p.is_dir():
+        raise ConfigError(f"{p} is a folder", field="--rerun-save", expected="an .rrd file path")
+    return p
+
+
 class RerunLogger:
     """Send a run to the Rerun viewer (``spawn``) and/or record it to an ``.rrd`` file (``save``)."""
 
@@ -57,6 +70,8 @@ class RerunLogger:
         application_id: str = "navkit",
         shapes: tuple[str, ...] = ("A1", "A6"),
     ) -> None:
+        if save is not None:
+            check_rrd_path(save)
         rr = require_module("rerun", "rerun", "viewing a run in Rerun (--rerun / --rerun-save)")
         self.rr = rr
         self.rec = rr.RecordingStream(application_id)
