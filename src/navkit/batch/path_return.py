@@ -43,6 +43,7 @@ __all__ = [
     "RUNS_PER_TASK",
     "ReturnSweepSettings",
     "collect_returns",
+    "read_return_path",
     "return_runs_job",
     "return_sweep_tasks",
     "run_rng",
@@ -73,16 +74,12 @@ def run_rng(seed: int, run: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence([int(seed), int(run)]))
 
 
-def return_runs_job(
-    out_dir: Path, *, path_json: str, first: int, count: int, settings: ReturnSweepSettings
-) -> dict[str, Any]:
-    """Simulate runs ``first .. first + count - 1`` of a sweep in lock-step, one stream per run:
-    write ``runs.json`` and ``true_xy.npy``; their figures (one list entry per run)."""
+def read_return_path(path_json: str) -> Any:
+    """The stored path a return drives back along (a ``path.json``, local or an fsspec URL);
+    :class:`~navkit.errors.ConfigError` when it has no length to drive."""
     from navkit.errors import ConfigError
-    from navkit.io.atomic import atomic_path, write_json
     from navkit.io.pathjson import read_path_json
     from navkit.io.urls import local_copy
-    from navkit.sim.return_sim import simulate_returns
 
     with local_copy(path_json) as local:
         spline = read_path_json(local)
@@ -93,6 +90,18 @@ def return_runs_job(
             field="segments",
             expected="at least one segment of positive length",
         )
+    return spline
+
+
+def return_runs_job(
+    out_dir: Path, *, path_json: str, first: int, count: int, settings: ReturnSweepSettings
+) -> dict[str, Any]:
+    """Simulate runs ``first .. first + count - 1`` of a sweep in lock-step, one stream per run:
+    write ``runs.json`` and ``true_xy.npy``; their figures (one list entry per run)."""
+    from navkit.io.atomic import atomic_path, write_json
+    from navkit.sim.return_sim import simulate_returns
+
+    spline = read_return_path(path_json)
     run_ids = list(range(first, first + count))
     sim = simulate_returns(
         spline,

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import typer
 
-from navkit.cli.common import cli_errors, progress, write_run_files
+from navkit.cli.common import RERUN, RERUN_SAVE, cli_errors, progress, write_run_files
 
 log = logging.getLogger(__name__)
 
@@ -47,14 +47,8 @@ def register(app: typer.Typer) -> None:
         y: float = typer.Option(None, "--y", help="Robot y (m); default: the world's start."),  # type: ignore[assignment]
         heading_deg: float = typer.Option(None, "--heading-deg", help="Robot heading (deg)."),  # type: ignore[assignment]
         small: bool = typer.Option(False, "--small", help="Low resolution (fast; for tests)."),
-        rerun: bool = typer.Option(
-            False, "--rerun", help="Stream the mission to the Rerun viewer (extra 'rerun')."
-        ),
-        rerun_save: Path | None = typer.Option(
-            None,
-            "--rerun-save",
-            help="Record the mission to this .rrd file for the Rerun viewer (headless).",
-        ),
+        rerun: bool = RERUN,
+        rerun_save: Path | None = RERUN_SAVE,
     ) -> None:
         """Run the built-in mission (out, map, localize, come back) into report.html, metrics.json
         and maps; then save a picture of every simulated sensor at the start, with the truth.

@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
+from navkit.cli.common import RERUN, RERUN_SAVE
 
 mission_app = typer.Typer(
     help="The integrated mission: out, map, localize, come back.", no_args_is_help=True
@@ -48,14 +49,8 @@ def run(
     ),
     seed: int = typer.Option(None, "--seed", help="Seed of every random draw."),  # type: ignore[assignment]
     small: bool = typer.Option(False, "--small", help="Reduced sensor resolutions (quick runs)."),
-    rerun: bool = typer.Option(
-        False, "--rerun", help="Stream the mission to the Rerun viewer (extra 'rerun')."
-    ),
-    rerun_save: Path | None = typer.Option(
-        None,
-        "--rerun-save",
-        help="Record the mission to this .rrd file for the Rerun viewer (headless).",
-    ),
+    rerun: bool = RERUN,
+    rerun_save: Path | None = RERUN_SAVE,
 ) -> None:
     """Drive the robot out along the route, map, localize, lose the link, come back; write
     report.html, metrics.json, trajectories (TUM), path.json, the obstacle map (PGM+YAML) and

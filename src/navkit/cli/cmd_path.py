@@ -234,12 +234,11 @@ def return_(
         from navkit.batch.path_return import (
             ReturnSweepSettings,
             collect_returns,
+            read_return_path,
             return_sweep_tasks,
         )
         from navkit.errors import ConfigError
         from navkit.io.atomic import write_json
-        from navkit.io.pathjson import read_path_json
-        from navkit.io.urls import local_copy
         from navkit.path.control import ReturnSettings
         from navkit.sensors import VisualOdometryNoise
         from navkit.sim.return_sim import simulate_returns
@@ -247,15 +246,7 @@ def return_(
 
         if runs < 1:
             raise ConfigError(f"is {runs}", field="--runs", expected="at least 1")
-        with local_copy(path_json) as local:
-            spline = read_path_json(local)
-        if spline.n_segments == 0 or spline.total_length <= 0:
-            raise ConfigError(
-                "the stored path has zero length",
-                source=path_json,
-                field="segments",
-                expected="at least one segment of positive length",
-            )
+        spline = read_return_path(path_json)
         vo = VisualOdometryNoise(
             rate_hz=vo_rate_hz,
             scale_bias=vo_scale_bias,

@@ -10,7 +10,7 @@ from typing import Any
 
 import typer
 
-from navkit.cli.common import STATE, check_out_dir, cli_errors
+from navkit.cli.common import RERUN, RERUN_SAVE, STATE, check_out_dir, cli_errors
 
 log = logging.getLogger(__name__)
 
@@ -65,14 +65,8 @@ def run_cmd(
     resume: bool = typer.Option(
         False, "--resume", help="Continue a killed run from its last checkpoint."
     ),
-    rerun: bool = typer.Option(
-        False, "--rerun", help="Stream the run to the Rerun viewer (extra 'rerun')."
-    ),
-    rerun_save: Path | None = typer.Option(
-        None,
-        "--rerun-save",
-        help="Record the run to this .rrd file for the Rerun viewer (headless).",
-    ),
+    rerun: bool = RERUN,
+    rerun_save: Path | None = RERUN_SAVE,
     intrinsics: str | None = typer.Option(
         None, "--intrinsics", help="RGB-D folders without intrinsics: FX,FY,CX,CY (pixels)."
     ),

@@ -374,6 +374,15 @@ def _progress_line(description: str, done: int, total: int | None, elapsed_s: fl
     )
 
 
+RERUN = typer.Option(False, "--rerun", help="Stream the run to the Rerun viewer (extra 'rerun').")
+RERUN_SAVE = typer.Option(
+    None,
+    "--rerun-save",
+    help="Record the run to this .rrd file for the Rerun viewer (headless).",
+)
+"""``--rerun`` / ``--rerun-save FILE.rrd`` of ``navkit run``, ``demo`` and ``mission run``."""
+
+
 def check_out_dir(out: Path, overwrite: bool) -> Path:
     """Make ``out`` ready for a command's outputs; refuse to replace earlier ones silently.
 

@@ -160,18 +160,9 @@ class PoseBuffer:
         buf = self.poses.get(topic)
         if not topic or not buf:
             return None
-        stamps = [s for s, _ in buf]
-        i = int(np.searchsorted(stamps, stamp_ns))
-        if i < len(stamps) and stamps[i] == stamp_ns:
-            return buf[i][1]
-        if i == 0:
-            return buf[0][1]
-        if i >= len(stamps):
-            return buf[-1][1]
-        (s0, T0), (s1, T1) = buf[i - 1], buf[i]
-        from navkit.runtime.tf import interpolate_pose
+        from navkit.runtime.tf import pose_at
 
-        return interpolate_pose(s0, T0, s1, T1, stamp_ns)
+        return pose_at(buf, stamp_ns)
 
 
 # --------------------------------------------------------------------------- obstacles

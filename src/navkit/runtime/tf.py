@@ -17,11 +17,12 @@ from __future__ import annotations
 
 import logging
 from collections import deque
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["TransformTree", "interpolate_pose"]
+__all__ = ["TransformTree", "interpolate_pose", "pose_at"]
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +42,22 @@ def interpolate_pose(
     T[:3, :3] = rot.as_matrix()[0]
     T[:3, 3] = (1 - w) * T0[:3, 3] + w * T1[:3, 3]
     return T
+
+
+def pose_at(buf: Any, stamp_ns: int) -> NDArray[np.float64]:
+    """The pose of a time-ordered, non-empty buffer of ``(stamp_ns, T)`` at ``stamp_ns``: exact
+    where a stamp matches, interpolated between neighbours (:func:`interpolate_pose`), held at the
+    first / last pose outside the buffer's span."""
+    stamps = [s for s, _ in buf]
+    i = int(np.searchsorted(stamps, stamp_ns))
+    if i < len(stamps) and stamps[i] == stamp_ns:
+        return buf[i][1]  # type: ignore[no-any-return]
+    if i == 0:
+        return buf[0][1]  # type: ignore[no-any-return]
+    if i >= len(stamps):
+        return buf[-1][1]  # type: ignore[no-any-return]
+    (s0, T0), (s1, T1) = buf[i - 1], buf[i]
+    return interpolate_pose(s0, T0, s1, T1, stamp_ns)
 
 
 class TransformTree:
@@ -89,17 +106,7 @@ class TransformTree:
     def _edge(self, child: str, stamp_ns: int) -> NDArray[np.float64]:
         if child in self.static:
             return self.static[child]
-        buf = self.dynamic[child]
-        stamps = [s for s, _ in buf]
-        i = int(np.searchsorted(stamps, stamp_ns))
-        if i < len(stamps) and stamps[i] == stamp_ns:
-            return buf[i][1]
-        if i == 0:
-            return buf[0][1]
-        if i >= len(stamps):
-            return buf[-1][1]
-        (s0, T0), (s1, T1) = buf[i - 1], buf[i]
-        return interpolate_pose(s0, T0, s1, T1, stamp_ns)
+        return pose_at(self.dynamic[child], stamp_ns)
 
     def _chain(self, frame: str) -> list[str]:
         """``frame`` and its ancestors, up to the root."""
