@@ -82,6 +82,7 @@ class RerunLogger:
             self.rec.spawn(connect=save is None)
         self.save = save
         self.shapes = set(shapes)
+        self._axes: set[str] = set()
         self._lut = np.zeros((256, 3), dtype=np.uint8)
         for k, c in CLASS_COLORS.items():
             self._lut[k & 0xFF] = c
@@ -107,10 +108,15 @@ class RerunLogger:
         rr = self.rr
         T = np.asarray(T, dtype=np.float64)
         self.rec.log(entity, rr.Transform3D(translation=T[:3, 3], mat3x3=T[:3, :3]))
-        self.rec.log(
-            entity + "/axes",
-            rr.Arrows3D(vectors=np.eye(3) * 0.5, colors=[(255, 0, 0), (0, 255, 0), (0, 0, 255)]),
-        )
+        if entity not in self._axes:  # the axes move with the transform: logged once, static
+            self._axes.add(entity)
+            self.rec.log(
+                entity + "/axes",
+                rr.Arrows3D(
+                    vectors=np.eye(3) * 0.5, colors=[(255, 0, 0), (0, 255, 0), (0, 0, 255)]
+                ),
+                static=True,
+            )
 
     def log_output(self, o: Any) -> None:
         """Show one :class:`~navkit.runtime.messages.Output`."""
