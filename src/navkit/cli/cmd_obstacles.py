@@ -146,6 +146,12 @@ ORIGIN_OPTION = typer.Option(
 )
 
 
+RINGS_OPTION = typer.Option(None, "--rings", help="Beams of a lidar cloud (default: recovered).")
+COLUMNS_OPTION = typer.Option(
+    None, "--columns", help="Azimuth columns of a lidar cloud (default: recovered)."
+)
+
+
 @obstacles_app.command("detect")
 def detect(
     ctx: typer.Context,
@@ -173,12 +179,8 @@ def detect(
     shapes: str | None = typer.Option(
         None, "--shapes", help="Shapes to compute, comma-separated (A1..A6, MEC, MVEE)."
     ),
-    rings: int | None = typer.Option(
-        None, "--rings", help="Beams of a lidar cloud (default: recovered)."
-    ),
-    columns: int | None = typer.Option(
-        None, "--columns", help="Azimuth columns of a lidar cloud (default: recovered)."
-    ),
+    rings: int | None = RINGS_OPTION,
+    columns: int | None = COLUMNS_OPTION,
     ring_method: str = typer.Option("auto", "--ring-method", help="auto, order or elevation."),
     intrinsics: str | None = typer.Option(
         None, "--intrinsics", help="Depth images: FX,FY,CX,CY (pixels)."

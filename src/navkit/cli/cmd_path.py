@@ -183,6 +183,15 @@ def _record_batch(
     )
 
 
+VO_SCALE_SIGMA = typer.Option(0.02, "--vo-scale-sigma", help="VO per-step relative scale noise.")
+VO_HEADING_SIGMA_DEG = typer.Option(
+    0.2, "--vo-heading-sigma-deg", help="VO per-step heading noise (deg)."
+)
+RUNS_PER_TASK = typer.Option(
+    25, "--runs-per-task", min=1, max=10_000, help="Runs simulated together in one task."
+)
+
+
 @path_app.command("return")
 def return_(
     path_json: str = typer.Argument(
@@ -195,13 +204,9 @@ def return_(
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
     vo_rate_hz: float = typer.Option(10.0, "--vo-rate-hz", help="VO (and control) rate (Hz)."),
-    vo_scale_sigma: float = typer.Option(
-        0.02, "--vo-scale-sigma", help="VO per-step relative scale noise."
-    ),
+    vo_scale_sigma: float = VO_SCALE_SIGMA,
     vo_scale_bias: float = typer.Option(0.0, "--vo-scale-bias", help="VO relative scale bias."),
-    vo_heading_sigma_deg: float = typer.Option(
-        0.2, "--vo-heading-sigma-deg", help="VO per-step heading noise (deg)."
-    ),
+    vo_heading_sigma_deg: float = VO_HEADING_SIGMA_DEG,
     vo_heading_bias_deg_per_m: float = typer.Option(
         0.0, "--vo-heading-bias-deg-per-m", help="VO heading drift (deg/m)."
     ),
@@ -210,9 +215,7 @@ def return_(
     stop_radius: float = typer.Option(
         0.05, "--stop-radius", help="Stop radius around the start (m)."
     ),
-    runs_per_task: int = typer.Option(
-        25, "--runs-per-task", min=1, max=10_000, help="Runs simulated together in one task."
-    ),
+    runs_per_task: int = RUNS_PER_TASK,
     workers: int | None = WORKERS,
     scheduler: str | None = SCHEDULER,
     resume: bool = RESUME,
@@ -238,11 +241,9 @@ def return_(
             return_sweep_tasks,
         )
         from navkit.errors import ConfigError
-        from navkit.io.atomic import write_json
         from navkit.path.control import ReturnSettings
         from navkit.sensors import VisualOdometryNoise
         from navkit.sim.return_sim import simulate_returns
-        from navkit.viz.path import plot_returns
 
         if runs < 1:
             raise ConfigError(f"is {runs}", field="--runs", expected="at least 1")
@@ -277,33 +278,52 @@ def return_(
         if sim is None:  # every run failed: the manifest says why, exit code 3
             typer.echo(f"no run completed -> {out / 'batch.jsonl'}", err=True)
             raise typer.Exit(code=EXIT_SOME_FAILED)
-        summary = {**sim.summary(), "failed_runs": bs["failed"], "rates": bs["rates"]}
-        write_json(
-            out / "returns.json",
-            {
-                **summary,
-                "start": sim.start,
-                "seeds": f"run i: numpy default_rng(SeedSequence([{seed}, i]))",
-                "runs_detail": detail,
-            },
-        )
-        plot_returns(spline, sim, out / "returns.png", stop_radius=stop_radius)
-        write_run_files(
-            out,
-            {"path": str(path_json), "runs": runs, "seed": seed, "vo": vo, "controller": ctrl},
-            {
-                "input": str(path_json),
-                **summary,
-                "reference": "simulator ground truth: the true final position of each simulated "
-                "return against the path's start",
-            },
-        )
-        typer.echo(
-            f"{summary['runs']} returns over L = {summary['path_length_m']:.3f} m: final error mean "
-            f"{summary['final_error_mean_pct']:.2f} %, p95 {summary['final_error_p95_pct']:.2f} % of L; "
-            f"lateral mean {summary['lateral_error_mean_m']:.3f} m -> {out / 'returns.json'}"
-        )
+        _write_returns(out, spline, sim, detail, bs, path_json, runs, seed, vo, ctrl)
     exit_if_failed(bs)
+
+
+def _write_returns(
+    out: Path,
+    spline: Any,
+    sim: Any,
+    detail: list[dict[str, Any]],
+    bs: dict[str, Any],
+    path_json: str,
+    runs: int,
+    seed: int,
+    vo: Any,
+    ctrl: Any,
+) -> None:
+    """``returns.json``, ``returns.png``, ``settings.toml`` / ``summary.json`` of a sweep."""
+    from navkit.io.atomic import write_json
+    from navkit.viz.path import plot_returns
+
+    summary = {**sim.summary(), "failed_runs": bs["failed"], "rates": bs["rates"]}
+    write_json(
+        out / "returns.json",
+        {
+            **summary,
+            "start": sim.start,
+            "seeds": f"run i: numpy default_rng(SeedSequence([{seed}, i]))",
+            "runs_detail": detail,
+        },
+    )
+    plot_returns(spline, sim, out / "returns.png", stop_radius=ctrl.stop_radius)
+    write_run_files(
+        out,
+        {"path": str(path_json), "runs": runs, "seed": seed, "vo": vo, "controller": ctrl},
+        {
+            "input": str(path_json),
+            **summary,
+            "reference": "simulator ground truth: the true final position of each simulated "
+            "return against the path's start",
+        },
+    )
+    typer.echo(
+        f"{summary['runs']} returns over L = {summary['path_length_m']:.3f} m: final error mean "
+        f"{summary['final_error_mean_pct']:.2f} %, p95 {summary['final_error_p95_pct']:.2f} % of L; "
+        f"lateral mean {summary['lateral_error_mean_m']:.3f} m -> {out / 'returns.json'}"
+    )
 
 
 @path_app.command("simulate")
@@ -317,12 +337,8 @@ def simulate(
         False, "--random-turns", help="Turn left or right at random."
     ),
     seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
-    vo_scale_sigma: float = typer.Option(
-        0.02, "--vo-scale-sigma", help="VO per-step relative scale noise."
-    ),
-    vo_heading_sigma_deg: float = typer.Option(
-        0.2, "--vo-heading-sigma-deg", help="VO per-step heading noise (deg)."
-    ),
+    vo_scale_sigma: float = VO_SCALE_SIGMA,
+    vo_heading_sigma_deg: float = VO_HEADING_SIGMA_DEG,
 ) -> None:
     """Drive a simulated robot (legs and turns, like the paper's experiment): true.tum and vo.tum.
 
