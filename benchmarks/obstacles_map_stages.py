@@ -12,16 +12,12 @@ per stage over the repeats after a warm-up. Prints a Markdown table. Not a ``ben
 from __future__ import annotations
 
 import argparse
-import json
-import os
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from benchmarks.obstacles_stages import ROOT, _extract
+from benchmarks.obstacles_stages import ROOT, _extract, _run
 
 _CHILD = r"""
 import json, resource, sys, time
@@ -74,18 +70,6 @@ print(json.dumps(out))
 """
 
 
-def _run_child(child: str, src: Path, repeats: int) -> dict[str, dict[str, float]]:
-    env = {**os.environ, "PYTHONPATH": str(src)}
-    res = subprocess.run(
-        [sys.executable, "-c", child, str(repeats)],
-        env=env,
-        capture_output=True,
-        text=True,
-        check=True,
-    )
-    return json.loads(res.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", default="4b98332")
@@ -96,8 +80,8 @@ def main() -> None:
         base_src = _extract(args.base, Path(tmp))
         runs: dict[str, list[dict[str, dict[str, float]]]] = {"before": [], "after": []}
         for _ in range(args.rounds):
-            runs["before"].append(_run_child(_CHILD, base_src, args.repeats))
-            runs["after"].append(_run_child(_CHILD, ROOT / "src", args.repeats))
+            runs["before"].append(_run(base_src, args.repeats, _CHILD))
+            runs["after"].append(_run(ROOT / "src", args.repeats, _CHILD))
     stages = ["split", "boundaries", "map"]
     print(f"before = {args.base}, after = this tree; CPU ms, median over {args.rounds} rounds")
     print(

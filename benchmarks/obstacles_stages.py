@@ -70,10 +70,11 @@ def _extract(rev: str, into: Path) -> Path:
     return into / "src"
 
 
-def _run(src: Path, repeats: int) -> dict[str, dict[str, float]]:
+def _run(src: Path, repeats: int, child: str = _CHILD) -> dict[str, dict[str, float]]:
+    """Run ``child`` (a timing script printing JSON last) on the navkit under ``src``."""
     env = {**os.environ, "PYTHONPATH": str(src)}
     res = subprocess.run(
-        [sys.executable, "-c", _CHILD, str(repeats)],
+        [sys.executable, "-c", child, str(repeats)],
         env=env,
         capture_output=True,
         text=True,
