@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
+
+# The tests compare the compiled kernels with their NumPy twins and pin results: every process
+# of the suite (and the CLI subprocesses it starts) runs the kernels, compiling on first use,
+# whatever the machine's cache holds (navkit.jit; tests/core/test_jit.py tests the policy).
+os.environ.setdefault("NAVKIT_JIT", "eager")
 
 import numpy as np
 import pytest

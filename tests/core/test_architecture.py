@@ -10,10 +10,10 @@ from pathlib import Path
 import pytest
 
 SRC = Path(__file__).resolve().parents[2] / "src" / "navkit"
-CORE = {"errors", "geometry", "sensors", "timing", "datasets", "_version", "__init__"}
+CORE = {"errors", "geometry", "sensors", "timing", "datasets", "jit", "_version", "__init__"}
 CAPABILITIES = {"obstacles", "planes", "stereo", "localization", "path"}
 ALLOWED = {
-    "geometry": {"errors"},
+    "geometry": {"errors", "jit"},
     "sensors": {"errors", "geometry"},
     **{c: CORE for c in CAPABILITIES},  # and no other capability
     "io": CORE | CAPABILITIES,

@@ -41,6 +41,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from navkit.errors import InputError
 from navkit.geometry._validate import as_points
+from navkit.jit import resolve_backend
 
 __all__ = [
     "SHAPES",
@@ -446,7 +447,7 @@ def ellipses_a6_batch(
     *,
     max_iter: int = 120,
     rel_tol: float = 3e-3,
-    backend: str = "compiled",
+    backend: str = "auto",
 ) -> list[Ellipse]:
     """A6 for many point sets at once: a compass (pattern) search vectorised over the sets.
 
@@ -465,8 +466,7 @@ def ellipses_a6_batch(
     ``cos``, ``sin`` and ``exp`` from libm instead of NumPy's SIMD versions, which differ by an
     ulp - tested to give the same ellipses to 1e-9); ``"numpy"``: the batched search below.
     """
-    if backend not in ("compiled", "numpy"):
-        raise InputError(f"= {backend!r}", field="backend", expected="'compiled' or 'numpy'")
+    backend = resolve_backend(backend)
     n = len(hulls)
     if n == 0:
         return []
@@ -641,7 +641,7 @@ def mvee_batch(
     *,
     tol: float = 1e-3,
     max_iter: int = 2000,
-    backend: str = "compiled",
+    backend: str = "auto",
 ) -> list[Ellipse]:
     """Minimum-volume enclosing ellipses of many 2D sets (Khachiyan 1996; Todd & Yildirim 2007).
 
@@ -658,8 +658,7 @@ def mvee_batch(
     same steps; the weights' moments are summed in index order, so results agree with
     ``backend="numpy"`` to rounding); ``"numpy"``: the batched loop below.
     """
-    if backend not in ("compiled", "numpy"):
-        raise InputError(f"= {backend!r}", field="backend", expected="'compiled' or 'numpy'")
+    backend = resolve_backend(backend)
     n = len(hulls)
     if n == 0:
         return []
@@ -789,7 +788,7 @@ def compute_shapes(
     names: Sequence[str] = ("A1", "A2", "A3", "A4", "A5", "A6", "MEC", "MVEE"),
     *,
     are_hulls: bool = False,
-    backend: str = "compiled",
+    backend: str = "auto",
 ) -> list[dict[str, Any]]:
     """Every requested shape for every point set: a list of ``{name: shape}`` dicts.
 
@@ -811,8 +810,7 @@ def compute_shapes(
             field="point_sets",
             expected="a list of (N, 2) point arrays",
         )
-    if backend not in ("compiled", "numpy"):
-        raise InputError(f"= {backend!r}", field="backend", expected="'compiled' or 'numpy'")
+    backend = resolve_backend(backend)
     if backend == "compiled":
         sets = [as_points(p, 2) for p in point_sets]
         xy = np.concatenate(sets) if sets else np.empty((0, 2))

@@ -51,6 +51,7 @@ from numpy.typing import ArrayLike, NDArray
 from navkit.errors import ConfigError, InputError
 from navkit.geometry import wrap_angle
 from navkit.geometry._validate import as_points, check_settings
+from navkit.jit import resolve
 from navkit.localization.field import LikelihoodField, _pyramid
 
 __all__ = ["Ambiguity", "Fix", "MatcherSettings", "analyse_peak", "match_scan", "score_poses"]
@@ -277,7 +278,9 @@ class _Search:
     """
 
     batch = 2048  # nodes expanded per vectorised step of the depth-first search
-    compiled = True  # scores by navkit.localization._kernels.gather_sums (False: NumPy, the oracle)
+    # scores by navkit.localization._kernels (False: NumPy, the oracle; None: the process's policy,
+    # navkit.jit - each search resolves it into its own ``compiled`` when it is built)
+    compiled: bool | None = None
     beam = 64  # width of the beam search that seeds the lower bound (see run)
     breadth = 4096  # nodes: levels are expanded whole while they stay this small (see run)
     optimism = 0.03  # the first pass assumes a leaf within this fraction of the top bound
@@ -294,6 +297,7 @@ class _Search:
         levels: int | None = None,
         rot_groups: int = 0,
     ) -> None:
+        self.compiled = resolve(type(self).compiled)
         self.f = fld
         self.thetas = thetas
         self.base = base
@@ -829,7 +833,7 @@ def _fine_scores(
     """
     V = fld.cubic_grid()
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    if _Search.compiled:
+    if resolve(_Search.compiled):
         from navkit.localization import _kernels
 
         return _kernels.cubic_pose_scores(  # type: ignore[no-any-return]
@@ -877,7 +881,7 @@ def _bilinear_scores(
     ``(M, 3)``; compiled: :func:`navkit.localization._kernels.bilinear_pose_scores`, the NumPy
     version below its oracle (the same operations in the same order: identical scores)."""
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    if _Search.compiled:
+    if resolve(_Search.compiled):
         from navkit.localization import _kernels
 
         return _kernels.bilinear_pose_scores(  # type: ignore[no-any-return]

@@ -17,9 +17,9 @@ The kernels run on one thread: the targets are CPU time per frame (``parallel=Tr
 threads, not remove work) and the machine is shared. ``cache=True`` keeps the compiled code on
 disk (``NUMBA_CACHE_DIR`` or ``__pycache__``); see ``docs/kernels.md``.
 
-Selecting the backend: the detector's ``ObstacleSettings.backend`` (``"compiled"`` by default,
-``"numpy"`` for the reference implementation) and the ``backend`` keyword of
-:func:`navkit.obstacles.cloud_to_grid`.
+Selecting the backend: the detector's ``ObstacleSettings.backend`` (``"compiled"``, ``"numpy"``
+for the reference implementation, ``"auto"`` by default: :mod:`navkit.jit`) and the ``backend``
+keyword of :func:`navkit.obstacles.cloud_to_grid`.
 """
 
 from __future__ import annotations

@@ -26,7 +26,7 @@ from navkit.obstacles.segment import (
     merge_close_components,
     vertex_labels,
 )
-from navkit.obstacles.settings import ObstacleSettings
+from navkit.obstacles.settings import ObstacleSettings, resolved
 from navkit.sensors import RangeScan
 
 __all__ = [
@@ -249,7 +249,7 @@ def detect_obstacles_grid(
     InputError
         If the grid has the wrong shape or no valid point at all.
     """
-    settings = settings or ObstacleSettings()
+    settings = resolved(settings or ObstacleSettings())
     clock = _Clock()
     P = _check_grid(points, source)
     origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
@@ -773,7 +773,7 @@ def detect_obstacles_in_grid(
     360 deg. Per-point labels: ``grid.per_point(result.vertex_labels)``.
     """
     mounting = mounting or Mounting()
-    settings = settings or ObstacleSettings()
+    settings = resolved(settings or ObstacleSettings())
     t0, c0 = time.perf_counter(), time.process_time()
     clock = _Clock()  # the compiled stage 1 below charges it
     if settings.wrap_azimuth is None:

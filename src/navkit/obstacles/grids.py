@@ -180,7 +180,7 @@ def cloud_to_grid(
     n_columns: int | None = None,
     ring_method: str = "auto",
     source: str = "points",
-    backend: str = "compiled",
+    backend: str = "auto",
 ) -> ScanGrid:
     """Recover the scan grid of a spinning-lidar cloud (any beam count, any storage order).
 

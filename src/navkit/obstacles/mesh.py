@@ -128,7 +128,7 @@ def build_mesh(
     jump_range_fraction: float,
     jump_range_ratio: float = np.inf,
     steep_cos: float | None = None,
-    backend: str = "compiled",
+    backend: str = "auto",
 ) -> MeshCharacteristics:
     """Stages 2-4: mesh, normals, H_s (normal, line of sight, jump) for a grid of points.
 
@@ -309,7 +309,7 @@ def robust_cell_normals(
     jump_height_m: float = 0.3,
     jump_range_fraction: float = 0.01,
     jump_range_ratio: float = 0.2,
-    backend: str = "compiled",
+    backend: str = "auto",
 ) -> NDArray[np.float64]:
     """Noise-robust unit normals per grid cell ``(R, C, 3)`` from a support of about ``support_m``.
 

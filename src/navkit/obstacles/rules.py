@@ -63,7 +63,7 @@ def classify(
     *,
     wrap: bool,
     robust_cells: NDArray[np.float64] | None = None,
-    backend: str = "compiled",
+    backend: str = "auto",
 ) -> tuple[NDArray[np.int8], dict[str, NDArray[np.bool_]]]:
     """Labels ``m_t (R, 2C) int8`` from the production rules (paper 1, stage 5).
 

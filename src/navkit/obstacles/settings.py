@@ -3,25 +3,32 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 
 from navkit.errors import ConfigError
 from navkit.geometry._validate import check_settings
+from navkit.jit import BACKENDS, resolve_backend
 
-__all__ = ["BACKENDS", "DEFAULT_SHAPES", "ObstacleSettings", "check_backend"]
+__all__ = ["BACKENDS", "DEFAULT_SHAPES", "ObstacleSettings", "check_backend", "resolved"]
 
 DEFAULT_SHAPES = ("A1", "A2", "A3", "A4", "A5", "A6", "MEC", "MVEE")
 
-BACKENDS = ("compiled", "numpy")
-"""Implementations of stages 1-7: ``"compiled"`` (Numba kernels, :mod:`navkit.obstacles._kernels`)
-and ``"numpy"`` (the vectorised reference; the same answers, see ``docs/kernels.md``)."""
+# BACKENDS (from navkit.jit): implementations of stages 1-8 - "compiled" (Numba kernels,
+# navkit.obstacles._kernels), "numpy" (the vectorised reference; the same answers, see
+# docs/kernels.md) and "auto" (the process's policy, navkit.jit).
 
 
 def check_backend(backend: str) -> str:
-    """``backend`` if it is one of :data:`BACKENDS`, else :class:`~navkit.errors.ConfigError`."""
-    if backend not in BACKENDS:
-        raise ConfigError(f"= {backend!r}", field="backend", expected=f"one of {BACKENDS}")
-    return backend
+    """``"compiled"`` or ``"numpy"`` for a backend setting (``"auto"`` resolved by the process's
+    policy, :func:`navkit.jit.kernels_enabled`); else :class:`~navkit.errors.ConfigError`."""
+    return resolve_backend(backend)
+
+
+def resolved(settings: ObstacleSettings) -> ObstacleSettings:
+    """``settings`` with ``backend="auto"`` replaced by the implementation this process runs."""
+    if settings.backend != "auto":
+        return settings
+    return replace(settings, backend=check_backend("auto"))
 
 
 @dataclass(frozen=True)
@@ -98,9 +105,11 @@ class ObstacleSettings:
         boundary vertices (stage 8).
     guaranteed_shapes : tuple of str
         Shapes recomputed over the obstacle together with its shadows: the paper's A7.
-    backend : {"compiled", "numpy"}
-        Implementation of stages 1-7: ``"compiled"`` (default) runs the fused Numba kernels of
-        :mod:`navkit.obstacles._kernels`; ``"numpy"`` the vectorised NumPy reference. Both give
+    backend : {"auto", "compiled", "numpy"}
+        Implementation of stages 1-8: ``"compiled"`` runs the fused Numba kernels of
+        :mod:`navkit.obstacles._kernels`; ``"numpy"`` the vectorised NumPy reference;
+        ``"auto"`` (default) the kernels once they are compiled on this machine
+        (:mod:`navkit.jit`). Both give
         the same classes, ids and boundaries and floats equal to the last bit (tested); with
         ``normal_support > 0`` stage 5 uses NumPy's filters whatever the backend.
     """
@@ -125,7 +134,7 @@ class ObstacleSettings:
     wrap_azimuth: bool | None = None
     shapes: tuple[str, ...] = DEFAULT_SHAPES
     guaranteed_shapes: tuple[str, ...] = ("A1", "MEC")
-    backend: str = "compiled"
+    backend: str = "auto"
 
     def __post_init__(self) -> None:
         check_settings(self, allow_inf=("jump_range_ratio",))

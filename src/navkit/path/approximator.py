@@ -38,6 +38,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
 from navkit.geometry._validate import check_settings
+from navkit.jit import kernels_enabled
 from navkit.path.fitting import (
     CubicFit,
     check_variant,
@@ -225,9 +226,10 @@ class OnlineApproximator:
         self._min_step = float(s.min_step)
         self._eps2 = self._eps_fit**2
         self._chain = LoopFreeChain(precision=s.loop_precision, min_loop_length=s.min_loop_length)
-        # the freeze's O(n) passes and the loop search as compiled loops (navkit.path._kernels);
-        # False: the NumPy versions (the oracle the tests compare with)
-        self.compiled = True
+        # the freeze's O(n) passes and the loop search as compiled loops (navkit.path._kernels)
+        # when the process runs the kernels (navkit.jit); False: the NumPy versions (the oracle
+        # the tests compare with)
+        self.compiled = kernels_enabled()
         self._raw: list[tuple[NDArray[np.float64], NDArray[np.float64], float]] = []
         self._raw_length = 0.0
         self._loops: list[LoopCut] = []

@@ -33,6 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from navkit.errors import ConfigError
+from navkit.jit import kernels_enabled
 from navkit.path.spline import PathSpline, cubic_eval, cubic_shift
 
 __all__ = [
@@ -209,9 +210,9 @@ class LoopFreeChain:
                 f"is {split}", field="split", expected="an integer >= 2 (2 = binary search)"
             )
         self.split = int(split)
-        # the refinement passes in one compiled loop (navkit.path._kernels); False: NumPy (the
-        # oracle the tests compare with)
-        self.compiled = True
+        # the refinement passes in one compiled loop (navkit.path._kernels) when the process runs
+        # the kernels (navkit.jit); False: NumPy (the oracle the tests compare with)
+        self.compiled = kernels_enabled()
         # segments (growing arrays, first n_seg rows valid)
         self.n_seg = 0
         self._ax = np.zeros((16, 4))

@@ -55,6 +55,7 @@ from numpy.typing import ArrayLike, NDArray
 from navkit.errors import InputError
 from navkit.geometry import Plane, canonical_plane
 from navkit.geometry._validate import check_settings
+from navkit.jit import kernels_enabled
 from navkit.planes.extract_cloud import CloudExtractionSettings, extract_planes_cloud
 from navkit.planes.segments import (
     ExtractionResult,
@@ -791,14 +792,15 @@ def extract_planes_organized(
     ExtractionResult
         ``labels`` is ``(H, W)``; inlier indices are ``row * W + col``, increasing.
     """
-    return _extract(points, settings, compiled=True)
+    return _extract(points, settings, compiled=kernels_enabled())
 
 
 def _extract(
     points: ArrayLike, settings: ExtractionSettings | None, *, compiled: bool
 ) -> ExtractionResult:
-    """:func:`extract_planes_organized` with the compiled kernels (``compiled=True``) or their
-    NumPy oracles (the tests compare the two)."""
+    """:func:`extract_planes_organized` with the compiled kernels (``compiled=True``; the public
+    function passes the process's policy, :func:`navkit.jit.kernels_enabled`) or their NumPy
+    oracles (the tests compare the two)."""
     s = settings or _DEFAULT_SETTINGS  # validated once (check_settings costs ~50 us a call)
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 3 or P.shape[2] != 3:

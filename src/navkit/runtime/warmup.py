@@ -1,0 +1,204 @@
+"""Compile every navkit kernel into Numba's on-disk cache, then write the stamp (:mod:`navkit.jit`).
+
+:func:`warm_up` runs the small built-in mission (every capability's per-frame path: the lidar's
+obstacles, the camera's planes and motion, the stereo room map, the laser fixes, the stored path
+and the return along it) and a few calls the mission does not make (a global fix without a
+prior, a float32 lidar cloud, every bounding shape), all on the compiled kernels; each kernel
+compiles on its first call and is written to the cache. Then the stamp tells later processes
+under ``NAVKIT_JIT=auto`` that the kernels are ready.
+
+Run by ``navkit compile`` in the foreground and, under ``NAVKIT_JIT=auto`` on a machine with no
+stamp, as the background process ``python -m navkit.runtime.warmup --stamp --lock LOCK``
+(:func:`navkit.jit.kernels_enabled`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from navkit import jit
+
+__all__ = ["WarmUp", "compiled_kernels", "warm_up"]
+
+log = logging.getLogger(__name__)
+
+ProgressFn = Callable[[Iterator[str], str, int], Iterator[str]]
+
+_MODULES = tuple(
+    "navkit." + rel.removesuffix(".py").replace("/", ".") for rel in jit.KERNEL_MODULES
+)
+
+
+@dataclass(frozen=True)
+class WarmUp:
+    """What :func:`warm_up` did."""
+
+    seconds: dict[str, float]  # wall seconds per step
+    compiled: int  # kernel specialisations compiled in this process (cache misses)
+    loaded: int  # specialisations loaded from the cache (cache hits)
+    stamp: Path | None  # the stamp written (None when not asked)
+
+
+def compiled_kernels() -> dict[str, tuple[int, int, int]]:
+    """Every Numba kernel of navkit's kernel modules (imported here) -> (signatures, cache
+    misses = compilations, cache hits = loads) in this process.
+
+    A kernel called only from other kernels gets no signature of its own when its callers load
+    from the cache, so "no signature" does not mean "never used"; the cache misses of a
+    workload in a fresh process after :func:`warm_up` are the test of its coverage
+    (``tests/runtime/test_warmup.py``)."""
+    import importlib
+
+    from numba.core.registry import CPUDispatcher
+
+    out: dict[str, tuple[int, int, int]] = {}
+    for name in _MODULES:
+        mod = importlib.import_module(name)
+        for attr, obj in vars(mod).items():
+            if isinstance(obj, CPUDispatcher) and obj.__module__ == name:
+                out[f"{name}.{attr}"] = (
+                    len(obj.signatures),
+                    sum(getattr(obj, "_cache_misses").values()),  # noqa: B009 - private
+                    sum(getattr(obj, "_cache_hits").values()),  # noqa: B009
+                )
+    return out
+
+
+def _mission() -> None:
+    from navkit.mission import Mission, MissionSettings
+    from navkit.mission.settings import builtin_route_path, load_route
+    from navkit.sim import load_scene
+
+    route, overrides = load_route(builtin_route_path("yard"))
+    settings = MissionSettings.small().with_overrides(overrides, source="mission_yard.toml")
+    Mission(load_scene("yard"), route, settings).run()
+
+
+def _lidar_cloud() -> None:
+    """A float32 spinning-lidar cloud (as recordings give) through grid recovery and the eight
+    stages with the default shapes, on a level and on a tilted mounting; and an organised grid
+    (:func:`~navkit.obstacles.detect_obstacles`)."""
+    from navkit.obstacles import (
+        Mounting,
+        ObstacleSettings,
+        cloud_to_grid,
+        detect_obstacles,
+        detect_obstacles_in_grid,
+    )
+    from navkit.sim import Box, Ground, Scene, SpinningLidar, TiltingScanner, render_scan
+
+    boxes = [((5, 0, 0.5), (1, 1, 1)), ((0, 6, 0.8), (2, 1, 1.6)), ((-4, -4, 0.6), (1, 3, 1.2))]
+    scene = Scene([Ground(), *(Box(c, size) for c, size in boxes)])
+    T = np.eye(4)
+    T[2, 3] = 1.0
+    sim = render_scan(scene, SpinningLidar(n_beams=32, n_columns=720), T)
+    # ring by ring, each ring one sweep (as KITTI stores a cloud): the grid from the storage order
+    P = sim.scan.points("sensor").transpose(1, 0, 2).reshape(-1, 3)
+    P = P[np.isfinite(P[:, 0])]
+    grid = cloud_to_grid(P.astype(np.float32), backend="compiled")
+    cloud_to_grid(P[::-1], ring_method="elevation", backend="compiled")  # any order
+    compiled = ObstacleSettings(backend="compiled")
+    detect_obstacles_in_grid(grid, Mounting(1.0), compiled)
+    detect_obstacles_in_grid(grid, Mounting(1.0, pitch_deg=3.0), compiled)
+    tilting = render_scan(scene, TiltingScanner(), T).scan
+    detect_obstacles(tilting, compiled)
+
+
+def _global_fix() -> None:
+    """A laser fix without a prior (the branch-and-bound's global search) in an L-shaped room."""
+    from navkit.localization import Localizer
+
+    corners = np.array([[0, 0], [10, 0], [10, 4], [5, 4], [5, 8], [0, 8]], dtype=np.float64)
+    ends = zip(corners, np.roll(corners, -1, 0), strict=True)
+    walls = np.concatenate([np.linspace(a, b, 200, endpoint=False) for a, b in ends])
+    pose = np.array([2.5, 2.0, 0.4])
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    local = (walls - pose[:2]) @ np.array([[c, -s], [s, c]])
+    Localizer.from_points(walls).register(local[::3])
+
+
+def _camera_frames() -> None:
+    """A 640 x 480 RGB-D frame's planes and a 320 x 240 stereo pair's disparity (the default
+    left-right check)."""
+    from navkit.mission.pose2d import T_body_camera, pose3
+    from navkit.planes import extract_planes_organized
+    from navkit.sensors import PinholeCamera, StereoRig
+    from navkit.sim import load_scene, render_rgbd, render_stereo
+    from navkit.stereo import DisparitySettings, compute_disparity
+
+    scene = load_scene("yard")
+    T = pose3(np.array(scene.start, dtype=np.float64), 0.0) @ T_body_camera(0.6, 10.0)
+    cam = PinholeCamera(525.0, 525.0, 319.5, 239.5, 640, 480)
+    extract_planes_organized(render_rgbd(scene, cam, T).frame.points())
+    small = PinholeCamera(260.0, 260.0, 159.5, 119.5, 320, 240)
+    pair = render_stereo(scene, StereoRig(small, 0.12), T, supersample=1).pair
+    compute_disparity(pair.left, pair.right)
+    compute_disparity(pair.left, pair.right, DisparitySettings(fill="background"))
+
+
+STEPS: dict[str, Callable[[], None]] = {
+    "mission (small)": _mission,
+    "lidar cloud, every shape": _lidar_cloud,
+    "global laser fix": _global_fix,
+    "camera frames": _camera_frames,
+}
+
+
+def warm_up(*, stamp: bool = True, progress: ProgressFn | None = None) -> WarmUp:
+    """Run :data:`STEPS` on the compiled kernels (compiling what the cache lacks) and, when all
+    of them finished and ``stamp``, write the stamp (:func:`navkit.jit.write_stamp`)."""
+    os.environ[jit.ENV] = "eager"  # this process and anything it starts run the kernels
+    seconds: dict[str, float] = {}
+    names: Iterator[str] = iter(list(STEPS))
+    if progress is not None:
+        names = progress(names, "compiling navkit's kernels", len(STEPS))
+    for name in names:
+        log.info("warm-up: %s", name)
+        t0 = time.perf_counter()
+        STEPS[name]()
+        seconds[name] = time.perf_counter() - t0
+    kernels = compiled_kernels()
+    return WarmUp(
+        seconds,
+        sum(m for _, m, _ in kernels.values()),
+        sum(h for _, _, h in kernels.values()),
+        jit.write_stamp() if stamp else None,
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m navkit.runtime.warmup [--stamp] [--lock FILE]`` (the background warm-up)."""
+    ap = argparse.ArgumentParser(prog="python -m navkit.runtime.warmup", description=__doc__)
+    ap.add_argument("--stamp", action="store_true", help="write the stamp when done")
+    ap.add_argument("--lock", type=Path, help="lock file to remove when done")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+    try:
+        os.nice(10)
+    except OSError:
+        pass
+    try:
+        res = warm_up(stamp=args.stamp)
+        log.info(
+            "compiled %d, loaded %d; steps %s; stamp %s",
+            res.compiled,
+            res.loaded,
+            {k: round(v, 1) for k, v in res.seconds.items()},
+            res.stamp,
+        )
+        return 0
+    finally:
+        if args.lock is not None:
+            args.lock.unlink(missing_ok=True)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

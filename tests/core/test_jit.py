@@ -1,0 +1,139 @@
+"""The kernel policy (navkit.jit): which implementation a process runs, the stamp, the one
+background warm-up. The warm-up's own coverage is tested in tests/runtime/test_warmup.py."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from navkit import jit
+from navkit.errors import ConfigError
+
+SRC = Path(__file__).resolve().parents[2] / "src"
+
+# A process under the policy ``auto`` with its own empty cache folder: a NumPy-tier obstacle
+# detection, then what it decided, whether Numba was ever imported, and the warm-up's lock.
+_PROBE = """
+import json, os, sys
+import numpy as np
+from navkit import jit
+from navkit.obstacles import detect_obstacles
+from navkit.sim import Box, Ground, Scene, SpinningLidar, render_scan
+T = np.eye(4)
+T[2, 3] = 1.0
+scene = Scene([Ground(), Box((4, 0, 0.5), (1, 1, 1))])
+det = detect_obstacles(render_scan(scene, SpinningLidar(n_beams=16, n_columns=360), T).scan)
+lock = jit.stamp_path().with_suffix(".lock")
+print(json.dumps({
+    "enabled": jit.kernels_enabled(),
+    "numba": "numba" in sys.modules,
+    "obstacles": len(det.obstacles),
+    "lock": lock.read_text().strip() if lock.exists() else None,
+}))
+"""
+
+
+def _probe(cache: Path, policy: str = "auto") -> dict:
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), NAVKIT_JIT=policy, PYTHONPATH=str(SRC))
+    out = subprocess.run(
+        [sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, check=True
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _stop(pid: int) -> None:
+    """Stop a background warm-up (its own session) before it compiles anything for long."""
+    try:
+        os.killpg(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+
+
+@pytest.fixture
+def fresh(monkeypatch, tmp_path):
+    """This process's decision undone, the cache (and so the stamp) in an empty folder."""
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(jit, "_decision", None)
+    return tmp_path
+
+
+def test_mode_reads_the_environment_and_refuses_unknown_values(monkeypatch):
+    monkeypatch.delenv("NAVKIT_JIT", raising=False)
+    assert jit.mode() == "auto"
+    monkeypatch.setenv("NAVKIT_JIT", " NumPy ")
+    assert jit.mode() == "numpy"
+    monkeypatch.setenv("NAVKIT_JIT", "gpu")
+    with pytest.raises(ConfigError) as e:
+        jit.mode()
+    assert "NAVKIT_JIT" in str(e.value) and "'eager'" in str(e.value)
+
+
+@pytest.mark.parametrize(("policy", "backend"), [("eager", "compiled"), ("numpy", "numpy")])
+def test_explicit_policies_decide_the_auto_backend(fresh, monkeypatch, policy, backend):
+    monkeypatch.setenv("NAVKIT_JIT", policy)
+    assert jit.resolve_backend("auto") == backend
+    assert jit.resolve(None) is (backend == "compiled")
+    # explicit requests are kept whatever the policy
+    assert jit.resolve_backend("numpy") == "numpy" and jit.resolve(True) is True
+    with pytest.raises(ConfigError, match="backend"):
+        jit.resolve_backend("fast")
+    assert not list(fresh.iterdir())  # nothing started, nothing written
+
+
+def test_the_stamp_is_keyed_by_the_cache_folder(fresh, monkeypatch, tmp_path_factory):
+    first = jit.stamp_path()
+    assert first.parent == fresh and first.name.startswith("navkit-jit-")
+    other = tmp_path_factory.mktemp("other")
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(other))
+    assert jit.stamp_path().parent == other and jit.stamp_path().name != first.name
+
+
+def test_auto_with_a_stamp_runs_the_kernels_and_starts_nothing(fresh, monkeypatch):
+    monkeypatch.setenv("NAVKIT_JIT", "auto")
+    jit.write_stamp()
+    assert jit.kernels_enabled() is True
+    assert jit.status().compiled and not jit.status().warming
+    assert not jit.stamp_path().with_suffix(".lock").exists()
+
+
+def test_auto_without_a_stamp_runs_numpy_and_one_background_warmup(tmp_path):
+    first = _probe(tmp_path)
+    assert first["lock"] is not None, first
+    pid = int(first["lock"])
+    try:
+        # the whole process ran the NumPy twins: Numba was never imported, the detection worked
+        assert first["enabled"] is False and first["numba"] is False
+        assert first["obstacles"] == 1
+        # the warm-up is navkit's (its log beside the lock) and a second process starts no other
+        cmdline = Path(f"/proc/{pid}/cmdline")
+        if cmdline.exists():
+            assert b"navkit.runtime.warmup" in cmdline.read_bytes()
+        assert list(tmp_path.glob("navkit-jit-*.log"))
+        second = _probe(tmp_path)
+        assert second["enabled"] is False and second["lock"] == first["lock"]
+    finally:
+        _stop(pid)
+
+
+def test_a_stale_lock_is_replaced(fresh, monkeypatch):
+    monkeypatch.setenv("NAVKIT_JIT", "auto")
+    lock = jit.stamp_path().with_suffix(".lock")
+    lock.write_text("999999999\n")
+    old = time.time() - 2 * jit._STALE_LOCK_S
+    os.utime(lock, (old, old))
+    assert jit.status().warming is False
+    try:
+        assert jit.kernels_enabled() is False
+        pid = int(lock.read_text())
+        assert pid != 999999999
+    finally:
+        _stop(int(lock.read_text()))
+        if jit._background is not None:
+            jit._background.wait()
