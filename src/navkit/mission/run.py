@@ -39,7 +39,7 @@ from navkit.mission.plane_fusion import PlaneMotionFusion, PlaneRecord, PlaneSte
 from navkit.mission.pose2d import compose
 from navkit.mission.robot import SimRobot
 from navkit.mission.settings import MissionSettings, Route
-from navkit.obstacles import detect_obstacles
+from navkit.obstacles import ObstacleSettings, detect_obstacles
 from navkit.obstacles.mapper import MapperSettings, ObstacleMapper, scan_points_2d
 from navkit.path import ApproximatorSettings, OnlineApproximator, Return, ReturnFailure, ReturnStep
 from navkit.path.control import ReturnSettings
@@ -199,6 +199,9 @@ class Mission:
         )
         self.mapper = ObstacleMapper(pts.min(0) - M.margin, pts.max(0) + M.margin, settings_map)
         self.recorder = OnlineApproximator(ApproximatorSettings(tolerance=s.path_tolerance))
+        self.obstacle_settings = ObstacleSettings(
+            shapes=s.obstacle_shapes, guaranteed_shapes=s.obstacle_guaranteed_shapes
+        )
         self.rooms = RoomRecord()
         self.localizer = MissionLocalizer(route, s.fusion, M.resolution, self.rooms, lg.timings)
         self.planes = PlaneRecord()
@@ -320,7 +323,7 @@ class Mission:
         in_range = sim.scan.valid & (sim.true_ranges <= M.max_range)
         lg.seen_primitives.update(np.unique(sim.hit_index[in_range]).tolist())
         with timed(lg.timings, "obstacles_detect"):
-            det = detect_obstacles(sim.scan)
+            det = detect_obstacles(sim.scan, self.obstacle_settings)
         truth, fix_now = self.robot.truth, self.k % self.every_cam == 0
         if self.phase == RETURN and fix_now:
             body, _ = scan_points_2d(det, np.eye(3), M.max_range)

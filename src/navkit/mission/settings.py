@@ -453,6 +453,12 @@ class MissionSettings:
         Tolerance of the path memory's spline (paper 4's eps), metres.
     return_delta, return_v_max, return_stop_radius : float
         Return controller (paper 4, mode 2): look-ahead along the path, speed, stop radius.
+    obstacle_shapes, obstacle_guaranteed_shapes : tuple of str
+        Bounding shapes (paper 1, stage 8) of each obstacle a lidar scan shows, and its A7
+        shapes over the obstacle with its shadows (:class:`navkit.obstacles.ObstacleSettings`'s
+        ``shapes`` / ``guaranteed_shapes``). Decision: by default the ones the mission's
+        outputs use - ``results.mcap`` publishes A1, A6 and A7; the obstacle map, the fixes and
+        the return use none - because each shape costs CPU on every scan (MVEE the most).
     """
 
     seed: int = 0
@@ -461,6 +467,8 @@ class MissionSettings:
     return_delta: float = 0.8
     return_v_max: float = 0.6
     return_stop_radius: float = 0.25
+    obstacle_shapes: tuple[str, ...] = ("A1", "A6")
+    obstacle_guaranteed_shapes: tuple[str, ...] = ("A1", "MEC")
     robot: RobotSettings = field(default_factory=RobotSettings)
     vo: VOSettings = field(default_factory=VOSettings)
     lidar: LidarSettings = field(default_factory=LidarSettings)

@@ -75,7 +75,9 @@ class MissionSinkSettings:
     shapes : tuple of str
         Bounding shapes published per obstacle (``"A7"``: the guaranteed ones). Decision: A1 and
         A6 by default, the two the Rerun logger draws; all of them (``navkit run``'s choice) cost
-        about five times as many markers per scan, 20 % of the demo's time.
+        about five times as many markers per scan, 20 % of the demo's time. Only the shapes the
+        mission computed can be published (``MissionSettings.obstacle_shapes``: A1 and A6 by
+        default, and A7 over A1 and MEC).
     frame : str
         Frame id of the mission's world.
     """
