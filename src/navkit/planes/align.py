@@ -260,17 +260,54 @@ def _remap_points(img, x, y):
 def _D(em1, t1: PlaneTexture, e2v, q2, lam, t, min_overlap):
     """Eq. 4 for texture-2 samples ``e2v`` at metric points ``q2`` ``(n, 2)``; ``em1`` is texture
     1's normalised brightness and validity as one 2-channel image (one bilinear lookup)."""
-    c, s = np.cos(lam), np.sin(lam)
-    px = c * q2[:, 0] - s * q2[:, 1] + t[0]
-    py = s * q2[:, 0] + c * q2[:, 1] + t[1]
-    x = px / t1.nu - t1.index0[0]
-    y = py / t1.nu - t1.index0[1]
-    EM = _remap_points(em1, x, y).reshape(-1, 2)
-    M = EM[:, 1] > 0.999
-    n = int(M.sum())
-    if n < min_overlap:
-        return _NO_OVERLAP, n
-    return float(np.abs(EM[M, 0] - e2v[M]).mean()), n
+    return _Eq4(em1, t1, e2v, q2)(lam, t, min_overlap)
+
+
+class _Eq4:
+    """:func:`_D` for fixed textures and samples, evaluated many times (the simplex search):
+    the sample coordinates, the padded float32 maps and the lookup's output are prepared once.
+    The same operations in the same order as :func:`_remap_points` on fresh arrays, so the same
+    values bit for bit."""
+
+    _COLS = 256
+
+    def __init__(self, em1, t1: PlaneTexture, e2v, q2) -> None:
+        n = len(q2)
+        rows = -(-n // self._COLS)
+        self.em1, self.nu, self.i0, self.e2v, self.n = em1, t1.nu, t1.index0, e2v, n
+        self.qx, self.qy = np.ascontiguousarray(q2[:, 0]), np.ascontiguousarray(q2[:, 1])
+        self.mx = np.full((rows, self._COLS), -1e6, np.float32)
+        self.my = np.full((rows, self._COLS), -1e6, np.float32)
+        self.a, self.b = np.empty(n), np.empty(n)
+
+    def __call__(self, lam, t, min_overlap):
+        c, s = np.cos(lam), np.sin(lam)
+        a, b, n = self.a, self.b, self.n
+        # x = (c qx - s qy + t0) / nu - i0 and y = (s qx + c qy + t1) / nu - i1, as _D wrote them
+        np.multiply(c, self.qx, out=a)
+        np.multiply(s, self.qy, out=b)
+        np.subtract(a, b, out=a)
+        np.add(a, t[0], out=a)
+        np.divide(a, self.nu, out=a)
+        np.subtract(a, self.i0[0], out=a)
+        self.mx.reshape(-1)[:n] = a
+        np.multiply(s, self.qx, out=a)
+        np.multiply(c, self.qy, out=b)
+        np.add(a, b, out=a)
+        np.add(a, t[1], out=a)
+        np.divide(a, self.nu, out=a)
+        np.subtract(a, self.i0[1], out=a)
+        self.my.reshape(-1)[:n] = a
+        out = cv2.remap(
+            self.em1, self.mx, self.my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+            borderValue=0,
+        )  # fmt: skip
+        EM = out.reshape(-1, 2)[:n]
+        M = EM[:, 1] > 0.999
+        k = int(M.sum())
+        if k < min_overlap:
+            return _NO_OVERLAP, k
+        return float(np.abs(EM[M, 0] - self.e2v[M]).mean()), k
 
 
 def search_2d(
@@ -350,13 +387,13 @@ def search_2d(
     # candidates are refined on a sparse subsample first, the winner then on all samples
     sub = slice(None, None, max(1, len(q2) // 6000))
 
+    eq4_sub, eq4 = _Eq4(em1, t1, e2v[sub], q2[sub]), _Eq4(em1, t1, e2v, q2)
+
     def cost_sub(x):
-        return _D(
-            em1, t1, e2v[sub], q2[sub], x[0] / radius, x[1:], min_fine // max(1, len(q2) // 6000)
-        )[0]
+        return eq4_sub(x[0] / radius, x[1:], min_fine // max(1, len(q2) // 6000))[0]
 
     def cost(x):
-        return _D(em1, t1, e2v, q2, x[0] / radius, x[1:], min_fine)[0]
+        return eq4(x[0] / radius, x[1:], min_fine)[0]
 
     def nelder_mead(fun, x0, step, xatol):
         simplex = x0 + np.vstack([np.zeros(3), np.eye(3) * step])
@@ -392,7 +429,7 @@ def search_2d(
         distinct = (min(others) - best[0]) / max(min(others), 1e-12)
     res = nelder_mead(bounded(cost, best[1], delta), best[1], 2 * nu, 0.05 * nu)
     lam, tx, ty = res.x / scale
-    D, n = _D(em1, t1, e2v, q2, lam, np.array([tx, ty]), min_fine)
+    D, n = eq4(lam, np.array([tx, ty]), min_fine)
     if D >= _NO_OVERLAP:
         D = float("nan")
     return Search2D(float(lam), np.array([tx, ty]), D, n, float(picks[0][0]), len(picks), distinct)
