@@ -17,7 +17,8 @@ Wall time is what the issue's rule is about ("``make demo`` on a fresh clone mus
 slower"); CPU time of the demo process is reported too (the background compilation's CPU is not
 in it). Run from the repository root::
 
-    PYTHONPATH=.:src .venv/bin/python benchmarks/cold_start.py [--before 4f29c21] [--rounds 2]
+    PYTHONPATH=.:src .venv/bin/python benchmarks/cold_start.py [--before 4f29c21] [--rounds 2] \
+        [--no-eager]
 """
 
 from __future__ import annotations
@@ -36,9 +37,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _demo(src: Path, cache: Path, policy: str, out: Path) -> tuple[float, float]:
     """Wall and CPU seconds of one ``navkit demo`` (the process and its waited-for children)."""
-    env = dict(
-        os.environ, PYTHONPATH=str(src), NUMBA_CACHE_DIR=str(cache), NAVKIT_JIT=policy
-    )
+    env = dict(os.environ, PYTHONPATH=str(src), NUMBA_CACHE_DIR=str(cache), NAVKIT_JIT=policy)
     env["MPLBACKEND"] = "Agg"
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
@@ -67,6 +66,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--before", default="4f29c21")
     ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument(
+        "--no-eager", action="store_true", help="skip the eager case (the longest, ~1.5 min CPU)"
+    )
     args = ap.parse_args()
     rows: dict[str, list[tuple[float, float]]] = {}
     with tempfile.TemporaryDirectory(prefix="navkit-cold-") as tmp:
@@ -92,10 +94,11 @@ def main() -> None:
                 rows.setdefault("auto, compiled (next run)", []).append(
                     _demo(ROOT / "src", c, "auto", t / f"o-next-{r}")
                 )
-                c = t / f"cache-eager-{r}"
-                rows.setdefault("eager, empty cache", []).append(
-                    _demo(ROOT / "src", c, "eager", t / f"o-eager-{r}")
-                )
+                if not args.no_eager:
+                    c = t / f"cache-eager-{r}"
+                    rows.setdefault("eager, empty cache", []).append(
+                        _demo(ROOT / "src", c, "eager", t / f"o-eager-{r}")
+                    )
                 print(f"round {r + 1} done", file=sys.stderr)
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT)

@@ -12,7 +12,7 @@ The policy, ``NAVKIT_JIT`` (environment variable; :func:`mode`):
     A process whose kernels are already compiled for this machine (a **stamp** left by a
     complete warm-up, :func:`stamp_path`) uses the compiled kernels. A process that finds no
     stamp runs the NumPy twins **for its whole life** and starts one background process
-    (``python -m navkit.runtime.warmup``, niced, detached) that compiles every kernel into the
+    (``python -m navkit.runtime.warmup``, detached, at the idle CPU priority) that compiles every kernel into the
     cache and then writes the stamp: the first run on a fresh machine costs what it cost before
     the kernels existed, and every later run is fast. A process never switches implementation
     half-way, so its results do not depend on when a compilation finished.
@@ -186,7 +186,8 @@ def status() -> JitStatus:
 
 
 def _start_warmup() -> None:
-    """Start one detached, niced ``python -m navkit.runtime.warmup --stamp`` unless one runs."""
+    """Start one detached ``python -m navkit.runtime.warmup --stamp`` (idle CPU priority) unless
+    one runs."""
     global _background
     lock = _lock_path()
     lock.parent.mkdir(parents=True, exist_ok=True)
