@@ -362,11 +362,13 @@ def order_desc(bound: np.ndarray, scale: float) -> np.ndarray:  # pragma: no cov
     """``np.argsort(-bound, kind="stable")`` for scores ``bound = sums / scale`` of non-negative
     integer sums (the branch-and-bound's bounds): a counting sort on the sums
     ``rint(bound * scale)`` (exact: the relative error of ``bound`` is ~1e-16), largest first,
-    ties in their original order - the same permutation. Returns int64 indices, or an empty
-    array when a sum is negative (the caller then sorts with NumPy)."""
+    ties in their original order - the same permutation (bins over the keys' range
+    ``[min, max]`` only). Returns int64 indices, or an empty array when a sum is negative (the
+    caller then sorts with NumPy)."""
     n = len(bound)
     keys = np.empty(n, np.int64)
     kmax = 0
+    kmin = np.iinfo(np.int64).max
     for i in range(n):
         k = int(np.rint(bound[i] * scale))
         if k < 0:
@@ -374,10 +376,14 @@ def order_desc(bound: np.ndarray, scale: float) -> np.ndarray:  # pragma: no cov
         keys[i] = k
         if k > kmax:
             kmax = k
-    start = np.zeros(kmax + 2, np.int64)
+        if k < kmin:
+            kmin = k
+    # bins of the keys' range only (a batch's bounds span a few % of [0, 255 N])
+    nb = kmax - kmin + 1 if n else 1
+    start = np.zeros(nb + 1, np.int64)
     for i in range(n):
         start[kmax - keys[i] + 1] += 1
-    for j in range(1, kmax + 2):
+    for j in range(1, nb + 1):
         start[j] += start[j - 1]
     out = np.empty(n, np.int64)
     for i in range(n):
