@@ -250,6 +250,7 @@ def expand_sums(
         # a child outside the window reads its sibling's cells (never out of the tables' range)
         dx = s if okx else 0
         dy = s * Wp if oky else 0
+        udx, udy, udxy = np.uint64(dx), np.uint64(dy), np.uint64(dx + dy)
         for r in range(split):
             kk = k[p] + r * kstep
             if kk >= K:
@@ -259,7 +260,7 @@ def expand_sums(
             if use_up:
                 up = 0
                 for i in range(N):
-                    up += grid_up[table_up[row, i] + b]
+                    up += grid_up[np.uint64(table_up[row, i] + b)]
                 if not up / (255.0 * N) > threshold:
                     continue
             a0 = 0
@@ -267,11 +268,11 @@ def expand_sums(
             a2 = 0
             a3 = 0
             for i in range(N):
-                f = table[row, i] + b
+                f = np.uint64(table[row, i] + b)
                 a0 += grid[f]
-                a1 += grid[f + dx]
-                a2 += grid[f + dy]
-                a3 += grid[f + dy + dx]
+                a1 += grid[f + udx]
+                a2 += grid[f + udy]
+                a3 += grid[f + udxy]
             ck[m] = kk
             cx[m] = x0
             cy[m] = y0
