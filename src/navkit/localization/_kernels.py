@@ -26,7 +26,7 @@ def gather_sums(
         s = shift[c]
         acc = 0
         for i in range(N):
-            acc += grid[F[r, i] + s]
+            acc += grid[np.uint64(F[r, i] + s)]  # unsigned: no negative-index wraparound
         out[c] = acc
     return out
 
@@ -88,6 +88,8 @@ def cubic_pose_scores(
     padding; the points summed in order. The NumPy version does the same operations in the
     same order: the same scores exactly."""
     Hp, Wp = V.shape
+    Vf = V.ravel()
+    one, two, three, uW = np.uint64(1), np.uint64(2), np.uint64(3), np.uint64(Wp)
     M = poses.shape[0]
     N = pts.shape[0]
     out = np.empty(M)
@@ -111,14 +113,14 @@ def cubic_pose_scores(
                 continue
             _catmull_rom(ux - fx, wx)
             _catmull_rom(uy - fy, wy)
-            x0 = int(fx)
-            y0 = int(fy)
+            # flat unsigned offsets (no negative-index wraparound): fx, fy >= 1 here
+            at = np.uint64((int(fy) - 1) * Wp + int(fx) - 1)
             v = 0.0
             for a in range(4):
-                r = y0 - 1 + a
-                row = wx[0] * V[r, x0 - 1] + wx[1] * V[r, x0]
-                row = row + wx[2] * V[r, x0 + 1]
-                row = row + wx[3] * V[r, x0 + 2]
+                row = wx[0] * Vf[at] + wx[1] * Vf[at + one]
+                row = row + wx[2] * Vf[at + two]
+                row = row + wx[3] * Vf[at + three]
+                at += uW
                 if a == 0:
                     v = wy[0] * row
                 else:
@@ -192,7 +194,7 @@ def bilinear_pose_scores(
 def _at(g: np.ndarray, ix: int, iy: int, W: int, H: int) -> float:  # pragma: no cover
     if ix < 0 or ix >= W or iy < 0 or iy >= H:
         return 0.0
-    return np.float64(g[iy, ix])
+    return np.float64(g[np.uint64(iy), np.uint64(ix)])  # in range: no wraparound
 
 
 @njit(cache=True)
