@@ -1,6 +1,6 @@
 """Localization (paper 3, issue 12): the correlative matcher of this revision against the one of
-an earlier revision (``--before``, a git revision; its ``matcher.py`` loaded from git into this
-process on the same maps and fields) and the point-to-point ICP baseline of
+an earlier revision (``--before``, a git revision; its ``matcher.py`` and its compiled kernels
+``_kernels.py`` loaded from git into this process on the same maps and fields) and the point-to-point ICP baseline of
 ``benchmarks.bench_localization`` - all three interleaved scan by scan in one process, CPU time
 (``time.process_time``) medians per log:
 
@@ -66,9 +66,7 @@ def load_matcher(rev: str) -> types.ModuleType:
             path.write_text(kernels)
         if str(tmp) not in sys.path:
             sys.path.insert(0, str(tmp))
-        src = src.replace(
-            "from navkit.localization import _kernels", f"import {name} as _kernels"
-        )
+        src = src.replace("from navkit.localization import _kernels", f"import {name} as _kernels")
     mod = types.ModuleType(f"navkit_matcher_{rev}")
     sys.modules[mod.__name__] = mod  # dataclasses look their module up
     exec(compile(src, f"{rev}:matcher.py", "exec"), mod.__dict__)  # our own source, from git
