@@ -690,8 +690,12 @@ class _Search:
         L = levels - 1
         step = 2**L
         g = np.arange(0, self.n, step)
-        K, IX, IY = np.meshgrid(np.arange(0, len(self.thetas), 2 ** self.a[L]), g, g, indexing="ij")
-        k, ix, iy = K.ravel(), IX.ravel(), IY.ravel()
+        # the (rotation, x, y) grid of the top level, x then y varying fastest (meshgrid "ij",
+        # raveled: the same arrays without its broadcasting machinery)
+        kr = np.arange(0, len(self.thetas), 2 ** self.a[L])
+        k = np.repeat(kr, len(g) * len(g))
+        ix = np.tile(np.repeat(g, len(g)), len(kr))
+        iy = np.tile(g, len(kr) * len(g))
         bound = self.scores(L, k, ix, iy)
         best: tuple[float, int, int, int] | None = None
         if L == 0:
@@ -919,6 +923,14 @@ _STENCIL_FIT = np.linalg.pinv(
 )
 
 
+# _refine's start: offsets -2..2 cells in x and y, -1..1 step in theta (theta varying fastest,
+# then y, then x); scaled per call (the same products as arange(-2, 3) * dxy, exactly)
+_START_GRID = np.stack(
+    np.meshgrid(np.arange(-2.0, 3.0), np.arange(-2.0, 3.0), np.arange(-1.0, 2.0), indexing="ij"),
+    -1,
+).reshape(-1, 3)
+
+
 def _refine(
     fld: LikelihoodField, pts: NDArray[np.float64], x0: NDArray[np.float64], dxy: float, dth: float
 ) -> NDArray[np.float64]:
@@ -940,10 +952,7 @@ def _refine(
     # Phase 1: exact scores on the grid around the discrete optimum (+-2 cells, +-1 step): the
     # nearest-cell scores of the search are noisy by up to half a cell per point, so on a
     # shallow peak the discrete winner can sit a cell or two from the true optimum.
-    g = np.arange(-2, 3) * dxy
-    a = np.arange(-1, 2) * dth
-    GX, GY, GA = np.meshgrid(g, g, a, indexing="ij")
-    cand = x + np.stack([GX.ravel(), GY.ravel(), GA.ravel()], axis=1)
+    cand = x + _START_GRID * np.array([dxy, dxy, dth])
     # (bilinear here, a quarter of the cubic's look-ups: it only picks the start cell)
     v1 = _bilinear_scores(fld, pts, cand)
     x = cand[int(np.argmax(v1))].copy()
