@@ -5,6 +5,12 @@ the candidate's translation. NumPy builds the (candidates x points) index array 
 :func:`gather_sums` walks it once without the temporary. Integer sums: the same values exactly
 (the NumPy version stays in ``_Search`` as the oracle, ``tests/localization/test_kernels.py``).
 Numba, ``cache=True``; imported on first use.
+
+Data-dependent look-ups index with ``np.uint64`` offsets: Numba wraps a negative signed index
+around (a compare and a select per look-up, which also keeps LLVM from scheduling the loads
+freely); every such offset here is non-negative by construction, so the unsigned index reads the
+same element without that code. Measured (issue 12, sixth pass): ``depth_first`` of a global fix
+on Acapulco 23.0 -> 13.6 ms CPU per fix on the same nodes (``expand_sums``' loop).
 """
 
 from __future__ import annotations
@@ -269,7 +275,7 @@ def expand_sums(
             a1 = 0
             a2 = 0
             a3 = 0
-            for i in range(N):
+            for i in range(N):  # unsigned offsets: no wraparound code (module docstring)
                 f = np.uint64(table[row, i] + b)
                 a0 += grid[f]
                 a1 += grid[f + udx]
