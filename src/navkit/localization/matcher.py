@@ -690,8 +690,8 @@ class _Search:
         L = levels - 1
         step = 2**L
         g = np.arange(0, self.n, step)
-        # the (rotation, x, y) grid of the top level, x then y varying fastest (meshgrid "ij",
-        # raveled: the same arrays without its broadcasting machinery)
+        # the (rotation, x, y) grid of the top level, rotation slowest and y fastest (meshgrid
+        # "ij" raveled: the same arrays without its broadcasting machinery)
         kr = np.arange(0, len(self.thetas), 2 ** self.a[L])
         k = np.repeat(kr, len(g) * len(g))
         ix = np.tile(np.repeat(g, len(g)), len(kr))
