@@ -93,3 +93,15 @@ def test_counting_sort_is_numpys_stable_descending_argsort(rng):
         assert np.array_equal(got, np.argsort(-bound, kind="stable"))
     assert len(_kernels.order_desc(np.zeros(0), 10.0)) == 0
     assert len(_kernels.order_desc(np.array([0.5, -0.1]), 10.0)) == 0  # negative: NumPy sorts
+
+
+def test_p95_is_numpys_percentile(rng):
+    # match_scan's reach (the heading step): the same value as np.percentile(x, 95), bit for bit
+    for n in (1, 2, 3, 20, 21, 101, 700):
+        for x in (
+            rng.uniform(0, 30, n),
+            np.round(rng.uniform(0, 30, n), 1),  # ties
+            np.linalg.norm(rng.normal(0, 8, (n, 2)), axis=1),
+            np.full(n, 7.25),
+        ):
+            assert M._p95(x) == float(np.percentile(x, 95))

@@ -240,6 +240,24 @@ _GROUP_EXTRA_LEVELS = 2  # pyramid levels beyond the search's for the rotation g
 _NO_TABLE = np.zeros((0, 1), dtype=np.int32)  # expand_sums: no early bound of sub-groups
 
 
+def _p95(x: NDArray[np.float64]) -> float:
+    """``np.percentile(x, 95)`` of a non-empty 1-D float array without NaN, the same value: the
+    linear method's virtual index ``(n - 1) * 0.95``, the two order statistics around it
+    (``np.partition``) and NumPy's interpolation step by step (``a + (b - a) t``, or
+    ``b - (b - a) (1 - t)`` from ``t = 0.5`` on) - without the generic quantile machinery
+    (~70 us of a ~2 ms tracking fix)."""
+    n = len(x)
+    vi = (n - 1) * 0.95
+    i0 = int(np.floor(vi))
+    if vi >= n - 1:  # NumPy takes the last element for both
+        return float(np.max(x))
+    part = np.partition(x, (i0, i0 + 1))
+    a, b = float(part[i0]), float(part[i0 + 1])
+    t = vi - i0
+    d = b - a
+    return b - d * (1 - t) if t >= 0.5 else a + d * t
+
+
 def _widen(level: NDArray[np.float32], s: int) -> NDArray[np.float32]:
     """Max over ``3 s``-wide blocks from a ``2 s``-wide max-pooled level (zero beyond)."""
     H, W = level.shape
@@ -1089,7 +1107,7 @@ def match_scan(
         )
     P = _thin(P, s.point_spacing)
     r = fld.resolution
-    reach = max(float(np.percentile(np.linalg.norm(P, axis=1), 95)), r)
+    reach = max(_p95(np.linalg.norm(P, axis=1)), r)  # P is finite here (rows with NaN dropped)
     step = (
         np.radians(s.angular_step_deg)
         if s.angular_step_deg
