@@ -1,6 +1,6 @@
 """Localization (paper 3, issue 12): the correlative matcher of this revision against the one of
-an earlier revision (``--before``, a git revision; its ``matcher.py`` loaded from git into this
-process on the same maps and fields) and the point-to-point ICP baseline of
+an earlier revision (``--before``, a git revision; its ``matcher.py`` and its compiled kernels
+``_kernels.py`` loaded from git into this process on the same maps and fields) and the point-to-point ICP baseline of
 ``benchmarks.bench_localization`` - all three interleaved scan by scan in one process, CPU time
 (``time.process_time``) medians per log:
 
@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import subprocess
 import sys
+import tempfile
 import time
 import types
 from pathlib import Path
@@ -38,16 +39,34 @@ from navkit.localization import build_map_from_scans
 from navkit.localization import matcher as M
 
 
-def load_matcher(rev: str) -> types.ModuleType:
-    """``navkit/localization/matcher.py`` at git revision ``rev`` as a module of its own."""
+def _git_show(rev: str, path: str) -> str | None:
+    """The text of ``path`` at git revision ``rev`` (None if it has no such file)."""
     root = Path(__file__).resolve().parents[1]
-    src = subprocess.run(
-        ["git", "show", f"{rev}:src/navkit/localization/matcher.py"],
-        cwd=root,
-        check=True,
-        capture_output=True,
-        text=True,
-    ).stdout
+    res = subprocess.run(
+        ["git", "show", f"{rev}:{path}"], cwd=root, capture_output=True, text=True, check=False
+    )
+    return res.stdout if res.returncode == 0 else None
+
+
+def load_matcher(rev: str) -> types.ModuleType:
+    """``navkit/localization/matcher.py`` at git revision ``rev`` as a module of its own, with
+    that revision's compiled kernels (``_kernels.py``, written to a temporary directory and
+    imported as a module of its own, Numba's cache beside it) when it has them - so "before"
+    runs the kernels it was written with, not this tree's."""
+    src = _git_show(rev, "src/navkit/localization/matcher.py")
+    if src is None:
+        raise SystemExit(f"revision {rev} has no src/navkit/localization/matcher.py")
+    kernels = _git_show(rev, "src/navkit/localization/_kernels.py")
+    if kernels is not None:
+        name = f"navkit_kernels_{rev}"
+        tmp = Path(tempfile.gettempdir()) / "navkit_before_kernels"
+        tmp.mkdir(exist_ok=True)
+        path = tmp / f"{name}.py"
+        if not path.exists() or path.read_text() != kernels:
+            path.write_text(kernels)
+        if str(tmp) not in sys.path:
+            sys.path.insert(0, str(tmp))
+        src = src.replace("from navkit.localization import _kernels", f"import {name} as _kernels")
     mod = types.ModuleType(f"navkit_matcher_{rev}")
     sys.modules[mod.__name__] = mod  # dataclasses look their module up
     exec(compile(src, f"{rev}:matcher.py", "exec"), mod.__dict__)  # our own source, from git

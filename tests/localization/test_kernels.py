@@ -84,10 +84,24 @@ def test_fixes_identical_on_recorded_logs(data_path, name):
 def test_counting_sort_is_numpys_stable_descending_argsort(rng):
     from navkit.localization import _kernels
 
-    for n, N in ((1, 37), (600, 37), (20_000, 150)):
-        sums = rng.integers(0, 255 * N // 3, n)
+    # the last case: a narrow range of high sums (a pruned batch: the bins span its range only)
+    for n, N, lo, hi in ((1, 37, 0, 3145), (600, 37, 0, 3145), (20_000, 150, 0, 12750), (5000, 150, 33000, 34500)):  # fmt: skip
+        sums = rng.integers(lo, hi, n)
         sums[: n // 3] = sums[0]  # many ties: their original order must be kept
         bound = sums / (255.0 * N)
         got = _kernels.order_desc(bound, 255.0 * N)
         assert np.array_equal(got, np.argsort(-bound, kind="stable"))
+    assert len(_kernels.order_desc(np.zeros(0), 10.0)) == 0
     assert len(_kernels.order_desc(np.array([0.5, -0.1]), 10.0)) == 0  # negative: NumPy sorts
+
+
+def test_p95_is_numpys_percentile(rng):
+    # match_scan's reach (the heading step): the same value as np.percentile(x, 95), bit for bit
+    for n in (1, 2, 3, 20, 21, 101, 700):
+        for x in (
+            rng.uniform(0, 30, n),
+            np.round(rng.uniform(0, 30, n), 1),  # ties
+            np.linalg.norm(rng.normal(0, 8, (n, 2)), axis=1),
+            np.full(n, 7.25),
+        ):
+            assert M._p95(x) == float(np.percentile(x, 95))
