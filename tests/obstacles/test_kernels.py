@@ -284,6 +284,93 @@ def test_cloud_to_grid_compiled_equals_numpy_on_a_shuffled_cloud(rng):
     _same_grid(a, cloud_to_grid(P, backend="compiled"))
 
 
+def test_cloud_to_grid_by_order_decides_near_ties_as_numpy(rng):
+    """The compiled order path ranks rings and picks each cell's nearest point without the
+    twin's ``hypot`` unless the answer is close: rings at the same elevation (tied keys), exact
+    duplicates, copies scaled by 1 +- 1e-15 and copies turned by 1e-7 rad (ranges tied up to
+    rounding: deciding those by the squared range alone fails this test) must take its exact
+    branches and still give the twin's grid."""
+    n_az = 720
+    el_deg = np.array([-10.0, -8.0, -8.0, -6.0, -4.0, -4.0, -2.0, 0.0])  # two tied pairs
+    az = np.tile(np.linspace(-np.pi, np.pi, n_az, endpoint=False), len(el_deg))
+    az += rng.normal(0, 1e-4, az.size)
+    el = np.repeat(np.radians(el_deg), n_az)
+    r = rng.uniform(3, 40, size=az.size)
+    P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * r[:, None]
+    c, s = np.cos(1e-7), np.sin(1e-7)
+    rows = []
+    for k, p in enumerate(P):  # storage order kept: the copies follow their original
+        rows.append(p)
+        if k % 5 == 0:
+            rows.append(p * (1 + (1e-15 if k % 10 else -1e-15)))
+        if k % 7 == 0:
+            rows.append(p.copy())
+        if k % 3 == 0:  # the same range up to rounding: sqrt(x^2 + y^2 + z^2) cannot decide
+            rows.append(np.array([p[0] * c - p[1] * s, p[0] * s + p[1] * c, p[2]]))
+    Q = np.array(rows)
+    Q[rng.random(len(Q)) < 0.03] = 0.0  # no-returns stored as zeros
+    a = cloud_to_grid(Q, backend="numpy")
+    assert a.method == "order"
+    _same_grid(a, cloud_to_grid(Q, backend="compiled"))
+    Q32 = Q.astype(np.float32)  # float32 input, as KITTI's: read by the kernel itself
+    _same_grid(cloud_to_grid(Q32, backend="numpy"), cloud_to_grid(Q32, backend="compiled"))
+
+
+def test_ring_ranking_falls_back_to_exact_keys():
+    """Ring keys closer than their error bound are not ranked by the approximate sums: two rings
+    whose elevations differ by 1e-13 relative, the approximate sums of the higher one lowered
+    (within the bound) so that they rank it first - the kernel must rank by the exact keys, as
+    the twin."""
+    from navkit.obstacles import _kernels
+
+    n_az = 400
+    az0 = np.linspace(-np.pi, np.pi, n_az, endpoint=False) + 0.3 / n_az
+    az = np.tile(az0, 2)
+    el = np.repeat([0.1 * (1 + 1e-13), 0.1], n_az)  # ring 0 is the higher one
+    P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * 10.0
+    twin = cloud_to_grid(P, backend="numpy")
+    assert twin.method == "order"
+    qx, qy, qz = (np.ascontiguousarray(P[:, k]) for k in range(3))
+    n = len(P)
+    azk = np.arctan2(qy, qx)
+    d, ad, work = np.empty(n), np.empty(n), np.empty(n)
+    ring = np.empty(n, np.int64)
+    sums, abs_sums = np.empty(1025), np.empty(1025)
+    counts = np.empty(1025, np.int64)
+    found, _step, n_r, lo = _kernels.rings_order_kernel(
+        azk, qx, qy, qz, d, ad, work, ring, sums, abs_sums, counts
+    )
+    assert found and n_r == 2
+    assert sums[0] / counts[0] > sums[1] / counts[1]
+    sums[0] = sums[1] * (1 - 2e-15)  # approximate key of ring 0 now below ring 1's
+    n_columns = twin.shape[0]
+    phase = (twin.azimuth[0] + np.pi) * n_columns / (2 * np.pi)
+    win, best = np.empty(n_columns * 2, np.int64), np.empty(n_columns * 2)
+    grid, cop = np.empty((n_columns * 2, 3)), np.empty(n, np.int64)
+    n_el = _kernels.grid_order_fill_kernel(
+        qx,
+        qy,
+        qz,
+        azk,
+        np.arange(n),
+        ring,
+        lo,
+        sums,
+        abs_sums,
+        counts,
+        n_r,
+        n_columns,
+        phase,
+        win,
+        best,
+        grid,
+        cop,
+    )
+    assert n_el == 2
+    np.testing.assert_array_equal(grid.reshape(n_columns, 2, 3), twin.points)
+    np.testing.assert_array_equal(cop, twin.cell_of_point)
+
+
 def test_mvee_and_a6_compiled_equal_numpy(rng):
     from navkit.geometry.shapes import ellipse_a5, ellipses_a6_batch, hull_points, mvee_batch
 

@@ -39,12 +39,14 @@ __all__ = [
     "grid_order_fill_kernel",
     "mesh_kernel",
     "phase_fractions_kernel",
+    "phase_means_kernel",
     "points_kernel",
     "refine_kernel",
     "rings_by_order_kernel",
     "rings_order_kernel",
     "robust_normals_kernel",
     "robust_strides_kernel",
+    "sin_cos_kernel",
     "stages_2_5_kernel",
 ]
 
@@ -1147,11 +1149,15 @@ def grid_fill_kernel(Q, rh, cell, n_cells):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, error_model="numpy")
-def cloud_valid_kernel(P, far, qx, qy, qz, rh, idx):  # type: ignore[no-untyped-def]
+def cloud_valid_kernel(P, far, qx, qy, qz, idx):  # type: ignore[no-untyped-def]
     """The valid points of ``P (N, >=3)`` (finite, not ``(0, 0, 0)``, every coordinate below
-    ``far`` in magnitude - the twin NaNs the others) as float64 columns ``qx, qy, qz``, their
-    horizontal range ``rh`` (``math.hypot`` = ``np.hypot``) and input index ``idx``. Returns how
-    many."""
+    ``far`` in magnitude - the twin NaNs the others) as float64 columns ``qx, qy, qz`` and
+    their input index ``idx``. Returns how many.
+
+    No horizontal range here: the twin's ``np.hypot`` (libm's, a function call per point, ~0.4
+    ms per KITTI frame) enters only comparisons - the ring ranking and the nearest point per
+    cell - which the later kernels decide with ``sqrt(x^2 + y^2)`` whenever the answer is
+    certain and with ``math.hypot`` (= ``np.hypot``) when it is not."""
     n = P.shape[0]
     m = 0
     for p in range(n):
@@ -1167,8 +1173,6 @@ def cloud_valid_kernel(P, far, qx, qy, qz, rh, idx):  # type: ignore[no-untyped-
             qz[um] = z
             idx[um] = p
             m += 1
-    for k in range(m):
-        rh[k] = math.hypot(qx[k], qy[k])
     return m
 
 
@@ -1244,71 +1248,132 @@ def _median_banded(values, work):  # type: ignore[no-untyped-def]
     return (a + b) / 2
 
 
+# relative error bound per value of the approximate forms below (``sqrt(x^2 + y^2)`` for
+# ``hypot``): a few units of 2^-53, taken with a wide margin
+_EPS = 2.0**-52
+
+
 @njit(cache=True, error_model="numpy")
-def rings_order_kernel(az, qz, rh, d, ad, work, ring, sums, counts):  # type: ignore[no-untyped-def]
-    """``grids._rings_by_order`` on ``az (n,)``: ``(found, azimuth step, number of rings)``,
-    the ring of every point in ``ring`` and, per ring, the count and the sum of ``z / max(r_h,
-    1e-9)`` (the twin's ``bincount`` weights, in point order) in ``counts`` and ``sums`` (at
-    least 513 long). ``d, work`` are float64 work arrays of ``n``."""
+def rings_order_kernel(az, qx, qy, qz, d, ad, work, ring, sums, abs_sums, counts):  # type: ignore[no-untyped-def]
+    """``grids._rings_by_order`` on ``az (n,)``: ``(found, azimuth step, number of rings, lowest
+    raw ring)``, the raw ring of every point in ``ring`` (subtract the lowest one for the ring
+    index) and, per ring ``r - lowest``, the count of points and the sum, in point order, of
+    ``z / max(sqrt(x^2 + y^2), 1e-9)`` and of its magnitude (the twin's ``bincount`` weights
+    with ``sqrt`` for ``hypot``: only their ranking is used, which
+    :func:`grid_order_fill_kernel` checks) in ``counts``, ``sums`` and ``abs_sums`` (at least
+    1,025 long). ``d, ad, work`` are float64 work arrays of ``n``."""
     n = len(az)
     two_pi = 2 * np.pi
     if n < 100:
-        return False, 0.0, 0
+        return False, 0.0, 0, 0
     pos = 0
-    for k in range(n - 1):
+    for k in range(n - 1):  # one pass: the wrapped steps, their magnitudes, how many are > 0
         v = az[k + 1] - az[k]
         v = v - two_pi if v >= np.pi else v
         v = v + two_pi if v < -np.pi else v
         d[k] = v
+        ad[k] = abs(v)
         pos += 1 if v > 0 else 0
-    ad = ad[: n - 1]
-    for k in range(n - 1):
-        ad[k] = abs(d[k])
-    step = _median_banded(ad, work)
+    step = _median_banded(ad[: n - 1], work)
     if not step > 0:
-        return False, 0.0, 0
+        return False, 0.0, 0, 0
     direction = 1.0 if 2 * pos > n - 1 else -1.0
     fwd = 0
     lim = -0.5 * step
     for k in range(n - 1):
         fwd += 1 if direction * d[k] > lim else 0
     if step > two_pi / 64 or fwd / (n - 1) < 0.9:
-        return False, 0.0, 0
+        return False, 0.0, 0, 0
+    # rings and the per-ring sums in one pass; the first point's ring is 0, so a ring outside
+    # [-512, 512] means more than 512 rings (not a sweep): the sums are indexed by ring + 512
+    for r in range(1025):
+        sums[r] = 0.0
+        abs_sums[r] = 0.0
+        counts[r] = 0
     acc = 0.0
     half = 0.5 * step
-    lo = np.iinfo(np.int64).max
-    hi = np.iinfo(np.int64).min
+    lo = 0
+    hi = 0
     for k in range(n):
         if k > 0:
             acc += d[k - 1]
         r = math.floor((direction * acc + half) / two_pi)
+        if r < -512 or r > 512:
+            return False, 0.0, 0, 0
         ring[k] = r
         lo = min(lo, r)
         hi = max(hi, r)
+        x = qx[k]
+        y = qy[k]
+        t = qz[k] / max(math.sqrt(x * x + y * y), 1e-9)
+        ur = np.uint64(r + 512)  # >= 0: no negative-index fix-up
+        counts[ur] += 1
+        sums[ur] += t
+        abs_sums[ur] += abs(t)
     n_r = hi - lo + 1
     if n_r < 2 or n_r > 512:
-        return False, 0.0, 0
+        return False, 0.0, 0, 0
+    for r in range(n_r):  # to index ring - lo
+        sums[r] = sums[r + lo + 512]
+        abs_sums[r] = abs_sums[r + lo + 512]
+        counts[r] = counts[r + lo + 512]
+    return True, step, n_r, lo
+
+
+@njit(cache=True, error_model="numpy")
+def _ring_keys_exact(qx, qy, qz, ring, lo, n_r, key):  # type: ignore[no-untyped-def]
+    """The twin's ring keys: mean of ``z / max(hypot(x, y), 1e-9)`` per ring (``bincount`` in
+    point order, divided by ``max(count, 1)``), ``inf`` for empty rings."""
+    s = np.zeros(n_r)
+    c = np.zeros(n_r, np.int64)
+    for k in range(len(ring)):
+        r = np.uint64(ring[k] - lo)
+        c[r] += 1
+        s[r] += qz[k] / max(math.hypot(qx[k], qy[k]), 1e-9)
     for r in range(n_r):
-        sums[r] = 0.0
-        counts[r] = 0
-    for k in range(n):
-        r = ring[k] - lo
-        ring[k] = r
-        ur = np.uint64(r)  # >= 0: no negative-index fix-up
-        counts[ur] += 1
-        sums[ur] += qz[k] / max(rh[k], 1e-9)
-    return True, step, n_r
+        key[r] = s[r] / max(c[r], 1) if c[r] > 0 else np.inf
+
+
+@njit(cache=True, error_model="numpy")
+def _exact_range(x, y, z):  # type: ignore[no-untyped-def]
+    """The twin's range ``sqrt(hypot(x, y)^2 + z^2)``."""
+    rh = math.hypot(x, y)
+    return math.sqrt(rh * rh + z * z)
 
 
 @njit(cache=True, error_model="numpy")
 def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
-    qx, qy, qz, rh, az, idx, ring, sums, counts, n_r, n_columns, phase, win, grid, cell_of_point
+    qx,
+    qy,
+    qz,
+    az,
+    idx,
+    ring,
+    lo,
+    sums,
+    abs_sums,
+    counts,
+    n_r,
+    n_columns,
+    phase,
+    win,
+    best,
+    grid,
+    cell_of_point,
 ):
     """Rings ranked by rising mean ``z / r_h`` (stable), the column of every point, its cell,
     the nearest point per cell into ``grid (n_columns n_el, 3)`` (NaN rows if empty; among
     points at the same range the last one wins, as in the twin) and ``cell_of_point (N,)``
-    (-1 for the points that are not valid). ``win`` is an int64 work array of the cells.
-    Returns ``n_el``."""
+    (-1 for the points that are not valid). ``win`` (int64) and ``best`` (float64) are work
+    arrays of the cells. Returns ``n_el``.
+
+    Bit for bit the twin's decisions without its ``hypot`` per point: the ring keys from
+    :func:`rings_order_kernel`'s ``sqrt`` sums are used when, sorted, every two neighbours are
+    farther apart than both keys' error bounds (``(8 + 4 count) eps`` times the mean magnitude:
+    a relative error of at most a few eps per value plus the rounding of both sums), else the
+    exact keys are computed (:func:`_ring_keys_exact`); the nearest point per cell compares
+    squared ranges ``x^2 + y^2 + z^2`` and falls back to the twin's range
+    (:func:`_exact_range`) when two are within a relative ``1e-12`` of each other or tiny."""
     n = len(az)
     key = np.empty(n_r)
     n_el = 0
@@ -1319,17 +1384,30 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
         else:
             key[r] = np.inf
     rank = np.argsort(key, kind="mergesort")
+    exact = False
+    for t in range(n_el - 1):
+        a = rank[t]
+        b = rank[t + 1]
+        err_a = (8 + 4 * counts[a]) * _EPS * abs_sums[a] / counts[a]
+        err_b = (8 + 4 * counts[b]) * _EPS * abs_sums[b] / counts[b]
+        if not key[b] - key[a] > 2 * (err_a + err_b):
+            exact = True
+    if exact:
+        _ring_keys_exact(qx, qy, qz, ring[:n], lo, n_r, key)
+        rank = np.argsort(key, kind="mergesort")
     lut = np.empty(n_r, np.int64)
     for r in range(n_r):
         lut[rank[r]] = r
     n_cells = n_columns * n_el
-    best = np.empty(n_cells)  # the range of each cell's current winner
     for c in range(n_cells):
         win[c] = -1
-        best[c] = np.inf
-    for p in range(len(cell_of_point)):
-        cell_of_point[p] = -1
+    if n < len(cell_of_point):  # some points are not valid; every valid one is written below
+        for p in range(len(cell_of_point)):
+            cell_of_point[p] = -1
     scale = 2 * np.pi
+    lo_f = 1.0 - 1e-12
+    hi_f = 1.0 + 1e-12
+    tiny = 1e-280
     # unsigned indices (all >= 0 by construction): no negative-index fix-up per access
     ncol = np.uint64(n_columns)
     for k in range(n):
@@ -1338,14 +1416,29 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
         if i >= n_columns or i < 0:
             i = i % n_columns
         ui = np.uint64(i)
-        j = lut[np.uint64(ring[k])]
+        j = lut[np.uint64(ring[k] - lo)]
         cell_of_point[np.uint64(idx[k])] = i * n_el + j
         # the winners are kept ring-major: the points of a ring fall into neighbouring entries
         c = np.uint64(j) * ncol + ui
-        rk = math.sqrt(rh[k] * rh[k] + qz[k] * qz[k])
-        if win[c] < 0 or rk <= best[c]:
+        px = qx[k]
+        py = qy[k]
+        pz = qz[k]
+        r2 = px * px + py * py + pz * pz
+        w = win[c]
+        if w < 0:
+            take = True
+        else:
+            b2 = best[c]
+            if r2 < lo_f * b2 and r2 > tiny:
+                take = True
+            elif r2 > hi_f * b2 and b2 > tiny:
+                take = False
+            else:  # too close to tell (or tiny): the twin's ranges
+                uw = np.uint64(w)
+                take = _exact_range(px, py, pz) <= _exact_range(qx[uw], qy[uw], qz[uw])
+        if take:
             win[c] = k
-            best[c] = rk
+            best[c] = r2
     g = grid.reshape(-1)
     nel = np.uint64(n_el)
     three = np.uint64(3)
@@ -1667,6 +1760,102 @@ def phase_fractions_kernel(az, step, n_columns, out):  # type: ignore[no-untyped
         out[m] = two_pi * (xs % 1.0)
         m += 1
     return m
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _block_sum(a, lo, n):  # type: ignore[no-untyped-def]
+    """NumPy's sum of a block of at most 128 values (``DOUBLE_pairwise_sum``'s leaves)."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[lo + i]
+        return res
+    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
+    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
+    i = 8
+    end = n - n % 8
+    while i < end:
+        b = lo + i
+        r0 += a[b]
+        r1 += a[b + 1]
+        r2 += a[b + 2]
+        r3 += a[b + 3]
+        r4 += a[b + 4]
+        r5 += a[b + 5]
+        r6 += a[b + 6]
+        r7 += a[b + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True, error_model="numpy")
+def _pairwise_sum(a, lo, n):  # type: ignore[no-untyped-def]
+    """NumPy's pairwise summation of ``a[lo:lo + n]`` (``DOUBLE_pairwise_sum``: eight running
+    sums over blocks of at most 128 values, halves split at multiples of 8), so that
+    ``0.0 + _pairwise_sum(a, 0, n)`` is ``np.add.reduce(a)`` bit for bit. The recursion runs on
+    an explicit stack (Numba's cache does not load recursive functions reliably)."""
+    s_lo = np.empty(64, np.int64)
+    s_n = np.empty(64, np.int64)
+    s_left = np.empty(64)  # the left half's sum, once known
+    s_state = np.empty(64, np.int64)  # 0: left half pending, 1: right half pending
+    top = 0
+    cur_lo = lo
+    cur_n = n
+    while True:
+        # descend along left halves down to a block
+        while cur_n > 128:
+            h = cur_n // 2
+            h -= h % 8
+            s_lo[top] = cur_lo
+            s_n[top] = cur_n
+            s_state[top] = 0
+            top += 1
+            cur_n = h
+        val = _block_sum(a, cur_lo, cur_n)
+        # climb: combine finished right halves, start the next pending right half
+        while top > 0 and s_state[top - 1] == 1:
+            top -= 1
+            val = s_left[top] + val
+        if top == 0:
+            return val
+        f = top - 1
+        s_left[f] = val
+        s_state[f] = 1
+        h = s_n[f] // 2
+        h -= h % 8
+        cur_lo = s_lo[f] + h
+        cur_n = s_n[f] - h
+
+
+@njit(cache=True, error_model="numpy")
+def phase_means_kernel(az, step, n_columns, s, c):  # type: ignore[no-untyped-def]
+    """The means of ``sin`` and ``cos`` of ``2 pi ((az[::step] + pi) / (2 pi) n_columns % 1)``
+    (the subsample whose circular mean gives the columns' phase in ``grids.cloud_to_grid``),
+    as ``np.sin(frac).mean()``, ``np.cos(frac).mean()``: ``math.sin`` / ``math.cos`` are libm's,
+    which NumPy's float64 ``sin`` / ``cos`` call (``grids`` checks that once per process and
+    keeps NumPy's otherwise), and the means are NumPy's pairwise sums divided by the count.
+    ``s, c`` are float64 work arrays."""
+    m = 0
+    two_pi = 2 * np.pi
+    for k in range(0, len(az), step):
+        xs = (az[k] + np.pi) / two_pi * n_columns
+        f = two_pi * (xs % 1.0)
+        s[m] = math.sin(f)
+        c[m] = math.cos(f)
+        m += 1
+    return (0.0 + _pairwise_sum(s, 0, m)) / m, (0.0 + _pairwise_sum(c, 0, m)) / m
+
+
+@njit(cache=True, error_model="numpy")
+def sin_cos_kernel(f, s, c):  # type: ignore[no-untyped-def]
+    """``math.sin`` and ``math.cos`` of ``f`` (the probe that libm's equal NumPy's)."""
+    for k in range(len(f)):
+        s[k] = math.sin(f[k])
+        c[k] = math.cos(f[k])
 
 
 @njit(cache=True, error_model="numpy")

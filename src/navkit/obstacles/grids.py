@@ -340,21 +340,32 @@ def cloud_to_grid(
 
 
 def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
-    """:func:`cloud_to_grid` with rings from the storage order, compiled: three kernels over
+    """:func:`cloud_to_grid` with rings from the storage order, compiled: four kernels over
     caller-provided arrays (:mod:`navkit.obstacles._buffers`) and NumPy's ``arctan2`` (whose
     SIMD results the twin uses) in place. ``None`` when the order is not a sweep (the caller then
-    takes the general path). The same grid as the twin, bit for bit."""
+    takes the general path). The same grid as the twin, bit for bit: the twin's ``hypot`` per
+    point only enters comparisons, which the kernels decide exactly without it (see
+    :func:`navkit.obstacles._kernels.grid_order_fill_kernel`)."""
     from navkit.obstacles import _kernels
     from navkit.obstacles._buffers import arena, cached_work
 
     N = len(P)
     cap = -(-N // 65536) * 65536  # work arrays reused across clouds of about the same size
-    (work_f, work_i) = cached_work(
-        ("cloud_to_grid", cap), lambda: arena([((8, cap), np.float64), ((2, cap), np.int64)])
+    (work_f, work_i, sums, abs_sums, counts) = cached_work(
+        ("cloud_to_grid", cap),
+        lambda: arena(
+            [
+                ((7, cap), np.float64),
+                ((2, cap), np.int64),
+                ((1025,), np.float64),
+                ((1025,), np.float64),
+                ((1025,), np.int64),
+            ]
+        ),
     )
-    qx, qy, qz, rh, az_buf, d, ad, tmp = work_f
+    qx, qy, qz, az_buf, d, ad, tmp = work_f
     idx, ring = work_i
-    m = _kernels.cloud_valid_kernel(P, _FAR, qx, qy, qz, rh, idx)
+    m = _kernels.cloud_valid_kernel(P, _FAR, qx, qy, qz, idx)
     if m < 4:
         raise InputError(
             f"has {m} valid points",
@@ -363,34 +374,41 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
             expected="at least 4 points that are not NaN or (0, 0, 0)",
         )
     az = np.arctan2(qy[:m], qx[:m], out=az_buf[:m])
-    sums = np.empty(513)
-    counts = np.empty(513, dtype=np.int64)
-    found, step, n_r = _kernels.rings_order_kernel(
-        az, qz[:m], rh[:m], d, ad, tmp, ring, sums, counts
+    found, step, n_r, lo = _kernels.rings_order_kernel(
+        az, qx, qy, qz, d, ad, tmp, ring, sums, abs_sums, counts
     )
     if not found:
         return None
     n_columns = max(3, round(2 * np.pi / step))
-    frac = tmp[: _kernels.phase_fractions_kernel(az, max(1, m // 20000), n_columns, tmp)]
-    phase = float(np.arctan2(np.sin(frac).mean(), np.cos(frac).mean()) / (2 * np.pi))
-    (win,) = cached_work(
-        ("cloud_to_grid cells", n_columns * n_r), lambda: arena([((n_columns * n_r,), np.int64)])
+    sub = max(1, m // 20000)
+    if _libm_sin_cos():
+        mean_sin, mean_cos = _kernels.phase_means_kernel(az, sub, n_columns, d, ad)
+    else:  # NumPy's sin / cos are not libm's here: theirs, as the twin
+        frac = tmp[: _kernels.phase_fractions_kernel(az, sub, n_columns, tmp)]
+        mean_sin, mean_cos = np.sin(frac).mean(), np.cos(frac).mean()
+    phase = float(np.arctan2(np.float64(mean_sin), np.float64(mean_cos)) / (2 * np.pi))
+    n_cells = n_columns * n_r
+    (win, best) = cached_work(
+        ("cloud_to_grid cells", n_cells),
+        lambda: arena([((n_cells,), np.int64), ((n_cells,), np.float64)]),
     )
-    grid, cell_of_point = arena([((n_columns * n_r, 3), np.float64), ((N,), np.int64)])
+    grid, cell_of_point = arena([((n_cells, 3), np.float64), ((N,), np.int64)])
     n_el = _kernels.grid_order_fill_kernel(
         qx,
         qy,
         qz,
-        rh,
         az,
         idx,
         ring,
+        lo,
         sums,
+        abs_sums,
         counts,
         n_r,
         n_columns,
         phase,
         win,
+        best,
         grid,
         cell_of_point,
     )
@@ -398,6 +416,25 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
     log.debug("cloud_to_grid: %d points -> %d x %d grid by order", N, n_columns, n_el)
     points = grid[: n_columns * n_el].reshape(n_columns, n_el, 3)
     return ScanGrid(points, cell_of_point, azimuth, True, "order")
+
+
+_LIBM_SIN_COS: list[bool] = []
+
+
+def _libm_sin_cos() -> bool:
+    """Whether NumPy's float64 ``sin`` and ``cos`` give libm's results (``math.sin`` /
+    ``math.cos`` in a kernel) on this machine: checked once per process on 4,096 values of
+    ``[0, 2 pi)``. NumPy calls libm for them on the machines measured; a NumPy build with its
+    own SIMD versions keeps NumPy's in the phase (the twin's values either way)."""
+    if not _LIBM_SIN_COS:
+        from navkit.obstacles import _kernels
+
+        f = np.random.default_rng(12).uniform(0.0, 2 * np.pi, 4096)
+        f[:64] = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
+        s, c = np.empty_like(f), np.empty_like(f)
+        _kernels.sin_cos_kernel(f, s, c)
+        _LIBM_SIN_COS.append(bool(np.array_equal(s, np.sin(f)) and np.array_equal(c, np.cos(f))))
+    return _LIBM_SIN_COS[0]
 
 
 def _finish_grid(
