@@ -363,12 +363,46 @@ def test_ring_ranking_falls_back_to_exact_keys():
         phase,
         win,
         best,
+        np.empty(n),
         grid,
         cop,
     )
     assert n_el == 2
     np.testing.assert_array_equal(grid.reshape(n_columns, 2, 3), twin.points)
     np.testing.assert_array_equal(cop, twin.cell_of_point)
+
+
+def test_cells_pass_falls_back_to_the_modulo(rng):
+    """Columns outside ``[0, n_columns]`` (a phase beyond its range here) are reported, and the
+    fallback gives the twin's ``floor(...) % n_columns`` cells."""
+    from navkit.obstacles import _kernels
+
+    n, n_columns, n_el = 5000, 360, 4
+    az = rng.uniform(-np.pi, np.pi, n)
+    az[:2] = (-np.pi, np.pi)
+    ring = rng.integers(0, n_el, n).astype(np.int64) + 3  # raw rings, lowest 3
+    lut = np.array([2, 0, 3, 1], dtype=np.int64)
+    q = rng.normal(size=(3, n))
+    idx = np.sort(rng.choice(n + 100, n, replace=False)).astype(np.int64)
+    cases = ((0.25, True), (-0.49, True), (0.5, True), (-0.5, False), (-1.7, False), (2.3, False))
+    for phase, expect_ok in cases:
+        x = (az + np.pi) / (2 * np.pi) * n_columns
+        i = np.floor(x - phase + 0.5).astype(np.int64) % n_columns
+        j = lut[ring - 3]
+        for all_valid in (True, False):
+            rk = ring.copy()
+            cop = np.full(n + 100, -7, dtype=np.int64)
+            pos = np.arange(n) if all_valid else idx
+            r2w = np.empty(n)
+            ok = _kernels._cells_pass(
+                az, rk, 3, lut, phase, n_columns, n_el, *q, pos, r2w, cop, all_valid
+            )
+            assert ok == expect_ok
+            if not ok:
+                _kernels._cells_pass_modulo(az, rk, 3, lut, phase, n_columns, n_el, pos, cop)
+            np.testing.assert_array_equal(cop[pos], i * n_el + j)
+            np.testing.assert_array_equal(rk, j * n_columns + i)
+            np.testing.assert_array_equal(r2w, q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
 
 
 def test_mvee_and_a6_compiled_equal_numpy(rng):

@@ -1259,9 +1259,9 @@ def rings_order_kernel(az, qx, qy, qz, d, ad, work, ring, sums, abs_sums, counts
     raw ring)``, the raw ring of every point in ``ring`` (subtract the lowest one for the ring
     index) and, per ring ``r - lowest``, the count of points and the sum, in point order, of
     ``z / max(sqrt(x^2 + y^2), 1e-9)`` and of its magnitude (the twin's ``bincount`` weights
-    with ``sqrt`` for ``hypot``: only their ranking is used, which
-    :func:`grid_order_fill_kernel` checks) in ``counts``, ``sums`` and ``abs_sums`` (at least
-    1,025 long). ``d, ad, work`` are float64 work arrays of ``n``."""
+    with ``sqrt`` for ``hypot``, summed in any order: only their ranking is used, which
+    :func:`grid_order_fill_kernel` checks against their error bound) in ``counts``, ``sums``
+    and ``abs_sums`` (at least 512 long). ``d, ad, work`` are float64 work arrays of ``n``."""
     n = len(az)
     two_pi = 2 * np.pi
     if n < 100:
@@ -1284,39 +1284,65 @@ def rings_order_kernel(az, qx, qy, qz, d, ad, work, ring, sums, abs_sums, counts
         fwd += 1 if direction * d[k] > lim else 0
     if step > two_pi / 64 or fwd / (n - 1) < 0.9:
         return False, 0.0, 0, 0
-    # rings and the per-ring sums in one pass; the first point's ring is 0, so a ring outside
-    # [-512, 512] means more than 512 rings (not a sweep): the sums are indexed by ring + 512
-    for r in range(1025):
-        sums[r] = 0.0
-        abs_sums[r] = 0.0
-        counts[r] = 0
+    # the unwrapped azimuth: the twin's cumsum, a serial chain of additions (nothing else in
+    # this loop, so that the rest vectorises)
+    u = work
     acc = 0.0
+    u[0] = acc
+    for k in range(1, n):
+        acc += d[k - 1]
+        u[k] = acc
     half = 0.5 * step
     lo = 0
     hi = 0
-    for k in range(n):
-        if k > 0:
-            acc += d[k - 1]
-        r = math.floor((direction * acc + half) / two_pi)
-        if r < -512 or r > 512:
-            return False, 0.0, 0, 0
+    for k in range(n):  # vectorised: division, floor, min / max
+        r = np.int64(math.floor((direction * u[k] + half) / two_pi))
         ring[k] = r
         lo = min(lo, r)
         hi = max(hi, r)
-        x = qx[k]
-        y = qy[k]
-        t = qz[k] / max(math.sqrt(x * x + y * y), 1e-9)
-        ur = np.uint64(r + 512)  # >= 0: no negative-index fix-up
-        counts[ur] += 1
-        sums[ur] += t
-        abs_sums[ur] += abs(t)
     n_r = hi - lo + 1
     if n_r < 2 or n_r > 512:
         return False, 0.0, 0, 0
-    for r in range(n_r):  # to index ring - lo
-        sums[r] = sums[r + lo + 512]
-        abs_sums[r] = abs_sums[r + lo + 512]
-        counts[r] = counts[r + lo + 512]
+    t = ad
+    for k in range(n):  # vectorised
+        x = qx[k]
+        y = qy[k]
+        t[k] = qz[k] / max(math.sqrt(x * x + y * y), 1e-9)
+    for r in range(n_r):
+        sums[r] = 0.0
+        abs_sums[r] = 0.0
+        counts[r] = 0
+    # per-ring sums over runs of points of one ring (a ring is mostly one run in storage
+    # order), four running sums each: these sums only have to be within their error bound,
+    # which holds for any order of the additions
+    k = 0
+    while k < n:
+        r = ring[k]
+        e = k + 1
+        while e < n and ring[e] == r:
+            e += 1
+        s0 = s1 = s2 = s3 = 0.0
+        a0 = a1 = a2 = a3 = 0.0
+        q = k
+        while q + 4 <= e:
+            s0 += t[q]
+            s1 += t[q + 1]
+            s2 += t[q + 2]
+            s3 += t[q + 3]
+            a0 += abs(t[q])
+            a1 += abs(t[q + 1])
+            a2 += abs(t[q + 2])
+            a3 += abs(t[q + 3])
+            q += 4
+        while q < e:
+            s0 += t[q]
+            a0 += abs(t[q])
+            q += 1
+        ur = np.uint64(r - lo)
+        sums[ur] += (s0 + s1) + (s2 + s3)
+        abs_sums[ur] += (a0 + a1) + (a2 + a3)
+        counts[ur] += e - k
+        k = e
     return True, step, n_r, lo
 
 
@@ -1342,6 +1368,63 @@ def _exact_range(x, y, z):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, error_model="numpy")
+def _cells_pass(  # type: ignore[no-untyped-def]
+    az, ring, lo, lut, phase, n_columns, n_el, qx, qy, qz, idx, r2w, cell_of_point, all_valid
+):
+    """The column ``i`` of every point (the twin's ``floor((az + pi) / (2 pi) n_columns - phase
+    + 0.5) % n_columns``), its cell ``i n_el + j`` into ``cell_of_point`` (at ``idx``), its
+    ring-major cell ``j n_columns + i`` over ``ring`` and ``x^2 + y^2 + z^2`` into ``r2w``.
+    Branch-free (a column is at most ``n_columns``, which wraps to 0); returns ``False`` if a
+    column fell outside ``[0, n_columns]`` (then :func:`_cells_pass_modulo` redoes the cells)."""
+    n = len(az)
+    scale = 2 * np.pi
+    good = True
+    if all_valid:  # idx[k] == k: contiguous stores, the loop vectorises
+        for k in range(n):
+            x = (az[k] + np.pi) / scale * n_columns
+            i = math.floor(x - phase + 0.5)
+            good &= (i >= 0) & (i <= n_columns)
+            i = i - n_columns if i >= n_columns else i
+            j = lut[np.uint64(ring[k] - lo)]
+            cell_of_point[k] = i * n_el + j
+            ring[k] = j * n_columns + i
+            px = qx[k]
+            py = qy[k]
+            pz = qz[k]
+            r2w[k] = px * px + py * py + pz * pz
+    else:
+        for k in range(n):
+            x = (az[k] + np.pi) / scale * n_columns
+            i = math.floor(x - phase + 0.5)
+            good &= (i >= 0) & (i <= n_columns)
+            i = i - n_columns if i >= n_columns else i
+            j = lut[np.uint64(ring[k] - lo)]
+            cell_of_point[np.uint64(idx[k])] = i * n_el + j
+            ring[k] = j * n_columns + i
+            px = qx[k]
+            py = qy[k]
+            pz = qz[k]
+            r2w[k] = px * px + py * py + pz * pz
+    return good
+
+
+@njit(cache=True, error_model="numpy")
+def _cells_pass_modulo(az, ring, lo, lut, phase, n_columns, n_el, idx, cell_of_point):  # type: ignore[no-untyped-def]
+    """:func:`_cells_pass`'s cells with the general modulo (``ring`` already holds what
+    :func:`_cells_pass` wrote, ``j n_columns + i'`` with its column ``i'``, recomputed here to
+    recover ``j``)."""
+    scale = 2 * np.pi
+    for k in range(len(az)):
+        x = (az[k] + np.pi) / scale * n_columns
+        raw = math.floor(x - phase + 0.5)
+        first = raw - n_columns if raw >= n_columns else raw
+        j = (ring[k] - first) // n_columns
+        i = raw % n_columns
+        cell_of_point[np.uint64(idx[k])] = i * n_el + j
+        ring[k] = j * n_columns + i
+
+
+@njit(cache=True, error_model="numpy")
 def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
     qx,
     qy,
@@ -1358,6 +1441,7 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
     phase,
     win,
     best,
+    r2w,
     grid,
     cell_of_point,
 ):
@@ -1365,7 +1449,8 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
     the nearest point per cell into ``grid (n_columns n_el, 3)`` (NaN rows if empty; among
     points at the same range the last one wins, as in the twin) and ``cell_of_point (N,)``
     (-1 for the points that are not valid). ``win`` (int64) and ``best`` (float64) are work
-    arrays of the cells. Returns ``n_el``.
+    arrays of the cells, ``r2w`` a float64 work array of the points; ``ring`` is overwritten
+    (with each point's ring-major cell). Returns ``n_el``.
 
     Bit for bit the twin's decisions without its ``hypot`` per point: the ring keys from
     :func:`rings_order_kernel`'s ``sqrt`` sums are used when, sorted, every two neighbours are
@@ -1404,26 +1489,33 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
     if n < len(cell_of_point):  # some points are not valid; every valid one is written below
         for p in range(len(cell_of_point)):
             cell_of_point[p] = -1
-    scale = 2 * np.pi
     lo_f = 1.0 - 1e-12
     hi_f = 1.0 + 1e-12
     tiny = 1e-280
+    # columns, cells and squared ranges first, in a loop that vectorises (division, floor,
+    # the small lookup); the ring-major cell of each point replaces its ring
+    ok = _cells_pass(
+        az,
+        ring,
+        lo,
+        lut,
+        phase,
+        n_columns,
+        n_el,
+        qx,
+        qy,
+        qz,
+        idx,
+        r2w,
+        cell_of_point,
+        n == len(cell_of_point),
+    )
+    if not ok:  # a column outside [0, n_columns]: not expected, the twin's modulo then
+        _cells_pass_modulo(az, ring, lo, lut, phase, n_columns, n_el, idx, cell_of_point)
     # unsigned indices (all >= 0 by construction): no negative-index fix-up per access
-    ncol = np.uint64(n_columns)
     for k in range(n):
-        x = (az[k] + np.pi) / scale * n_columns
-        i = math.floor(x - phase + 0.5)
-        if i >= n_columns or i < 0:
-            i = i % n_columns
-        ui = np.uint64(i)
-        j = lut[np.uint64(ring[k] - lo)]
-        cell_of_point[np.uint64(idx[k])] = i * n_el + j
-        # the winners are kept ring-major: the points of a ring fall into neighbouring entries
-        c = np.uint64(j) * ncol + ui
-        px = qx[k]
-        py = qy[k]
-        pz = qz[k]
-        r2 = px * px + py * py + pz * pz
+        c = np.uint64(ring[k])
+        r2 = r2w[k]
         w = win[c]
         if w < 0:
             take = True
@@ -1435,10 +1527,11 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
                 take = False
             else:  # too close to tell (or tiny): the twin's ranges
                 uw = np.uint64(w)
-                take = _exact_range(px, py, pz) <= _exact_range(qx[uw], qy[uw], qz[uw])
+                take = _exact_range(qx[k], qy[k], qz[k]) <= _exact_range(qx[uw], qy[uw], qz[uw])
         if take:
             win[c] = k
             best[c] = r2
+    ncol = np.uint64(n_columns)
     g = grid.reshape(-1)
     nel = np.uint64(n_el)
     three = np.uint64(3)

@@ -357,9 +357,9 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
             [
                 ((7, cap), np.float64),
                 ((2, cap), np.int64),
-                ((1025,), np.float64),
-                ((1025,), np.float64),
-                ((1025,), np.int64),
+                ((513,), np.float64),
+                ((513,), np.float64),
+                ((513,), np.int64),
             ]
         ),
     )
@@ -409,6 +409,7 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
         phase,
         win,
         best,
+        tmp,
         grid,
         cell_of_point,
     )
