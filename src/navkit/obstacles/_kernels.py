@@ -463,9 +463,8 @@ def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # 
             elif not x >= 0:  # negative or NaN
                 x = x + two_pi
             v = abs(x - np.pi)
-            if math.isfinite(v) and v > 0:
-                dal[m] = v
-                m += 1
+            dal[m] = v  # branch-free: always written, kept when finite and > 0
+            m += 1 if (math.isfinite(v) and v > 0) else 0
     dalpha = 1.0
     if m > 0:  # np.median: the middle order statistic(s), exactly
         dalpha = _median_banded(dal[:m], np.empty(m))
@@ -492,8 +491,13 @@ def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # 
         if cnt == 0:
             continue
         col = cols[j]
-        lo = _kth(col[:cnt], (cnt - 1) // 2)
-        hi = _kth(col[:cnt], cnt // 2)
+        h = (cnt - 1) // 2
+        lo = _kth(col[:cnt], h)
+        hi = lo
+        if cnt % 2 == 0:  # the upper middle: the least of what the selection left after h
+            hi = col[h + 1]
+            for q in range(h + 2, cnt):
+                hi = col[q] if col[q] < hi else hi
         xp[n_cols] = j
         fp[n_cols] = np.float64((lo + hi) / np.float32(2))
         n_cols += 1
@@ -624,6 +628,12 @@ def _robust_rows(  # type: ignore[no-untyped-def]
         for jj in range(n_el):
             j = np.uint64(jj)
             f = base + j
+            zc = Z[f]
+            if zc != zc:  # an empty vertex: every test below fails and the normal is 0
+                nvx[f] = np.float32(0.0)
+                nvy[f] = np.float32(0.0)
+                nvz[f] = np.float32(0.0)
+                continue
             k = np.uint64(kst[f])
             if wrap and big:  # 1 <= k <= max_stride < n_az
                 ip = ii + k
@@ -636,7 +646,6 @@ def _robust_rows(  # type: ignore[no-untyped-def]
             else:
                 ip = np.uint64(min(i + kst[f], n_az - 1))
                 im = np.uint64(max(i - kst[f], 0))
-            zc = Z[f]
             dc = Df[f]
             lim = jump_h + jump_f * dc
             e0 = ip * nel + j
