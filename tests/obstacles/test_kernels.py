@@ -372,37 +372,53 @@ def test_ring_ranking_falls_back_to_exact_keys():
     np.testing.assert_array_equal(cop, twin.cell_of_point)
 
 
-def test_cells_pass_falls_back_to_the_modulo(rng):
-    """Columns outside ``[0, n_columns]`` (a phase beyond its range here) are reported, and the
-    fallback gives the twin's ``floor(...) % n_columns`` cells."""
+def test_cells_pass_equals_the_modulo(rng):
+    """The columns as two selects are the twin's ``floor(...) % n_columns`` for every phase
+    ``arctan2 / 2 pi`` can give, the ends of both ranges included."""
     from navkit.obstacles import _kernels
 
     n, n_columns, n_el = 5000, 360, 4
     az = rng.uniform(-np.pi, np.pi, n)
-    az[:2] = (-np.pi, np.pi)
+    az[:3] = (-np.pi, np.pi, 0.0)
     ring = rng.integers(0, n_el, n).astype(np.int64) + 3  # raw rings, lowest 3
     lut = np.array([2, 0, 3, 1], dtype=np.int64)
     q = rng.normal(size=(3, n))
     idx = np.sort(rng.choice(n + 100, n, replace=False)).astype(np.int64)
-    cases = ((0.25, True), (-0.49, True), (0.5, True), (-0.5, False), (-1.7, False), (2.3, False))
-    for phase, expect_ok in cases:
+    for phase in (0.25, -0.49, 0.5, -0.5, 0.0, -0.0):
         x = (az + np.pi) / (2 * np.pi) * n_columns
         i = np.floor(x - phase + 0.5).astype(np.int64) % n_columns
         j = lut[ring - 3]
-        for all_valid in (True, False):
-            rk = ring.copy()
-            cop = np.full(n + 100, -7, dtype=np.int64)
-            pos = np.arange(n) if all_valid else idx
-            r2w = np.empty(n)
-            ok = _kernels._cells_pass(
-                az, rk, 3, lut, phase, n_columns, n_el, *q, pos, r2w, cop, all_valid
-            )
-            assert ok == expect_ok
-            if not ok:
-                _kernels._cells_pass_modulo(az, rk, 3, lut, phase, n_columns, n_el, pos, cop)
-            np.testing.assert_array_equal(cop[pos], i * n_el + j)
-            np.testing.assert_array_equal(rk, j * n_columns + i)
-            np.testing.assert_array_equal(r2w, q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+        rk = ring.copy()
+        cop = np.full(n + 100, -7, dtype=np.int64)
+        r2w = np.empty(n)
+        _kernels._cells_pass(az, rk, 3, lut, phase, n_columns, n_el, *q, idx, r2w, cop)
+        np.testing.assert_array_equal(cop[idx], i * n_el + j)
+        np.testing.assert_array_equal(rk, j * n_columns + i)
+        np.testing.assert_array_equal(r2w, q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+
+
+def test_recycled_arena_reuses_only_unreferenced_buffers():
+    """Outputs come from an earlier buffer only once no array (nor any view) references it: a
+    caller's arrays are never overwritten."""
+    from navkit.obstacles._buffers import recycled_arena
+
+    specs = [((1000, 300), np.float64), ((5000,), np.int64)]
+    a, b = recycled_arena(specs)
+    a[:] = 1.0
+    first = a.ctypes.data
+    c, _ = recycled_arena(specs)
+    assert c.ctypes.data != first  # a and b alive
+    view = a[10:20].reshape(-1)
+    del a, b
+    e, _ = recycled_arena(specs)
+    assert e.ctypes.data != first  # a view of a is alive
+    assert np.all(view == 1.0)
+    del view
+    g, h = recycled_arena(specs)
+    assert g.ctypes.data == first  # nothing references it any more: reused
+    assert g.shape == (1000, 300) and h.shape == (5000,) and g.ctypes.data % (1 << 21) == 0
+    small = recycled_arena([((10,), np.float64)])[0]  # below 1 MiB: a plain arena
+    assert small.shape == (10,)
 
 
 def test_mvee_and_a6_compiled_equal_numpy(rng):

@@ -347,7 +347,7 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
     point only enters comparisons, which the kernels decide exactly without it (see
     :func:`navkit.obstacles._kernels.grid_order_fill_kernel`)."""
     from navkit.obstacles import _kernels
-    from navkit.obstacles._buffers import arena, cached_work
+    from navkit.obstacles._buffers import arena, cached_work, recycled_arena
 
     N = len(P)
     cap = -(-N // 65536) * 65536  # work arrays reused across clouds of about the same size
@@ -392,7 +392,7 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
         ("cloud_to_grid cells", n_cells),
         lambda: arena([((n_cells,), np.int64), ((n_cells,), np.float64)]),
     )
-    grid, cell_of_point = arena([((n_cells, 3), np.float64), ((N,), np.int64)])
+    grid, cell_of_point = recycled_arena([((n_cells, 3), np.float64), ((N,), np.int64)])
     n_el = _kernels.grid_order_fill_kernel(
         qx,
         qy,
@@ -430,11 +430,14 @@ def _libm_sin_cos() -> bool:
     if not _LIBM_SIN_COS:
         from navkit.obstacles import _kernels
 
-        f = np.random.default_rng(12).uniform(0.0, 2 * np.pi, 4096)
-        f[:64] = np.linspace(0.0, 2 * np.pi, 64, endpoint=False)
-        s, c = np.empty_like(f), np.empty_like(f)
-        _kernels.sin_cos_kernel(f, s, c)
-        _LIBM_SIN_COS.append(bool(np.array_equal(s, np.sin(f)) and np.array_equal(c, np.cos(f))))
+        az = np.random.default_rng(12).uniform(-np.pi, np.pi, 4096)
+        az[:64] = np.linspace(-np.pi, np.pi, 64, endpoint=False)
+        s, c = np.empty_like(az), np.empty_like(az)
+        _kernels.phase_means_kernel(az, 1, 1, s, c)  # one column: the fractions of a turn
+        frac = 2 * np.pi * (((az + np.pi) / (2 * np.pi) * 1) % 1.0)  # the same values
+        _LIBM_SIN_COS.append(
+            bool(np.array_equal(s, np.sin(frac)) and np.array_equal(c, np.cos(frac)))
+        )
     return _LIBM_SIN_COS[0]
 
 
