@@ -397,30 +397,6 @@ def test_cells_pass_equals_the_modulo(rng):
         np.testing.assert_array_equal(r2w, q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
 
 
-def test_recycled_arena_reuses_only_unreferenced_buffers():
-    """Outputs come from an earlier buffer only once no array (nor any view) references it: a
-    caller's arrays are never overwritten."""
-    from navkit.obstacles._buffers import recycled_arena
-
-    specs = [((1000, 300), np.float64), ((5000,), np.int64)]
-    a, b = recycled_arena(specs)
-    a[:] = 1.0
-    first = a.ctypes.data
-    c, _ = recycled_arena(specs)
-    assert c.ctypes.data != first  # a and b alive
-    view = a[10:20].reshape(-1)
-    del a, b
-    e, _ = recycled_arena(specs)
-    assert e.ctypes.data != first  # a view of a is alive
-    assert np.all(view == 1.0)
-    del view
-    g, h = recycled_arena(specs)
-    assert g.ctypes.data == first  # nothing references it any more: reused
-    assert g.shape == (1000, 300) and h.shape == (5000,) and g.ctypes.data % (1 << 21) == 0
-    small = recycled_arena([((10,), np.float64)])[0]  # below 1 MiB: a plain arena
-    assert small.shape == (10,)
-
-
 def test_mvee_and_a6_compiled_equal_numpy(rng):
     from navkit.geometry.shapes import ellipse_a5, ellipses_a6_batch, hull_points, mvee_batch
 

@@ -13,7 +13,6 @@ the last four shapes).
 
 from __future__ import annotations
 
-import sys
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable, Sequence
@@ -22,7 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import DTypeLike, NDArray
 
-__all__ = ["arena", "cached_work", "recycled_arena"]
+__all__ = ["arena", "cached_work"]
 
 _ALIGN = 64  # bytes: every array starts on a cache line
 _HUGE = 1 << 22  # NumPy madvises huge pages from 4 MiB on
@@ -76,51 +75,3 @@ def cached_work(key: Hashable, make: Callable[[], list[NDArray[Any]]]) -> list[N
     else:
         cache.move_to_end(key)
     return got
-
-
-_RECYCLE_KEEP = 3  # buffers kept per size and thread
-
-
-def recycled_arena(specs: Sequence[tuple[tuple[int, ...], DTypeLike]]) -> list[NDArray[Any]]:
-    """:func:`arena`'s arrays, carved from a buffer of an earlier call that **no array
-    references any more** when there is one (per thread and size, the last three), else from
-    a new one.
-
-    For outputs a caller keeps: an arena's fresh pages cost a page fault and the kernel's
-    zeroing of each 2 MiB page on first write, every call. A buffer is reused only when its
-    reference count shows that the pool alone holds it - every view of it (the outputs, and
-    any view of them) is gone - so nothing a caller holds is ever overwritten. Allocations
-    below 1 MiB go to :func:`arena`.
-    """
-    offsets = []
-    total = 0
-    for shape, dtype in specs:
-        offsets.append(total)
-        n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
-        total += -(-n // _ALIGN) * _ALIGN
-    if total < (1 << 20):
-        return arena(specs)
-    size = max(-(-total // _PAGE) * _PAGE, _HUGE)
-    pool: dict[int, list[NDArray[np.uint8]]] | None = getattr(_LOCAL, "pool", None)
-    if pool is None:
-        pool = _LOCAL.pool = {}
-    kept = pool.setdefault(size, [])
-    raw = None
-    for q in range(len(kept)):
-        # two references: the list's and getrefcount's argument - no view is alive
-        if sys.getrefcount(kept[q]) == 2:
-            raw = kept[q]
-            break
-    if raw is None:
-        raw = np.empty(size + _PAGE, dtype=np.uint8)
-        kept.append(raw)
-        if len(kept) > _RECYCLE_KEEP:
-            kept.pop(0)
-    skip = -raw.ctypes.data % _PAGE
-    out = []
-    for (shape, dtype), off in zip(specs, offsets, strict=True):
-        dt = np.dtype(dtype)
-        n = int(np.prod(shape, dtype=np.int64))
-        start = skip + off
-        out.append(raw[start : start + n * dt.itemsize].view(dt).reshape(shape))
-    return out

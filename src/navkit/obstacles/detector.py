@@ -255,10 +255,10 @@ def detect_obstacles_grid(
     origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
     if settings.backend == "compiled":
         from navkit.obstacles import _kernels
-        from navkit.obstacles._buffers import recycled_arena
+        from navkit.obstacles._buffers import arena
 
         P_in = P
-        P, valid = recycled_arena([(P_in.shape, np.float64), (P_in.shape[:2], np.bool_)])
+        P, valid = arena([(P_in.shape, np.float64), (P_in.shape[:2], np.bool_)])
         any_valid = _kernels.points_kernel(P_in, P, valid)
     else:
         valid = np.isfinite(P[..., 0]) & np.isfinite(P[..., 1]) & np.isfinite(P[..., 2])
@@ -791,9 +791,9 @@ def detect_obstacles_in_grid(
         # stage 1 in one pass (mounting.to_body + the validity codes, the same bits: R only
         # permutes and flips axes, see _kernels.body_points_kernel)
         from navkit.obstacles import _kernels
-        from navkit.obstacles._buffers import recycled_arena
+        from navkit.obstacles._buffers import arena
 
-        P, valid = recycled_arena([(S.shape, np.float64), (S.shape[:2], np.bool_)])
+        P, valid = arena([(S.shape, np.float64), (S.shape[:2], np.bool_)])
         any_valid = _kernels.body_points_kernel(
             np.ascontiguousarray(S, dtype=np.float64), R, float(mounting.height_m), P, valid
         )

@@ -347,7 +347,7 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
     point only enters comparisons, which the kernels decide exactly without it (see
     :func:`navkit.obstacles._kernels.grid_order_fill_kernel`)."""
     from navkit.obstacles import _kernels
-    from navkit.obstacles._buffers import arena, cached_work, recycled_arena
+    from navkit.obstacles._buffers import arena, cached_work
 
     N = len(P)
     cap = -(-N // 65536) * 65536  # work arrays reused across clouds of about the same size
@@ -392,7 +392,7 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
         ("cloud_to_grid cells", n_cells),
         lambda: arena([((n_cells,), np.int64), ((n_cells,), np.float64)]),
     )
-    grid, cell_of_point = recycled_arena([((n_cells, 3), np.float64), ((N,), np.int64)])
+    grid, cell_of_point = arena([((n_cells, 3), np.float64), ((N,), np.int64)])
     n_el = _kernels.grid_order_fill_kernel(
         qx,
         qy,

@@ -246,7 +246,7 @@ def mesh_and_classes(
         )
         return mesh, labels, found if rules else {}
     from navkit.obstacles import _kernels
-    from navkit.obstacles._buffers import arena, cached_work, recycled_arena
+    from navkit.obstacles._buffers import arena, cached_work
 
     n_az, n_el = valid.shape
     origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
@@ -280,7 +280,7 @@ def mesh_and_classes(
         ),
     )
     rr, rc = (R, C2) if rules else (0, 0)
-    outs = recycled_arena(
+    outs = arena(
         [
             ((R, C2), np.bool_),
             ((R, C2, 3), np.float32),
