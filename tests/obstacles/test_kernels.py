@@ -374,7 +374,8 @@ def test_ring_ranking_falls_back_to_exact_keys():
 
 def test_cells_pass_equals_the_modulo(rng):
     """The columns as two selects are the twin's ``floor(...) % n_columns`` for every phase
-    ``arctan2 / 2 pi`` can give, the ends of both ranges included."""
+    ``arctan2 / 2 pi`` can give, the ends of both ranges included; the points that are not
+    valid (not in ``idx``) get -1."""
     from navkit.obstacles import _kernels
 
     n, n_columns, n_el = 5000, 360, 4
@@ -393,6 +394,9 @@ def test_cells_pass_equals_the_modulo(rng):
         r2w = np.empty(n)
         _kernels._cells_pass(az, rk, 3, lut, phase, n_columns, n_el, *q, idx, r2w, cop)
         np.testing.assert_array_equal(cop[idx], i * n_el + j)
+        others = np.ones(n + 100, dtype=bool)
+        others[idx] = False
+        assert others.sum() == 100 and np.all(cop[others] == -1)
         np.testing.assert_array_equal(rk, j * n_columns + i)
         np.testing.assert_array_equal(r2w, q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
 

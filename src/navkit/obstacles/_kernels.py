@@ -1378,26 +1378,43 @@ def _exact_range(x, y, z):  # type: ignore[no-untyped-def]
 @njit(cache=True, error_model="numpy")
 def _cells_pass(az, ring, lo, lut, phase, n_columns, n_el, qx, qy, qz, idx, r2w, cell_of_point):  # type: ignore[no-untyped-def]
     """The column ``i`` of every point (the twin's ``floor((az + pi) / (2 pi) n_columns - phase
-    + 0.5) % n_columns``), its cell ``i n_el + j`` into ``cell_of_point`` (at ``idx``), its
-    ring-major cell ``j n_columns + i`` over ``ring`` and ``x^2 + y^2 + z^2`` into ``r2w``.
+    + 0.5) % n_columns``), its cell ``i n_el + j`` into ``cell_of_point`` (at ``idx``, -1 for
+    the other entries), its ring-major cell ``j n_columns + i`` over ``ring`` and ``x^2 + y^2 +
+    z^2`` into ``r2w``.
 
-    The modulo as two selects: ``az`` in ``[-pi, pi]`` (``arctan2``) and ``phase`` in ``[-1/2,
-    1/2]`` (``arctan2 / 2 pi``) put ``floor(...)`` in ``[0, n_columns + 1]``, where subtracting
-    ``n_columns`` once from values ``>= n_columns`` is the modulo (``n_columns >= 3``); the
-    select for negative values only guards the reasoning."""
+    Two passes: the arithmetic (vectorised), with the columns parked in ``cell_of_point[:n]``,
+    then the ring lookup and the cells, backwards: ``idx[k] >= k``, so a cell written at
+    ``idx[k]`` never overwrites a parked column still to be read. The modulo as two selects:
+    ``az`` in ``[-pi, pi]`` (``arctan2``) and ``phase`` in ``[-1/2, 1/2]`` (``arctan2 / 2 pi``)
+    put ``floor(...)`` in ``[0, n_columns + 1]``, where subtracting ``n_columns`` once from
+    values ``>= n_columns`` is the modulo (``n_columns >= 3``); the select for negative values
+    only guards the reasoning."""
+    n = len(az)
     scale = 2 * np.pi
-    for k in range(len(az)):
+    for k in range(n):  # vectorised: division, floor, selects, squares
         x = (az[k] + np.pi) / scale * n_columns
         i = math.floor(x - phase + 0.5)
         i = i - n_columns if i >= n_columns else i
         i = i + n_columns if i < 0 else i
-        j = lut[np.uint64(ring[k] - lo)]
-        cell_of_point[np.uint64(idx[k])] = i * n_el + j
-        ring[k] = j * n_columns + i
+        cell_of_point[k] = i
         px = qx[k]
         py = qy[k]
         pz = qz[k]
         r2w[k] = px * px + py * py + pz * pz
+    for k in range(n - 1, -1, -1):
+        uk = np.uint64(k)
+        i = cell_of_point[uk]
+        j = lut[np.uint64(ring[uk] - lo)]
+        cell_of_point[np.uint64(idx[uk])] = i * n_el + j
+        ring[uk] = j * n_columns + i
+    if n < len(cell_of_point):  # the points that are not valid: -1 (between the valid ones)
+        prev = -1
+        for k in range(n):
+            for p in range(prev + 1, idx[k]):
+                cell_of_point[p] = -1
+            prev = idx[k]
+        for p in range(prev + 1, len(cell_of_point)):
+            cell_of_point[p] = -1
 
 
 @njit(cache=True, error_model="numpy")
@@ -1462,9 +1479,6 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
     n_cells = n_columns * n_el
     for c in range(n_cells):
         win[c] = -1
-    if n < len(cell_of_point):  # some points are not valid; every valid one is written below
-        for p in range(len(cell_of_point)):
-            cell_of_point[p] = -1
     lo_f = 1.0 - 1e-12
     hi_f = 1.0 + 1e-12
     tiny = 1e-280
