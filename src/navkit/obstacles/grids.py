@@ -389,8 +389,10 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
     phase = float(np.arctan2(np.float64(mean_sin), np.float64(mean_cos)) / (2 * np.pi))
     n_cells = n_columns * n_r
     (win, best) = cached_work(
-        ("cloud_to_grid cells", n_cells),
-        lambda: arena([((n_cells,), np.int64), ((n_cells,), np.float64)]),
+        ("cloud_to_grid cells", n_cells, N < 2**31),
+        lambda: arena(
+            [((n_cells,), np.int32 if N < 2**31 else np.int64), ((n_cells,), np.float64)]
+        ),
     )
     grid, cell_of_point = arena([((n_cells, 3), np.float64), ((N,), np.int64)])
     n_el = _kernels.grid_order_fill_kernel(
