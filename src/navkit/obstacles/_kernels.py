@@ -1355,27 +1355,6 @@ def rings_order_kernel(az, qx, qy, qz, d, ad, work, ring, sums, abs_sums, counts
 
 
 @njit(cache=True, error_model="numpy")
-def _ring_keys_exact(qx, qy, qz, ring, lo, n_r, key):  # type: ignore[no-untyped-def]
-    """The twin's ring keys: mean of ``z / max(hypot(x, y), 1e-9)`` per ring (``bincount`` in
-    point order, divided by ``max(count, 1)``), ``inf`` for empty rings."""
-    s = np.zeros(n_r)
-    c = np.zeros(n_r, np.int64)
-    for k in range(len(ring)):
-        r = np.uint64(ring[k] - lo)
-        c[r] += 1
-        s[r] += qz[k] / max(math.hypot(qx[k], qy[k]), 1e-9)
-    for r in range(n_r):
-        key[r] = s[r] / max(c[r], 1) if c[r] > 0 else np.inf
-
-
-@njit(cache=True, error_model="numpy")
-def _exact_range(x, y, z):  # type: ignore[no-untyped-def]
-    """The twin's range ``sqrt(hypot(x, y)^2 + z^2)``."""
-    rh = math.hypot(x, y)
-    return math.sqrt(rh * rh + z * z)
-
-
-@njit(cache=True, error_model="numpy")
 def _cells_pass(az, ring, lo, lut, phase, n_columns, n_el, qx, qy, qz, idx, r2w, cell_of_point):  # type: ignore[no-untyped-def]
     """The column ``i`` of every point (the twin's ``floor((az + pi) / (2 pi) n_columns - phase
     + 0.5) % n_columns``), its cell ``i n_el + j`` into ``cell_of_point`` (at ``idx``, -1 for
@@ -1450,9 +1429,12 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
     :func:`rings_order_kernel`'s ``sqrt`` sums are used when, sorted, every two neighbours are
     farther apart than both keys' error bounds (``(8 + 4 count) eps`` times the mean magnitude:
     a relative error of at most a few eps per value plus the rounding of both sums), else the
-    exact keys are computed (:func:`_ring_keys_exact`); the nearest point per cell compares
+    exact keys are computed (the twin's: ``hypot`` per point, sums in point order); the nearest
+    point per cell compares
     squared ranges ``x^2 + y^2 + z^2`` and falls back to the twin's range
-    (:func:`_exact_range`) when two are within a relative ``1e-12`` of each other or tiny."""
+    ``sqrt(hypot(x, y)^2 + z^2)`` when two are within a relative ``1e-12`` of each other or
+    tiny. (Written out here, not as helper functions: each helper is one more function to
+    compile on the first call.)"""
     n = len(az)
     key = np.empty(n_r)
     n_el = 0
@@ -1472,7 +1454,14 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
         if not key[b] - key[a] > 2 * (err_a + err_b):
             exact = True
     if exact:
-        _ring_keys_exact(qx, qy, qz, ring[:n], lo, n_r, key)
+        se = np.zeros(n_r)
+        ce = np.zeros(n_r, np.int64)
+        for k in range(n):  # the twin's bincount: in point order
+            r = np.uint64(ring[k] - lo)
+            ce[r] += 1
+            se[r] += qz[k] / max(math.hypot(qx[k], qy[k]), 1e-9)
+        for r in range(n_r):
+            key[r] = se[r] / max(ce[r], 1) if ce[r] > 0 else np.inf
         rank = np.argsort(key, kind="mergesort")
     lut = np.empty(n_r, np.int64)
     for r in range(n_r):
@@ -1502,7 +1491,11 @@ def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
                 take = False
             else:  # too close to tell (or tiny): the twin's ranges
                 uw = np.uint64(w)
-                take = _exact_range(qx[k], qy[k], qz[k]) <= _exact_range(qx[uw], qy[uw], qz[uw])
+                hk = math.hypot(qx[k], qy[k])
+                hw = math.hypot(qx[uw], qy[uw])
+                zk = qz[k]
+                zw = qz[uw]
+                take = math.sqrt(hk * hk + zk * zk) <= math.sqrt(hw * hw + zw * zw)
         if take:
             win[c] = k
             best[c] = r2
