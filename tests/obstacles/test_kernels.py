@@ -319,9 +319,10 @@ def test_cloud_to_grid_by_order_decides_near_ties_as_numpy(rng):
 def test_ring_ranking_falls_back_to_exact_keys():
     """Ring keys closer than their error bound are not ranked by the approximate sums: two rings
     whose elevations differ by 1e-13 relative, the approximate sums of the higher one lowered
-    (within the bound) so that they rank it first - the kernel must rank by the exact keys, as
-    the twin."""
+    (within the bound) so that they rank it first - the ranking must be the exact keys', as
+    the twin's, and so the grid."""
     from navkit.obstacles import _kernels
+    from navkit.obstacles.grids import _ring_lut
 
     n_az = 400
     az0 = np.linspace(-np.pi, np.pi, n_az, endpoint=False) + 0.3 / n_az
@@ -335,41 +336,31 @@ def test_ring_ranking_falls_back_to_exact_keys():
     azk = np.arctan2(qy, qx)
     d, ad, work = np.empty(n), np.empty(n), np.empty(n)
     ring = np.empty(n, np.int64)
-    sums, abs_sums = np.empty(1025), np.empty(1025)
-    counts = np.empty(1025, np.int64)
+    sums, abs_sums = np.empty(513), np.empty(513)
+    counts = np.empty(513, np.int64)
     found, _step, n_r, lo = _kernels.rings_order_kernel(
         azk, qx, qy, qz, d, ad, work, ring, sums, abs_sums, counts
     )
     assert found and n_r == 2
     assert sums[0] / counts[0] > sums[1] / counts[1]
+    lut, n_el = _ring_lut(qx, qy, qz, ring[:n], lo, sums[:2], abs_sums[:2], counts[:2])
+    assert n_el == 2 and list(lut) == [1, 0]
     sums[0] = sums[1] * (1 - 2e-15)  # approximate key of ring 0 now below ring 1's
+    lut, n_el = _ring_lut(qx, qy, qz, ring[:n], lo, sums[:2], abs_sums[:2], counts[:2])
+    assert n_el == 2 and list(lut) == [1, 0]  # the exact keys decided
     n_columns = twin.shape[0]
     phase = (twin.azimuth[0] + np.pi) * n_columns / (2 * np.pi)
-    win, best = np.empty(n_columns * 2, np.int64), np.empty(n_columns * 2)
+    win, best = np.empty(n_columns * 2, np.int32), np.empty(n_columns * 2)
     grid, cop = np.empty((n_columns * 2, 3)), np.empty(n, np.int64)
-    n_el = _kernels.grid_order_fill_kernel(
-        qx,
-        qy,
-        qz,
-        azk,
-        np.arange(n),
-        ring,
-        lo,
-        sums,
-        abs_sums,
-        counts,
-        n_r,
-        n_columns,
-        phase,
-        win,
-        best,
-        np.empty(n),
-        grid,
-        cop,
-    )
-    assert n_el == 2
+    _kernels.grid_order_fill_kernel(
+        qx, qy, qz, azk, np.arange(n), ring, lo, lut, n_el, n_columns, phase, win, best,
+        np.empty(n), grid, cop,
+    )  # fmt: skip
     np.testing.assert_array_equal(grid.reshape(n_columns, 2, 3), twin.points)
     np.testing.assert_array_equal(cop, twin.cell_of_point)
+    sums[0] = sums[1] * (1 - 1e-6)  # far beyond the bound: the approximate keys decide
+    lut, _ = _ring_lut(qx, qy, qz, ring[:n], lo, sums[:2], abs_sums[:2], counts[:2])
+    assert list(lut) == [0, 1]
 
 
 def test_cells_pass_equals_the_modulo(rng):

@@ -39,7 +39,7 @@ __all__ = [
     "grid_order_fill_kernel",
     "mesh_kernel",
     "phase_fractions_kernel",
-    "phase_means_kernel",
+    "phase_sin_cos_kernel",
     "points_kernel",
     "refine_kernel",
     "rings_by_order_kernel",
@@ -1256,11 +1256,6 @@ def _median_banded(values, work):  # type: ignore[no-untyped-def]
     return (a + b) / 2
 
 
-# relative error bound per value of the approximate forms below (``sqrt(x^2 + y^2)`` for
-# ``hypot``): a few units of 2^-53, taken with a wide margin
-_EPS = 2.0**-52
-
-
 @njit(cache=True, error_model="numpy")
 def rings_order_kernel(az, qx, qy, qz, d, ad, work, ring, sums, abs_sums, counts):  # type: ignore[no-untyped-def]
     """``grids._rings_by_order`` on ``az (n,)``: ``(found, azimuth step, number of rings, lowest
@@ -1398,74 +1393,23 @@ def _cells_pass(az, ring, lo, lut, phase, n_columns, n_el, qx, qy, qz, idx, r2w,
 
 @njit(cache=True, error_model="numpy")
 def grid_order_fill_kernel(  # type: ignore[no-untyped-def]
-    qx,
-    qy,
-    qz,
-    az,
-    idx,
-    ring,
-    lo,
-    sums,
-    abs_sums,
-    counts,
-    n_r,
-    n_columns,
-    phase,
-    win,
-    best,
-    r2w,
-    grid,
-    cell_of_point,
+    qx, qy, qz, az, idx, ring, lo, lut, n_el, n_columns, phase, win, best, r2w, grid, cell_of_point
 ):
-    """Rings ranked by rising mean ``z / r_h`` (stable), the column of every point, its cell,
-    the nearest point per cell into ``grid (n_columns n_el, 3)`` (NaN rows if empty; among
-    points at the same range the last one wins, as in the twin) and ``cell_of_point (N,)``
-    (-1 for the points that are not valid). ``win`` (int32 when the points fit: less to clear
-    and read than int64, ~0.08 ms per KITTI frame) and ``best`` (float64) are work arrays of
-    the cells, ``r2w`` a float64 work array of the points; ``ring`` is overwritten
-    (with each point's ring-major cell). Returns ``n_el``.
+    """The column of every point, its cell, the nearest point per cell into ``grid (n_columns
+    n_el, 3)`` (NaN rows if empty; among points at the same range the last one wins, as in the
+    twin) and ``cell_of_point (N,)`` (-1 for the points that are not valid). ``lut`` maps a
+    ring ``ring - lo`` to its elevation index (``grids._ring_lut``: the rings ranked by rising
+    mean ``z / r_h``). ``win`` (int32 when the points fit: less to clear and read than int64,
+    ~0.08 ms per KITTI frame) and ``best`` (float64) are work arrays of the cells, ``r2w`` a
+    float64 work array of the points; ``ring`` is overwritten (with each point's ring-major
+    cell).
 
-    Bit for bit the twin's decisions without its ``hypot`` per point: the ring keys from
-    :func:`rings_order_kernel`'s ``sqrt`` sums are used when, sorted, every two neighbours are
-    farther apart than both keys' error bounds (``(8 + 4 count) eps`` times the mean magnitude:
-    a relative error of at most a few eps per value plus the rounding of both sums), else the
-    exact keys are computed (the twin's: ``hypot`` per point, sums in point order); the nearest
-    point per cell compares
-    squared ranges ``x^2 + y^2 + z^2`` and falls back to the twin's range
+    Bit for bit the twin's decisions without its ``hypot`` per point: the nearest point per
+    cell compares squared ranges ``x^2 + y^2 + z^2`` and falls back to the twin's range
     ``sqrt(hypot(x, y)^2 + z^2)`` when two are within a relative ``1e-12`` of each other or
-    tiny. (Written out here, not as helper functions: each helper is one more function to
-    compile on the first call.)"""
+    tiny (written out here, not as a helper: each helper is one more function to compile on
+    the first call)."""
     n = len(az)
-    key = np.empty(n_r)
-    n_el = 0
-    for r in range(n_r):
-        if counts[r] > 0:
-            key[r] = sums[r] / max(counts[r], 1)
-            n_el += 1
-        else:
-            key[r] = np.inf
-    rank = np.argsort(key, kind="mergesort")
-    exact = False
-    for t in range(n_el - 1):
-        a = rank[t]
-        b = rank[t + 1]
-        err_a = (8 + 4 * counts[a]) * _EPS * abs_sums[a] / counts[a]
-        err_b = (8 + 4 * counts[b]) * _EPS * abs_sums[b] / counts[b]
-        if not key[b] - key[a] > 2 * (err_a + err_b):
-            exact = True
-    if exact:
-        se = np.zeros(n_r)
-        ce = np.zeros(n_r, np.int64)
-        for k in range(n):  # the twin's bincount: in point order
-            r = np.uint64(ring[k] - lo)
-            ce[r] += 1
-            se[r] += qz[k] / max(math.hypot(qx[k], qy[k]), 1e-9)
-        for r in range(n_r):
-            key[r] = se[r] / max(ce[r], 1) if ce[r] > 0 else np.inf
-        rank = np.argsort(key, kind="mergesort")
-    lut = np.empty(n_r, np.int64)
-    for r in range(n_r):
-        lut[rank[r]] = r
     n_cells = n_columns * n_el
     for c in range(n_cells):
         win[c] = -1
@@ -1823,83 +1767,13 @@ def phase_fractions_kernel(az, step, n_columns, out):  # type: ignore[no-untyped
     return m
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def _block_sum(a, lo, n):  # type: ignore[no-untyped-def]
-    """NumPy's sum of a block of at most 128 values (``DOUBLE_pairwise_sum``'s leaves)."""
-    if n < 8:
-        res = 0.0
-        for i in range(n):
-            res += a[lo + i]
-        return res
-    r0, r1, r2, r3 = a[lo], a[lo + 1], a[lo + 2], a[lo + 3]
-    r4, r5, r6, r7 = a[lo + 4], a[lo + 5], a[lo + 6], a[lo + 7]
-    i = 8
-    end = n - n % 8
-    while i < end:
-        b = lo + i
-        r0 += a[b]
-        r1 += a[b + 1]
-        r2 += a[b + 2]
-        r3 += a[b + 3]
-        r4 += a[b + 4]
-        r5 += a[b + 5]
-        r6 += a[b + 6]
-        r7 += a[b + 7]
-        i += 8
-    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
-    while i < n:
-        res += a[lo + i]
-        i += 1
-    return res
-
-
 @njit(cache=True, error_model="numpy")
-def _pairwise_sum(a, lo, n):  # type: ignore[no-untyped-def]
-    """NumPy's pairwise summation of ``a[lo:lo + n]`` (``DOUBLE_pairwise_sum``: eight running
-    sums over blocks of at most 128 values, halves split at multiples of 8), so that
-    ``0.0 + _pairwise_sum(a, 0, n)`` is ``np.add.reduce(a)`` bit for bit. The recursion runs on
-    an explicit stack (Numba's cache does not load recursive functions reliably)."""
-    s_lo = np.empty(64, np.int64)
-    s_n = np.empty(64, np.int64)
-    s_left = np.empty(64)  # the left half's sum, once known
-    s_state = np.empty(64, np.int64)  # 0: left half pending, 1: right half pending
-    top = 0
-    cur_lo = lo
-    cur_n = n
-    while True:
-        # descend along left halves down to a block
-        while cur_n > 128:
-            h = cur_n // 2
-            h -= h % 8
-            s_lo[top] = cur_lo
-            s_n[top] = cur_n
-            s_state[top] = 0
-            top += 1
-            cur_n = h
-        val = _block_sum(a, cur_lo, cur_n)
-        # climb: combine finished right halves, start the next pending right half
-        while top > 0 and s_state[top - 1] == 1:
-            top -= 1
-            val = s_left[top] + val
-        if top == 0:
-            return val
-        f = top - 1
-        s_left[f] = val
-        s_state[f] = 1
-        h = s_n[f] // 2
-        h -= h % 8
-        cur_lo = s_lo[f] + h
-        cur_n = s_n[f] - h
-
-
-@njit(cache=True, error_model="numpy")
-def phase_means_kernel(az, step, n_columns, s, c):  # type: ignore[no-untyped-def]
-    """The means of ``sin`` and ``cos`` of ``2 pi ((az[::step] + pi) / (2 pi) n_columns % 1)``
-    (the subsample whose circular mean gives the columns' phase in ``grids.cloud_to_grid``),
-    as ``np.sin(frac).mean()``, ``np.cos(frac).mean()``: ``math.sin`` / ``math.cos`` are libm's,
-    which NumPy's float64 ``sin`` / ``cos`` call (``grids`` checks that once per process and
-    keeps NumPy's otherwise), and the means are NumPy's pairwise sums divided by the count.
-    ``s, c`` are float64 work arrays: they hold the sines and cosines afterwards."""
+def phase_sin_cos_kernel(az, step, n_columns, s, c):  # type: ignore[no-untyped-def]
+    """``sin`` and ``cos`` of ``2 pi ((az[::step] + pi) / (2 pi) n_columns % 1)`` into ``s`` and
+    ``c`` (the subsample whose circular mean gives the columns' phase in
+    ``grids.cloud_to_grid``; their means are NumPy's, as in the twin). ``math.sin`` /
+    ``math.cos`` are libm's, which NumPy's float64 ``sin`` / ``cos`` call (``grids`` checks
+    that once per process and keeps NumPy's otherwise). Returns how many."""
     m = 0
     two_pi = 2 * np.pi
     for k in range(0, len(az), step):
@@ -1908,7 +1782,7 @@ def phase_means_kernel(az, step, n_columns, s, c):  # type: ignore[no-untyped-de
         s[m] = math.sin(f)
         c[m] = math.cos(f)
         m += 1
-    return (0.0 + _pairwise_sum(s, 0, m)) / m, (0.0 + _pairwise_sum(c, 0, m)) / m
+    return m
 
 
 @njit(cache=True, error_model="numpy")

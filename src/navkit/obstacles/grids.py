@@ -381,13 +381,17 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
         return None
     n_columns = max(3, round(2 * np.pi / step))
     sub = max(1, m // 20000)
-    if _libm_sin_cos():
-        mean_sin, mean_cos = _kernels.phase_means_kernel(az, sub, n_columns, d, ad)
+    if _libm_sin_cos():  # sin and cos in one kernel, their means NumPy's (as the twin's)
+        k = _kernels.phase_sin_cos_kernel(az, sub, n_columns, d, ad)
+        mean_sin, mean_cos = d[:k].mean(), ad[:k].mean()
     else:  # NumPy's sin / cos are not libm's here: theirs, as the twin
         frac = tmp[: _kernels.phase_fractions_kernel(az, sub, n_columns, tmp)]
         mean_sin, mean_cos = np.sin(frac).mean(), np.cos(frac).mean()
-    phase = float(np.arctan2(np.float64(mean_sin), np.float64(mean_cos)) / (2 * np.pi))
-    n_cells = n_columns * n_r
+    phase = float(np.arctan2(mean_sin, mean_cos) / (2 * np.pi))
+    lut, n_el = _ring_lut(
+        qx[:m], qy[:m], qz[:m], ring[:m], lo, sums[:n_r], abs_sums[:n_r], counts[:n_r]
+    )
+    n_cells = n_columns * n_el
     (win, best) = cached_work(
         ("cloud_to_grid cells", n_cells, N < 2**31),
         lambda: arena(
@@ -395,7 +399,7 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
         ),
     )
     grid, cell_of_point = arena([((n_cells, 3), np.float64), ((N,), np.int64)])
-    n_el = _kernels.grid_order_fill_kernel(
+    _kernels.grid_order_fill_kernel(
         qx,
         qy,
         qz,
@@ -403,10 +407,8 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
         idx,
         ring,
         lo,
-        sums,
-        abs_sums,
-        counts,
-        n_r,
+        lut,
+        n_el,
         n_columns,
         phase,
         win,
@@ -417,8 +419,43 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
     )
     azimuth = -np.pi + (np.arange(n_columns) + phase) * 2 * np.pi / n_columns
     log.debug("cloud_to_grid: %d points -> %d x %d grid by order", N, n_columns, n_el)
-    points = grid[: n_columns * n_el].reshape(n_columns, n_el, 3)
-    return ScanGrid(points, cell_of_point, azimuth, True, "order")
+    return ScanGrid(grid.reshape(n_columns, n_el, 3), cell_of_point, azimuth, True, "order")
+
+
+def _ring_lut(
+    qx: NDArray[np.float64],
+    qy: NDArray[np.float64],
+    qz: NDArray[np.float64],
+    ring: NDArray[np.int64],
+    lo: int,
+    sums: NDArray[np.float64],
+    abs_sums: NDArray[np.float64],
+    counts: NDArray[np.int64],
+) -> tuple[NDArray[np.int64], int]:
+    """The elevation index of every ring ``ring - lo`` (rings ranked by rising mean ``z / r_h``,
+    stable, empty rings last, as the twin ranks them) and the number of rings with points.
+
+    The ranking comes from the kernel's sums of ``z / max(sqrt(x^2 + y^2), 1e-9)`` (no
+    ``hypot`` per point) when it is certain: sorted, every two neighbouring keys farther apart
+    than twice the sum of their error bounds, ``(8 + 4 count) 2^-52`` times the mean magnitude
+    (a few eps per value for ``sqrt`` instead of ``hypot`` plus the rounding of both sums, in
+    any order, with a wide margin). Otherwise the twin's keys are computed (``np.hypot``,
+    ``bincount`` in point order): the ranks are the twin's either way."""
+    n_r = len(counts)
+    present = counts > 0
+    n_el = int(present.sum())
+    cnt = np.maximum(counts, 1)
+    key = np.where(present, sums / cnt, np.inf)
+    rank = np.argsort(key, kind="stable")
+    err = (8 + 4 * counts) * 2.0**-52 * abs_sums / cnt
+    a, b = rank[: n_el - 1], rank[1:n_el]
+    if not np.all(key[b] - key[a] > 2 * (err[a] + err[b])):  # too close to tell: the twin's
+        tan_el = qz / np.maximum(np.hypot(qx, qy), 1e-9)
+        mean_el = np.bincount(ring - lo, weights=tan_el, minlength=n_r) / cnt
+        rank = np.argsort(np.where(present, mean_el, np.inf), kind="stable")
+    lut = np.empty(n_r, dtype=np.int64)
+    lut[rank] = np.arange(n_r)
+    return lut, n_el
 
 
 _LIBM_SIN_COS: list[bool] = []
@@ -435,7 +472,7 @@ def _libm_sin_cos() -> bool:
         az = np.random.default_rng(12).uniform(-np.pi, np.pi, 4096)
         az[:64] = np.linspace(-np.pi, np.pi, 64, endpoint=False)
         s, c = np.empty_like(az), np.empty_like(az)
-        _kernels.phase_means_kernel(az, 1, 1, s, c)  # one column: the fractions of a turn
+        _kernels.phase_sin_cos_kernel(az, 1, 1, s, c)  # one column: the fractions of a turn
         frac = 2 * np.pi * (((az + np.pi) / (2 * np.pi) * 1) % 1.0)  # the same values
         _LIBM_SIN_COS.append(
             bool(np.array_equal(s, np.sin(frac)) and np.array_equal(c, np.cos(frac)))
