@@ -316,6 +316,24 @@ def test_cloud_to_grid_by_order_decides_near_ties_as_numpy(rng):
     _same_grid(cloud_to_grid(Q32, backend="numpy"), cloud_to_grid(Q32, backend="compiled"))
 
 
+def test_cloud_to_grid_phase_without_libm_sin_cos(rng, monkeypatch):
+    """Where NumPy's ``sin`` / ``cos`` would not be libm's, the phase takes NumPy's: the twin's
+    grid either way (the branch forced here)."""
+    from navkit.obstacles import grids
+
+    n_az = 900
+    az = np.tile(np.linspace(-np.pi, np.pi, n_az, endpoint=False), 6) + 0.37 * 2 * np.pi / n_az
+    el = np.repeat(np.radians([-12.0, -8.0, -5.0, -2.0, 1.0, 3.0]), n_az)
+    r = rng.uniform(2, 30, size=az.size)
+    P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * r[:, None]
+    a = cloud_to_grid(P, backend="numpy")
+    assert a.method == "order"
+    monkeypatch.setattr(grids, "_LIBM_SIN_COS", [False])
+    _same_grid(a, cloud_to_grid(P, backend="compiled"))
+    monkeypatch.setattr(grids, "_LIBM_SIN_COS", [True])
+    _same_grid(a, cloud_to_grid(P, backend="compiled"))
+
+
 def test_ring_ranking_falls_back_to_exact_keys():
     """Ring keys closer than their error bound are not ranked by the approximate sums: two rings
     whose elevations differ by 1e-13 relative, the approximate sums of the higher one lowered

@@ -344,7 +344,7 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
     caller-provided arrays (:mod:`navkit.obstacles._buffers`) and NumPy's ``arctan2`` (whose
     SIMD results the twin uses) in place. ``None`` when the order is not a sweep (the caller then
     takes the general path). The same grid as the twin, bit for bit: the twin's ``hypot`` per
-    point only enters comparisons, which the kernels decide exactly without it (see
+    point only enters comparisons, which are decided exactly without it (:func:`_ring_lut`,
     :func:`navkit.obstacles._kernels.grid_order_fill_kernel`)."""
     from navkit.obstacles import _kernels
     from navkit.obstacles._buffers import arena, cached_work
