@@ -284,6 +284,132 @@ def test_cloud_to_grid_compiled_equals_numpy_on_a_shuffled_cloud(rng):
     _same_grid(a, cloud_to_grid(P, backend="compiled"))
 
 
+def test_cloud_to_grid_by_order_decides_near_ties_as_numpy(rng):
+    """The compiled order path ranks rings and picks each cell's nearest point without the
+    twin's ``hypot`` unless the answer is close: rings at the same elevation (tied keys), exact
+    duplicates, copies scaled by 1 +- 1e-15 and copies turned by 1e-7 rad (ranges tied up to
+    rounding: deciding those by the squared range alone fails this test) must take its exact
+    branches and still give the twin's grid."""
+    n_az = 720
+    el_deg = np.array([-10.0, -8.0, -8.0, -6.0, -4.0, -4.0, -2.0, 0.0])  # two tied pairs
+    az = np.tile(np.linspace(-np.pi, np.pi, n_az, endpoint=False), len(el_deg))
+    az += rng.normal(0, 1e-4, az.size)
+    el = np.repeat(np.radians(el_deg), n_az)
+    r = rng.uniform(3, 40, size=az.size)
+    P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * r[:, None]
+    c, s = np.cos(1e-7), np.sin(1e-7)
+    rows = []
+    for k, p in enumerate(P):  # storage order kept: the copies follow their original
+        rows.append(p)
+        if k % 5 == 0:
+            rows.append(p * (1 + (1e-15 if k % 10 else -1e-15)))
+        if k % 7 == 0:
+            rows.append(p.copy())
+        if k % 3 == 0:  # the same range up to rounding: sqrt(x^2 + y^2 + z^2) cannot decide
+            rows.append(np.array([p[0] * c - p[1] * s, p[0] * s + p[1] * c, p[2]]))
+    Q = np.array(rows)
+    Q[rng.random(len(Q)) < 0.03] = 0.0  # no-returns stored as zeros
+    a = cloud_to_grid(Q, backend="numpy")
+    assert a.method == "order"
+    _same_grid(a, cloud_to_grid(Q, backend="compiled"))
+    Q32 = Q.astype(np.float32)  # float32 input, as KITTI's: read by the kernel itself
+    _same_grid(cloud_to_grid(Q32, backend="numpy"), cloud_to_grid(Q32, backend="compiled"))
+
+
+def test_cloud_to_grid_phase_without_libm_sin_cos(rng, monkeypatch):
+    """Where NumPy's ``sin`` / ``cos`` would not be libm's, the phase takes NumPy's: the twin's
+    grid either way (the branch forced here)."""
+    from navkit.obstacles import grids
+
+    n_az = 900
+    az = np.tile(np.linspace(-np.pi, np.pi, n_az, endpoint=False), 6) + 0.37 * 2 * np.pi / n_az
+    el = np.repeat(np.radians([-12.0, -8.0, -5.0, -2.0, 1.0, 3.0]), n_az)
+    r = rng.uniform(2, 30, size=az.size)
+    P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * r[:, None]
+    a = cloud_to_grid(P, backend="numpy")
+    assert a.method == "order"
+    monkeypatch.setattr(grids, "_LIBM_SIN_COS", [False])
+    _same_grid(a, cloud_to_grid(P, backend="compiled"))
+    monkeypatch.setattr(grids, "_LIBM_SIN_COS", [True])
+    _same_grid(a, cloud_to_grid(P, backend="compiled"))
+
+
+def test_ring_ranking_falls_back_to_exact_keys():
+    """Ring keys closer than their error bound are not ranked by the approximate sums: two rings
+    whose elevations differ by 1e-13 relative, the approximate sums of the higher one lowered
+    (within the bound) so that they rank it first - the ranking must be the exact keys', as
+    the twin's, and so the grid."""
+    from navkit.obstacles import _kernels
+    from navkit.obstacles.grids import _ring_lut
+
+    n_az = 400
+    az0 = np.linspace(-np.pi, np.pi, n_az, endpoint=False) + 0.3 / n_az
+    az = np.tile(az0, 2)
+    el = np.repeat([0.1 * (1 + 1e-13), 0.1], n_az)  # ring 0 is the higher one
+    P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * 10.0
+    twin = cloud_to_grid(P, backend="numpy")
+    assert twin.method == "order"
+    qx, qy, qz = (np.ascontiguousarray(P[:, k]) for k in range(3))
+    n = len(P)
+    azk = np.arctan2(qy, qx)
+    d, ad, work = np.empty(n), np.empty(n), np.empty(n)
+    ring = np.empty(n, np.int64)
+    sums, abs_sums = np.empty(513), np.empty(513)
+    counts = np.empty(513, np.int64)
+    found, _step, n_r, lo = _kernels.rings_order_kernel(
+        azk, qx, qy, qz, d, ad, work, ring, sums, abs_sums, counts
+    )
+    assert found and n_r == 2
+    assert sums[0] / counts[0] > sums[1] / counts[1]
+    lut, n_el = _ring_lut(qx, qy, qz, ring[:n], lo, sums[:2], abs_sums[:2], counts[:2])
+    assert n_el == 2 and list(lut) == [1, 0]
+    sums[0] = sums[1] * (1 - 2e-15)  # approximate key of ring 0 now below ring 1's
+    lut, n_el = _ring_lut(qx, qy, qz, ring[:n], lo, sums[:2], abs_sums[:2], counts[:2])
+    assert n_el == 2 and list(lut) == [1, 0]  # the exact keys decided
+    n_columns = twin.shape[0]
+    phase = (twin.azimuth[0] + np.pi) * n_columns / (2 * np.pi)
+    win, best = np.empty(n_columns * 2, np.int32), np.empty(n_columns * 2)
+    grid, cop = np.empty((n_columns * 2, 3)), np.empty(n, np.int64)
+    _kernels.grid_order_fill_kernel(
+        qx, qy, qz, azk, np.arange(n), ring, lo, lut, n_el, n_columns, phase, win, best,
+        np.empty(n), grid, cop,
+    )  # fmt: skip
+    np.testing.assert_array_equal(grid.reshape(n_columns, 2, 3), twin.points)
+    np.testing.assert_array_equal(cop, twin.cell_of_point)
+    sums[0] = sums[1] * (1 - 1e-6)  # far beyond the bound: the approximate keys decide
+    lut, _ = _ring_lut(qx, qy, qz, ring[:n], lo, sums[:2], abs_sums[:2], counts[:2])
+    assert list(lut) == [0, 1]
+
+
+def test_cells_pass_equals_the_modulo(rng):
+    """The columns as two selects are the twin's ``floor(...) % n_columns`` for every phase
+    ``arctan2 / 2 pi`` can give, the ends of both ranges included; the points that are not
+    valid (not in ``idx``) get -1."""
+    from navkit.obstacles import _kernels
+
+    n, n_columns, n_el = 5000, 360, 4
+    az = rng.uniform(-np.pi, np.pi, n)
+    az[:3] = (-np.pi, np.pi, 0.0)
+    ring = rng.integers(0, n_el, n).astype(np.int64) + 3  # raw rings, lowest 3
+    lut = np.array([2, 0, 3, 1], dtype=np.int64)
+    q = rng.normal(size=(3, n))
+    idx = np.sort(rng.choice(n + 100, n, replace=False)).astype(np.int64)
+    for phase in (0.25, -0.49, 0.5, -0.5, 0.0, -0.0):
+        x = (az + np.pi) / (2 * np.pi) * n_columns
+        i = np.floor(x - phase + 0.5).astype(np.int64) % n_columns
+        j = lut[ring - 3]
+        rk = ring.copy()
+        cop = np.full(n + 100, -7, dtype=np.int64)
+        r2w = np.empty(n)
+        _kernels._cells_pass(az, rk, 3, lut, phase, n_columns, n_el, *q, idx, r2w, cop)
+        np.testing.assert_array_equal(cop[idx], i * n_el + j)
+        others = np.ones(n + 100, dtype=bool)
+        others[idx] = False
+        assert others.sum() == 100 and np.all(cop[others] == -1)
+        np.testing.assert_array_equal(rk, j * n_columns + i)
+        np.testing.assert_array_equal(r2w, q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
+
+
 def test_mvee_and_a6_compiled_equal_numpy(rng):
     from navkit.geometry.shapes import ellipse_a5, ellipses_a6_batch, hull_points, mvee_batch
 

@@ -340,21 +340,32 @@ def cloud_to_grid(
 
 
 def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
-    """:func:`cloud_to_grid` with rings from the storage order, compiled: three kernels over
+    """:func:`cloud_to_grid` with rings from the storage order, compiled: four kernels over
     caller-provided arrays (:mod:`navkit.obstacles._buffers`) and NumPy's ``arctan2`` (whose
     SIMD results the twin uses) in place. ``None`` when the order is not a sweep (the caller then
-    takes the general path). The same grid as the twin, bit for bit."""
+    takes the general path). The same grid as the twin, bit for bit: the twin's ``hypot`` per
+    point only enters comparisons, which are decided exactly without it (:func:`_ring_lut`,
+    :func:`navkit.obstacles._kernels.grid_order_fill_kernel`)."""
     from navkit.obstacles import _kernels
     from navkit.obstacles._buffers import arena, cached_work
 
     N = len(P)
     cap = -(-N // 65536) * 65536  # work arrays reused across clouds of about the same size
-    (work_f, work_i) = cached_work(
-        ("cloud_to_grid", cap), lambda: arena([((8, cap), np.float64), ((2, cap), np.int64)])
+    (work_f, work_i, sums, abs_sums, counts) = cached_work(
+        ("cloud_to_grid", cap),
+        lambda: arena(
+            [
+                ((7, cap), np.float64),
+                ((2, cap), np.int64),
+                ((513,), np.float64),
+                ((513,), np.float64),
+                ((513,), np.int64),
+            ]
+        ),
     )
-    qx, qy, qz, rh, az_buf, d, ad, tmp = work_f
+    qx, qy, qz, az_buf, d, ad, tmp = work_f
     idx, ring = work_i
-    m = _kernels.cloud_valid_kernel(P, _FAR, qx, qy, qz, rh, idx)
+    m = _kernels.cloud_valid_kernel(P, _FAR, qx, qy, qz, idx)
     if m < 4:
         raise InputError(
             f"has {m} valid points",
@@ -363,41 +374,110 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
             expected="at least 4 points that are not NaN or (0, 0, 0)",
         )
     az = np.arctan2(qy[:m], qx[:m], out=az_buf[:m])
-    sums = np.empty(513)
-    counts = np.empty(513, dtype=np.int64)
-    found, step, n_r = _kernels.rings_order_kernel(
-        az, qz[:m], rh[:m], d, ad, tmp, ring, sums, counts
+    found, step, n_r, lo = _kernels.rings_order_kernel(
+        az, qx, qy, qz, d, ad, tmp, ring, sums, abs_sums, counts
     )
     if not found:
         return None
     n_columns = max(3, round(2 * np.pi / step))
-    frac = tmp[: _kernels.phase_fractions_kernel(az, max(1, m // 20000), n_columns, tmp)]
-    phase = float(np.arctan2(np.sin(frac).mean(), np.cos(frac).mean()) / (2 * np.pi))
-    (win,) = cached_work(
-        ("cloud_to_grid cells", n_columns * n_r), lambda: arena([((n_columns * n_r,), np.int64)])
+    sub = max(1, m // 20000)
+    if _libm_sin_cos():  # sin and cos in one kernel, their means NumPy's (as the twin's)
+        k = _kernels.phase_sin_cos_kernel(az, sub, n_columns, d, ad)
+        mean_sin, mean_cos = d[:k].mean(), ad[:k].mean()
+    else:  # NumPy's sin / cos are not libm's here: theirs, as the twin
+        frac = tmp[: _kernels.phase_fractions_kernel(az, sub, n_columns, tmp)]
+        mean_sin, mean_cos = np.sin(frac).mean(), np.cos(frac).mean()
+    phase = float(np.arctan2(mean_sin, mean_cos) / (2 * np.pi))
+    lut, n_el = _ring_lut(
+        qx[:m], qy[:m], qz[:m], ring[:m], lo, sums[:n_r], abs_sums[:n_r], counts[:n_r]
     )
-    grid, cell_of_point = arena([((n_columns * n_r, 3), np.float64), ((N,), np.int64)])
-    n_el = _kernels.grid_order_fill_kernel(
+    n_cells = n_columns * n_el
+    (win, best) = cached_work(
+        ("cloud_to_grid cells", n_cells, N < 2**31),
+        lambda: arena(
+            [((n_cells,), np.int32 if N < 2**31 else np.int64), ((n_cells,), np.float64)]
+        ),
+    )
+    grid, cell_of_point = arena([((n_cells, 3), np.float64), ((N,), np.int64)])
+    _kernels.grid_order_fill_kernel(
         qx,
         qy,
         qz,
-        rh,
         az,
         idx,
         ring,
-        sums,
-        counts,
-        n_r,
+        lo,
+        lut,
+        n_el,
         n_columns,
         phase,
         win,
+        best,
+        tmp,
         grid,
         cell_of_point,
     )
     azimuth = -np.pi + (np.arange(n_columns) + phase) * 2 * np.pi / n_columns
     log.debug("cloud_to_grid: %d points -> %d x %d grid by order", N, n_columns, n_el)
-    points = grid[: n_columns * n_el].reshape(n_columns, n_el, 3)
-    return ScanGrid(points, cell_of_point, azimuth, True, "order")
+    return ScanGrid(grid.reshape(n_columns, n_el, 3), cell_of_point, azimuth, True, "order")
+
+
+def _ring_lut(
+    qx: NDArray[np.float64],
+    qy: NDArray[np.float64],
+    qz: NDArray[np.float64],
+    ring: NDArray[np.int64],
+    lo: int,
+    sums: NDArray[np.float64],
+    abs_sums: NDArray[np.float64],
+    counts: NDArray[np.int64],
+) -> tuple[NDArray[np.int64], int]:
+    """The elevation index of every ring ``ring - lo`` (rings ranked by rising mean ``z / r_h``,
+    stable, empty rings last, as the twin ranks them) and the number of rings with points.
+
+    The ranking comes from the kernel's sums of ``z / max(sqrt(x^2 + y^2), 1e-9)`` (no
+    ``hypot`` per point) when it is certain: sorted, every two neighbouring keys farther apart
+    than twice the sum of their error bounds, ``(8 + 4 count) 2^-52`` times the mean magnitude
+    (a few eps per value for ``sqrt`` instead of ``hypot`` plus the rounding of both sums, in
+    any order, with a wide margin). Otherwise the twin's keys are computed (``np.hypot``,
+    ``bincount`` in point order): the ranks are the twin's either way."""
+    n_r = len(counts)
+    present = counts > 0
+    n_el = int(present.sum())
+    cnt = np.maximum(counts, 1)
+    key = np.where(present, sums / cnt, np.inf)
+    rank = np.argsort(key, kind="stable")
+    err = (8 + 4 * counts) * 2.0**-52 * abs_sums / cnt
+    a, b = rank[: n_el - 1], rank[1:n_el]
+    if not np.all(key[b] - key[a] > 2 * (err[a] + err[b])):  # too close to tell: the twin's
+        tan_el = qz / np.maximum(np.hypot(qx, qy), 1e-9)
+        mean_el = np.bincount(ring - lo, weights=tan_el, minlength=n_r) / cnt
+        rank = np.argsort(np.where(present, mean_el, np.inf), kind="stable")
+    lut = np.empty(n_r, dtype=np.int64)
+    lut[rank] = np.arange(n_r)
+    return lut, n_el
+
+
+_LIBM_SIN_COS: list[bool] = []
+
+
+def _libm_sin_cos() -> bool:
+    """Whether NumPy's float64 ``sin`` and ``cos`` give libm's results (``math.sin`` /
+    ``math.cos`` in a kernel) on this machine: checked once per process on 4,096 values of
+    ``[0, 2 pi)``. NumPy calls libm for them on the machines measured; a NumPy build with its
+    own SIMD versions keeps NumPy's in the phase (the twin's values either way)."""
+    if not _LIBM_SIN_COS:
+        from navkit.obstacles import _kernels
+
+        az = np.random.default_rng(12).uniform(-np.pi, np.pi, 4096)
+        az[:64] = np.linspace(-np.pi, np.pi, 64, endpoint=False)
+        s, c = np.empty_like(az), np.empty_like(az)
+        _kernels.phase_sin_cos_kernel(az, 1, 1, s, c)  # one column: the fractions of a turn
+        frac = 2 * np.pi * (((az + np.pi) / (2 * np.pi) * 1) % 1.0)  # the same values
+        _LIBM_SIN_COS.append(
+            bool(np.array_equal(s, np.sin(frac)) and np.array_equal(c, np.cos(frac)))
+        )
+    return _LIBM_SIN_COS[0]
 
 
 def _finish_grid(
