@@ -137,3 +137,11 @@ def test_a_stale_lock_is_replaced(fresh, monkeypatch):
         _stop(int(lock.read_text()))
         if jit._background is not None:
             jit._background.wait()
+
+
+def test_the_stamp_covers_every_module_with_kernels():
+    """A module with Numba kernels missing from KERNEL_MODULES would leave its cache out of the
+    stamp's key (a changed kernel would not be re-warmed)."""
+    pkg = SRC / "navkit"
+    with_kernels = {str(p.relative_to(pkg)) for p in pkg.rglob("*.py") if "@njit" in p.read_text()}
+    assert with_kernels == set(jit.KERNEL_MODULES)
