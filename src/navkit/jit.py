@@ -61,6 +61,7 @@ __all__ = [
     "KERNEL_MODULES",
     "MODES",
     "JitStatus",
+    "implementation",
     "kernels_enabled",
     "mode",
     "resolve",
@@ -238,6 +239,15 @@ def kernels_enabled() -> bool:
                 log.info("no kernel stamp (%s): compiling in this process", exc)
                 _decision = True
     return _decision
+
+
+def implementation() -> str:
+    """What this process ran so far: ``"compiled kernels"``, ``"NumPy twins"``, or ``"no
+    kernel needed"`` (nothing asked yet) - written into every run's ``summary.json`` so that
+    its timings can be read (a first run on a fresh machine runs the twins)."""
+    if _decision is None:
+        return "no kernel needed"
+    return "compiled kernels" if _decision else "NumPy twins"
 
 
 def resolve(compiled: bool | None) -> bool:

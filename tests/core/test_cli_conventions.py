@@ -136,15 +136,20 @@ def test_check_out_dir(tmp_path):
         check_out_dir(out / "summary.json", overwrite=True)
 
 
-def test_summary_says_what_its_figures_are_measured_against(tmp_path, cli):
+def test_summary_says_what_its_figures_are_measured_against(tmp_path, cli, monkeypatch):
+    from navkit import jit
     from navkit.cli.common import write_run_files
 
+    monkeypatch.setattr(jit, "_decision", None)  # as in a new process
     write_run_files(tmp_path / "a", {"x": 1}, {"success_rate": 1.0}, reference="simulator truth")
     s = json.loads((tmp_path / "a" / "summary.json").read_text())
     assert list(s)[:3] == ["navkit_version", "argv", "reference"]
     assert s["reference"] == "simulator truth" and s["success_rate"] == 1.0
-    # the path commands' headline figures name their reference
+    assert s["kernels"] == "no kernel needed"  # this process ran no hot path yet
+    # the path commands' headline figures name their reference, and the implementation that
+    # produced their timings (the suite runs the compiled kernels: NAVKIT_JIT=eager)
     r = cli("path", "simulate", "-o", tmp_path / "sim", "--legs", "3")
     assert r.exit_code == 0, r.output
     s = json.loads((tmp_path / "sim" / "summary.json").read_text())
     assert s["reference"].startswith("simulator ground truth")
+    assert s["kernels"] in ("compiled kernels", "no kernel needed")

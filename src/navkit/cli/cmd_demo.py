@@ -93,7 +93,9 @@ def register(app: typer.Typer) -> None:
             # ... and the sensor pictures at the start pose
             summary = render_sensor_pictures(out, settings, progress)
             summary["mission"] = {
-                k: v for k, v in mission_summary.items() if k not in ("navkit_version", "argv")
+                k: v
+                for k, v in mission_summary.items()
+                if k not in ("navkit_version", "argv", "kernels")
             }
             write_run_files(out, {**dataclasses.asdict(settings), **mission_settings}, summary)
             r = metrics["return"]

@@ -331,7 +331,8 @@ def write_run_files(
     reference: str | None = None,
 ) -> None:
     """Write ``settings.toml`` (the resolved settings; TOML has no null, so None values are left
-    out) and ``summary.json`` (with the navkit version and the command line) into ``out``
+    out) and ``summary.json`` (with the navkit version, the command line and which
+    implementation of the hot paths ran, :func:`navkit.jit.implementation`) into ``out``
     atomically: what every navkit run writes next to its outputs.
 
     Parameters
@@ -347,6 +348,7 @@ def write_run_files(
     import sys
 
     from navkit import __version__
+    from navkit.jit import implementation
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -355,6 +357,7 @@ def write_run_files(
     ref = reference if reference is not None else summary.get("reference")
     if ref is not None:
         head["reference"] = ref
+    head["kernels"] = implementation()  # timings of a first run on a fresh machine: NumPy twins
     write_json(
         out / "summary.json", {**head, **{k: v for k, v in summary.items() if k != "reference"}}
     )

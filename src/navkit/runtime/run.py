@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from navkit.errors import ConfigError, InputError
+from navkit.jit import implementation
 from navkit.runtime.capabilities import PoseBuffer, StageResult, build_stages, needs_pose, route
 from navkit.runtime.messages import Message, Output
 from navkit.runtime.pipeline import Pipeline, resolve_pipeline
@@ -376,7 +377,8 @@ def run_recording(
     }
     from navkit import __version__
 
-    write_json(out / "summary.json", {"navkit_version": __version__, **summary})
+    head = {"navkit_version": __version__, "kernels": implementation()}
+    write_json(out / "summary.json", {**head, **summary})
     return summary
 
 
