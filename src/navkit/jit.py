@@ -61,6 +61,7 @@ __all__ = [
     "KERNEL_MODULES",
     "MODES",
     "JitStatus",
+    "failed_path",
     "implementation",
     "kernels_enabled",
     "mode",
@@ -166,6 +167,7 @@ class JitStatus:
     stamp: Path
     compiled: bool  # the stamp exists
     warming: bool  # a warm-up process holds the lock
+    failed: bool  # a background warm-up failed (its traceback in failed_path())
     enabled: bool | None  # this process's decision, None until made
 
 
@@ -180,10 +182,22 @@ def _lock_is_fresh(lock: Path) -> bool:
         return False
 
 
+def failed_path() -> Path:
+    """Where a failed background warm-up leaves its traceback (removed by a successful one)."""
+    return stamp_path().with_suffix(".failed")
+
+
 def status() -> JitStatus:
     """The policy, the stamp and this process's decision (``navkit compile --status``)."""
     stamp = stamp_path()
-    return JitStatus(mode(), stamp, stamp.is_file(), _lock_is_fresh(_lock_path()), _decision)
+    return JitStatus(
+        mode(),
+        stamp,
+        stamp.is_file(),
+        _lock_is_fresh(_lock_path()),
+        failed_path().exists(),
+        _decision,
+    )
 
 
 def _start_warmup() -> None:
@@ -192,6 +206,13 @@ def _start_warmup() -> None:
     global _background
     lock = _lock_path()
     lock.parent.mkdir(parents=True, exist_ok=True)
+    if failed_path().exists():
+        log.warning(
+            "the background compilation of navkit's kernels failed (%s): this run uses their "
+            "NumPy twins; `navkit compile` shows the error",
+            failed_path(),
+        )
+        return
     if lock.exists() and not _lock_is_fresh(lock):
         lock.unlink(missing_ok=True)
     try:

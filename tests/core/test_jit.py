@@ -145,3 +145,11 @@ def test_the_stamp_covers_every_module_with_kernels():
     pkg = SRC / "navkit"
     with_kernels = {str(p.relative_to(pkg)) for p in pkg.rglob("*.py") if "@njit" in p.read_text()}
     assert with_kernels == set(jit.KERNEL_MODULES)
+
+
+def test_a_failed_warmup_is_not_started_again(fresh, monkeypatch):
+    monkeypatch.setenv("NAVKIT_JIT", "auto")
+    jit.failed_path().write_text("Traceback ...\n")
+    assert jit.kernels_enabled() is False  # the NumPy twins, and ...
+    assert not jit.stamp_path().with_suffix(".lock").exists()  # ... no new warm-up
+    assert jit.status().failed

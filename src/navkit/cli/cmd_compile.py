@@ -30,7 +30,13 @@ def register(app: typer.Typer) -> None:
             if status:
                 st = jit.status()
                 state = (
-                    "compiled" if st.compiled else "warming up" if st.warming else "not compiled"
+                    "compiled"
+                    if st.compiled
+                    else "warming up"
+                    if st.warming
+                    else f"background compilation failed ({jit.failed_path()})"
+                    if st.failed
+                    else "not compiled"
                 )
                 typer.echo(f"kernels: {state}; policy NAVKIT_JIT={st.mode}; stamp {st.stamp}")
                 return

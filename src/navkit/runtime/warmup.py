@@ -18,6 +18,7 @@ import argparse
 import logging
 import os
 import time
+import traceback
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -166,6 +167,7 @@ def warm_up(*, stamp: bool = True, progress: ProgressFn | None = None) -> WarmUp
         STEPS[name]()
         seconds[name] = time.perf_counter() - t0
     kernels = compiled_kernels()
+    jit.failed_path().unlink(missing_ok=True)
     return WarmUp(
         seconds,
         sum(m for _, m, _ in kernels.values()),
@@ -200,6 +202,12 @@ def main(argv: list[str] | None = None) -> int:
             res.stamp,
         )
         return 0
+    except Exception:
+        # later processes must not start a failing warm-up again and again: they read this
+        # marker, run the NumPy twins and point at the log (navkit.jit)
+        log.exception("the warm-up failed")
+        jit.failed_path().write_text(traceback.format_exc())
+        return 1
     finally:
         if args.lock is not None:
             args.lock.unlink(missing_ok=True)
