@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from typing import Any
 
 import cv2
 import numpy as np
@@ -131,11 +132,14 @@ def search_1d(
 # 2D search (one plane, eq. 4)
 
 
-def masked_ncc(fixed, fmask, moving, mmask, min_overlap: int):
+def masked_ncc(fixed, fmask, moving, mmask, min_overlap: int, fixed_spectra=None):
     """Masked normalised cross-correlation for every integer shift (Padfield 2012).
 
     Returns ``(ncc, offset)``: ``ncc[n]`` compares ``fixed[x]`` with ``moving[x - k]`` for the
     shift ``k = n - offset``; NaN where fewer than ``min_overlap`` pixels overlap.
+    ``fixed_spectra``: a dict kept by a caller that correlates the same ``fixed`` / ``fmask``
+    with many ``moving`` images (the turns of :func:`search_2d`): the fixed image's three
+    spectra per transform size, computed once (the same arrays).
     """
     fm = fmask.astype(np.float64)
     mm = mmask[::-1, ::-1].astype(np.float64)
@@ -152,7 +156,13 @@ def masked_ncc(fixed, fmask, moving, mmask, min_overlap: int):
     def conv(A, B):
         return sfft.irfft2(A * B, shape)[: out[0], : out[1]]
 
-    sf, sff, sfm = spec(F), spec(F * F), spec(fm)
+    key = tuple(shape)
+    if fixed_spectra is not None and key in fixed_spectra:
+        sf, sff, sfm = fixed_spectra[key]
+    else:
+        sf, sff, sfm = spec(F), spec(F * F), spec(fm)
+        if fixed_spectra is not None:
+            fixed_spectra[key] = (sf, sff, sfm)
     sm, smm, smk = spec(M), spec(M * M), spec(mm)
     N = np.rint(conv(sfm, smk))
     sF, sM = conv(sf, smk), conv(sfm, sm)
@@ -348,9 +358,10 @@ def search_2d(
         16, int(min_overlap / f**2), int(min_fraction * min(Fm.sum(), t2.valid_count / f**2))
     )
     found = []
+    spectra: dict[tuple[int, ...], tuple[Any, Any, Any]] = {}  # F's, per transform size
     for lam in lams:
         G, Gm, oG = _resample(t2, c2, float(lam), delta)
-        ncc, off = masked_ncc(F, Fm, G, Gm, min_ov)
+        ncc, off = masked_ncc(F, Fm, G, Gm, min_ov, spectra)
         # shift in metres: (k + oF - oG) * delta, k = index - off (rows j, cols i)
         kj = np.arange(ncc.shape[0]) - off[0] + oF[1] - oG[1]
         ki = np.arange(ncc.shape[1]) - off[1] + oF[0] - oG[0]
