@@ -104,6 +104,20 @@ def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-
     """``segment.merge_close_components`` (a union-find on the
     obstacle ids; the components do not depend on the order of the unions) with the boundary
     vertices from :func:`_boundary_ids`. ``obs_lab`` (C-contiguous) is relabelled in place."""
+    lut, m, merged = _merge_lut(obs_lab, n, P, wrap, distance_m, gap)
+    if not merged:
+        return obs_lab, n
+    flat = obs_lab.ravel()
+    for f in range(len(flat)):  # in place: the caller's array is the kernel's own
+        flat[f] = lut[flat[f]]
+    return obs_lab, m
+
+
+@njit(cache=True)
+def _merge_lut(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped-def]
+    """The merging of :func:`_merge_close_rows` without the relabelling: ``(lut (n + 1,),
+    number of merged ids, whether any two merged)``; a boundary vertex's point is read only
+    when another obstacle's vertex is in its window."""
     n_az, n_el = P.shape[0], P.shape[1]
     vid, bnd = _boundary_ids(obs_lab, n_az, n_el, wrap)
     parent = np.arange(n + 1).astype(np.int64)
@@ -113,7 +127,8 @@ def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-
             if not bnd[si, sj]:
                 continue
             va = vid[si, sj]
-            px, py, pz = P[si, sj, 0], P[si, sj, 1], P[si, sj, 2]
+            loaded = False
+            px = py = pz = 0.0
             for di in range(0, gap + 1):
                 ti = si + di
                 if ti >= n_az:
@@ -129,6 +144,9 @@ def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-
                     other |= (vb > 0) & (vb != va)
                 if not other:
                     continue
+                if not loaded:
+                    px, py, pz = P[si, sj, 0], P[si, sj, 1], P[si, sj, 2]
+                    loaded = True
                 for tj in range(j0, j1):
                     vb = vid[ti, tj]
                     if vb <= 0 or vb == va:
@@ -140,12 +158,9 @@ def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-
                         _union(parent, va, vb)
                         merged = True
     if not merged:
-        return obs_lab, n
+        return np.arange(n + 1).astype(np.int32), n, False
     lut, m = _renumber_by_min(parent, n)
-    flat = obs_lab.ravel()
-    for f in range(len(flat)):  # in place: the caller's array is the kernel's own
-        flat[f] = lut[flat[f]]
-    return obs_lab, m
+    return lut, m, True
 
 
 # ------------------------------------------------------------------------------------------
@@ -247,7 +262,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
     """Stage 6 (twin: ``detector._split``): obstacle components, the size / height /
     noise-patch filters, merging of close components and the shadows' owners, with the ground
     components of stage 7 from the same union-find. ``labels`` is changed in place (dropped
-    components back to ground). ``work_i8 (R * C,) int8`` and ``work_i32 (6, R * C) int32``
+    components back to ground). ``work_i8 (R * C,) int8`` and ``work_i32 (7, R * C) int32``
     are work arrays (any content; kept between calls by the caller).
 
     Returns ``obs_lab, n, tri_obstacle, tcode``: ``tri_obstacle`` the obstacle id of
@@ -271,6 +286,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
     shf = work_i32[3]  # the shadow triangles in raster order
     obf = work_i32[4]  # the obstacle triangles in raster order
     ground_size = work_i32[5]  # per ground root: the component's size
+    groots = work_i32[6]  # the roots of the ground sets (some joined later by the drops)
     _class_union_find(labels, wrap, cls, parent)
     # obstacle and shadow components numbered by first appearance in raster order; every
     # triangle pointed at its root on the way
@@ -280,12 +296,20 @@ def split_kernel(  # type: ignore[no-untyped-def]
     ns = 0
     nsh = 0
     nt = 0
+    ng = 0
     for f in range(R * C):
         r = parent[parent[f]]
         parent[f] = r
         c = cls[f]
         if c <= 0:
             labf[f] = 0
+            if c == _GROUND:  # the ground sets' sizes, at their roots (reached first)
+                if r == f:
+                    ground_size[f] = 1
+                    groots[ng] = f
+                    ng += 1
+                else:
+                    ground_size[r] += 1
             continue
         if r == f:
             if c == _OBSTACLE:
@@ -408,6 +432,13 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 labels[f // C, f % C] = 0
                 cls[f] = _GROUND
                 dropped_any = True
+                r = parent[f]  # the component's root, its first triangle in raster order
+                if r == f:
+                    ground_size[f] = 1
+                    groots[ng] = f
+                    ng += 1
+                else:
+                    ground_size[r] += 1
             labf[f] = lut[a]
         if dropped_any:  # the dropped triangles join the ground around them
             nb = np.empty(4, np.int64)
@@ -418,22 +449,28 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 i = f // C
                 for q in range(_neighbours(i, f - i * C, R, C, wrap, nb)):
                     if cls[nb[q]] == _GROUND:
-                        _union(parent, f, nb[q])
+                        # ``_union`` (the smaller root stays the root) with the sizes
+                        ra = _find(parent, f)
+                        rb = _find(parent, nb[q])
+                        if rb < ra:
+                            ra, rb = rb, ra
+                        if ra < rb:
+                            parent[rb] = ra
+                            ground_size[ra] += ground_size[rb]
         n = m2
         if n >= 2 and gap >= 1 and distance_m > 0:
-            lab, n = _merge_close_rows(lab, n, P, wrap, distance_m, gap)
+            mlut, n, merged = _merge_lut(lab, n, P, wrap, distance_m, gap)
+            if merged:  # the obstacle triangles only (every other id is 0)
+                for k in range(nt):
+                    f = obf[k]
+                    labf[f] = mlut[labf[f]]
     # ground components: the main ground zones (>= main_share of the largest one's triangles)
     # and each triangle's code for stage 7 (class flag, main ground)
     big = 0
-    for f in range(R * C):
-        if cls[f] == _GROUND:
-            r = parent[parent[f]]  # the unions above keep parent[x] <= x and roots smallest
-            parent[f] = r
-            if r == f:
-                ground_size[f] = 1
-            else:
-                ground_size[r] += 1
-            big = max(big, ground_size[r])
+    for k in range(ng):
+        g = groots[k]
+        if parent[g] == g:
+            big = max(big, ground_size[g])
     thr = main_share * big
     tcode = np.empty((R, C), np.int8)
     tflat = tcode.ravel()
@@ -444,8 +481,14 @@ def split_kernel(  # type: ignore[no-untyped-def]
             t = labels[i, j]
             f = i * C + j
             code = flag[t + 4] if (t >= -4) & (t <= 0) else np.int8(0)
-            if t == 0 and ground_size[parent[f]] >= thr:
-                code = _MAIN
+            if t == 0:
+                # the root: parent[f] < f was pointed at its root earlier in this raster pass
+                # (the unions keep parent[x] <= x and the roots smallest; every member of a
+                # ground set is a ground triangle)
+                r = parent[parent[f]]
+                parent[f] = r
+                if ground_size[r] >= thr:
+                    code = _MAIN
             tflat[f] = code
     tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
     if ns == 0 or n == 0:

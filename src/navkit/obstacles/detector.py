@@ -403,7 +403,7 @@ def _compiled_split(
     R, C = labels.shape
     work_i8, work_i32 = cached_work(
         ("split", R, C),
-        lambda: [np.empty(R * C, np.int8), np.empty((6, R * C), np.int32)],
+        lambda: [np.empty(R * C, np.int8), np.empty((7, R * C), np.int32)],
     )
     obs_lab, n, tri_obstacle, tcode = _kernels_map.split_kernel(
         labels,
