@@ -265,13 +265,16 @@ def split_kernel(  # type: ignore[no-untyped-def]
     components back to ground). ``work_i8 (R * C,) int8`` and ``work_i32 (7, R * C) int32``
     are work arrays (any content; kept between calls by the caller).
 
-    Returns ``obs_lab, n, tri_obstacle, tcode``: ``tri_obstacle`` the obstacle id of
+    Returns ``obs_lab, n, tri_obstacle, tcode, shadows, ntri``: ``tri_obstacle`` the obstacle
+    id of
     obstacle triangles and the owner of shadow triangles (the twin's ``owner`` is
     ``tri_obstacle`` on the shadow triangles, 0 elsewhere); ``tcode (R, 2C) int8`` each
     triangle's class flag for stage 7 (1 ground, 2 shadow behind, 4 side shadow, 8 obstacle,
     0 unreliable) with ``_MAIN`` (= 1 | 16) for a ground triangle of a main ground zone (a
     ground component after the drop with at least ``main_share`` of the largest one's
-    triangles; ``segment.main_ground_vertices``).
+    triangles; ``segment.main_ground_vertices``); ``shadows`` the flat indices of the shadow
+    triangles (raster order; their owners, possibly 0, in ``tri_obstacle``) and ``ntri (n,)``
+    the triangles of each obstacle (stage 8's inputs: no pass over the grid there).
 
     Every root of the union-find is its set's smallest member and ``parent[f] <= f``, so one
     raster pass ``parent[f] = parent[parent[f]]`` points every triangle at its root (no
@@ -328,6 +331,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
             shf[nsh] = f
             nsh += 1
     dropped_any = False
+    ntri = np.zeros(1, np.int64)  # per final obstacle id: its triangles
     if n:
         size = np.zeros(n + 1, np.int64)
         hi = np.full(n + 1, -np.inf, np.float32)
@@ -458,12 +462,17 @@ def split_kernel(  # type: ignore[no-untyped-def]
                             parent[rb] = ra
                             ground_size[ra] += ground_size[rb]
         n = m2
+        mlut = np.arange(n + 1).astype(np.int32)
         if n >= 2 and gap >= 1 and distance_m > 0:
             mlut, n, merged = _merge_lut(lab, n, P, wrap, distance_m, gap)
             if merged:  # the obstacle triangles only (every other id is 0)
                 for k in range(nt):
                     f = obf[k]
                     labf[f] = mlut[labf[f]]
+        ntri = np.zeros(n + 1, np.int64)
+        for a in range(1, len(lut)):
+            if lut[a] > 0:
+                ntri[mlut[lut[a]]] += size[a]
     # ground components: the main ground zones (>= main_share of the largest one's triangles)
     # and each triangle's code for stage 7 (class flag, main ground)
     big = 0
@@ -491,8 +500,9 @@ def split_kernel(  # type: ignore[no-untyped-def]
                     code = _MAIN
             tflat[f] = code
     tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
+    shadows = shf[:nsh].copy()
     if ns == 0 or n == 0:
-        return lab, n, tri_obstacle, tcode
+        return lab, n, tri_obstacle, tcode, shadows, ntri[1:]
     # shadow owners: per shadow zone, the obstacle it shares the most adjacencies with (ties:
     # the larger id, as the twin's stable lexsort)
     nobs = n + 1
@@ -542,7 +552,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
     for t in range(nsh):
         f = shf[t]
         trif[f] = best[sl[f]]
-    return lab, n, tri_obstacle, tcode
+    return lab, n, tri_obstacle, tcode, shadows, ntri[1:]
 
 
 # ------------------------------------------------------------------------------------------
@@ -656,13 +666,14 @@ def ground_cells_kernel(P, sel, cell_m, quantile):  # type: ignore[no-untyped-de
 
 
 @njit(cache=True, error_model="numpy")
-def map_groups_kernel(flat, tri, labels, tri_obstacle, vid, boundary, n):  # type: ignore[no-untyped-def]
+def map_groups_kernel(flat, tri, tri_obstacle, shadows, ntri, vid, boundary, n):  # type: ignore[no-untyped-def]
     """Boundary vertices ``(x, y)``, all vertices ``(x, y, z)`` and shadow vertex sets
     ``(x, y)`` of obstacles 1..n in CSR layouts (each with offsets ``(n + 1,)``), the shadow
     areas and the triangle counts, in the twin's orders (vertices in raster order; a shadow
     set's vertices sorted by index, each once; areas summed in raster order). Two passes over
-    the vertices and one over the triangles; the triangles' obstacles and shadow owners are
-    read from ``tri_obstacle`` (:func:`split_kernel`) with the classes ``labels``."""
+    the vertices and one over the shadow triangles ``shadows`` (raster order) with their
+    owners in ``tri_obstacle``; the triangle counts ``ntri (n,)`` are stage 6's
+    (:func:`split_kernel`)."""
     vf = vid.ravel()
     bf = boundary.ravel()
     nv = len(vf)
@@ -695,38 +706,32 @@ def map_groups_kernel(flat, tri, labels, tri_obstacle, vid, boundary, n):  # typ
                 b_xy[q, 0] = flat[k, 0]
                 b_xy[q, 1] = flat[k, 1]
                 bfill[a - 1] = q + 1
-    # triangles: counts per obstacle, shadow areas and the shadow triangles (raster order)
-    R, C2 = tri_obstacle.shape
-    ntri = np.zeros(n + 1, np.int64)
+    # the shadow triangles with an owner (raster order): counts per owner and areas
+    C2 = tri_obstacle.shape[1]
     area = np.zeros(n + 1)
     t_cnt = np.zeros(n + 1, np.int64)
-    sh = np.empty(R * C2, np.int64)
+    sh = np.empty(len(shadows), np.int64)
     ns = 0
-    for r in range(R):
-        for c in range(C2):
-            b = tri_obstacle[r, c]
-            if b <= 0:
-                continue
-            t = labels[r, c]
-            if t == -2:  # an obstacle triangle
-                ntri[b] += 1
-            elif t == -3 or t == -4:  # a shadow triangle and its owner
-                a = b
-                t_cnt[a] += 1
-                sh[ns] = r * C2 + c
-                ns += 1
-                i0, i1, i2 = tri[r, c, 0], tri[r, c, 1], tri[r, c, 2]
-                v0x, v0y = flat[i0, 0], flat[i0, 1]
-                area[a] += 0.5 * abs(
-                    (flat[i1, 0] - v0x) * (flat[i2, 1] - v0y)
-                    - (flat[i2, 0] - v0x) * (flat[i1, 1] - v0y)
-                )
+    ownf = tri_obstacle.ravel()
+    for k in range(len(shadows)):
+        f = shadows[k]
+        a = ownf[f]
+        if a <= 0:
+            continue
+        r, c = f // C2, f % C2
+        t_cnt[a] += 1
+        sh[ns] = f
+        ns += 1
+        i0, i1, i2 = tri[r, c, 0], tri[r, c, 1], tri[r, c, 2]
+        v0x, v0y = flat[i0, 0], flat[i0, 1]
+        area[a] += 0.5 * abs(
+            (flat[i1, 0] - v0x) * (flat[i2, 1] - v0y) - (flat[i2, 0] - v0x) * (flat[i1, 1] - v0y)
+        )
     t_off = np.zeros(n + 2, np.int64)
     for a in range(1, n + 1):
         t_off[a + 1] = t_off[a] + 3 * t_cnt[a]
     fill = t_off.copy()
     verts = np.empty(3 * ns, np.int64)
-    ownf = tri_obstacle.ravel()
     for k in range(ns):
         t = sh[k]
         a = ownf[t]
@@ -749,4 +754,4 @@ def map_groups_kernel(flat, tri, labels, tri_obstacle, vid, boundary, n):  # typ
     for k in range(m):
         s_xy[k, 0] = flat[verts[k], 0]
         s_xy[k, 1] = flat[verts[k], 1]
-    return b_off, b_xy, v_off, v_xyz, s_off, s_xy, area[1:], ntri[1:]
+    return b_off, b_xy, v_off, v_xyz, s_off, s_xy, area[1:], ntri
