@@ -24,11 +24,14 @@ __all__ = [
 
 @njit(cache=True, error_model="numpy")
 def _mvee_weights(P, tol, max_iter):  # type: ignore[no-untyped-def]
-    """Khachiyan / Todd-Yildirim weights ``u (m,)`` of one centred, scaled set ``P (m, 2)``."""
+    """Khachiyan / Todd-Yildirim weights ``u (m,)`` of one centred, scaled set ``P (m, 2)``.
+
+    Three passes over the points per iteration: the moments (with the previous step's clamp
+    of negative weights to 0), the Mahalanobis terms with the largest and the smallest (over
+    the positive weights) in one pass, and the step; the same values as separate passes."""
     m = P.shape[0]
     d = 2
     u = np.full(m, 1.0 / m)
-    M = np.empty(m)
     for _ in range(max_iter):
         m0 = 0.0
         m1 = 0.0
@@ -36,7 +39,11 @@ def _mvee_weights(P, tol, max_iter):  # type: ignore[no-untyped-def]
         m3 = 0.0
         m4 = 0.0
         for k in range(m):
-            x, y, w = P[k, 0], P[k, 1], u[k]
+            w = u[k]
+            if w < 0.0:  # the previous step's clamp
+                w = 0.0
+                u[k] = 0.0
+            x, y = P[k, 0], P[k, 1]
             m0 += x * w
             m1 += y * w
             m2 += x * x * w
@@ -47,19 +54,20 @@ def _mvee_weights(P, tol, max_iter):  # type: ignore[no-untyped-def]
         det = max(sxx * syy - sxy * sxy, 1e-300)
         j_up = 0
         j_dn = -1
+        M_up = 0.0
+        best = np.inf
         for k in range(m):
             dx = P[k, 0] - cx
             dy = P[k, 1] - cy
-            M[k] = 1.0 + (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det
-            if M[k] > M[j_up] or (M[k] != M[k] and M[j_up] == M[j_up]):
+            Mk = 1.0 + (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det
+            if k == 0 or Mk > M_up or (Mk != Mk and M_up == M_up):
                 j_up = k
-        best = np.inf
-        for k in range(m):
-            v = M[k] if u[k] > 0 else np.inf
+                M_up = Mk
+            v = Mk if u[k] > 0 else np.inf
             if j_dn < 0 or v < best or (v != v and best == best):
                 j_dn = k
                 best = v
-        M_up, M_dn = M[j_up], M[j_dn]
+        M_dn = best if u[j_dn] > 0 else _mahalanobis(P, j_dn, cx, cy, sxx, sxy, syy, det)
         eps_up = M_up / (d + 1) - 1
         eps_dn = 1 - M_dn / (d + 1)
         worst = eps_up if (eps_up != eps_up or eps_up >= eps_dn) else eps_dn
@@ -86,10 +94,18 @@ def _mvee_weights(P, tol, max_iter):  # type: ignore[no-untyped-def]
             for k in range(m):
                 u[k] *= f
             u[j_dn] -= beta
-        for k in range(m):
-            if u[k] < 0.0:
-                u[k] = 0.0
+    for k in range(m):
+        if u[k] < 0.0:
+            u[k] = 0.0
     return u
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _mahalanobis(P, k, cx, cy, sxx, sxy, syy, det):  # type: ignore[no-untyped-def]
+    """The term ``M[k]`` of :func:`_mvee_weights`."""
+    dx = P[k, 0] - cx
+    dy = P[k, 1] - cy
+    return 1.0 + (syy * dx * dx - 2.0 * sxy * dx * dy + sxx * dy * dy) / det
 
 
 @njit(cache=True, error_model="numpy")

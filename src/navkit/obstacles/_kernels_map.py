@@ -622,19 +622,27 @@ def ground_cells_kernel(P, sel, cell_m, quantile):  # type: ignore[no-untyped-de
     m = len(sel)
     if m == 0:
         return np.zeros((1, 1)), np.zeros(2), False
+    # one gather of the reference points into contiguous arrays (the later passes read those)
+    xs = np.empty(m)
+    ys = np.empty(m)
+    zz = np.empty(m)
     gx_min = np.inf
     gy_min = np.inf
     for k in range(m):
-        gx_min = min(gx_min, P[sel[k], 0])
-        gy_min = min(gy_min, P[sel[k], 1])
+        p = sel[k]
+        x, y = P[p, 0], P[p, 1]
+        xs[k] = x
+        ys[k] = y
+        zz[k] = P[p, 2]
+        gx_min = min(gx_min, x)
+        gy_min = min(gy_min, y)
     ix = np.empty(m, np.int64)
     iy = np.empty(m, np.int64)
     nx = 0
     ny = 0
     for k in range(m):
-        p = sel[k]
-        ix[k] = math.floor((P[p, 0] - gx_min) / cell_m)
-        iy[k] = math.floor((P[p, 1] - gy_min) / cell_m)
+        ix[k] = math.floor((xs[k] - gx_min) / cell_m)
+        iy[k] = math.floor((ys[k] - gy_min) / cell_m)
         nx = max(nx, ix[k] + 1)
         ny = max(ny, iy[k] + 1)
     counts = np.zeros(nx * ny + 1, np.int64)
@@ -645,7 +653,7 @@ def ground_cells_kernel(P, sel, cell_m, quantile):  # type: ignore[no-untyped-de
     zs = np.empty(m, np.float64)
     for k in range(m):
         c = ix[k] * ny + iy[k]
-        zs[fill[c]] = P[sel[k], 2]
+        zs[fill[c]] = zz[k]
         fill[c] += 1
     heights = np.full((nx, ny), np.nan)
     missing = False
