@@ -346,9 +346,12 @@ def split_kernel(  # type: ignore[no-untyped-def]
             start[a + 1] = start[a] + size[a]
         fill = start.copy()
         zs = np.empty(nt, np.float64)  # their mid heights by label
-        bi_ = np.empty(nt, np.int64)  # those with a ground neighbour (the lift's pairs)
-        bj_ = np.empty(nt, np.int64)
-        cyc = wrap and R > 1
+        # those with a ground neighbour (the lift's pairs): row, column, label and which of
+        # the four offsets (``_OFF_I``, ``_OFF_J``; rows cyclic with ``wrap``) is ground
+        bi_ = np.empty(nt, np.int32)
+        bj_ = np.empty(nt, np.int32)
+        ba_ = np.empty(nt, np.int32)
+        bm_ = np.empty(nt, np.int8)
         nbd = 0
         i = 0
         ca = 0  # the label of the current run
@@ -359,17 +362,21 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 i += 1
             j = f - i * C
             a = labf[f]
-            # a ground neighbour (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)?
-            up = i - 1 if i > 0 else (R - 1 if cyc else -1)
-            dn = i + 1 if i + 1 < R else (0 if cyc else -1)
-            if (
-                (j + 1 < C and labels[i, j + 1] == 0)
-                or (j > 0 and labels[i, j - 1] == 0)
-                or (dn >= 0 and j > 0 and labels[dn, j - 1] == 0)
-                or (up >= 0 and j + 1 < C and labels[up, j + 1] == 0)
-            ):
+            # the ground neighbours (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)
+            up = i - 1 if i > 0 else (R - 1 if wrap else -1)
+            dn = i + 1 if i + 1 < R else (0 if wrap else -1)
+            mk = 0
+            if j + 1 < C:
+                mk |= 1 if labels[i, j + 1] == 0 else 0
+                mk |= 8 if (up >= 0 and labels[up, j + 1] == 0) else 0
+            if j > 0:
+                mk |= 2 if labels[i, j - 1] == 0 else 0
+                mk |= 4 if (dn >= 0 and labels[dn, j - 1] == 0) else 0
+            if mk:
                 bi_[nbd] = i
                 bj_[nbd] = j
+                ba_[nbd] = a
+                bm_[nbd] = mk
                 nbd += 1
             if a != ca:  # a run of one label: its sums in registers, the same order
                 if ca:
@@ -397,21 +404,20 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 k0, k1 = 0, nbd
                 if seam == 1:  # only row R - 1 (di = 1) or row 0 (di = -1) crosses
                     k0, k1 = (first_last, nbd) if di == 1 else (0, first_one)
+                bit = 1 << o
                 for k in range(k0, k1):
-                    i, j = bi_[k], bj_[k]
-                    tj = j + dj
-                    if tj < 0 or tj >= C:
+                    if not (bm_[k] & bit):  # that neighbour is not ground (or not there)
                         continue
-                    ti = i + di
+                    ti = bi_[k] + di
                     crosses = ti < 0 or ti >= R
                     if crosses != (seam == 1):
                         continue
                     if crosses:
                         ti = ti % R
-                    if labels[ti, tj] == 0:
-                        a = lab[i, j]
-                        cnt_g[a] += 1
-                        sum_g[a] += np.float64(h * (zmax[ti, tj] + zmin[ti, tj]))
+                    tj = bj_[k] + dj
+                    a = ba_[k]
+                    cnt_g[a] += 1
+                    sum_g[a] += np.float64(h * (zmax[ti, tj] + zmin[ti, tj]))
         lut = np.zeros(n + 1, np.int32)
         m2 = 0
         for a in range(1, n + 1):
