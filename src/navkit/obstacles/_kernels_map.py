@@ -566,13 +566,14 @@ def split_kernel(  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def vertex_kernel(tcode, obs_lab, valid, wrap):  # type: ignore[no-untyped-def]
+def vertex_kernel(tcode, obs_lab, valid, wrap, ref):  # type: ignore[no-untyped-def]
     """``segment.boundary_vertices`` + ``vertex_labels`` + ``main_ground_vertices`` in one pass
     over the vertices, each reading its six incident triangles once
     (``segment._incident_slices``' order; a missing triangle counts as obstacle id 0, no class,
     not main ground) in stage 6's codes ``tcode`` (:func:`split_kernel`). Returns ``vid,
     boundary, vertex labels, main ground vertices`` and the flat indices of the main ground
-    vertices labelled ground (the ground-height reference, raster order). Row by row on the
+    vertices labelled ground (the ground-height reference, raster order; a view of the work
+    array ``ref (n_az * n_el,) int64``, any content on entry). Row by row on the
     row windows (:func:`_window_ids`): no branch per triangle, the class from a table of the
     16 flag combinations."""
     n_az, n_el = valid.shape
@@ -581,7 +582,6 @@ def vertex_kernel(tcode, obs_lab, valid, wrap):  # type: ignore[no-untyped-def]
     bnd = np.empty((n_az, n_el), np.bool_)
     vlab = np.empty((n_az, n_el), np.int8)
     main = np.empty((n_az, n_el), np.bool_)
-    ref = np.empty(n_az * n_el, np.int64)
     # the class of a valid vertex from the flags of its triangles: obstacle, ground, shadow
     # behind, side shadow, else unreliable
     table = np.empty(32, np.int8)
@@ -619,19 +619,20 @@ def vertex_kernel(tcode, obs_lab, valid, wrap):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def ground_cells_kernel(P, sel, cell_m, quantile):  # type: ignore[no-untyped-def]
+def ground_cells_kernel(P, sel, cell_m, quantile, work_f, work_i):  # type: ignore[no-untyped-def]
     """``ground.ground_height_map`` before its hole filling, on the reference points ``sel``
     (flat indices in raster order, from :func:`vertex_kernel`): the ``quantile`` of their z
     per horizontal cell ``(nx, ny)`` (NaN: no point), the grid's origin, and whether a cell is
     empty. The arithmetic of ``_kernels.ground_cells_kernel``, without its two passes over
-    every vertex to find the reference points."""
+    every vertex to find the reference points. ``work_f (4, >= m) float64`` and ``work_i (2,
+    >= m) int64`` are work arrays (any content; kept between calls by the caller)."""
     m = len(sel)
     if m == 0:
         return np.zeros((1, 1)), np.zeros(2), False
     # one gather of the reference points into contiguous arrays (the later passes read those)
-    xs = np.empty(m)
-    ys = np.empty(m)
-    zz = np.empty(m)
+    xs = work_f[0, :m]
+    ys = work_f[1, :m]
+    zz = work_f[2, :m]
     gx_min = np.inf
     gy_min = np.inf
     for k in range(m):
@@ -642,8 +643,8 @@ def ground_cells_kernel(P, sel, cell_m, quantile):  # type: ignore[no-untyped-de
         zz[k] = P[p, 2]
         gx_min = min(gx_min, x)
         gy_min = min(gy_min, y)
-    ix = np.empty(m, np.int64)
-    iy = np.empty(m, np.int64)
+    ix = work_i[0, :m]
+    iy = work_i[1, :m]
     nx = 0
     ny = 0
     for k in range(m):
@@ -656,7 +657,7 @@ def ground_cells_kernel(P, sel, cell_m, quantile):  # type: ignore[no-untyped-de
         counts[ix[k] * ny + iy[k] + 1] += 1
     start = np.cumsum(counts)
     fill = start.copy()
-    zs = np.empty(m, np.float64)
+    zs = work_f[3, :m]
     for k in range(m):
         c = ix[k] * ny + iy[k]
         zs[fill[c]] = zz[k]

@@ -387,6 +387,24 @@ def _split(
     return obs_lab, n, owner
 
 
+def _work_6_7(R: int, C: int, N: int) -> list[NDArray[Any]]:
+    """The work arrays of the compiled stages 6 and 7 for ``R x C`` triangles and ``N``
+    vertices, kept between calls under one key (``_buffers.cached_work`` keeps four):
+    ``int8 (R * C,)``, ``int32 (7, R * C)`` (stage 6), ``float64 (4, N)``, ``int64 (3, N)``
+    (stage 7)."""
+    from navkit.obstacles._buffers import cached_work
+
+    return cached_work(
+        ("split", R, C, N),
+        lambda: [
+            np.empty(R * C, np.int8),
+            np.empty((7, R * C), np.int32),
+            np.empty((4, N)),
+            np.empty((3, N), np.int64),
+        ],
+    )
+
+
 def _compiled_split(
     labels: NDArray[np.int8],
     mesh: MeshCharacteristics,
@@ -408,13 +426,9 @@ def _compiled_split(
     as the obstacle and shadow components), and for stage 8 the shadow triangles (flat
     indices, raster order) and each obstacle's number of triangles."""
     from navkit.obstacles import _kernels_map
-    from navkit.obstacles._buffers import cached_work
 
     R, C = labels.shape
-    work_i8, work_i32 = cached_work(
-        ("split", R, C),
-        lambda: [np.empty(R * C, np.int8), np.empty((7, R * C), np.int32)],
-    )
+    work_i8, work_i32, _, _ = _work_6_7(R, C, P.shape[0] * P.shape[1])
     obs_lab, n, tri_obstacle, tcode, shadows, ntri = _kernels_map.split_kernel(
         labels,
         mesh.z_min.astype(np.float32, copy=False),
@@ -474,11 +488,14 @@ def _compiled_vertices(
     from navkit.obstacles import _kernels, _kernels_map
     from navkit.obstacles.ground import fill_missing_cells
 
-    vid, boundary, vlab, _main, ref = _kernels_map.vertex_kernel(tcode, obs_lab, valid, bool(wrap))
+    _, _, work_f, work_i = _work_6_7(labels.shape[0], labels.shape[1], valid.size)
+    vid, boundary, vlab, _main, ref = _kernels_map.vertex_kernel(
+        tcode, obs_lab, valid, bool(wrap), work_i[2]
+    )
     if settings.ground_refine:
         flat = P.reshape(-1, 3)
         grid, origin, missing = _kernels_map.ground_cells_kernel(
-            flat, ref, float(settings.ground_cell_m), 0.25
+            flat, ref, float(settings.ground_cell_m), 0.25, work_f, work_i
         )
         if missing:
             grid = fill_missing_cells(grid)
