@@ -487,24 +487,25 @@ def split_kernel(  # type: ignore[no-untyped-def]
         if parent[g] == g:
             big = max(big, ground_size[g])
     thr = main_share * big
+    ithr = math.ceil(thr)  # an integer size s is >= thr exactly when s >= ceil(thr)
     tcode = np.empty((R, C), np.int8)
     tflat = tcode.ravel()
-    # the flag of classes -4 .. 0 (shadow behind, side shadow, obstacle, unreliable, ground)
-    flag = np.array([2, 4, 8, 0, 1], np.int8)
+    # the flag of classes -4 .. 0 (shadow behind, side shadow, obstacle, unreliable, ground) by
+    # the class's byte (-4 .. -1 are 252 .. 255); any other class 0
+    flag = np.zeros(256, np.int8)
+    flag[252], flag[253], flag[254], flag[255], flag[0] = 2, 4, 8, 0, 1
     for i in range(R):
         for j in range(C):
             t = labels[i, j]
             f = i * C + j
-            code = flag[t + 4] if (t >= -4) & (t <= 0) else np.int8(0)
-            if t == 0:
-                # the root: parent[f] < f was pointed at its root earlier in this raster pass
-                # (the unions keep parent[x] <= x and the roots smallest; every member of a
-                # ground set is a ground triangle)
-                r = parent[parent[f]]
-                parent[f] = r
-                if ground_size[r] >= thr:
-                    code = _MAIN
-            tflat[f] = code
+            # the root, without a branch: parent[f] < f was pointed at its root earlier in
+            # this raster pass (the unions keep parent[x] <= x and the roots smallest; a
+            # ground set's members are ground triangles; the size read for another class's
+            # root is not used)
+            r = parent[parent[f]]
+            parent[f] = r
+            main = (t == 0) & (ground_size[r] >= ithr)
+            tflat[f] = _MAIN if main else flag[np.uint8(t)]
     tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
     shadows = shf[:nsh].copy()
     if ns == 0 or n == 0:
