@@ -117,12 +117,40 @@ def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-
 def _merge_lut(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped-def]
     """The merging of :func:`_merge_close_rows` without the relabelling: ``(lut (n + 1,),
     number of merged ids, whether any two merged)``; a boundary vertex's point is read only
-    when another obstacle's vertex is in its window."""
+    when another obstacle's vertex is in its window. A row of vertices is skipped when the
+    rows of its windows hold one obstacle id at most (no other id to merge with: about half
+    the rows of a SemanticKITTI frame)."""
     n_az, n_el = P.shape[0], P.shape[1]
     vid, bnd = _boundary_ids(obs_lab, n_az, n_el, wrap)
+    # per row of vertices: the smallest and largest obstacle id in it (0, 0: none)
+    rlo = np.zeros(n_az, np.int32)
+    rhi = np.zeros(n_az, np.int32)
+    big = np.int32(np.iinfo(np.int32).max)
+    for r in range(n_az):
+        lo = big
+        hi = np.int32(0)
+        for c in range(n_el):
+            v = vid[r, c]
+            hi = max(hi, v)
+            lo = min(lo, v if v > 0 else big)
+        rlo[r] = lo if hi > 0 else 0
+        rhi[r] = hi
     parent = np.arange(n + 1).astype(np.int64)
     merged = False
     for si in range(n_az):
+        lo = big
+        hi = np.int32(0)
+        for di in range(0, gap + 1):
+            ti = si + di
+            if ti >= n_az:
+                if not wrap:
+                    continue
+                ti = ti % n_az
+            if rhi[ti] > 0:
+                lo = min(lo, rlo[ti])
+                hi = max(hi, rhi[ti])
+        if hi == 0 or lo == hi:  # one id at most in the window rows: nothing to merge
+            continue
         for sj in range(n_el):
             if not bnd[si, sj]:
                 continue
