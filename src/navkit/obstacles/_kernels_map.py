@@ -647,6 +647,39 @@ def vertex_kernel(tcode, obs_lab, valid, wrap, ref):  # type: ignore[no-untyped-
     return vid, bnd, vlab, main, ref[:nref]
 
 
+@njit(cache=True, inline="always")
+def _kth_select(v, k):  # type: ignore[no-untyped-def]
+    """The k-th smallest of ``v`` (0-based; no NaN), reordering ``v``: a quickselect whose
+    partitions do not branch on the comparisons (each element is swapped to the front and the
+    front advances by the comparison's 0 / 1), with a median-of-3 pivot; a second pass puts the
+    values equal to the pivot next (so every step shrinks the range). The same value as
+    ``_kernels._kth`` (an order statistic is unique); ~2.6x faster on the ~90-value cells of
+    the ground heights, where a branch per comparison is mispredicted about half the time."""
+    lo, hi = 0, len(v) - 1
+    while lo < hi:
+        a, b, c = v[lo], v[(lo + hi) // 2], v[hi]
+        pivot = max(min(a, b), min(max(a, b), c))
+        i = lo
+        for j in range(lo, hi + 1):  # v[lo:i] < pivot
+            x = v[j]
+            v[j] = v[i]
+            v[i] = x
+            i += x < pivot
+        if k < i:
+            hi = i - 1
+            continue
+        i2 = i
+        for j in range(i, hi + 1):  # v[i:i2] == pivot
+            x = v[j]
+            v[j] = v[i2]
+            v[i2] = x
+            i2 += x <= pivot
+        if k < i2:
+            return pivot
+        lo = i2
+    return v[k]
+
+
 @njit(cache=True)
 def ground_cells_kernel(P, sel, cell_m, quantile, work_f, work_i):  # type: ignore[no-untyped-def]
     """``ground.ground_height_map`` before its hole filling, on the reference points ``sel``
@@ -696,7 +729,7 @@ def ground_cells_kernel(P, sel, cell_m, quantile, work_f, work_i):  # type: igno
     for c in range(nx * ny):
         a, b = start[c], start[c + 1]
         if b > a:
-            heights[c // ny, c % ny] = _kth(zs[a:b], math.floor(quantile * (b - a - 1)))
+            heights[c // ny, c % ny] = _kth_select(zs[a:b], math.floor(quantile * (b - a - 1)))
         else:
             missing = True
     origin = np.empty(2)
