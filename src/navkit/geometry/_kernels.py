@@ -450,64 +450,6 @@ def _outside_polygon(x, y, qx, qy):  # type: ignore[no-untyped-def]
     return cand, nc
 
 
-FINER_AFTER = 128
-"""Candidates left by the octagon filter above which :func:`_hull_one` filters again with the
-hull of the extreme points in ``len(_DIR_COS)`` directions (measured on the SemanticKITTI
-boundary sets: 18.5k points, 4.5k candidates after the octagon, the hulls 0.5 -> 0.3 ms)."""
-
-_DIR_COS = np.cos(2 * np.pi * np.arange(32) / 32)
-_DIR_SIN = np.sin(2 * np.pi * np.arange(32) / 32)
-
-
-@njit(cache=True, error_model="numpy")
-def _outside_finer(x, y, cand, nc):  # type: ignore[no-untyped-def]
-    """The candidates ``cand[:nc]`` (indices into ``x, y``) not clearly inside the hull of
-    their extreme points along 32 directions (a polygon inside the set's hull, found by the
-    chain itself: strictly convex, counter-clockwise), and their number; ``cand, nc`` unchanged
-    when that hull is degenerate or ambiguous. The candidates keep the set's extreme x and y
-    (the octagon's vertices), so the margin's extent is the set's."""
-    nd = len(_DIR_COS)
-    best = np.full(nd, -np.inf)
-    arg = np.zeros(nd, np.int64)
-    for t in range(nc):
-        k = cand[t]
-        xk, yk = x[k], y[k]
-        for d in range(nd):
-            v = _DIR_COS[d] * xk + _DIR_SIN[d] * yk
-            if v > best[d]:
-                best[d] = v
-                arg[d] = k
-    ex = np.empty(nd)
-    ey = np.empty(nd)
-    ne = 0
-    for d in range(nd):  # the distinct extreme points
-        k = arg[d]
-        if d == 0 or k != arg[d - 1]:
-            ex[ne] = x[k]
-            ey[ne] = y[k]
-            ne += 1
-    if ne < 3:
-        return cand, nc
-    out = np.empty(ne + 1, np.int64)
-    h = _chain(ex[:ne], ey[:ne], np.arange(ne), out)
-    if h < 3:
-        return cand, nc
-    qx = np.empty(h)
-    qy = np.empty(h)
-    for t in range(h):
-        qx[t] = ex[out[t]]
-        qy[t] = ey[out[t]]
-    cx = np.empty(nc)
-    cy = np.empty(nc)
-    for t in range(nc):
-        cx[t] = x[cand[t]]
-        cy[t] = y[cand[t]]
-    sub, ns = _outside_polygon(cx, cy, qx, qy)
-    for t in range(ns):
-        sub[t] = cand[sub[t]]
-    return sub, ns
-
-
 @njit(cache=True, error_model="numpy")
 def _hull_one(x, y, out, qx, qy):  # type: ignore[no-untyped-def]
     """Andrew's monotone chain on one set: writes the hull's local indices to ``out``
@@ -517,8 +459,7 @@ def _hull_one(x, y, out, qx, qy):  # type: ignore[no-untyped-def]
 
     The points clearly inside a convex polygon inside the hull - ``qx, qy`` (counter-clockwise,
     strictly convex, at least 3 vertices, e.g. the hull of a subset) or else the octagon of the
-    extreme points, refined by :func:`_outside_finer` when more than ``FINER_AFTER`` points
-    are left - are dropped first (Akl-Toussaint)."""
+    extreme points - are dropped first (Akl-Toussaint)."""
     m = len(x)
     if m < 3:
         return -1
@@ -529,17 +470,7 @@ def _hull_one(x, y, out, qx, qy):  # type: ignore[no-untyped-def]
         cand, nc = _outside_polygon(x, y, qx, qy)
     else:
         cand, nc = _outside_octagon(x, y)
-        if nc > FINER_AFTER:
-            cand, nc = _outside_finer(x, y, cand, nc)
-    return _chain(x, y, cand[:nc], out)
-
-
-@njit(cache=True, error_model="numpy")
-def _chain(x, y, cand, out):  # type: ignore[no-untyped-def]
-    """Andrew's monotone chain on the points ``cand`` of ``x, y`` (their hull's indices to
-    ``out``, counter-clockwise from the lexicographically smallest vertex; their number, or -1
-    as :func:`_hull_one`)."""
-    nc = len(cand)
+    cand = cand[:nc]
     order = cand[_lex_order(x[cand], y[cand])]
     # distinct points only (duplicates are adjacent after the sort)
     u = 0

@@ -125,7 +125,7 @@ def _merge_lut(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped
     # per row of vertices: the smallest and largest obstacle id in it (0, 0: none)
     rlo = np.zeros(n_az, np.int32)
     rhi = np.zeros(n_az, np.int32)
-    big = np.int32(np.iinfo(np.int32).max)
+    big = np.int32(2147483647)  # the largest int32
     for r in range(n_az):
         lo = big
         hi = np.int32(0)
