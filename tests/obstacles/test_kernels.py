@@ -513,3 +513,17 @@ def test_stage_6_7_row_windows_equal_numpy(rng):
         np.testing.assert_array_equal(out, out_t)
         merges += m < 4
     assert merges > 20  # the draws do merge components
+
+
+def test_branch_free_select_is_the_order_statistic(rng):
+    """Stage 7's per-cell selection (``_kernels_map._kth_select``) returns the k-th smallest
+    value exactly (``np.sort(v)[k]``), with many ties, few values and sorted / reversed input."""
+    from navkit.obstacles import _kernels_map
+
+    for t in range(400):
+        m = int(rng.integers(1, 300))
+        v = rng.integers(0, 4 if t % 3 == 0 else 10**6, m).astype(np.float64) * 0.01
+        if t % 7 == 0:
+            v = np.sort(v)[:: 1 if t % 2 else -1].copy()
+        k = int(rng.integers(0, m))
+        assert _kernels_map._kth_select(v.copy(), k) == np.sort(v)[k]

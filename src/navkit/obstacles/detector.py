@@ -302,7 +302,9 @@ def _detect_from_stage_1(
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
     compiled = settings.backend == "compiled"
     if compiled:
-        obs_lab, n, tri_obstacle, tcode = _compiled_split(labels, mesh, P, wrap, settings)
+        obs_lab, n, tri_obstacle, tcode, shadows, ntri = _compiled_split(
+            labels, mesh, P, wrap, settings
+        )
     else:
         obs_lab, n, owner = _split(labels, mesh, P, wrap, settings)
         tri_obstacle = np.where(obs_lab > 0, obs_lab, owner).astype(np.int32)
@@ -318,7 +320,7 @@ def _detect_from_stage_1(
     # stage 8: the 2D map - bounding shapes of every obstacle
     if compiled:
         obstacles = _build_compiled(
-            P, mesh.triangles, labels, tri_obstacle, vid, boundary, n, settings
+            P, mesh.triangles, tri_obstacle, shadows, ntri, vid, boundary, n, settings
         )
     else:
         obstacles = _build_obstacles(
@@ -385,27 +387,49 @@ def _split(
     return obs_lab, n, owner
 
 
+def _work_6_7(R: int, C: int, N: int) -> list[NDArray[Any]]:
+    """The work arrays of the compiled stages 6 and 7 for ``R x C`` triangles and ``N``
+    vertices, kept between calls under one key (``_buffers.cached_work`` keeps four):
+    ``int8 (R * C,)``, ``int32 (7, R * C)`` (stage 6), ``float64 (4, N)``, ``int64 (3, N)``
+    (stage 7)."""
+    from navkit.obstacles._buffers import cached_work
+
+    return cached_work(
+        ("split", R, C, N),
+        lambda: [
+            np.empty(R * C, np.int8),
+            np.empty((7, R * C), np.int32),
+            np.empty((4, N)),
+            np.empty((3, N), np.int64),
+        ],
+    )
+
+
 def _compiled_split(
     labels: NDArray[np.int8],
     mesh: MeshCharacteristics,
     P: NDArray[np.float64],
     wrap: bool,
     settings: ObstacleSettings,
-) -> tuple[NDArray[np.int32], int, NDArray[np.int32], NDArray[np.int8]]:
+) -> tuple[
+    NDArray[np.int32],
+    int,
+    NDArray[np.int32],
+    NDArray[np.int8],
+    NDArray[np.int32],
+    NDArray[np.int64],
+]:
     """Stage 6 in one kernel (:func:`navkit.obstacles._kernels_map.split_kernel`), same answers;
     returns the obstacle ids, their number, the triangles' obstacle ids with the shadows'
-    owners (the twin's separate ``owner`` array is not built), and each triangle's code
+    owners (the twin's separate ``owner`` array is not built), each triangle's code
     for stage 7 (class, main ground zone: the ground components come from the same union-find
-    as the obstacle and shadow components)."""
+    as the obstacle and shadow components), and for stage 8 the shadow triangles (flat
+    indices, raster order) and each obstacle's number of triangles."""
     from navkit.obstacles import _kernels_map
-    from navkit.obstacles._buffers import cached_work
 
     R, C = labels.shape
-    work_i8, work_i32 = cached_work(
-        ("split", R, C),
-        lambda: [np.empty(R * C, np.int8), np.empty((6, R * C), np.int32)],
-    )
-    obs_lab, n, tri_obstacle, tcode = _kernels_map.split_kernel(
+    work_i8, work_i32, _, _ = _work_6_7(R, C, P.shape[0] * P.shape[1])
+    obs_lab, n, tri_obstacle, tcode, shadows, ntri = _kernels_map.split_kernel(
         labels,
         mesh.z_min.astype(np.float32, copy=False),
         mesh.z_max.astype(np.float32, copy=False),
@@ -420,7 +444,7 @@ def _compiled_split(
         work_i8,
         work_i32,
     )
-    return obs_lab, int(n), tri_obstacle, tcode
+    return obs_lab, int(n), tri_obstacle, tcode, shadows, ntri
 
 
 def _vertices(
@@ -464,11 +488,14 @@ def _compiled_vertices(
     from navkit.obstacles import _kernels, _kernels_map
     from navkit.obstacles.ground import fill_missing_cells
 
-    vid, boundary, vlab, _main, ref = _kernels_map.vertex_kernel(tcode, obs_lab, valid, bool(wrap))
+    _, _, work_f, work_i = _work_6_7(labels.shape[0], labels.shape[1], valid.size)
+    vid, boundary, vlab, _main, ref = _kernels_map.vertex_kernel(
+        tcode, obs_lab, valid, bool(wrap), work_i[2]
+    )
     if settings.ground_refine:
         flat = P.reshape(-1, 3)
         grid, origin, missing = _kernels_map.ground_cells_kernel(
-            flat, ref, float(settings.ground_cell_m), 0.25
+            flat, ref, float(settings.ground_cell_m), 0.25, work_f, work_i
         )
         if missing:
             grid = fill_missing_cells(grid)
@@ -588,22 +615,24 @@ def _build_obstacles(
 def _build_compiled(
     P: NDArray[np.float64],
     tri: NDArray[np.int64],
-    labels: NDArray[np.int8],
     tri_obstacle: NDArray[np.int32],
+    shadows: NDArray[np.int32],
+    ntri: NDArray[np.int64],
     vid: NDArray[np.int32],
     boundary: NDArray[np.bool_],
     n: int,
     settings: ObstacleSettings,
 ) -> list[Obstacle]:
     """:func:`_build_obstacles` on the compiled backend: the groupings in one kernel
-    (:func:`navkit.obstacles._kernels_map.map_groups_kernel`, on stage 6's ``tri_obstacle``),
+    (:func:`navkit.obstacles._kernels_map.map_groups_kernel`, on stage 6's ``tri_obstacle``,
+    shadow triangles and triangle counts),
     then :func:`_assemble_compiled`; the same obstacles."""
     if n == 0:
         return []
     from navkit.obstacles import _kernels_map
 
     b_off, b_xy, v_off, v_xyz, s_off, s_xy, shadow_area, ntri = _kernels_map.map_groups_kernel(
-        P.reshape(-1, 3), tri, labels, tri_obstacle, vid, boundary, n
+        P.reshape(-1, 3), tri, tri_obstacle, shadows, ntri, vid, boundary, n
     )
     return _assemble_compiled(b_xy, b_off, v_xyz, v_off, s_xy, s_off, shadow_area, ntri, settings)
 
