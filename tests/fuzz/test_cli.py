@@ -234,6 +234,8 @@ def test_bad_paths(command: str, param: str, inputs: Inputs, runner: Any, tmp_pa
 
 @pytest.mark.parametrize("command", list(COMMANDS))
 def test_out_that_is_not_a_folder(command: str, inputs: Inputs, runner: Any) -> None:
+    if not any(p.name == "out" for p in COMMANDS[command].params):
+        pytest.skip("writes no --out folder")  # navkit compile: Numba's cache only
     base = inputs.base(command)
     if base is None:
         pytest.skip("no cheap valid run of this command")
