@@ -12,12 +12,8 @@ per stage over the repeats after a warm-up. Prints a Markdown table. Not a ``ben
 from __future__ import annotations
 
 import argparse
-import tempfile
-from pathlib import Path
 
-import numpy as np
-
-from benchmarks.obstacles_stages import ROOT, _extract, _run
+from benchmarks.obstacles_stages import ab_medians
 
 _CHILD = r"""
 import json, resource, sys, time
@@ -76,12 +72,7 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=15)
     args = ap.parse_args()
-    with tempfile.TemporaryDirectory(prefix="navkit-base-") as tmp:
-        base_src = _extract(args.base, Path(tmp))
-        runs: dict[str, list[dict[str, dict[str, float]]]] = {"before": [], "after": []}
-        for _ in range(args.rounds):
-            runs["before"].append(_run(base_src, args.repeats, _CHILD))
-            runs["after"].append(_run(ROOT / "src", args.repeats, _CHILD))
+    meds = ab_medians(args.base, args.rounds, args.repeats, _CHILD)
     stages = ["split", "boundaries", "map"]
     print(f"before = {args.base}, after = this tree; CPU ms, median over {args.rounds} rounds")
     print(
@@ -90,11 +81,9 @@ def main() -> None:
         + " | stages 6-8 | faults split / boundaries / map | Patchwork++ | 6-8 / PW++ |"
     )
     print("|---" * (len(stages) + 6) + "|")
-    for frame in runs["after"][0]:
+    for frame in meds["after"]:
         for tree in ("before", "after"):
-            med = {
-                k: float(np.median([r[frame][k] for r in runs[tree]])) for k in runs[tree][0][frame]
-            }
+            med = meds[tree][frame]
             total = sum(med[s] for s in stages)
             pw = med["Patchwork++"]
             cells = " | ".join(f"{med[s]:.2f}" for s in stages)

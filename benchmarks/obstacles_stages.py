@@ -83,18 +83,34 @@ def _run(src: Path, repeats: int, child: str = _CHILD) -> dict[str, dict[str, fl
     return json.loads(res.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
 
 
+def ab_medians(
+    base: str, rounds: int, repeats: int, child: str = _CHILD
+) -> dict[str, dict[str, dict[str, float]]]:
+    """``child`` on the tree of git revision ``base`` ("before") and on this tree ("after"),
+    alternating fresh processes for ``rounds`` rounds: ``{tree: {frame: {figure: median over
+    the rounds}}}``."""
+    with tempfile.TemporaryDirectory(prefix="navkit-base-") as tmp:
+        base_src = _extract(base, Path(tmp))
+        runs: dict[str, list[dict[str, dict[str, float]]]] = {"before": [], "after": []}
+        for _ in range(rounds):
+            runs["before"].append(_run(base_src, repeats, child))
+            runs["after"].append(_run(ROOT / "src", repeats, child))
+    return {
+        tree: {
+            frame: {k: float(np.median([r[frame][k] for r in rs])) for k in rs[0][frame]}
+            for frame in rs[0]
+        }
+        for tree, rs in runs.items()
+    }
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--base", default="cf36993")
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=15)
     args = ap.parse_args()
-    with tempfile.TemporaryDirectory(prefix="navkit-base-") as tmp:
-        base_src = _extract(args.base, Path(tmp))
-        runs: dict[str, list[dict[str, dict[str, float]]]] = {"before": [], "after": []}
-        for _ in range(args.rounds):
-            runs["before"].append(_run(base_src, args.repeats))
-            runs["after"].append(_run(ROOT / "src", args.repeats))
+    meds = ab_medians(args.base, args.rounds, args.repeats)
     stages = ["cloud_to_grid", "points", "mesh", "classes", "split", "boundaries"]
     print(f"before = {args.base}, after = this tree; CPU ms, median over {args.rounds} rounds")
     print(
@@ -102,11 +118,9 @@ def main() -> None:
         "| Patchwork++ | grid..classes / PW++ | 1-7 / PW++ |"
     )
     print("|---" * (len(stages) + 7) + "|")
-    for frame in runs["after"][0]:
+    for frame in meds["after"]:
         for tree in ("before", "after"):
-            med = {
-                k: float(np.median([r[frame][k] for r in runs[tree]])) for k in runs[tree][0][frame]
-            }
+            med = meds[tree][frame]
             part = sum(med[s] for s in ("cloud_to_grid", "points", "mesh", "classes"))
             pw = med["Patchwork++"]
             cells = " | ".join(f"{med[s]:.2f}" for s in stages)
