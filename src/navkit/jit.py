@@ -222,15 +222,20 @@ def _start_warmup() -> None:
         return
     env = dict(os.environ, **{ENV: "eager"})
     logfile = lock.with_suffix(".log")
-    with open(logfile, "wb") as out:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "navkit.runtime.warmup", "--stamp", "--lock", str(lock)],
-            env=env,
-            stdin=subprocess.DEVNULL,
-            stdout=out,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
+    try:
+        with open(logfile, "wb") as out:
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "navkit.runtime.warmup", "--stamp", "--lock", str(lock)],
+                env=env,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+    except OSError:  # no process could be started: leave no lock behind (the caller compiles)
+        os.close(fd)
+        lock.unlink(missing_ok=True)
+        raise
     _background = proc  # kept: it outlives this call (and may outlive the process)
     os.write(fd, f"{proc.pid}\n".encode())
     os.close(fd)
@@ -256,7 +261,7 @@ def kernels_enabled() -> bool:
                 _decision = stamp_path().is_file()
                 if not _decision:
                     _start_warmup()
-            except OSError as exc:  # unwritable cache folders: behave as before the policy
+            except OSError as exc:  # unwritable folders, no new process: behave as before
                 log.info("no kernel stamp (%s): compiling in this process", exc)
                 _decision = True
     return _decision

@@ -153,3 +153,14 @@ def test_a_failed_warmup_is_not_started_again(fresh, monkeypatch):
     assert jit.kernels_enabled() is False  # the NumPy twins, and ...
     assert not jit.stamp_path().with_suffix(".lock").exists()  # ... no new warm-up
     assert jit.status().failed
+
+
+def test_a_warmup_that_cannot_start_leaves_no_lock_and_compiles_here(fresh, monkeypatch):
+    monkeypatch.setenv("NAVKIT_JIT", "auto")
+
+    def no_process(*args, **kwargs):
+        raise PermissionError("no new processes here")
+
+    monkeypatch.setattr(jit.subprocess, "Popen", no_process)
+    assert jit.kernels_enabled() is True  # as before the policy: compile in this process
+    assert not jit.stamp_path().with_suffix(".lock").exists()
