@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, fields, replace
 
@@ -28,7 +29,14 @@ def resolved(settings: ObstacleSettings) -> ObstacleSettings:
     """``settings`` with ``backend="auto"`` replaced by the implementation this process runs."""
     if settings.backend != "auto":
         return settings
-    return replace(settings, backend=check_backend("auto"))
+    return _with_backend(settings, check_backend("auto"))
+
+
+@functools.lru_cache(maxsize=32)
+def _with_backend(settings: ObstacleSettings, backend: str) -> ObstacleSettings:
+    """One validated copy per (settings, backend): a detection per frame does not re-check
+    the same settings (``replace`` runs ``__post_init__``)."""
+    return replace(settings, backend=backend)
 
 
 @dataclass(frozen=True)
