@@ -164,3 +164,15 @@ def test_a_warmup_that_cannot_start_leaves_no_lock_and_compiles_here(fresh, monk
     monkeypatch.setattr(jit.subprocess, "Popen", no_process)
     assert jit.kernels_enabled() is True  # as before the policy: compile in this process
     assert not jit.stamp_path().with_suffix(".lock").exists()
+
+
+def test_a_numpy_process_refuses_to_warm_up(fresh, monkeypatch):
+    """A warm-up would run the twins there and stamp kernels it never compiled."""
+    from navkit.errors import NavkitError
+    from navkit.runtime.warmup import warm_up
+
+    monkeypatch.setenv("NAVKIT_JIT", "numpy")
+    assert jit.kernels_enabled() is False
+    with pytest.raises(NavkitError, match="navkit compile"):
+        warm_up()
+    assert not jit.stamp_path().exists()

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from navkit import jit
+from navkit.errors import NavkitError
 
 __all__ = ["WarmUp", "compiled_kernels", "warm_up"]
 
@@ -156,6 +157,11 @@ STEPS: dict[str, Callable[[], None]] = {
 def warm_up(*, stamp: bool = True, progress: ProgressFn | None = None) -> WarmUp:
     """Run :data:`STEPS` on the compiled kernels (compiling what the cache lacks) and, when all
     of them finished and ``stamp``, write the stamp (:func:`navkit.jit.write_stamp`)."""
+    if jit.status().enabled is False:  # a process never switches implementation
+        raise NavkitError(
+            "this process already runs the NumPy twins (NAVKIT_JIT found no compiled kernels); "
+            "warm up in a new process: `navkit compile`"
+        )
     os.environ[jit.ENV] = "eager"  # this process and anything it starts run the kernels
     seconds: dict[str, float] = {}
     names: Iterator[str] = iter(list(STEPS))
