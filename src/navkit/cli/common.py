@@ -59,10 +59,9 @@ STATE = _State()
 
 def _context() -> Any:
     """click's context of the running command, or None outside one."""
-    try:  # typer >= 0.17 vendors click as typer._click
-        from typer._click.globals import get_current_context
-    except ImportError:  # pragma: no cover - older typer uses click itself
-        from click import get_current_context  # type: ignore[no-redef]
+    # typer >= 0.26 (the floor in pyproject.toml) vendors click as typer._click; earlier typer
+    # depended on click itself, which navkit would then import without declaring it
+    from typer._click.globals import get_current_context
 
     return get_current_context(silent=True)
 
