@@ -11,7 +11,9 @@ agree to the last bit (tested in ``tests/obstacles/test_kernels.py``). Rules kep
   as ``np.float32``; square roots of float32 values are rounded back to float32;
 - NaN propagates through minima and maxima as in ``np.minimum`` / ``np.maximum``;
 - transcendental functions (``arctan2``, ``cos``) stay in NumPy (its SIMD ``arctan2`` differs
-  from libm's by an ulp on ~7 % of inputs), the kernels take their results.
+  from libm's by an ulp on ~7 % of inputs), the kernels take their results - except the scan
+  grid's per-point azimuth, which both paths compute with one fixed arithmetic
+  (:func:`navkit.geometry.angles.atan2` and its kernel ``atan2_kernel``, the same bits).
 
 The kernels run on one thread: the targets are CPU time per frame (``parallel=True`` would add
 threads, not remove work) and the machine is shared. ``cache=True`` keeps the compiled code on

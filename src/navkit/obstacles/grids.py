@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
 from navkit.geometry import R_BODY_FROM_OPTICAL
+from navkit.geometry.angles import atan2
 from navkit.obstacles.settings import check_backend
 from navkit.sensors import PinholeCamera
 
@@ -252,7 +253,15 @@ def cloud_to_grid(
     if not compiled:
         Q = P if all_ok else P[idx]
         rh = np.hypot(Q[:, 0], Q[:, 1])
-    az = np.arctan2(Q[:, 1], Q[:, 0])
+    # the azimuth with one fixed arithmetic (navkit.geometry.angles: the same bits on every
+    # machine and in the kernel; NumPy's arctan2 differs between machines)
+    if compiled:
+        from navkit.geometry._kernels import atan2_kernel
+
+        qy, qx = np.ascontiguousarray(Q[:, 1]), np.ascontiguousarray(Q[:, 0])
+        az = atan2_kernel(qy, qx, np.empty(len(Q)))
+    else:
+        az = atan2(Q[:, 1], Q[:, 0])
     if compiled and ring_method in ("auto", "order"):
         found, ring_o, step_o = _kernels.rings_by_order_kernel(az)
         by_order = (ring_o, float(step_o)) if found else None
@@ -340,12 +349,14 @@ def cloud_to_grid(
 
 
 def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
-    """:func:`cloud_to_grid` with rings from the storage order, compiled: four kernels over
-    caller-provided arrays (:mod:`navkit.obstacles._buffers`) and NumPy's ``arctan2`` (whose
-    SIMD results the twin uses) in place. ``None`` when the order is not a sweep (the caller then
+    """:func:`cloud_to_grid` with rings from the storage order, compiled: five kernels over
+    caller-provided arrays (:mod:`navkit.obstacles._buffers`), the azimuth by
+    :func:`navkit.geometry._kernels.atan2_kernel` (the twin's :func:`navkit.geometry.angles.atan2`,
+    bit for bit). ``None`` when the order is not a sweep (the caller then
     takes the general path). The same grid as the twin, bit for bit: the twin's ``hypot`` per
     point only enters comparisons, which are decided exactly without it (:func:`_ring_lut`,
     :func:`navkit.obstacles._kernels.grid_order_fill_kernel`)."""
+    from navkit.geometry._kernels import atan2_kernel
     from navkit.obstacles import _kernels
     from navkit.obstacles._buffers import arena, cached_work
 
@@ -373,7 +384,7 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
             field="points",
             expected="at least 4 points that are not NaN or (0, 0, 0)",
         )
-    az = np.arctan2(qy[:m], qx[:m], out=az_buf[:m])
+    az = atan2_kernel(qy[:m], qx[:m], az_buf[:m])
     found, step, n_r, lo = _kernels.rings_order_kernel(
         az, qx, qy, qz, d, ad, tmp, ring, sums, abs_sums, counts
     )
