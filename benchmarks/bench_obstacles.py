@@ -69,7 +69,7 @@ t_import = time.perf_counter() - t0
 from navkit.experiments.obstacles import kitti_frame
 pts = kitti_frame("000000")[0]
 out = {"import_s": t_import}
-for tag, st in (("stages 1-7", ObstacleSettings(shapes=(), guaranteed_shapes=())),
+for tag, st in (("stages 1-7", ObstacleSettings(build_map=False)),
                 ("all 8 stages", ObstacleSettings())):
     for k in ("first", "second"):
         c = time.process_time(); w = time.perf_counter()
@@ -112,8 +112,10 @@ def backend_comparison(
     frames: list[Any], pw: Any, repeats: int = 7
 ) -> list[dict[str, float | str]]:
     """CPU ms per frame (median of ``repeats`` after a warm-up): the compiled and the NumPy
-    backend (grid recovery + stages 1-7, and all 8 stages with the default shapes) and
-    Patchwork++, frame by frame in the same run."""
+    backend (grid recovery + stages 1-7, and all 8 stages with the default shapes), the
+    compiled stages 1-7 with stage 8's outlines (``"1-7+o"``: what earlier rounds timed as
+    "stages 1-7" - no shapes, but the obstacle records with their hulls) and Patchwork++,
+    frame by frame in the same run."""
     from dataclasses import replace
 
     from navkit.obstacles import (
@@ -127,14 +129,19 @@ def backend_comparison(
         grid = cloud_to_grid(pts, backend=st.backend)
         detect_obstacles_in_grid(grid, Mounting(SENSOR_HEIGHT_KITTI), st)
 
-    nomap = ObstacleSettings(shapes=(), guaranteed_shapes=())
+    stages_1_7 = ObstacleSettings(build_map=False)
+    outlines = ObstacleSettings(shapes=(), guaranteed_shapes=())
     full = ObstacleSettings()
     table: list[dict[str, float | str]] = []
     for k, pts in enumerate(frames):
         row: dict[str, float | str] = {"frame": KITTI_FRAMES[k]}
         row["pw"] = 1e3 * cpu_wall_time(partial(patchwork_ground, pw, pts), repeats)[0]
-        for tag, st in (("1-7", nomap), ("all", full)):
-            for be in ("compiled", "numpy"):
+        for tag, st, backends in (
+            ("1-7", stages_1_7, ("compiled", "numpy")),
+            ("1-7+o", outlines, ("compiled",)),
+            ("all", full, ("compiled", "numpy")),
+        ):
+            for be in backends:
                 fn = partial(run_nav, pts, replace(st, backend=be))
                 row[f"{tag} {be}"] = 1e3 * cpu_wall_time(fn, repeats)[0]
         row["pw again"] = 1e3 * cpu_wall_time(partial(patchwork_ground, pw, pts), repeats)[0]
@@ -145,17 +152,19 @@ def backend_comparison(
 def format_backends(table: list[dict[str, float | str]]) -> str:
     """Markdown table of :func:`backend_comparison` (ratios = navkit / Patchwork++)."""
     lines = [
-        "| frame | Patchwork++ | 1-7 compiled | 1-7 NumPy | all 8 compiled | all 8 NumPy "
-        "| 1-7 compiled / PW++ | all 8 compiled / PW++ | compiled speed-up 1-7 / all 8 |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| frame | Patchwork++ | 1-7 compiled | 1-7 NumPy | 1-7 + outlines compiled "
+        "| all 8 compiled | all 8 NumPy | 1-7 compiled / PW++ | 1-7 + outlines / PW++ "
+        "| all 8 compiled / PW++ | compiled speed-up 1-7 / all 8 |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in table:
         pw = 0.5 * (float(r["pw"]) + float(r["pw again"]))
         a, b = float(r["1-7 compiled"]), float(r["1-7 numpy"])
+        o = float(r["1-7+o compiled"])
         c, d = float(r["all compiled"]), float(r["all numpy"])
         lines.append(
-            f"| {r['frame']} | {pw:.1f} | {a:.1f} | {b:.1f} | {c:.1f} | {d:.1f} "
-            f"| {a / pw:.2f}x | {c / pw:.2f}x | {b / a:.1f}x / {d / c:.1f}x |"
+            f"| {r['frame']} | {pw:.1f} | {a:.1f} | {b:.1f} | {o:.1f} | {c:.1f} | {d:.1f} "
+            f"| {a / pw:.2f}x | {o / pw:.2f}x | {c / pw:.2f}x | {b / a:.1f}x / {d / c:.1f}x |"
         )
     return "\n".join(lines)
 
@@ -174,14 +183,16 @@ def kernel_rows(quick: bool = False) -> list[Row]:
     table = backend_comparison(frames, pw, 3 if quick else 7)
     for r in table:
         pw_ms = 0.5 * (float(r["pw"]) + float(r["pw again"]))
-        for tag in ("1-7", "all"):
+        names = {"1-7": "stages 1-7", "1-7+o": "stages 1-7 + outlines", "all": "all 8 stages"}
+        for tag in ("1-7", "1-7+o", "all"):
             for be in ("compiled", "numpy"):
+                if f"{tag} {be}" not in r:
+                    continue
                 ms = float(r[f"{tag} {be}"])
                 rows.append(
                     Row(
                         AREA,
-                        f"KITTI {r['frame']} CPU ms: {'stages 1-7' if tag == '1-7' else 'all 8 stages'}"
-                        f" ({be})",
+                        f"KITTI {r['frame']} CPU ms: {names[tag]} ({be})",
                         "ms",
                         ms,
                         pw_ms,
@@ -266,12 +277,12 @@ def run(quick: bool = False) -> list[Row]:
         pw = pwpp.patchworkpp(params)
         repeats = 3 if quick else 7
         settings_full = ObstacleSettings()
-        settings_nomap = ObstacleSettings(shapes=(), guaranteed_shapes=())
+        settings_nomap = ObstacleSettings(build_map=False)  # stops after stage 7
         settings_paper = ObstacleSettings(
             shapes=("A1", "A2", "A3", "A4", "A5", "MEC"), guaranteed_shapes=("A1",)
         )
         variants = {
-            "stages 1-7 (classes + instances + boundaries)": (settings_nomap, "no shapes"),
+            "stages 1-7 (classes + instances + boundaries)": (settings_nomap, "no stage 8"),
             "8 stages + A1-A5, MEC, A7(A1)": (settings_paper, "A6 and MVEE skipped"),
             "all 8 stages + A1-A7 + MEC + MVEE": (settings_full, "Patchwork++: ground only"),
         }

@@ -179,3 +179,25 @@ def test_grid_entry_takes_points_directly():
     P = scan.points("body")
     det = detect_obstacles_grid(P, (0.0, 0.0, 1.5))
     assert det.obstacles == () and det.triangle_labels.shape == (60, 40)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "compiled"])
+def test_build_map_false_stops_after_stage_7_with_the_same_labels(backend):
+    """``build_map=False`` (stages 1-7 only): the same per-point and per-triangle classes,
+    obstacle ids and boundaries as the full detection of a scan with obstacles, and no records."""
+    from navkit.experiments.obstacles import paper_scenes, scanners
+    from navkit.geometry import se3_from_rt
+    from navkit.sim import render_scan
+
+    sc, height = scanners()["spinning64"]
+    sim = render_scan(
+        paper_scenes()["four"], sc, se3_from_rt(np.eye(3), [0.0, 0.0, height]), max_range=60.0
+    )
+    full = detect_obstacles(sim.scan, ObstacleSettings(backend=backend))
+    part = detect_obstacles(sim.scan, ObstacleSettings(backend=backend, build_map=False))
+    assert len(full.obstacles) >= 3 and part.obstacles == ()
+    for name in ("vertex_labels", "vertex_obstacle", "boundary", "triangle_labels"):
+        assert np.array_equal(getattr(part, name), getattr(full, name)), name
+    assert set(np.unique(part.vertex_obstacle[part.vertex_obstacle > 0])) == {
+        o.id for o in full.obstacles
+    }

@@ -318,7 +318,9 @@ def _detect_from_stage_1(
     clock.lap("boundaries")
 
     # stage 8: the 2D map - bounding shapes of every obstacle
-    if compiled:
+    if not settings.build_map:  # stages 1-7 only: classes, ids and boundaries per point
+        obstacles = []
+    elif compiled:
         obstacles = _build_compiled(
             P, mesh.triangles, tri_obstacle, shadows, ntri, vid, boundary, n, settings
         )

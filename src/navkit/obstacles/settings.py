@@ -108,6 +108,12 @@ class ObstacleSettings:
     wrap_azimuth : bool or None
         Close the mesh across the azimuth seam (a 360 deg spinning lidar). ``None`` = when the
         azimuth span plus one step reaches 2 pi.
+    build_map : bool
+        Stage 8: an :class:`~navkit.obstacles.Obstacle` record per obstacle - its outline (the
+        convex hull of its boundary vertices), heights, shadow and bounding shapes. ``False``
+        stops after stage 7: the per-point classes, obstacle ids and boundary flags are all in
+        the detection (what a ground segmenter such as Patchwork++ gives, and what a per-frame
+        costmap needs), its ``obstacles`` is empty.
     shapes : tuple of str
         Bounding-shape methods of :mod:`navkit.geometry.shapes` computed on each obstacle's
         boundary vertices (stage 8).
@@ -140,6 +146,7 @@ class ObstacleSettings:
     ground_above_m: float = 0.3
     ground_cell_m: float = 2.0
     wrap_azimuth: bool | None = None
+    build_map: bool = True
     shapes: tuple[str, ...] = DEFAULT_SHAPES
     guaranteed_shapes: tuple[str, ...] = ("A1", "MEC")
     backend: str = "auto"
