@@ -186,11 +186,22 @@ def test_the_composed_mission_makes_the_map_it_made_before(mission_run, blocked_
     <= 1e-6 on the recorded logs), and the blocked run's closed loop carries that to -1.6 %
     hits, -2.3 % cells seen, -0.5 % occupied (was 24669, 250010, 1011; plain 22196, 233324,
     920); both missions still return home. Bisected: the stereo check and the obstacle, plane
-    and runtime changes of the same round leave these counts unchanged."""
-    for lg, (hits, seen, occupied) in (
-        (mission_run, (22130, 233587, 924)),
-        (blocked_run, (24275, 244290, 1006)),
-    ):
+    and runtime changes of the same round leave these counts unchanged.
+    Pinned per kind of CPU since session 5: NumPy's float64 transcendental functions run its
+    SVML code on AVX-512 CPUs and libm's elsewhere, an ulp apart, and the blocked run's closed
+    loop carries that to +2.0 % hits, +2.3 % cells seen, +3.9 % occupied on a Zen 3 core (AVX2;
+    24770 hits at the session's start, e2d5bee, as after its changes); the plain run moves
+    by <= 0.8 %. Within one kind of CPU the runs are bit for bit repeatable, so 1 % still only
+    absorbs float-level changes of the code."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__
+    except ImportError:  # pragma: no cover - a NumPy without its CPU dispatch table
+        __cpu_features__ = {}
+    if __cpu_features__.get("AVX512_SKX"):  # the kind the counts were first pinned on
+        pins = ((22130, 233587, 924), (24275, 244290, 1006))
+    else:  # AVX2 (Zen 3, session 5)
+        pins = ((22170, 233733, 917), (24770, 249814, 1045))
+    for lg, (hits, seen, occupied) in zip((mission_run, blocked_run), pins, strict=True):
         g = lg.obstacle_grid.grid()
         assert g.hits.sum() == pytest.approx(hits, rel=0.01)
         assert g.seen.sum() == pytest.approx(seen, rel=0.01)
