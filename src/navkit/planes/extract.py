@@ -365,10 +365,10 @@ def _patch_moments(
     thickness), while raw second moments at 5 m are ~25 m^2: in float32 (eps 6e-8) raw moments
     would lose the thickness to cancellation (25 * 6e-8 = 1.5e-6 m^2). Centred on the patch's
     float32 mean, the products are <= ~0.01 m^2 and keep ~1e-9 m^2; the moments about the
-    reference are converted to raw float64 moments for the region sums. ``compiled``: one
-    fused pass per patch (:func:`navkit.planes._kernels.patch_moments`, same bits); else the
-    NumPy block reductions below (the oracle), where the coordinates are centred in place and
-    one scratch image serves all products.
+    reference are converted to raw float64 moments for the region sums. ``compiled``: two
+    fused sweeps per band of patches (:func:`navkit.planes._kernels.patch_moments`, same
+    bits); else the NumPy block reductions below (the oracle), where the coordinates are
+    centred in place and one scratch image serves all products.
     """
     c = int(s.cell)
     Hc, Wc = hc * c, wc * c
@@ -376,7 +376,7 @@ def _patch_moments(
     tol_scale = np.float32(s.inlier_factor * s.rms_quadratic)
     tol_base = np.float32(s.inlier_factor * s.rms_base)
     if compiled:
-        M, ref_g = _kernels().patch_moments(P, hc, wc, c, valid)
+        M, ref_g = _kernels().patch_moments(np.ascontiguousarray(P), hc, wc, c, valid)
         return _Patches(P, valid, ref_g, M, tol_scale, tol_base)
     X = _WS.get("X", (3, Hc, Wc), np.float32)
     r2 = _WS.get("r2", (Hc, Wc), np.float32)
