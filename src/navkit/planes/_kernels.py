@@ -248,29 +248,35 @@ def refine_pixels(
     as ``sum_rows`` adds them) and the outline samples of the incomplete
     patches: their labelled pixels on every ``stride[b]``-th row and column, ``float32(d + ref)``
     ``(3, K)``, and their regions ``(K,)`` (patch by patch, raster order within one).
+
+    A whole patch at a time, in loops over its ``c c`` pixels (400: 50 AVX2 vectors, no
+    remainder; a row of 20 pixels was 8 + 8 + 4 scalar): its rows of float64 points converted
+    to float32 in flat loops, then the bound and the centred coordinates, then one sweep per
+    candidate. The mixed patches' sums add only the pixels of the candidate (the other pixels
+    added exact zeros before: the same sums).
     """
     B, m = cand.shape
+    cc = c * c
     complete = np.empty(B, np.bool_)
     Mreg = np.zeros((n_reg, 13), np.float64)
     row = np.empty(13, np.float64)
     ref64 = np.empty(3, np.float64)
     sd = np.empty(3, np.float64)
     ssd = np.empty(6, np.float64)
-    d = np.empty((3, c, c), np.float32)
-    pts = np.empty((3, B * c * c), np.float32)
-    preg = np.empty(B * c * c, np.int64)
-    # one row of a patch at a time, in short loops over its c pixels that LLVM vectorises
-    dx = np.empty(c, np.float32)
-    dy = np.empty(c, np.float32)
-    dz = np.empty(c, np.float32)
-    tt = np.empty(c, np.float32)
-    best = np.empty(c, np.float32)
-    lab = np.empty(c, np.int64)
+    pts = np.empty((3, B * cc), np.float32)
+    preg = np.empty(B * cc, np.int64)
+    buf = np.empty(3 * cc, np.float32)  # the patch's points in float32, interleaved
+    dx = np.empty(cc, np.float32)
+    dy = np.empty(cc, np.float32)
+    dz = np.empty(cc, np.float32)
+    tt = np.empty(cc, np.float32)
+    best = np.empty(cc, np.float32)
+    lab = np.empty(cc, np.int32)  # 32-bit: as many lanes as the float32 distances
     n_pts = 0
     for b in range(B):
-        i = ids[b] // wc
-        j = ids[b] - i * wc
         g = ids[b]
+        i = g // wc
+        j = g - i * wc
         mx = ref[g, 0]
         my = ref[g, 1]
         mz = ref[g, 2]
@@ -278,54 +284,58 @@ def refine_pixels(
         n_slot = 0
         while n_slot < m and cand[b, n_slot] >= 0:
             n_slot += 1
-        ok = own_b >= 0
         for r in range(c):
-            Pr = P[i * c + r, j * c : (j + 1) * c]
-            for q in range(c):
-                px = np.float32(Pr[q, 0])
-                py = np.float32(Pr[q, 1])
-                pz = np.float32(Pr[q, 2])
-                r2 = np.float32(
-                    np.float32(np.float32(px * px) + np.float32(py * py)) + np.float32(pz * pz)
-                )
-                val = (r2 > 0) & (r2 < np.inf)  # else never an inlier (bound -1)
-                tt[q] = np.float32(np.float32(r2 * tol_scale) + tol_base) if val else np.float32(-1)
-                dx[q] = np.float32(px - mx) if val else np.float32(0.0)
-                dy[q] = np.float32(py - my) if val else np.float32(0.0)
-                dz[q] = np.float32(pz - mz) if val else np.float32(0.0)
-                best[q] = np.inf
-                lab[q] = -1
-            for s in range(n_slot):  # closest candidate within the bound; ties keep the earlier
-                k = cand[b, s]
-                n0 = n32[k, 0]
-                n1 = n32[k, 1]
-                n2 = n32[k, 2]
-                o = off[b, s]
-                for q in range(c):
-                    dist = abs(
+            Pf = P[i * c + r, j * c : (j + 1) * c].reshape(-1)
+            o = 3 * c * r
+            for k in range(3 * c):
+                buf[o + k] = np.float32(Pf[k])
+        for p in range(cc):
+            px = buf[3 * p]
+            py = buf[3 * p + 1]
+            pz = buf[3 * p + 2]
+            r2 = np.float32(
+                np.float32(np.float32(px * px) + np.float32(py * py)) + np.float32(pz * pz)
+            )
+            val = (r2 > 0) & (r2 < np.inf)  # else never an inlier (bound -1)
+            tt[p] = np.float32(np.float32(r2 * tol_scale) + tol_base) if val else np.float32(-1)
+            dx[p] = np.float32(px - mx) if val else np.float32(0.0)
+            dy[p] = np.float32(py - my) if val else np.float32(0.0)
+            dz[p] = np.float32(pz - mz) if val else np.float32(0.0)
+            best[p] = np.inf
+            lab[p] = -1
+        for s in range(n_slot):  # closest candidate within the bound; ties keep the earlier
+            k32 = np.int32(cand[b, s])
+            n0 = n32[k32, 0]
+            n1 = n32[k32, 1]
+            n2 = n32[k32, 2]
+            o = off[b, s]
+            for p in range(cc):
+                dist = abs(
+                    np.float32(
                         np.float32(
-                            np.float32(
-                                np.float32(np.float32(dx[q] * n0) + np.float32(dy[q] * n1))
-                                + np.float32(dz[q] * n2)
-                            )
-                            + o
+                            np.float32(np.float32(dx[p] * n0) + np.float32(dy[p] * n1))
+                            + np.float32(dz[p] * n2)
                         )
+                        + o
                     )
-                    better = (dist < tt[q]) & (dist < best[q])
-                    best[q] = dist if better else best[q]
-                    lab[q] = k if better else lab[q]
-            for q in range(c):
-                label[b, r, q] = lab[q]
-                d[0, r, q] = dx[q]
-                d[1, r, q] = dy[q]
-                d[2, r, q] = dz[q]
-                ok = ok and (lab[q] == own_b or tt[q] < 0)
+                )
+                better = (dist < tt[p]) & (dist < best[p])
+                best[p] = dist if better else best[p]
+                lab[p] = k32 if better else lab[p]
+        own32 = np.int32(own_b)
+        lb_b = label[b].reshape(-1)
+        bad = 0  # valid pixels not in the patch's own region
+        for p in range(cc):
+            lb_b[p] = lab[p]
+            bad += (lab[p] != own32) & (tt[p] >= 0)
+        ok = own_b >= 0 and bad == 0
         complete[b] = ok
         if ok:
             continue
-        # the mixed patch: float64 moments per candidate (local sums, one sweep per slot)
+        # the mixed patch: float64 moments per candidate, its pixels in raster order
         for s in range(n_slot):
             k = cand[b, s]
+            k32 = np.int32(k)
             s0 = 0.0
             s1 = 0.0
             s2 = 0.0
@@ -336,23 +346,21 @@ def refine_pixels(
             s7 = 0.0
             s8 = 0.0
             s9 = 0.0
-            for r in range(c):
-                for q in range(c):
-                    # branch-free: a pixel of another candidate adds exact zeros
-                    w = 1.0 if label[b, r, q] == k else 0.0
-                    ex = np.float64(d[0, r, q])
-                    ey = np.float64(d[1, r, q])
-                    ez = np.float64(d[2, r, q])
-                    s0 += w
-                    s1 += ex * w
-                    s2 += ey * w
-                    s3 += ez * w
-                    s4 += (ex * ex) * w
-                    s5 += (ex * ey) * w
-                    s6 += (ex * ez) * w
-                    s7 += (ey * ey) * w
-                    s8 += (ey * ez) * w
-                    s9 += (ez * ez) * w
+            for p in range(cc):
+                if lab[p] == k32:
+                    ex = np.float64(dx[p])
+                    ey = np.float64(dy[p])
+                    ez = np.float64(dz[p])
+                    s0 += 1.0
+                    s1 += ex
+                    s2 += ey
+                    s3 += ez
+                    s4 += ex * ex
+                    s5 += ex * ey
+                    s6 += ex * ez
+                    s7 += ey * ey
+                    s8 += ey * ez
+                    s9 += ez * ez
             if s0 > 0:
                 ref64[0] = mx
                 ref64[1] = my
@@ -373,11 +381,12 @@ def refine_pixels(
         st = stride[b]
         for r in range(0, c, st):
             for q in range(0, c, st):
-                lb = label[b, r, q]
+                p = r * c + q
+                lb = lab[p]
                 if lb >= 0:
-                    pts[0, n_pts] = np.float32(d[0, r, q] + mx)
-                    pts[1, n_pts] = np.float32(d[1, r, q] + my)
-                    pts[2, n_pts] = np.float32(d[2, r, q] + mz)
+                    pts[0, n_pts] = np.float32(dx[p] + mx)
+                    pts[1, n_pts] = np.float32(dy[p] + my)
+                    pts[2, n_pts] = np.float32(dz[p] + mz)
                     preg[n_pts] = lb
                     n_pts += 1
     return complete, Mreg, pts[:, :n_pts], preg[:n_pts]  # views: read once, then dropped

@@ -652,7 +652,9 @@ def _refine_border(
     n32 = rn.astype(np.float32)
     rho32 = rd.astype(np.float32)
     own = comp[ids]
-    label = np.full((B, c, c), -1, np.int16 if n_reg < 32767 else np.int32)
+    ltype = np.int16 if n_reg < 32767 else np.int32
+    # the compiled kernel writes every pixel's label
+    label = np.empty((B, c, c), ltype) if compiled else np.full((B, c, c), -1, ltype)
     # n . ref - rho per (patch, candidate), float32 (-1 slots: unused)
     kc = np.maximum(cand, 0)
     nk = n32[kc]  # (B, m, 3)
