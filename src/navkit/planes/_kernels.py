@@ -16,9 +16,30 @@ extraction, so ``import navkit`` does not pay for Numba.
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
 
 MAX_CELL = 128  # NumPy's PW_BLOCKSIZE: a patch's row sums are one pairwise block up to it
+
+
+@intrinsic
+def _prefetch(typingctx, arr, idx):  # type: ignore[no-untyped-def]  # pragma: no cover
+    """A hint to load the cache line of ``arr.reshape(-1)[idx]`` (C-contiguous ``arr``):
+    LLVM's ``llvm.prefetch`` (read, high locality). No effect on any result."""
+    sig = types.void(arr, idx)
+
+    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = builder.gep(ary.data, [args[1]])
+        i32 = ir.IntType(32)
+        fnty = ir.FunctionType(ir.VoidType(), [ptr.type, i32, i32, i32])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.prefetch.p0")
+        builder.call(fn, [ptr, i32(0), i32(3), i32(1)])
+        return context.get_dummy_value()
+
+    return sig, codegen
 
 
 @njit(cache=True)
@@ -273,7 +294,18 @@ def refine_pixels(
     best = np.empty(cc, np.float32)
     lab = np.empty(cc, np.int32)  # 32-bit: as many lanes as the float32 distances
     n_pts = 0
+    W = P.shape[1]
+    Pflat = P.reshape(-1)  # flat indices: no reshape per row (a helper call each)
+    lflat = label.reshape(-1)
     for b in range(B):
+        if b + 2 < B:  # the rows of the patch after next towards the cache (~10 % faster
+            gn = ids[b + 2]  # when the grid is no longer in the cache: patches out of order)
+            i2 = gn // wc
+            base = ((i2 * c) * W + (gn - i2 * wc) * c) * 3
+            for r in range(c):
+                for e in range(0, 3 * c, 8):  # 8 float64 a cache line
+                    _prefetch(Pflat, base + r * 3 * W + e)
+                _prefetch(Pflat, base + r * 3 * W + 3 * c - 1)
         g = ids[b]
         i = g // wc
         j = g - i * wc
@@ -285,10 +317,10 @@ def refine_pixels(
         while n_slot < m and cand[b, n_slot] >= 0:
             n_slot += 1
         for r in range(c):
-            Pf = P[i * c + r, j * c : (j + 1) * c].reshape(-1)
+            src0 = ((i * c + r) * W + j * c) * 3
             o = 3 * c * r
             for k in range(3 * c):
-                buf[o + k] = np.float32(Pf[k])
+                buf[o + k] = np.float32(Pflat[src0 + k])
         for p in range(cc):
             px = buf[3 * p]
             py = buf[3 * p + 1]
@@ -323,7 +355,7 @@ def refine_pixels(
                 best[p] = dist if better else best[p]
                 lab[p] = k32 if better else lab[p]
         own32 = np.int32(own_b)
-        lb_b = label[b].reshape(-1)
+        lb_b = lflat[b * cc : (b + 1) * cc]
         bad = 0  # valid pixels not in the patch's own region
         for p in range(cc):
             lb_b[p] = lab[p]
