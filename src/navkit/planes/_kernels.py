@@ -486,14 +486,18 @@ def label_image(
                     if v >= 0:
                         inl[pos[v]] = y * W + x0 + q
                         pos[v] += 1
-            elif s >= 0:
+            elif s >= 0:  # the labels branch-free, then the inliers with a local position
+                vr = valid[y, x0 : x0 + c]
+                lr = labels[y, x0 : x0 + c]
                 for q in range(c):
-                    if valid[y, x0 + q]:
-                        labels[y, x0 + q] = s
-                        inl[pos[s]] = y * W + x0 + q
-                        pos[s] += 1
-                    else:
-                        labels[y, x0 + q] = -1
+                    lr[q] = s if vr[q] else -1
+                p = pos[s]
+                i0 = y * W + x0
+                for q in range(c):
+                    if vr[q]:
+                        inl[p] = i0 + q
+                        p += 1
+                pos[s] = p
             else:
                 for q in range(c):
                     labels[y, x0 + q] = -1
