@@ -318,9 +318,10 @@ def refine_pixels(
             n_slot += 1
         for r in range(c):
             src0 = ((i * c + r) * W + j * c) * 3
+            Pr = Pflat[src0 : src0 + 3 * c]  # a slice: indices known >= 0, the loop vectorises
             o = 3 * c * r
             for k in range(3 * c):
-                buf[o + k] = np.float32(Pflat[src0 + k])
+                buf[o + k] = np.float32(Pr[k])
         for p in range(cc):
             px = buf[3 * p]
             py = buf[3 * p + 1]
