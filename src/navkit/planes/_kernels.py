@@ -304,8 +304,8 @@ def refine_pixels(
             base = ((i2 * c) * W + (gn - i2 * wc) * c) * 3
             for r in range(c):
                 for e in range(0, 3 * c, 8):  # 8 float64 a cache line
-                    _prefetch(Pflat, base + r * 3 * W + e)
-                _prefetch(Pflat, base + r * 3 * W + 3 * c - 1)
+                    _prefetch(Pflat, base + r * 3 * W + e)  # type: ignore[call-arg]
+                _prefetch(Pflat, base + r * 3 * W + 3 * c - 1)  # type: ignore[call-arg]
         g = ids[b]
         i = g // wc
         j = g - i * wc
