@@ -315,23 +315,40 @@ def _rank1_normals(
     """The normals (and rho) of the rows whose smallest eigenvalue is repeated, in place, as
     :func:`smallest_eigenpairs` gives them: LAPACK's first eigenvector, normalised, pointing
     away from the origin. The empty patches (all-zero rows, ~100 of a Kinect frame's 768) all
-    have the zero matrix: one LAPACK call for all of them."""
+    have the zero matrix, whose plane is computed once per process (:func:`_zero_row_plane`,
+    the same LAPACK call on the same matrix); LAPACK runs only for the other rows (usually
+    none)."""
     idx = np.flatnonzero(rank1)
     zero = ~M[idx].any(axis=1)
     z, nz = idx[zero], idx[~zero]
-    rows = nz if not len(z) else np.concatenate([nz, z[:1]])
-    n = np.maximum(M[rows, 0], 1.0)
-    m = M[rows, 1:4] / n[:, None]
-    C = M[rows, 4:].reshape(-1, 3, 3) / n[:, None, None] - m[:, :, None] * m[:, None, :]
+    if len(nz):
+        normal[nz], rho[nz] = _lapack_planes(M[nz])
+    if len(z):
+        normal[z], rho[z] = _zero_row_plane()
+
+
+def _lapack_planes(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Unit normals (LAPACK's first eigenvector, away from the origin) and rho of moment rows."""
+    n = np.maximum(M[:, 0], 1.0)
+    m = M[:, 1:4] / n[:, None]
+    C = M[:, 4:].reshape(-1, 3, 3) / n[:, None, None] - m[:, :, None] * m[:, None, :]
     _, V = np.linalg.eigh(C)
     v = V[:, :, 0] / np.sqrt(np.einsum("gi,gi->g", V[:, :, 0], V[:, :, 0]))[:, None]
     d = np.einsum("gi,gi->g", v, m)
     v[d < 0] *= -1
-    normal[nz] = v[: len(nz)]
-    rho[nz] = np.abs(d[: len(nz)])
-    if len(z):
-        normal[z] = v[-1]
-        rho[z] = np.abs(d[-1])
+    return v, np.abs(d)
+
+
+_ZERO_ROW_PLANE: list[tuple[NDArray[np.float64], float]] = []
+
+
+def _zero_row_plane() -> tuple[NDArray[np.float64], float]:
+    """:func:`_lapack_planes` of an all-zero moment row (the zero matrix), computed on first
+    use (LAPACK's eigenvectors of a matrix do not depend on the other matrices of a call)."""
+    if not _ZERO_ROW_PLANE:
+        v, d = _lapack_planes(np.zeros((1, _NM)))
+        _ZERO_ROW_PLANE.append((v[0].copy(), float(d[0])))
+    return _ZERO_ROW_PLANE[0]
 
 
 def _block_sum(a: NDArray[np.float32], hc: int, wc: int, c: int) -> NDArray[np.float32]:
@@ -339,6 +356,9 @@ def _block_sum(a: NDArray[np.float32], hc: int, wc: int, c: int) -> NDArray[np.f
     lead = a.shape[:-2]
     b = a.reshape(*lead, hc, c, wc * c).sum(axis=-2)
     return b.reshape(*lead, hc, wc, c).sum(axis=-1)
+
+
+_RegionPlanes = tuple[NDArray[np.float64], NDArray[np.float64]]  # normals (n, 3), rho (n,)
 
 
 @dataclass(frozen=True)
@@ -365,10 +385,10 @@ def _patch_moments(
     thickness), while raw second moments at 5 m are ~25 m^2: in float32 (eps 6e-8) raw moments
     would lose the thickness to cancellation (25 * 6e-8 = 1.5e-6 m^2). Centred on the patch's
     float32 mean, the products are <= ~0.01 m^2 and keep ~1e-9 m^2; the moments about the
-    reference are converted to raw float64 moments for the region sums. ``compiled``: one
-    fused pass per patch (:func:`navkit.planes._kernels.patch_moments`, same bits); else the
-    NumPy block reductions below (the oracle), where the coordinates are centred in place and
-    one scratch image serves all products.
+    reference are converted to raw float64 moments for the region sums. ``compiled``: two
+    fused sweeps per band of patches (:func:`navkit.planes._kernels.patch_moments`, same
+    bits); else the NumPy block reductions below (the oracle), where the coordinates are
+    centred in place and one scratch image serves all products.
     """
     c = int(s.cell)
     Hc, Wc = hc * c, wc * c
@@ -376,7 +396,7 @@ def _patch_moments(
     tol_scale = np.float32(s.inlier_factor * s.rms_quadratic)
     tol_base = np.float32(s.inlier_factor * s.rms_base)
     if compiled:
-        M, ref_g = _kernels().patch_moments(P, hc, wc, c, valid)
+        M, ref_g = _kernels().patch_moments(np.ascontiguousarray(P), hc, wc, c, valid)
         return _Patches(P, valid, ref_g, M, tol_scale, tol_base)
     X = _WS.get("X", (3, Hc, Wc), np.float32)
     r2 = _WS.get("r2", (Hc, Wc), np.float32)
@@ -448,11 +468,13 @@ def _sample_stride(M: NDArray[np.float64], c: int, raster: float) -> NDArray[np.
 
 def _grow_regions(
     M: NDArray[np.float64], hc: int, wc: int, s: ExtractionSettings, compiled: bool = False
-) -> tuple[int, NDArray[np.int64], int]:
+) -> tuple[int, NDArray[np.int64], int, _RegionPlanes | None]:
     """Steps 2-4: planar patches, region growing, pruning, merging.
 
-    Returns the number of regions, the region of each patch ``(G,)`` (``-1`` = none) and the
-    number of planar patches.
+    Returns the number of regions, the region of each patch ``(G,)`` (``-1`` = none), the
+    number of planar patches and, when the merge joined no regions, the regions' planes
+    ``(normals, rho)`` (``_planes_from_rows(_sum_rows(comp, n, M))``, already computed for the
+    merge test; else ``None``).
     """
     c = int(s.cell)
     G = hc * wc
@@ -525,7 +547,7 @@ def _prune_merge(
     s: ExtractionSettings,
     cos_t: float,
     compiled: bool = False,
-) -> tuple[int, NDArray[np.int64], int]:
+) -> tuple[int, NDArray[np.int64], int, _RegionPlanes | None]:
     """Steps 3-4 of :func:`_grow_regions` from the planar patches: regions (``regions(keep)``:
     the components of the kept patches' graph), pruning, regrouping, merging (``compiled``: the
     coplanar regions' components by union-find, :func:`navkit.planes._kernels.dense_components`,
@@ -533,7 +555,7 @@ def _prune_merge(
     n_planar = int(planar.sum())
     n_reg, comp = regions(planar)
     if n_reg == 0:
-        return 0, comp, n_planar
+        return 0, comp, n_planar, None
     # 4. prune patches that disagree with their region's refit plane, then regroup
     rn, rd, _, _ = _planes_from_rows(_sum_rows(comp, n_reg, M))
     r = np.maximum(comp, 0)
@@ -542,7 +564,7 @@ def _prune_merge(
     )
     n_reg, comp = regions(planar & (comp >= 0) & agree)
     if n_reg == 0:
-        return 0, comp, n_planar
+        return 0, comp, n_planar, None
     # merge coplanar regions (e.g. a wall cut in two by an object in front of it)
     rn, rd, _, rmean = _planes_from_rows(_sum_rows(comp, n_reg, M))
     rtol = s.distance_factor * s.noise(np.einsum("gi,gi->g", rmean, rmean))
@@ -553,7 +575,8 @@ def _prune_merge(
     same &= same.T
     n_m, merged = _kernels().dense_components(same) if compiled else _dense_components(same)
     comp = np.where(comp >= 0, merged[np.maximum(comp, 0)], -1)
-    return n_m, comp, n_planar
+    # no regions joined (each its own component, numbered in order): comp and the planes stand
+    return n_m, comp, n_planar, ((rn, rd) if n_m == n_reg else None)
 
 
 def _dense_components(adj: NDArray[np.bool_]) -> tuple[int, NDArray[np.int64]]:
@@ -652,7 +675,9 @@ def _refine_border(
     n32 = rn.astype(np.float32)
     rho32 = rd.astype(np.float32)
     own = comp[ids]
-    label = np.full((B, c, c), -1, np.int16 if n_reg < 32767 else np.int32)
+    ltype = np.int16 if n_reg < 32767 else np.int32
+    # the compiled kernel writes every pixel's label
+    label = np.empty((B, c, c), ltype) if compiled else np.full((B, c, c), -1, ltype)
     # n . ref - rho per (patch, candidate), float32 (-1 slots: unused)
     kc = np.maximum(cand, 0)
     nk = n32[kc]  # (B, m, 3)
@@ -818,11 +843,14 @@ def _extract(
     # 1. patch moments
     pt = _patch_moments(P, s, hc, wc, compiled)
     # 2.-4. planar patches, region growing, pruning, merging
-    n_reg, comp, n_planar = _grow_regions(pt.M, hc, wc, s, compiled)
+    n_reg, comp, n_planar, reg_planes = _grow_regions(pt.M, hc, wc, s, compiled)
     if n_reg == 0:
         return ExtractionResult((), -np.ones((H, W), np.int64))
     # 5. wholesale patches; the others pixel by pixel against the region planes
-    rn, rd, _, _ = _planes_from_rows(_sum_rows(comp, n_reg, pt.M))
+    if reg_planes is None:  # regions were merged: their planes anew
+        rn, rd, _, _ = _planes_from_rows(_sum_rows(comp, n_reg, pt.M))
+    else:
+        rn, rd = reg_planes
     cellmap = comp.reshape(hc, wc)
     if compiled:
         wholesale, ids, cand = _kernels().border_patches(cellmap, s.refine == "full")
