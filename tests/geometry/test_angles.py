@@ -56,7 +56,9 @@ def test_signed_zeros_and_axes_follow_c():
     assert atan2(-0.0, -1.0) == -np.pi and atan2(0.0, -1.0) == np.pi
 
 
-@pytest.mark.parametrize(("y", "x"), [(1.0, 2.0), ([1.0, -1.0], 2.0), (np.ones((3, 1)), [1.0, -1.0])])
+@pytest.mark.parametrize(
+    ("y", "x"), [(1.0, 2.0), ([1.0, -1.0], 2.0), (np.ones((3, 1)), [1.0, -1.0])]
+)
 def test_broadcasts_as_numpy(y, x):
     got = atan2(y, x)
     assert got.shape == np.broadcast_shapes(np.shape(y), np.shape(x))

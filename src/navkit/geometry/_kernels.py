@@ -16,8 +16,8 @@ from navkit.geometry.angles import ATAN_P, ATAN_Q, MID_FROM, MOREBITS, PI_2, PI_
 
 __all__ = [
     "a6_csr_kernel",
-    "atan2_kernel",
     "a6_search_kernel",
+    "atan2_kernel",
     "basic_shapes_kernel",
     "hulls_csr_kernel",
     "mvee_csr_kernel",

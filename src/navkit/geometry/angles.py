@@ -91,4 +91,3 @@ def atan2(y: ArrayLike, x: ArrayLike) -> NDArray[np.float64]:
             on_axis = np.where(yv == 0, np.where(np.signbit(xv), np.pi, 0.0), PI_2)
             out = np.where(axis, np.copysign(on_axis, yv), out)
     return out.reshape(shape)
-
