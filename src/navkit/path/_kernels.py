@@ -246,6 +246,35 @@ def gauss_legendre_length(
 
 
 @njit(cache=True)
+def _project_one(
+    c: np.ndarray, u0: float, px: float, py: float, iterations: int
+) -> tuple[float, float]:  # pragma: no cover - compiled
+    """``fitting.project`` for one point ``(px, py)`` from ``u0``: (u, distance)."""
+    ui = min(max(u0, 0.0), 1.0)
+    u = ui
+    for _ in range(iterations):
+        rx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3])) - px
+        ry = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3])) - py
+        dx = c[0, 1] + u * (2 * c[0, 2] + 3 * c[0, 3] * u)
+        dy = c[1, 1] + u * (2 * c[1, 2] + 3 * c[1, 3] * u)
+        ddx = 2 * c[0, 2] + 6 * c[0, 3] * u
+        ddy = 2 * c[1, 2] + 6 * c[1, 3] * u
+        g = rx * dx + ry * dy
+        H = dx * dx + dy * dy + rx * ddx + ry * ddy
+        step = g / H if H > 1e-300 else 0.0
+        u = min(max(u - step, 0.0), 1.0)
+    cx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3]))
+    cy = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3]))
+    r_new = np.hypot(cx - px, cy - py)
+    cx = c[0, 0] + ui * (c[0, 1] + ui * (c[0, 2] + ui * c[0, 3]))
+    cy = c[1, 0] + ui * (c[1, 1] + ui * (c[1, 2] + ui * c[1, 3]))
+    r_old = np.hypot(cx - px, cy - py)
+    if r_new <= r_old:
+        return u, r_new
+    return ui, r_old
+
+
+@njit(cache=True)
 def project(
     c: np.ndarray, u0: np.ndarray, d: np.ndarray, iterations: int
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
@@ -254,31 +283,35 @@ def project(
     u_out = np.empty(n)
     dist = np.empty(n)
     for i in range(n):
-        ui = min(max(u0[i], 0.0), 1.0)
-        u = ui
-        px, py = d[i, 0], d[i, 1]
-        for _ in range(iterations):
-            rx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3])) - px
-            ry = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3])) - py
-            dx = c[0, 1] + u * (2 * c[0, 2] + 3 * c[0, 3] * u)
-            dy = c[1, 1] + u * (2 * c[1, 2] + 3 * c[1, 3] * u)
-            ddx = 2 * c[0, 2] + 6 * c[0, 3] * u
-            ddy = 2 * c[1, 2] + 6 * c[1, 3] * u
-            g = rx * dx + ry * dy
-            H = dx * dx + dy * dy + rx * ddx + ry * ddy
-            step = g / H if H > 1e-300 else 0.0
-            u = min(max(u - step, 0.0), 1.0)
+        u_out[i], dist[i] = _project_one(c, u0[i], d[i, 0], d[i, 1], iterations)
+    return u_out, dist
+
+
+@njit(cache=True)
+def within(
+    c: np.ndarray, tau: np.ndarray, buf: np.ndarray, n: int, limit: float, geometric: bool
+) -> bool:  # pragma: no cover - compiled
+    """The exact deviation test of ``OnlineApproximator._push`` on buffer rows ``[0, n)``
+    (points ``buf - buf[0]`` at ``u = tau / tau[n - 1]``): every residual ``|C(u_i) - d_i|``
+    (``fitting.residuals``) within ``limit``, or, with ``geometric``, every point beyond it
+    within ``limit`` of the curve (``fitting.project``, 3 Newton steps). The same formulas
+    point by point; stops at the first point that fails (only the verdict is used)."""
+    T = tau[n - 1]
+    x0, y0 = buf[0, 0], buf[0, 1]
+    for i in range(n):
+        u = tau[i] / T
+        px, py = buf[i, 0] - x0, buf[i, 1] - y0
         cx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3]))
         cy = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3]))
-        r_new = np.hypot(cx - px, cy - py)
-        cx = c[0, 0] + ui * (c[0, 1] + ui * (c[0, 2] + ui * c[0, 3]))
-        cy = c[1, 0] + ui * (c[1, 1] + ui * (c[1, 2] + ui * c[1, 3]))
-        r_old = np.hypot(cx - px, cy - py)
-        if r_new <= r_old:
-            u_out[i], dist[i] = u, r_new
-        else:
-            u_out[i], dist[i] = ui, r_old
-    return u_out, dist
+        r = np.hypot(cx - px, cy - py)
+        if r <= limit:
+            continue
+        if not geometric or not r > limit:  # (NaN: not from finite points) rejected
+            return False
+        _, dist = _project_one(c, u, px, py, 3)
+        if not dist <= limit:
+            return False
+    return True
 
 
 @njit(cache=True)

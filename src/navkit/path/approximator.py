@@ -56,6 +56,17 @@ __all__ = ["ApproximationResult", "ApproximatorSettings", "OnlineApproximator", 
 log = logging.getLogger(__name__)
 
 _POW7 = np.arange(7.0)
+_KERNELS: Any = None
+
+
+def _kernels() -> Any:
+    """:mod:`navkit.path._kernels`, imported on first use (it loads Numba)."""
+    global _KERNELS
+    if _KERNELS is None:
+        from navkit.path import _kernels as kernels
+
+        _KERNELS = kernels
+    return _KERNELS
 
 
 @dataclass(frozen=True)
@@ -225,6 +236,7 @@ class OnlineApproximator:
         self._max_points = int(s.max_segment_points)
         self._min_step = float(s.min_step)
         self._eps2 = self._eps_fit**2
+        self._geometric = bool(s.geometric_test)
         self._chain = LoopFreeChain(precision=s.loop_precision, min_loop_length=s.min_loop_length)
         # the freeze's O(n) passes and the loop search as compiled loops (navkit.path._kernels)
         # when the process runs the kernels (navkit.jit); False: the NumPy versions (the oracle
@@ -341,16 +353,12 @@ class OnlineApproximator:
             self._grow()
             self._buf[n] = p
             self._tau[n] = tau
-            u = self._tau[: n + 1] / tau
-            d = self._buf[: n + 1] - self._buf[0]
-            r = residuals(fit, u, d)
-            ok = bool(r.max() <= self._eps_fit)
-            if not ok and self.settings.geometric_test:
-                # the residual at a point's own parameter includes along-track misfit; the
-                # distance to the curve (Newton projection) is what the guarantee is about
-                far = r > self._eps_fit
-                _, dist = project(fit, u[far], d[far])
-                ok = bool(dist.max() <= self._eps_fit)
+            if self.compiled:  # the same test in one compiled pass, stopping at the first miss
+                ok = _kernels().within(
+                    fit.coef, self._tau, self._buf, n + 1, self._eps_fit, self._geometric
+                )
+            else:
+                ok = self._within(fit, n, tau)
         if ok:
             self._grow()
             self._buf[n], self._tau[n] = p, tau
@@ -360,6 +368,21 @@ class OnlineApproximator:
         # step 1.5: freeze on all points but the last, start the next segment where it ends
         self._freeze(self._n)
         self._push(p)
+
+    def _within(self, fit: CubicFit, n: int, tau: float) -> bool:
+        """The exact deviation test on buffer rows ``[0, n]`` (NumPy; the compiled twin is
+        ``_kernels.within``)."""
+        u = self._tau[: n + 1] / tau
+        d = self._buf[: n + 1] - self._buf[0]
+        r = residuals(fit, u, d)
+        ok = bool(r.max() <= self._eps_fit)
+        if not ok and self.settings.geometric_test:
+            # the residual at a point's own parameter includes along-track misfit; the
+            # distance to the curve (Newton projection) is what the guarantee is about
+            far = r > self._eps_fit
+            _, dist = project(fit, u[far], d[far])
+            ok = bool(dist.max() <= self._eps_fit)
+        return ok
 
     # ------------------------------------------------------------------ freezing (steps 1.5 - 1.7)
     def _freeze(self, n_use: int) -> None:
