@@ -403,3 +403,52 @@ def update_leaves(
             lo[leaf, 0] = lo[leaf, 1] = np.inf
             hi[leaf, 0] = hi[leaf, 1] = -np.inf
     update_tree(lo, hi, a + cap, b + cap)
+
+
+@njit(cache=True)
+def find_crossings(
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    first_piece: int,
+    n_piece: int,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    s0: np.ndarray,
+    f: np.ndarray,
+    precision: float,
+    min_loop_length: float,
+    max_pairs: int,
+    first_only: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:  # pragma: no cover - compiled
+    """``LoopFreeChain.find_crossings`` from the first piece of the new segments on, in one
+    call: :func:`candidate_pairs`, the pairs' parameter intervals (neighbouring pieces trimmed
+    by ``min_loop_length / 2`` on each side of their shared end, empty intervals dropped: the
+    NumPy version's ``np.where`` / mask, pair by pair) and :func:`refine_crossings`."""
+    ia, ib = candidate_pairs(lo, hi, cap, first_piece, n_piece)
+    n = len(ia)
+    sa = np.empty(n, np.int64)
+    sb = np.empty(n, np.int64)
+    ua0 = np.empty(n)
+    ua1 = np.empty(n)
+    ub0 = np.empty(n)
+    ub1 = np.empty(n)
+    m = 0.5 * min_loop_length
+    w = 0
+    for p in range(n):
+        a, b = ia[p], ib[p]
+        a0, a1, b0, b1 = pu0[a], pu1[a], pu0[b], pu1[b]
+        if b == a + 1:
+            a1 = a1 - m
+            b0 = b0 + m
+        if a1 > a0 and b1 > b0:
+            sa[w], sb[w] = pseg[a], pseg[b]
+            ua0[w], ua1[w], ub0[w], ub1[w] = a0, a1, b0, b1
+            w += 1
+    return refine_crossings(
+        sa[:w], sb[:w], ua0[:w], ua1[:w], ub0[:w], ub1[:w], ax, ay, s0, f,
+        precision, min_loop_length, max_pairs, first_only,
+    )  # fmt: skip
