@@ -258,6 +258,7 @@ class OnlineApproximator:
         self._anchor_is_point = True  # the very first anchor is a data point
         self._tangent: NDArray[np.float64] | None = None
         self._last: NDArray[np.float64] | None = None
+        self._fit_t: tuple[Any, ...] | None = None  # the last freeze's fit over t (compiled)
 
     # ------------------------------------------------------------------ state
     @property
@@ -404,6 +405,7 @@ class OnlineApproximator:
                     dev.max(),
                     self._eps,
                 )
+        self._fit_t = None
         pts = self._buf[:n_use]
         ax, ay = fit_s.metric_coefficients(anchor)
         length = float(fit_s.T)
@@ -446,10 +448,12 @@ class OnlineApproximator:
             # the guarantee is on the distance to the stored curve (its parameter moved)
             u, dist = project(fit_s, s / fit_s.T, d)
             return fit_s, u * fit_s.T, dist
-        from navkit.path import _kernels as K
-
+        K = _kernels()
         fit_t = self._fit_compiled(variant, tau, d)
-        s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], tau / fit_t.T, _GL_X, _GL_W)
+        u_t = tau / fit_t.T
+        s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u_t, _GL_X, _GL_W)
+        # the fallback (_scaled_t_fit) starts from the same fit over t and arc lengths
+        self._fit_t = (n_use, fit_t, u_t, s, d)
         fit_s = self._fit_compiled(variant, s, d)
         u, dist = K.project(fit_s.coef, s / fit_s.T, d, 3)
         return fit_s, u * fit_s.T, dist
@@ -458,11 +462,9 @@ class OnlineApproximator:
         self, variant: str, tau: NDArray[np.float64], d: NDArray[np.float64]
     ) -> CubicFit:
         """:func:`navkit.path.fitting.fit_points` with the compiled power sums."""
-        from navkit.path import _kernels as K
-
         T = float(tau[-1])
         u = tau / T if T > 0 else np.zeros_like(tau)
-        S, D, Q = K.power_sums(u, d)
+        S, D, Q = _kernels().power_sums(u, d)
         tangent = self._tangent
         return fit_from_sums(
             variant,
@@ -482,11 +484,14 @@ class OnlineApproximator:
         d = self._buf[:n_use] - anchor
         tau = self._tau[:n_use]
         if self.compiled:
-            from navkit.path import _kernels as K
-
-            fit_t = self._fit_compiled(variant, tau, d)
-            u = tau / fit_t.T
-            s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u, _GL_X, _GL_W)
+            K = _kernels()
+            cached, self._fit_t = self._fit_t, None
+            if cached is not None and cached[0] == n_use:  # _natural_fit's first two steps
+                _, fit_t, u, s, d = cached
+            else:
+                fit_t = self._fit_compiled(variant, tau, d)
+                u = tau / fit_t.T
+                s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u, _GL_X, _GL_W)
             fit = CubicFit(coef=fit_t.coef, T=float(s[-1]), ssr=fit_t.ssr)
             u2, dist = K.project(fit.coef, u, d, 3)
             return fit, u2 * fit.T, dist
