@@ -229,18 +229,27 @@ def power_sums(
 def gauss_legendre_length(
     ax: np.ndarray, ay: np.ndarray, u: np.ndarray, gx: np.ndarray, gw: np.ndarray
 ) -> np.ndarray:  # pragma: no cover - compiled
-    """``spline.gauss_legendre_length`` in one loop (nodes ``gx``, weights ``gw`` on [0, 1])."""
-    out = np.zeros(len(u))
-    acc = 0.0
-    for i in range(1, len(u)):
+    """``spline.gauss_legendre_length`` (nodes ``gx``, weights ``gw`` on [0, 1]): the speeds at
+    all nodes first (``sqrt(x'^2 + y'^2)``, a loop LLVM vectorises; ``np.hypot`` is a libm call
+    per node, 12x slower here and equal to within 1e-16 relative for speeds far from the
+    float64 range's ends), then the running sum in point order."""
+    n = len(u)
+    m = len(gx)
+    speed = np.empty(n * m)
+    for i in range(1, n):
         h = u[i] - u[i - 1]
-        tot = 0.0
-        for k in range(len(gx)):
+        for k in range(m):
             t = u[i - 1] + h * gx[k]
             dx = ax[1] + t * (2.0 * ax[2] + 3.0 * ax[3] * t)
             dy = ay[1] + t * (2.0 * ay[2] + 3.0 * ay[3] * t)
-            tot += np.hypot(dx, dy) * gw[k]
-        acc += h * tot
+            speed[i * m + k] = np.sqrt(dx * dx + dy * dy)
+    out = np.zeros(n)
+    acc = 0.0
+    for i in range(1, n):
+        tot = 0.0
+        for k in range(m):
+            tot += speed[i * m + k] * gw[k]
+        acc += (u[i] - u[i - 1]) * tot
         out[i] = acc
     return out
 
@@ -278,13 +287,46 @@ def _project_one(
 def project(
     c: np.ndarray, u0: np.ndarray, d: np.ndarray, iterations: int
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """``fitting.project`` point by point (the same Newton steps and formulas)."""
+    """``fitting.project`` (the same Newton steps and formulas), one Newton step over all points
+    at a time in branch-free loops LLVM vectorises; distances as ``sqrt(dx^2 + dy^2)`` instead
+    of ``np.hypot`` (within 1e-16 relative, see :func:`gauss_legendre_length`)."""
     n = len(u0)
-    u_out = np.empty(n)
+    c00, c01, c02, c03 = c[0, 0], c[0, 1], c[0, 2], c[0, 3]
+    c10, c11, c12, c13 = c[1, 0], c[1, 1], c[1, 2], c[1, 3]
+    ui = np.empty(n)
+    u = np.empty(n)
+    for i in range(n):
+        ui[i] = min(max(u0[i], 0.0), 1.0)
+        u[i] = ui[i]
+    for _ in range(iterations):
+        for i in range(n):
+            x = u[i]
+            px, py = d[i, 0], d[i, 1]
+            rx = c00 + x * (c01 + x * (c02 + x * c03)) - px
+            ry = c10 + x * (c11 + x * (c12 + x * c13)) - py
+            dx = c01 + x * (2 * c02 + 3 * c03 * x)
+            dy = c11 + x * (2 * c12 + 3 * c13 * x)
+            ddx = 2 * c02 + 6 * c03 * x
+            ddy = 2 * c12 + 6 * c13 * x
+            g = rx * dx + ry * dy
+            H = dx * dx + dy * dy + rx * ddx + ry * ddy
+            ok = H > 1e-300
+            step = g / (H if ok else 1.0)
+            u[i] = min(max(x - (step if ok else 0.0), 0.0), 1.0)
     dist = np.empty(n)
     for i in range(n):
-        u_out[i], dist[i] = _project_one(c, u0[i], d[i, 0], d[i, 1], iterations)
-    return u_out, dist
+        x, x0 = u[i], ui[i]
+        px, py = d[i, 0], d[i, 1]
+        ex = c00 + x * (c01 + x * (c02 + x * c03)) - px
+        ey = c10 + x * (c11 + x * (c12 + x * c13)) - py
+        r_new = np.sqrt(ex * ex + ey * ey)
+        ex = c00 + x0 * (c01 + x0 * (c02 + x0 * c03)) - px
+        ey = c10 + x0 * (c11 + x0 * (c12 + x0 * c13)) - py
+        r_old = np.sqrt(ex * ex + ey * ey)
+        better = r_new <= r_old
+        u[i] = x if better else x0
+        dist[i] = r_new if better else r_old
+    return u, dist
 
 
 @njit(cache=True)
