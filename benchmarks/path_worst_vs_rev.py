@@ -85,9 +85,14 @@ def _record(mod: ModuleType, xy: np.ndarray, eps: float, clock: _GcClock) -> tup
     r = a.finish()
     key = (
         len(a._raw), a._chain.n_seg, len(a._chain.cuts), r.n_cheap, r.n_refit_fallbacks,
-        r.points.tobytes(), a._chain._len[: a._chain.n_seg].tobytes(),
+        r.points.tobytes(),
     )  # fmt: skip
-    return t, g, key
+    n = a._chain.n_seg
+    floats = np.concatenate(
+        [a._chain._ax[:n].ravel(), a._chain._ay[:n].ravel(), a._chain._len[:n], r.point_s]
+        + [np.r_[c.s_start, c.s_end, c.point] for c in a._chain.cuts]
+    )
+    return t, g, (key, floats)
 
 
 def main() -> None:
@@ -102,7 +107,7 @@ def main() -> None:
     print(
         f"{args.rev} -> this tree, CPU us per point (median of {args.runs} runs per point)\n"
         "trajectory | eps (m) | worst | mean | worst without gc | points > 1 ms | gc in the "
-        "worst point | same segments, cuts, points"
+        "worst point | same segments, cuts, points (floats 1e-9)"
     )
     for name in args.only or list(TRAJECTORIES):
         xy = _load(TRAJECTORIES[name])
@@ -111,13 +116,17 @@ def main() -> None:
         for eps in TOLERANCES:
             t: dict[str, list[np.ndarray]] = {"rev": [], "tree": []}
             g: dict[str, list[np.ndarray]] = {"rev": [], "tree": []}
-            keys = set()
+            keys: list[tuple[Any, np.ndarray]] = []
             for _ in range(args.runs):
                 for label, mod in (("rev", rev), ("tree", tree)):
                     tt, gg, key = _record(mod, xy, eps, clock)
                     t[label].append(tt)
                     g[label].append(gg)
-                    keys.add(key)
+                    keys.append(key)
+            # the same segments, cuts and points; floats within 1e-9 relative (the tests' bound)
+            same = all(k[0] == keys[0][0] for k in keys) and all(
+                np.allclose(k[1], keys[0][1], rtol=1e-9, atol=1e-12) for k in keys
+            )
             med = {k: np.median(v, axis=0) * 1e6 for k, v in t.items()}
             net = {k: np.median(np.subtract(t[k], g[k]), axis=0) * 1e6 for k in t}
             gcw = {k: float(np.median(np.asarray(g[k])[:, np.argmax(med[k])]) * 1e6) for k in t}
@@ -126,7 +135,7 @@ def main() -> None:
                 f"{med['rev'].mean():.0f} -> {med['tree'].mean():.0f} | "
                 f"{net['rev'].max():.0f} -> {net['tree'].max():.0f} | "
                 f"{int((med['rev'] > 1000).sum())} -> {int((med['tree'] > 1000).sum())} | "
-                f"{gcw['rev']:.0f} -> {gcw['tree']:.0f} | {'yes' if len(keys) == 1 else 'NO'}",
+                f"{gcw['rev']:.0f} -> {gcw['tree']:.0f} | {'yes' if same else 'NO'}",
                 flush=True,
             )
 
