@@ -278,7 +278,7 @@ def _fit_endpoints(
     the general code's operations in the same order, on plain locals (the O(1) test of every
     point calls it; the list and loop machinery was most of its cost)."""
     Dx, Dy = D[0], D[1]
-    S0, S1, S2, S3, S4, S5, S6 = S
+    _, _, S2, S3, S4, S5, S6 = S
     k1x, k1y, k2x, k2y = ex, ey, 0.0, 0.0
     rr = (
         Q
