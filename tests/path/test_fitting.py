@@ -107,3 +107,31 @@ def test_power_sums_simple():
     np.testing.assert_allclose(S[:3], [3.0, 1.5, 1.25])
     np.testing.assert_allclose(D[0], [3.0, 2.5, 2.25, 2.125])
     assert Q == 6.0
+
+
+def test_endpoints_fast_path_is_the_general_code(rng):
+    """``fit_from_sums``' straight-line path for ``endpoints`` (the O(1) test of every point)
+    gives the general code's numbers bit for bit, signs of zeros included, also on degenerate
+    parameter grids and zero data."""
+    from navkit.path.fitting import _fit_general
+
+    for trial in range(3000):
+        n = int(rng.integers(4, 60))
+        u = np.sort(rng.random(n))
+        u[0], u[-1] = 0.0, 1.0
+        if trial % 7 == 0:
+            u[1:] = 1.0  # every point at the end: no free function fits
+        if trial % 11 == 0:
+            u[1:-1] = 0.5
+        d = np.c_[rng.normal(size=n).cumsum(), rng.normal(size=n).cumsum()]
+        d *= 10.0 ** rng.integers(-6, 3)
+        d[0] = 0.0
+        if trial % 13 == 0:
+            d[:] = 0.0
+        S, D, Q = power_sums(u, d)
+        args = (S.tolist(), D.tolist(), Q, n - 1, float(rng.random() * 10))
+        a = fit_from_sums("endpoints", *args, end=d[-1].tolist())
+        b = _fit_general("endpoints", *args, end=d[-1].tolist())
+        assert np.array_equal(a.coef, b.coef) and (a.T, a.ssr) == (b.T, b.ssr)
+        assert np.array_equal(np.signbit(a.coef), np.signbit(b.coef))
+        assert np.signbit(a.ssr) == np.signbit(b.ssr)

@@ -96,3 +96,47 @@ def test_recorded_trajectories(data_path, relative):
     _, xy, _, _ = load_planar_track(data_path(relative))
     xy = xy[:15000]  # MRCLAM: the first 150 s (its loops are in them)
     assert _assert_same(xy, 0.05) >= 1
+
+
+def test_within_is_the_numpy_test(rng):
+    """``_kernels.within`` (the exact deviation test of a point, stopping at the first miss)
+    gives ``OnlineApproximator._within``'s verdict: residuals at the points' own parameters,
+    then the distance to the curve of the points beyond the limit."""
+    from navkit.path import _kernels as K
+    from navkit.path.fitting import fit_points
+
+    for trial in range(300):
+        n = int(rng.integers(3, 200))
+        t = np.linspace(0, rng.uniform(0.5, 3) * np.pi, n)
+        xy = np.c_[np.cos(t), np.sin(t)] * rng.uniform(1, 20) + rng.normal(0, 0.02, (n, 2))
+        a = OnlineApproximator(ApproximatorSettings(tolerance=0.05, geometric_test=trial % 2 == 0))
+        a._buf = xy + rng.normal(0, 1, 2)
+        a._tau = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T))]
+        fit = fit_points("endpoints", a._tau, a._buf - a._buf[0])
+        for limit in (0.01, 0.03, 0.05, 0.2):
+            a._eps_fit = limit
+            expected = a._within(fit, n - 1, float(a._tau[n - 1]))
+            got = K.within(fit.coef, a._tau, a._buf, n, limit, trial % 2 == 0)
+            assert got == expected
+
+
+def test_freeze_kernels_match_numpy(rng):
+    """The vectorised arc lengths and projection of the freeze against the NumPy versions."""
+    from navkit.path import _kernels as K
+    from navkit.path.fitting import CubicFit, project
+    from navkit.path.spline import _GL_W, _GL_X, gauss_legendre_length
+
+    for _ in range(50):
+        n = int(rng.integers(2, 2000))
+        coef = rng.normal(0, 5, (2, 4))
+        u = np.sort(rng.random(n))
+        s = K.gauss_legendre_length(coef[0], coef[1], u, _GL_X, _GL_W)
+        ref = gauss_legendre_length(coef[0], coef[1], u)
+        assert np.abs(s - ref).max() <= 1e-12 * max(ref[-1], 1e-300)
+        d = np.c_[np.polyval(coef[0, ::-1], u), np.polyval(coef[1, ::-1], u)]
+        d += rng.normal(0, 0.05, d.shape)
+        u0 = np.clip(u + rng.normal(0, 0.02, n), -0.1, 1.1)
+        uk, dk = K.project(coef, u0, d, 3)
+        un, dn = project(CubicFit(coef=coef, T=1.0, ssr=0.0), u0, d)
+        assert np.abs(dk - dn).max() <= 1e-12 * max(dn.max(), 1.0)
+        assert np.abs(uk - un).max() <= 1e-9

@@ -49,13 +49,24 @@ from navkit.path.fitting import (
     residuals,
 )
 from navkit.path.loops import LoopCut, LoopFreeChain
-from navkit.path.spline import _GL_W, _GL_X, PathSpline, cubic_eval, gauss_legendre_length
+from navkit.path.spline import _GL_W, _GL_X, PathSpline, gauss_legendre_length
 
 __all__ = ["ApproximationResult", "ApproximatorSettings", "OnlineApproximator", "approximate"]
 
 log = logging.getLogger(__name__)
 
 _POW7 = np.arange(7.0)
+_KERNELS: Any = None
+
+
+def _kernels() -> Any:
+    """:mod:`navkit.path._kernels`, imported on first use (it loads Numba)."""
+    global _KERNELS
+    if _KERNELS is None:
+        from navkit.path import _kernels as kernels
+
+        _KERNELS = kernels
+    return _KERNELS
 
 
 @dataclass(frozen=True)
@@ -225,6 +236,7 @@ class OnlineApproximator:
         self._max_points = int(s.max_segment_points)
         self._min_step = float(s.min_step)
         self._eps2 = self._eps_fit**2
+        self._geometric = bool(s.geometric_test)
         self._chain = LoopFreeChain(precision=s.loop_precision, min_loop_length=s.min_loop_length)
         # the freeze's O(n) passes and the loop search as compiled loops (navkit.path._kernels)
         # when the process runs the kernels (navkit.jit); False: the NumPy versions (the oracle
@@ -246,6 +258,7 @@ class OnlineApproximator:
         self._anchor_is_point = True  # the very first anchor is a data point
         self._tangent: NDArray[np.float64] | None = None
         self._last: NDArray[np.float64] | None = None
+        self._fit_t: tuple[Any, ...] | None = None  # the last freeze's fit over t (compiled)
 
     # ------------------------------------------------------------------ state
     @property
@@ -341,16 +354,12 @@ class OnlineApproximator:
             self._grow()
             self._buf[n] = p
             self._tau[n] = tau
-            u = self._tau[: n + 1] / tau
-            d = self._buf[: n + 1] - self._buf[0]
-            r = residuals(fit, u, d)
-            ok = bool(r.max() <= self._eps_fit)
-            if not ok and self.settings.geometric_test:
-                # the residual at a point's own parameter includes along-track misfit; the
-                # distance to the curve (Newton projection) is what the guarantee is about
-                far = r > self._eps_fit
-                _, dist = project(fit, u[far], d[far])
-                ok = bool(dist.max() <= self._eps_fit)
+            if self.compiled:  # the same test in one compiled pass, stopping at the first miss
+                ok = _kernels().within(
+                    fit.coef, self._tau, self._buf, n + 1, self._eps_fit, self._geometric
+                )
+            else:
+                ok = self._within(fit, n, tau)
         if ok:
             self._grow()
             self._buf[n], self._tau[n] = p, tau
@@ -360,6 +369,21 @@ class OnlineApproximator:
         # step 1.5: freeze on all points but the last, start the next segment where it ends
         self._freeze(self._n)
         self._push(p)
+
+    def _within(self, fit: CubicFit, n: int, tau: float) -> bool:
+        """The exact deviation test on buffer rows ``[0, n]`` (NumPy; the compiled twin is
+        ``_kernels.within``)."""
+        u = self._tau[: n + 1] / tau
+        d = self._buf[: n + 1] - self._buf[0]
+        r = residuals(fit, u, d)
+        ok = bool(r.max() <= self._eps_fit)
+        if not ok and self.settings.geometric_test:
+            # the residual at a point's own parameter includes along-track misfit; the
+            # distance to the curve (Newton projection) is what the guarantee is about
+            far = r > self._eps_fit
+            _, dist = project(fit, u[far], d[far])
+            ok = bool(dist.max() <= self._eps_fit)
+        return ok
 
     # ------------------------------------------------------------------ freezing (steps 1.5 - 1.7)
     def _freeze(self, n_use: int) -> None:
@@ -381,6 +405,7 @@ class OnlineApproximator:
                     dev.max(),
                     self._eps,
                 )
+        self._fit_t = None
         pts = self._buf[:n_use]
         ax, ay = fit_s.metric_coefficients(anchor)
         length = float(fit_s.T)
@@ -391,10 +416,14 @@ class OnlineApproximator:
         self._loops.extend(
             self._chain.append(ax, ay, length, remove_loops=self.settings.remove_loops)
         )
-        # the next segment starts where this one ends, with its tangent
-        end = np.array([cubic_eval(ax, float(length)), cubic_eval(ay, float(length))])
-        tan = np.array([cubic_eval(ax, float(length), 1), cubic_eval(ay, float(length), 1)])
-        norm = float(np.hypot(*tan))
+        # the next segment starts where this one ends, with its tangent (cubic_eval's formulas
+        # on plain floats: the same numbers without ~10 NumPy scalar calls)
+        x0, x1, x2, x3 = ax.tolist()
+        y0, y1, y2, y3 = ay.tolist()
+        u = length
+        end = np.array([x0 + u * (x1 + u * (x2 + u * x3)), y0 + u * (y1 + u * (y2 + u * y3))])
+        tan = np.array([x1 + u * (2.0 * x2 + 3.0 * x3 * u), y1 + u * (2.0 * y2 + 3.0 * y3 * u)])
+        norm = float(np.hypot(tan[0], tan[1]))
         self._tangent = tan / norm if norm > 0 else None
         self._anchor_is_point = False
         self._start_segment(end)
@@ -419,10 +448,12 @@ class OnlineApproximator:
             # the guarantee is on the distance to the stored curve (its parameter moved)
             u, dist = project(fit_s, s / fit_s.T, d)
             return fit_s, u * fit_s.T, dist
-        from navkit.path import _kernels as K
-
+        K = _kernels()
         fit_t = self._fit_compiled(variant, tau, d)
-        s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], tau / fit_t.T, _GL_X, _GL_W)
+        u_t = tau / fit_t.T
+        s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u_t, _GL_X, _GL_W)
+        # the fallback (_scaled_t_fit) starts from the same fit over t and arc lengths
+        self._fit_t = (n_use, fit_t, u_t, s, d)
         fit_s = self._fit_compiled(variant, s, d)
         u, dist = K.project(fit_s.coef, s / fit_s.T, d, 3)
         return fit_s, u * fit_s.T, dist
@@ -431,11 +462,9 @@ class OnlineApproximator:
         self, variant: str, tau: NDArray[np.float64], d: NDArray[np.float64]
     ) -> CubicFit:
         """:func:`navkit.path.fitting.fit_points` with the compiled power sums."""
-        from navkit.path import _kernels as K
-
         T = float(tau[-1])
         u = tau / T if T > 0 else np.zeros_like(tau)
-        S, D, Q = K.power_sums(u, d)
+        S, D, Q = _kernels().power_sums(u, d)
         tangent = self._tangent
         return fit_from_sums(
             variant,
@@ -455,11 +484,14 @@ class OnlineApproximator:
         d = self._buf[:n_use] - anchor
         tau = self._tau[:n_use]
         if self.compiled:
-            from navkit.path import _kernels as K
-
-            fit_t = self._fit_compiled(variant, tau, d)
-            u = tau / fit_t.T
-            s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u, _GL_X, _GL_W)
+            K = _kernels()
+            cached, self._fit_t = self._fit_t, None
+            if cached is not None and cached[0] == n_use:  # _natural_fit's first two steps
+                _, fit_t, u, s, d = cached
+            else:
+                fit_t = self._fit_compiled(variant, tau, d)
+                u = tau / fit_t.T
+                s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u, _GL_X, _GL_W)
             fit = CubicFit(coef=fit_t.coef, T=float(s[-1]), ssr=fit_t.ssr)
             u2, dist = K.project(fit.coef, u, d, 3)
             return fit, u2 * fit.T, dist

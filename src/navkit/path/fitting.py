@@ -176,6 +176,22 @@ def fit_from_sums(
     tangent : (2,) sequence
         Unit tangent at the start (tangent variants).
     """
+    if variant == "endpoints" and end is not None and n_free_points >= 3:
+        return _fit_endpoints(S, D, Q, T, float(end[0]), float(end[1]))
+    return _fit_general(variant, S, D, Q, n_free_points, T, end, tangent)
+
+
+def _fit_general(
+    variant: str,
+    S: Sequence[float],
+    D: Sequence[Sequence[float]],
+    Q: float,
+    n_free_points: int,
+    T: float,
+    end: Sequence[float] | None = None,
+    tangent: Sequence[float] | None = None,
+) -> CubicFit:
+    """:func:`fit_from_sums` for every variant (the table's basis functions)."""
     # the known part K(u) = k1 u + k2 u^2 (per coordinate)
     k1 = [0.0, 0.0]
     k2 = [0.0, 0.0]
@@ -253,6 +269,51 @@ def fit_from_sums(
         free -= 1  # degenerate grid: drop the highest-order function
     coef = np.array([[0.0, k1[0], k2[0], 0.0], [0.0, k1[1], k2[1], 0.0]])
     return CubicFit(coef=coef, T=T, ssr=max(rr, 0.0))
+
+
+def _fit_endpoints(
+    S: Sequence[float], D: Sequence[Sequence[float]], Q: float, T: float, ex: float, ey: float
+) -> CubicFit:
+    """:func:`fit_from_sums` for ``endpoints`` with both free functions (3 or more free points):
+    the general code's operations in the same order, on plain locals (the O(1) test of every
+    point calls it; the list and loop machinery was most of its cost)."""
+    Dx, Dy = D[0], D[1]
+    _, _, S2, S3, S4, S5, S6 = S
+    k1x, k1y, k2x, k2y = ex, ey, 0.0, 0.0
+    rr = (
+        Q
+        - 2.0 * (k1x * Dx[1] + k1y * Dy[1] + k2x * Dx[2] + k2y * Dy[2])
+        + (k1x**2 + k1y**2) * S2
+        + 2.0 * (k1x * k2x + k1y * k2y) * S3
+        + (k2x**2 + k2y**2) * S4
+    )
+    Rx1 = Dx[1] - k1x * S2 - k2x * S3
+    Rx2 = Dx[2] - k1x * S3 - k2x * S4
+    Rx3 = Dx[3] - k1x * S4 - k2x * S5
+    Ry1 = Dy[1] - k1y * S2 - k2y * S3
+    Ry2 = Dy[2] - k1y * S3 - k2y * S4
+    Ry3 = Dy[3] - k1y * S4 - k2y * S5
+    g00 = S4 - 2 * S3 + S2
+    g01 = S5 - S4 - S3 + S2
+    g11 = S6 - 2 * S4 + S2
+    bx0, bx1 = Rx2 - Rx1, Rx3 - Rx1
+    by0, by1 = Ry2 - Ry1, Ry3 - Ry1
+    det = g00 * g11 - g01 * g01
+    diag = g00 * g11
+    if diag > 0 and det > 1e-13 * diag:
+        cx0 = (bx0 * g11 - g01 * bx1) / det
+        cx1 = (g00 * bx1 - bx0 * g01) / det
+        cy0 = (by0 * g11 - g01 * by1) / det
+        cy1 = (g00 * by1 - by0 * g01) / det
+        coef = np.array(
+            [
+                [0.0, k1x - cx0 - cx1, k2x + cx0, 0.0 + cx1],
+                [0.0, k1y - cy0 - cy1, k2y + cy0, 0.0 + cy1],
+            ]
+        )
+        ssr = rr - (0 + (cx0 * bx0 + cy0 * by0) + (cx1 * bx1 + cy1 * by1))
+        return CubicFit(coef=coef, T=T, ssr=max(ssr, 0.0))
+    return _fit_general("endpoints", S, D, Q, 3, T, end=(ex, ey))  # degenerate grid
 
 
 def residuals(fit: CubicFit, u: NDArray[np.float64], d: NDArray[np.float64]) -> NDArray[np.float64]:

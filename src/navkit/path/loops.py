@@ -25,8 +25,10 @@ left of the new segment, so a path is loop-free after every segment.
 
 from __future__ import annotations
 
+import bisect
 import functools
 import logging
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -104,7 +106,7 @@ def _quadratic_roots(a: float, b: float, c: float) -> list[float]:
     disc = b * b - 4.0 * a * c
     if disc < 0:
         return []
-    q = -0.5 * (b + np.copysign(np.sqrt(disc), b))  # numerically stable form
+    q = -0.5 * (b + math.copysign(math.sqrt(disc), b))  # numerically stable form
     roots = [q / a]
     if abs(q) > 1e-300:
         roots.append(c / q)
@@ -155,9 +157,9 @@ def monotone_breaks(
     ``(0, length)``.
     """
     inner = sorted(
-        float(r)
-        for c in (ax, ay)
-        for r in _quadratic_roots(3.0 * float(c[3]), 2.0 * float(c[2]), float(c[1]))
+        r
+        for c in (ax.tolist(), ay.tolist())
+        for r in _quadratic_roots(3.0 * c[3], 2.0 * c[2], c[1])
         if 0.0 < r < length
     )
     tol = 1e-12 * max(length, 1.0)
@@ -210,6 +212,7 @@ class LoopFreeChain:
                 f"is {split}", field="split", expected="an integer >= 2 (2 = binary search)"
             )
         self.split = int(split)
+        self._f = np.linspace(0.0, 1.0, self.split + 1)  # the split fractions of a pass
         # the refinement passes in one compiled loop (navkit.path._kernels) when the process runs
         # the kernels (navkit.jit); False: NumPy (the oracle the tests compare with)
         self.compiled = kernels_enabled()
@@ -385,6 +388,25 @@ class LoopFreeChain:
         """
         if first_segment >= self.n_seg:
             return []
+        K = self.split
+        f = self._f
+        if self.compiled:  # the whole search in one compiled call: the same crossings, same order
+            from navkit.path import _kernels
+
+            A, B, Pt, truncated = _kernels.find_crossings(
+                self._lo, self._hi, self._cap, int(self._seg_first_piece[first_segment]),
+                self.n_piece, self._pseg, self._pu0, self._pu1, self._ax[: self.n_seg],
+                self._ay[: self.n_seg], self._s0[: self.n_seg], f, self.precision,
+                self.min_loop_length, self.max_pairs, first_only,
+            )  # fmt: skip
+            if truncated:
+                log.warning(
+                    "loop search: more than %d overlapping sub-pairs (curves on top of each "
+                    "other?) in %d passes; kept those with the smallest s",
+                    self.max_pairs,
+                    truncated,
+                )
+            return self._crossings(A, B, Pt, first_only)
         ia, ib = self._candidate_pairs(int(self._seg_first_piece[first_segment]))
         if len(ia) == 0:
             return []
@@ -399,35 +421,6 @@ class LoopFreeChain:
         ok = (ua1 > ua0) & (ub1 > ub0)
         sa, sb = sa[ok], sb[ok]
         ua0, ua1, ub0, ub1 = ua0[ok], ua1[ok], ub0[ok], ub1[ok]
-        K = self.split
-        f = np.linspace(0.0, 1.0, K + 1)
-        if self.compiled:  # all passes in one compiled loop: the same crossings, same order
-            from navkit.path import _kernels
-
-            A, B, Pt, truncated = _kernels.refine_crossings(
-                sa.astype(np.int64),
-                sb.astype(np.int64),
-                ua0,
-                ua1,
-                ub0,
-                ub1,
-                self._ax[: self.n_seg],
-                self._ay[: self.n_seg],
-                self._s0[: self.n_seg],
-                f,
-                self.precision,
-                self.min_loop_length,
-                self.max_pairs,
-                first_only,
-            )
-            if truncated:
-                log.warning(
-                    "loop search: more than %d overlapping sub-pairs (curves on top of each "
-                    "other?) in %d passes; kept those with the smallest s",
-                    self.max_pairs,
-                    truncated,
-                )
-            return self._crossings(A, B, Pt, first_only)
         found_a: list[NDArray[np.float64]] = []
         found_b: list[NDArray[np.float64]] = []
         found_p: list[NDArray[np.float64]] = []
@@ -541,10 +534,9 @@ class LoopFreeChain:
         return cuts
 
     def _locate(self, s: float) -> tuple[int, float]:
-        k = int(
-            np.clip(np.searchsorted(self._s0[: self.n_seg], s, side="right") - 1, 0, self.n_seg - 1)
-        )
-        return k, float(np.clip(s - self._s0[k], 0.0, self._len[k]))
+        # np.searchsorted(s0, s, side="right") - 1 and np.clip, on plain floats
+        k = min(max(bisect.bisect_right(self._s0[: self.n_seg].tolist(), s) - 1, 0), self.n_seg - 1)
+        return k, min(max(s - float(self._s0[k]), 0.0), float(self._len[k]))
 
     def _cut(self, c: Crossing) -> int:
         """Remove ``(s_a, s_b)``; returns the index of the segment holding what follows ``s_b``."""

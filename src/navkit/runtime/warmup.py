@@ -146,8 +146,21 @@ def _camera_frames() -> None:
     compute_disparity(pair.left, pair.right, DisparitySettings(fill="background"))
 
 
+def _path_record() -> None:
+    """A noisy figure eight driven twice through the path recorder: every path kernel (the
+    exact deviation test of a point, the freeze's passes, the loop search and cut), whatever
+    the mission's short route happens to need."""
+    from navkit.path import ApproximatorSettings, approximate
+
+    t = np.linspace(0.0, 4.0 * np.pi, 800)
+    xy = np.c_[10.0 * np.sin(t), 5.0 * np.sin(2.0 * t)]
+    xy += np.random.default_rng(0).normal(0.0, 0.01, xy.shape)
+    approximate(xy, ApproximatorSettings(tolerance=0.05), timed=False)
+
+
 STEPS: dict[str, Callable[[], None]] = {
     "mission (small)": _mission,
+    "path recording": _path_record,
     "lidar cloud, every shape": _lidar_cloud,
     "global laser fix": _global_fix,
     "camera frames": _camera_frames,
