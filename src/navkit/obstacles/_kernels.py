@@ -644,6 +644,7 @@ def _robust_rows(  # type: ignore[no-untyped-def]
     # unsigned indices: Numba then skips its negative-index fix-up on every gather (~25 %
     # faster on KITTI); every end point is a valid index (>= 0) by construction
     big = n_az > max_stride
+    tb = np.empty((6, n_el), np.float32)  # the row's tangents (azimuth, elevation)
     naz = np.uint64(n_az)
     nel = np.uint64(n_el)
     for i in range(i0, i1):
@@ -666,10 +667,10 @@ def _robust_rows(  # type: ignore[no-untyped-def]
             j = np.uint64(jj)
             f = base + j
             zc = Z[f]
-            if zc != zc:  # an empty vertex: every test below fails and the normal is 0
-                nvx[f] = np.float32(0.0)
-                nvy[f] = np.float32(0.0)
-                nvz[f] = np.float32(0.0)
+            if zc != zc:  # an empty vertex: every test below fails and the normal is 0 (zero
+                # tangents: 0 * (1 / 0) is NaN, not finite)
+                for q in range(6):
+                    tb[q, j] = np.float32(0.0)
                 continue
             k = np.uint64(kst[f])
             if wrap and big:  # 1 <= k <= max_stride < n_az
@@ -706,12 +707,26 @@ def _robust_rows(  # type: ignore[no-untyped-def]
             e1 = e1 if t1 else f
             e2 = e2 if t2 else f
             e3 = e3 if t3 else f
-            tax = X[e0] - X[e1]
-            tay = Y[e0] - Y[e1]
-            taz = Z[e0] - Z[e1]
-            tex = X[e2] - X[e3]
-            tey = Y[e2] - Y[e3]
-            tez = Z[e2] - Z[e3]
+            tb[0, j] = X[e0] - X[e1]
+            tb[1, j] = Y[e0] - Y[e1]
+            tb[2, j] = Z[e0] - Z[e1]
+            tb[3, j] = X[e2] - X[e3]
+            tb[4, j] = Y[e2] - Y[e3]
+            tb[5, j] = Z[e2] - Z[e3]
+        # the row's normals from the buffered tangents, in a loop that vectorises: the square
+        # root and the division off the gathers' dependency chain (one long chain per vertex
+        # left the out-of-order core idle on a Zen 3 core)
+        ox = nvx[base : base + nel]
+        oy = nvy[base : base + nel]
+        oz = nvz[base : base + nel]
+        tax_, tay_, taz_, tex_, tey_, tez_ = tb[0], tb[1], tb[2], tb[3], tb[4], tb[5]
+        for jj in range(n_el):
+            tax = tax_[jj]
+            tay = tay_[jj]
+            taz = taz_[jj]
+            tex = tex_[jj]
+            tey = tey_[jj]
+            tez = tez_[jj]
             nx = tay * tez - taz * tey
             ny = taz * tex - tax * tez
             nz = tax * tey - tay * tex
@@ -720,9 +735,9 @@ def _robust_rows(  # type: ignore[no-untyped-def]
             cx = nx * inv
             cy = ny * inv
             cz = nz * inv
-            nvx[f] = cx if math.isfinite(cx) else np.float32(0.0)
-            nvy[f] = cy if math.isfinite(cy) else np.float32(0.0)
-            nvz[f] = cz if math.isfinite(cz) else np.float32(0.0)
+            ox[jj] = cx if math.isfinite(cx) else np.float32(0.0)
+            oy[jj] = cy if math.isfinite(cy) else np.float32(0.0)
+            oz[jj] = cz if math.isfinite(cz) else np.float32(0.0)
 
 
 @njit(cache=True, error_model="numpy")
@@ -808,26 +823,40 @@ def _extent_pass(Z, D, M, n_el, lo_o, hi_o, rg_o):  # type: ignore[no-untyped-de
 
 @njit(cache=True, error_model="numpy")
 def _jump_pass(  # type: ignore[no-untyped-def]
-    D, M, n_el, lo, hi, rg, nz, ok, jump_h, jump_f, ratio, use_ratio, steep_cos, use_steep, jp_o
+    D, M, n_el, lo, hi, rg, nz, ok, jump_h, jump_f, ratio, use_ratio, steep_cos, use_steep, jp_o, code
 ):
-    """Pass 3c: the height-jump code of H_s (:func:`mesh_kernel`'s tests) of both triangles."""
+    """Pass 3c: the height-jump code of H_s (:func:`mesh_kernel`'s tests) of both triangles.
+
+    With ``use_ratio`` in two loops that vectorise: per cell, the range-ratio tests of its
+    edges into the work array ``code (2 M,) int8`` (bit 0: the triangle's azimuth edge, bit 1:
+    its elevation edge; T_{k+1}'s two edges are the same pair of vertices), then per triangle
+    the height test and the steep-edge test. One loop over the cells with both triangles' tests
+    stayed scalar on AVX2 (interleaved loads and stores of both triangles)."""
+    if not use_ratio:
+        for k in range(2 * M):
+            jp_o[k] = (hi[k] - lo[k] > jump_h + jump_f * rg[k]) & ok[k]
+        return
     D1, D2, D3 = D[1:], D[n_el:], D[n_el + 1 :]
+    one = np.int8(1)
     for f in range(M):
         d00, d01, d10, d11 = D[f], D1[f], D2[f], D3[f]
-        for t in range(2):
-            k = 2 * f + t
-            lo_k = lo[k]
-            jp = hi[k] - lo_k > jump_h + jump_f * rg[k]
-            if use_ratio:
-                if t == 0:
-                    a0, a1, e0, e1 = d00, d10, d00, d01  # azimuth edge, elevation edge
-                else:
-                    a0, a1, e0, e1 = d01, d11, d01, d11
-                jp = jp | (abs(a0 - a1) > ratio * min(a0, a1))
-                if use_steep:
-                    e = abs(e0 - e1) > ratio * min(e0, e1)
-                    jp = jp | (e & ((abs(nz[k]) < steep_cos) | (lo_k > jump_h)))
-            jp_o[k] = jp & ok[k]
+        # (a NaN range fails every test, whatever the minimum is)
+        m0 = d00 if d00 < d10 else d10
+        m1 = d01 if d01 < d11 else d11
+        me = d00 if d00 < d01 else d01
+        a0 = abs(d00 - d10) > ratio * m0  # T_k's azimuth edge (00, 10)
+        e0 = abs(d00 - d01) > ratio * me  # T_k's elevation edge (00, 01)
+        a1 = abs(d01 - d11) > ratio * m1  # T_{k+1}'s edges: both (01, 11)
+        code[2 * f] = np.int8(a0) | (np.int8(e0) << one)
+        code[2 * f + 1] = np.int8(a1) * np.int8(3)
+    for k in range(2 * M):
+        lo_k = lo[k]
+        c = code[k]
+        jp = (hi[k] - lo_k > jump_h + jump_f * rg[k]) | ((c & one) != 0)
+        if use_steep:
+            e = (c & np.int8(2)) != 0
+            jp = jp | (e & ((abs(nz[k]) < steep_cos) | (lo_k > jump_h)))
+        jp_o[k] = jp & ok[k]
 
 
 @njit(cache=True, error_model="numpy")
@@ -1132,6 +1161,7 @@ def stages_2_5_kernel(  # type: ignore[no-untyped-def]
             steep_cos,
             use_steep,
             jp,
+            lab,
         )
         _class_pass(
             Xb, Yb, Db, origin, Mb, n_el, nx, ny, nz, okp, jp, rzc, use_robust, c2, cos_c1, lab
