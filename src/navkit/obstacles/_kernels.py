@@ -29,6 +29,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from llvmlite import binding as llvm_binding
 from llvmlite import ir
 from numba import njit
 from numba.core import cgutils, types
@@ -57,6 +58,13 @@ __all__ = [
 _NAN32 = np.float32(np.nan)
 
 
+# the intrinsic's name mangles its pointer type: opaque pointers from LLVM 17 on, typed
+# ``i8*`` before (older llvmlite)
+_PREFETCH_NAME = (
+    "llvm.prefetch.p0" if llvm_binding.llvm_version_info[0] >= 17 else "llvm.prefetch.p0i8"
+)
+
+
 @intrinsic
 def _prefetch(typingctx, arr, idx):  # type: ignore[no-untyped-def]
     """``_prefetch(a, q)``: a hint to load the cache line of ``a[q]`` (``a`` a contiguous 1-D
@@ -70,7 +78,7 @@ def _prefetch(typingctx, arr, idx):  # type: ignore[no-untyped-def]
         i8p = ir.IntType(8).as_pointer()
         i32 = ir.IntType(32)
         fnty = ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.prefetch.p0")
+        fn = cgutils.get_or_insert_function(builder.module, fnty, _PREFETCH_NAME)
         builder.call(fn, [builder.bitcast(ptr, i8p), i32(0), i32(3), i32(1)])
         return context.get_dummy_value()
 
@@ -829,7 +837,22 @@ def _extent_pass(Z, D, M, n_el, lo_o, hi_o, rg_o):  # type: ignore[no-untyped-de
 
 @njit(cache=True, error_model="numpy")
 def _jump_pass(  # type: ignore[no-untyped-def]
-    D, M, n_el, lo, hi, rg, nz, ok, jump_h, jump_f, ratio, use_ratio, steep_cos, use_steep, jp_o, code
+    D,
+    M,
+    n_el,
+    lo,
+    hi,
+    rg,
+    nz,
+    ok,
+    jump_h,
+    jump_f,
+    ratio,
+    use_ratio,
+    steep_cos,
+    use_steep,
+    jp_o,
+    code,
 ):
     """Pass 3c: the height-jump code of H_s (:func:`mesh_kernel`'s tests) of both triangles.
 
