@@ -29,11 +29,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from llvmlite import binding as llvm_binding
-from llvmlite import ir
 from numba import njit
-from numba.core import cgutils, types
-from numba.extending import intrinsic
+
+from navkit._intrinsics import prefetch
 
 __all__ = [
     "boundary_kernel",
@@ -56,33 +54,6 @@ __all__ = [
 ]
 
 _NAN32 = np.float32(np.nan)
-
-
-# the intrinsic's name mangles its pointer type: opaque pointers from LLVM 17 on, typed
-# ``i8*`` before (older llvmlite)
-_PREFETCH_NAME = (
-    "llvm.prefetch.p0" if llvm_binding.llvm_version_info[0] >= 17 else "llvm.prefetch.p0i8"
-)
-
-
-@intrinsic
-def _prefetch(typingctx, arr, idx):  # type: ignore[no-untyped-def]
-    """``_prefetch(a, q)``: a hint to load the cache line of ``a[q]`` (``a`` a contiguous 1-D
-    array, ``q`` an integer; LLVM's ``llvm.prefetch``, read, high locality). No effect on any
-    result, never faults (an address outside the array is allowed)."""
-    sig = types.void(arr, idx)
-
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-        ary = context.make_array(signature.args[0])(context, builder, args[0])
-        ptr = builder.gep(ary.data, [args[1]])
-        i8p = ir.IntType(8).as_pointer()
-        i32 = ir.IntType(32)
-        fnty = ir.FunctionType(ir.VoidType(), [i8p, i32, i32, i32])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, _PREFETCH_NAME)
-        builder.call(fn, [builder.bitcast(ptr, i8p), i32(0), i32(3), i32(1)])
-        return context.get_dummy_value()
-
-    return sig, codegen
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -672,11 +643,11 @@ def _robust_rows(  # type: ignore[no-untyped-def]
         if ia < n_az:
             ba = np.uint64(ia) * nel
             for q in range(ba, ba + nel, np.uint64(16)):
-                _prefetch(X, q)
-                _prefetch(Y, q)
-                _prefetch(Z, q)
+                prefetch(X, q)
+                prefetch(Y, q)
+                prefetch(Z, q)
             for q in range(ba, ba + nel, np.uint64(8)):
-                _prefetch(Df, q)
+                prefetch(Df, q)
         for jj in range(n_el):
             j = np.uint64(jj)
             f = base + j

@@ -16,30 +16,11 @@ extraction, so ``import navkit`` does not pay for Numba.
 from __future__ import annotations
 
 import numpy as np
-from llvmlite import ir
-from numba import njit, types
-from numba.core import cgutils
-from numba.extending import intrinsic
+from numba import njit
+
+from navkit._intrinsics import prefetch
 
 MAX_CELL = 128  # NumPy's PW_BLOCKSIZE: a patch's row sums are one pairwise block up to it
-
-
-@intrinsic
-def _prefetch(typingctx, arr, idx):  # type: ignore[no-untyped-def]  # pragma: no cover
-    """A hint to load the cache line of ``arr.reshape(-1)[idx]`` (C-contiguous ``arr``):
-    LLVM's ``llvm.prefetch`` (read, high locality). No effect on any result."""
-    sig = types.void(arr, idx)
-
-    def codegen(context, builder, signature, args):  # type: ignore[no-untyped-def]
-        ary = context.make_array(signature.args[0])(context, builder, args[0])
-        ptr = builder.gep(ary.data, [args[1]])
-        i32 = ir.IntType(32)
-        fnty = ir.FunctionType(ir.VoidType(), [ptr.type, i32, i32, i32])
-        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.prefetch.p0")
-        builder.call(fn, [ptr, i32(0), i32(3), i32(1)])
-        return context.get_dummy_value()
-
-    return sig, codegen
 
 
 @njit(cache=True)
@@ -304,8 +285,8 @@ def refine_pixels(
             base = ((i2 * c) * W + (gn - i2 * wc) * c) * 3
             for r in range(c):
                 for e in range(0, 3 * c, 8):  # 8 float64 a cache line
-                    _prefetch(Pflat, base + r * 3 * W + e)  # type: ignore[call-arg]
-                _prefetch(Pflat, base + r * 3 * W + 3 * c - 1)  # type: ignore[call-arg]
+                    prefetch(Pflat, base + r * 3 * W + e)  # type: ignore[call-arg]
+                prefetch(Pflat, base + r * 3 * W + 3 * c - 1)  # type: ignore[call-arg]
         g = ids[b]
         i = g // wc
         j = g - i * wc
