@@ -10,7 +10,17 @@ from pathlib import Path
 import pytest
 
 SRC = Path(__file__).resolve().parents[2] / "src" / "navkit"
-CORE = {"errors", "geometry", "sensors", "timing", "datasets", "jit", "_version", "__init__"}
+CORE = {
+    "errors",
+    "geometry",
+    "sensors",
+    "timing",
+    "datasets",
+    "jit",
+    "_intrinsics",  # Numba intrinsics shared by the capabilities' kernels
+    "_version",
+    "__init__",
+}
 CAPABILITIES = {"obstacles", "planes", "stereo", "localization", "path"}
 ALLOWED = {
     "geometry": {"errors", "jit"},
