@@ -345,17 +345,12 @@ class LoopFreeChain:
             )
 
     def _candidate_pairs(self, first_piece: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-        """(older piece, newer piece) pairs with overlapping boxes, newer pieces ``>= first_piece``."""
+        """(older piece, newer piece) pairs with overlapping boxes, newer pieces ``>= first_piece``
+        (NumPy; the compiled search does this inside ``_kernels.find_crossings`` with
+        ``_kernels.candidate_pairs``: the same pairs in the same order)."""
         q = np.arange(first_piece, self.n_piece)
         if len(q) == 0:
             return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
-        if self.compiled:  # depth-first descent per piece: the same pairs in the same order
-            from navkit.path import _kernels
-
-            a, b = _kernels.candidate_pairs(
-                self._lo, self._hi, self._cap, int(first_piece), int(self.n_piece)
-            )
-            return a.astype(np.intp), b.astype(np.intp)
         qlo = self._lo[q + self._cap]
         qhi = self._hi[q + self._cap]
         # start the descent a few levels below the root (at most 64 nodes there): one vectorised
