@@ -498,3 +498,258 @@ def find_crossings(
         sa[:w], sb[:w], ua0[:w], ua1[:w], ub0[:w], ub1[:w], ax, ay, s0, f,
         precision, min_loop_length, max_pairs, first_only,
     )  # fmt: skip
+
+
+# ---------------------------------------------------------------------- the chain's updates (session 6)
+@njit(cache=True)
+def _quadratic_roots(a: float, b: float, c: float, out: np.ndarray, n: int) -> int:  # pragma: no cover
+    """``loops._quadratic_roots`` appending to ``out`` from index ``n``; returns the new count."""
+    if abs(a) < 1e-300:
+        if abs(b) > 1e-300:
+            out[n] = -c / b
+            return n + 1
+        return n
+    disc = b * b - 4.0 * a * c
+    if disc < 0:
+        return n
+    q = -0.5 * (b + np.copysign(np.sqrt(disc), b))
+    out[n] = q / a
+    n += 1
+    if abs(q) > 1e-300:
+        out[n] = c / q
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def monotone_breaks(ax: np.ndarray, ay: np.ndarray, length: float) -> np.ndarray:  # pragma: no cover
+    """``loops.monotone_breaks`` (the same roots, order and tolerance): ``0 = u_0 < ... < u_m =
+    length`` with at most 4 inner breaks."""
+    roots = np.empty(4)
+    n = _quadratic_roots(3.0 * ax[3], 2.0 * ax[2], ax[1], roots, 0)
+    n = _quadratic_roots(3.0 * ay[3], 2.0 * ay[2], ay[1], roots, n)
+    inner = np.empty(4)
+    m = 0
+    for i in range(n):  # keep 0 < r < length, insertion-sorted
+        r = roots[i]
+        if 0.0 < r < length:
+            j = m
+            while j > 0 and inner[j - 1] > r:
+                inner[j] = inner[j - 1]
+                j -= 1
+            inner[j] = r
+            m += 1
+    tol = 1e-12 * max(length, 1.0)
+    cuts = np.empty(m + 2)
+    cuts[0] = 0.0
+    w = 1
+    for i in range(m):
+        r = inner[i]
+        if r - cuts[w - 1] > tol and length - r > tol:
+            cuts[w] = r
+            w += 1
+    cuts[w] = length
+    return cuts[: w + 1]
+
+
+@njit(cache=True)
+def push_segment(
+    seg_ax: np.ndarray,
+    seg_ay: np.ndarray,
+    seg_len: np.ndarray,
+    s0: np.ndarray,
+    first_piece: np.ndarray,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    n_seg: int,
+    n_piece: int,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    length: float,
+) -> int:  # pragma: no cover - compiled
+    """``LoopFreeChain._push_segment``: segment ``n_seg`` := ``(ax, ay, length)`` starting at the
+    chain's end, its monotone pieces appended after piece ``n_piece`` and their leaves and
+    ancestors updated. The caller has made room (segments, at most 5 pieces, tree capacity).
+    Returns the new piece count."""
+    k = n_seg
+    for c in range(4):
+        seg_ax[k, c] = ax[c]
+        seg_ay[k, c] = ay[c]
+    seg_len[k] = length
+    s0[k] = s0[k - 1] + seg_len[k - 1] if k > 0 else 0.0
+    breaks = monotone_breaks(ax, ay, length)
+    a = n_piece
+    b = n_piece + len(breaks) - 1
+    first_piece[k] = a
+    for i in range(a, b):
+        pseg[i] = k
+        pu0[i] = breaks[i - a]
+        pu1[i] = breaks[i - a + 1]
+    first_piece[k + 1] = b
+    update_leaves(lo, hi, cap, a, b, b, pseg, pu0, pu1, seg_ax, seg_ay)
+    return b
+
+
+@njit(cache=True)
+def _cubic_shift(c: np.ndarray, u0: float) -> np.ndarray:  # pragma: no cover - compiled
+    """``spline.cubic_shift`` (the same formulas)."""
+    out = np.empty(4)
+    out[0] = c[0] + u0 * (c[1] + u0 * (c[2] + u0 * c[3]))
+    out[1] = c[1] + u0 * (2.0 * c[2] + 3.0 * c[3] * u0)
+    out[2] = c[2] + 3.0 * c[3] * u0
+    out[3] = c[3]
+    return out
+
+
+@njit(cache=True)
+def _locate(s0: np.ndarray, seg_len: np.ndarray, n_seg: int, s: float) -> tuple[int, float]:
+    """``LoopFreeChain._locate``: ``bisect_right(s0[:n_seg], s) - 1`` clipped to a segment, and
+    the offset in it clipped to its length."""  # pragma: no cover - compiled
+    lo_i, hi_i = 0, n_seg
+    while lo_i < hi_i:
+        mid = (lo_i + hi_i) // 2
+        if s < s0[mid]:
+            hi_i = mid
+        else:
+            lo_i = mid + 1
+    k = min(max(lo_i - 1, 0), n_seg - 1)
+    return k, min(max(s - s0[k], 0.0), seg_len[k])
+
+
+@njit(cache=True)
+def _first_crossing(
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    first: int,
+    n_piece: int,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    s0: np.ndarray,
+    f: np.ndarray,
+    precision: float,
+    min_loop_length: float,
+    max_pairs: int,
+) -> tuple[bool, float, float, float, float, int]:  # pragma: no cover - compiled
+    """:func:`find_crossings` with ``first_only`` and ``LoopFreeChain._crossings``' choice (the
+    smallest ``s_a``, then the largest ``s_b``, then the first found: ``np.lexsort``'s first):
+    (found, s_a, s_b, x, y, truncated passes)."""
+    A, B, P, truncated = find_crossings(
+        lo, hi, cap, first, n_piece, pseg, pu0, pu1, ax, ay, s0, f,
+        precision, min_loop_length, max_pairs, True,
+    )  # fmt: skip
+    if len(A) == 0:
+        return False, 0.0, 0.0, 0.0, 0.0, truncated
+    k = 0
+    for i in range(1, len(A)):
+        if A[i] < A[k] or (A[i] == A[k] and B[i] > B[k]):
+            k = i
+    return True, A[k], B[k], P[k, 0], P[k, 1], truncated
+
+
+@njit(cache=True)
+def append_search(
+    seg_ax: np.ndarray,
+    seg_ay: np.ndarray,
+    seg_len: np.ndarray,
+    s0: np.ndarray,
+    first_piece: np.ndarray,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    n_seg: int,
+    n_piece: int,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    length: float,
+    f: np.ndarray,
+    precision: float,
+    min_loop_length: float,
+    max_pairs: int,
+    search: bool,
+) -> tuple[int, bool, float, float, float, float, int]:  # pragma: no cover - compiled
+    """``LoopFreeChain.append``'s first step in one call: :func:`push_segment`, then (with
+    ``search``) the first crossing of the new segment's pieces (:func:`_first_crossing`).
+    Returns (piece count, found, s_a, s_b, x, y, truncated passes)."""
+    n_new = push_segment(
+        seg_ax, seg_ay, seg_len, s0, first_piece, pseg, pu0, pu1, lo, hi, cap, n_seg, n_piece,
+        ax, ay, length,
+    )  # fmt: skip
+    if not search:
+        return n_new, False, 0.0, 0.0, 0.0, 0.0, 0
+    m = n_seg + 1
+    found, sa, sb, x, y, tr = _first_crossing(
+        lo, hi, cap, first_piece[n_seg], n_new, pseg, pu0, pu1, seg_ax[:m], seg_ay[:m], s0[:m],
+        f, precision, min_loop_length, max_pairs,
+    )  # fmt: skip
+    return n_new, found, sa, sb, x, y, tr
+
+
+@njit(cache=True)
+def cut_search(
+    seg_ax: np.ndarray,
+    seg_ay: np.ndarray,
+    seg_len: np.ndarray,
+    s0: np.ndarray,
+    first_piece: np.ndarray,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    n_seg: int,
+    n_piece: int,
+    s_a: float,
+    s_b: float,
+    f: np.ndarray,
+    precision: float,
+    min_loop_length: float,
+    max_pairs: int,
+) -> tuple[int, int, int, bool, float, float, float, float, int]:  # pragma: no cover - compiled
+    """``LoopFreeChain._cut`` and the next search in one call: locate ``s_a`` and ``s_b``, drop
+    the segments from the one holding ``s_a`` on (their leaves emptied), push the part of that
+    segment before ``s_a`` (if longer than 1e-12) and the part of the one holding ``s_b`` after
+    it (``cubic_shift``'s formulas), then look for the first crossing of that last segment.
+    The caller has made room for 2 more segments and 10 more pieces. Returns (index of the
+    segment holding ``s_b`` before the cut, segment count, piece count, found, s_a, s_b, x, y,
+    truncated passes)."""
+    ka, ua = _locate(s0, seg_len, n_seg, s_a)
+    kb, ub = _locate(s0, seg_len, n_seg, s_b)
+    tx = _cubic_shift(seg_ax[kb], ub)
+    ty = _cubic_shift(seg_ay[kb], ub)
+    t_len = seg_len[kb] - ub
+    hx = seg_ax[ka].copy()
+    hy = seg_ay[ka].copy()
+    # truncate to ka segments: their pieces' leaves become empty boxes
+    first = first_piece[ka]
+    if n_piece > first:
+        update_leaves(lo, hi, cap, first, n_piece, first, pseg, pu0, pu1, seg_ax, seg_ay)
+    n_seg, n_piece = ka, first
+    if ua > 1e-12:
+        n_piece = push_segment(
+            seg_ax, seg_ay, seg_len, s0, first_piece, pseg, pu0, pu1, lo, hi, cap, n_seg,
+            n_piece, hx, hy, ua,
+        )  # fmt: skip
+        n_seg += 1
+    k = n_seg
+    n_piece = push_segment(
+        seg_ax, seg_ay, seg_len, s0, first_piece, pseg, pu0, pu1, lo, hi, cap, n_seg, n_piece,
+        tx, ty, t_len,
+    )  # fmt: skip
+    n_seg += 1
+    found, sa, sb, x, y, tr = _first_crossing(
+        lo, hi, cap, first_piece[k], n_piece, pseg, pu0, pu1, seg_ax[:n_seg], seg_ay[:n_seg],
+        s0[:n_seg], f, precision, min_loop_length, max_pairs,
+    )  # fmt: skip
+    return kb, n_seg, n_piece, found, sa, sb, x, y, tr
