@@ -9,6 +9,8 @@ as the oracle, ``tests/path/test_kernels.py``). Numba, ``cache=True``; imported 
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numba import njit
 
@@ -753,3 +755,87 @@ def cut_search(
         s0[:n_seg], f, precision, min_loop_length, max_pairs,
     )  # fmt: skip
     return kb, n_seg, n_piece, found, sa, sb, x, y, tr
+
+
+# ---------------------------------------------------------------------- the freeze (session 6)
+@njit(cache=True)
+def fit_endpoints(
+    S: np.ndarray, D: np.ndarray, Q: float, ex: float, ey: float
+) -> tuple[bool, np.ndarray, float]:  # pragma: no cover - compiled
+    """``fitting._fit_endpoints`` (the same operations in the same order): (solved, coef
+    ``(2, 4)``, ssr); not solved on a degenerate grid (the caller falls back to
+    ``fitting._fit_general``)."""
+    S2, S3, S4, S5, S6 = S[2], S[3], S[4], S[5], S[6]
+    k1x, k1y, k2x, k2y = ex, ey, 0.0, 0.0
+    rr = (
+        Q
+        - 2.0 * (k1x * D[0, 1] + k1y * D[1, 1] + k2x * D[0, 2] + k2y * D[1, 2])
+        + (k1x**2 + k1y**2) * S2
+        + 2.0 * (k1x * k2x + k1y * k2y) * S3
+        + (k2x**2 + k2y**2) * S4
+    )
+    Rx1 = D[0, 1] - k1x * S2 - k2x * S3
+    Rx2 = D[0, 2] - k1x * S3 - k2x * S4
+    Rx3 = D[0, 3] - k1x * S4 - k2x * S5
+    Ry1 = D[1, 1] - k1y * S2 - k2y * S3
+    Ry2 = D[1, 2] - k1y * S3 - k2y * S4
+    Ry3 = D[1, 3] - k1y * S4 - k2y * S5
+    g00 = S4 - 2 * S3 + S2
+    g01 = S5 - S4 - S3 + S2
+    g11 = S6 - 2 * S4 + S2
+    bx0, bx1 = Rx2 - Rx1, Rx3 - Rx1
+    by0, by1 = Ry2 - Ry1, Ry3 - Ry1
+    det = g00 * g11 - g01 * g01
+    diag = g00 * g11
+    coef = np.zeros((2, 4))
+    if diag > 0 and det > 1e-13 * diag:
+        cx0 = (bx0 * g11 - g01 * bx1) / det
+        cx1 = (g00 * bx1 - bx0 * g01) / det
+        cy0 = (by0 * g11 - g01 * by1) / det
+        cy1 = (g00 * by1 - by0 * g01) / det
+        coef[0, 1], coef[0, 2], coef[0, 3] = k1x - cx0 - cx1, k2x + cx0, 0.0 + cx1
+        coef[1, 1], coef[1, 2], coef[1, 3] = k1y - cy0 - cy1, k2y + cy0, 0.0 + cy1
+        ssr = rr - (0 + (cx0 * bx0 + cy0 * by0) + (cx1 * bx1 + cy1 * by1))
+        return True, coef, max(ssr, 0.0)
+    return False, coef, 0.0
+
+
+@njit(cache=True)
+def natural_fit_endpoints(
+    buf: np.ndarray, tau: np.ndarray, n: int, gx: np.ndarray, gw: np.ndarray
+) -> tuple[Any, ...]:  # pragma: no cover - compiled
+    """``OnlineApproximator._natural_fit`` for the ``endpoints`` variant (4 or more points) in
+    one call: the points ``d = buf[:n] - buf[0]``, the fit over ``t`` (:func:`power_sums`,
+    :func:`fit_endpoints`), its arc lengths (:func:`gauss_legendre_length`), the refit over
+    them and the projection (:func:`project`) - the same kernels and formulas in the same
+    order, without the Python steps and 5 kernel calls between them. Returns (solved, d,
+    coef_t, T_t, ssr_t, u_t, s, T_s, ssr_s, coef_s, then the projection's u and distances);
+    not solved (a degenerate grid): the caller takes the general route."""
+    d = np.empty((n, 2))
+    x0, y0 = buf[0, 0], buf[0, 1]
+    for i in range(n):
+        d[i, 0] = buf[i, 0] - x0
+        d[i, 1] = buf[i, 1] - y0
+    T = tau[n - 1]
+    u = np.zeros(n)
+    if T > 0:
+        for i in range(n):
+            u[i] = tau[i] / T
+    ex, ey = d[n - 1, 0], d[n - 1, 1]
+    S, D, Q = power_sums(u, d)
+    ok, coef_t, ssr_t = fit_endpoints(S, D, Q, ex, ey)
+    empty = np.zeros(0)
+    if not ok:
+        return False, d, coef_t, T, 0.0, u, empty, 0.0, 0.0, coef_t, empty, empty
+    s = gauss_legendre_length(coef_t[0], coef_t[1], u, gx, gw)
+    T_s = s[n - 1]
+    us = np.zeros(n)
+    if T_s > 0:
+        for i in range(n):
+            us[i] = s[i] / T_s
+    S, D, Q = power_sums(us, d)
+    ok, coef_s, ssr_s = fit_endpoints(S, D, Q, ex, ey)
+    if not ok:
+        return False, d, coef_t, T, ssr_t, u, s, T_s, 0.0, coef_s, empty, empty
+    up, dist = project(coef_s, us, d, 3)
+    return True, d, coef_t, T, ssr_t, u, s, T_s, ssr_s, coef_s, up, dist

@@ -436,6 +436,15 @@ class OnlineApproximator:
         With ``compiled`` (the default) the O(n) passes - power sums, Gauss-Legendre arc
         lengths, Newton projection - run as compiled loops (:mod:`navkit.path._kernels`; the
         same formulas, sums in point order: equal to the NumPy passes to rounding)."""
+        if self.compiled and variant == "endpoints" and n_use >= 4:
+            # the whole step in one call (session 6; a degenerate grid takes the route below)
+            ok, d, c_t, T_t, ssr_t, u_t, s, T_s, ssr_s, c_s, u, dist = (
+                _kernels().natural_fit_endpoints(self._buf, self._tau, n_use, _GL_X, _GL_W)
+            )
+            if ok:
+                fit_t = CubicFit(coef=c_t, T=T_t, ssr=ssr_t)
+                self._fit_t = (n_use, fit_t, u_t, s, d)  # for the fallback (_scaled_t_fit)
+                return CubicFit(coef=c_s, T=T_s, ssr=ssr_s), u * T_s, dist
         d = self._buf[:n_use] - anchor
         tau = self._tau[:n_use]
         if not self.compiled:
