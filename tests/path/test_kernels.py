@@ -208,7 +208,7 @@ def test_natural_fit_kernel_matches_numpy(rng):
     from navkit.path import _kernels as K
     from navkit.path.spline import _GL_W, _GL_X
 
-    for _ in range(20):
+    for trial in range(20):
         n = int(rng.integers(4, 2000))
         t = np.linspace(0, rng.uniform(0.3, 2.0), n)
         xy = np.c_[np.cos(t), np.sin(t)] * rng.uniform(1, 30) + rng.normal(0, 0.01, (n, 2))
@@ -217,10 +217,17 @@ def test_natural_fit_kernel_matches_numpy(rng):
         a._buf = np.vstack([xy, np.zeros((3, 2))])  # rows beyond n are not read
         a._tau = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T)), 0, 0, 0]
         fit, s, dev = a._natural_fit("endpoints", a._buf[0].copy(), n)
-        ok, d, c_t, T_t, _, u_t, s_k, T_s, _, c_s, u, dist = K.natural_fit_endpoints(
-            a._buf, a._tau, n, _GL_X, _GL_W
+        eps = (0.005, 1.0)[trial % 2]  # with a point beyond eps the fallback is computed too
+        ok, d, c_t, T_t, _, u_t, s_k, T_s, _, c_s, u, dist, u2, dist2 = K.natural_fit_endpoints(
+            a._buf, a._tau, n, _GL_X, _GL_W, eps
         )
         assert ok
+        assert len(u2) == (n if dev.max() > eps else 0)
+        if len(u2):
+            fit_f, s_f, dev_f = a._scaled_t_fit("endpoints", a._buf[0].copy(), n)
+            assert np.abs(c_t - fit_f.coef).max() <= 1e-9 * np.abs(fit_f.coef).max()
+            assert np.abs(u2 * s_k[-1] - s_f).max() <= 1e-9 * fit_f.T
+            assert np.abs(dist2 - dev_f).max() <= 1e-9
         assert np.array_equal(d, a._buf[:n] - a._buf[0])
         assert abs(T_s - fit.T) <= 1e-12 * fit.T
         assert np.abs(c_s - fit.coef).max() <= 1e-9 * np.abs(fit.coef).max()

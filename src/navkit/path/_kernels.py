@@ -802,14 +802,16 @@ def fit_endpoints(
 
 @njit(cache=True)
 def natural_fit_endpoints(
-    buf: np.ndarray, tau: np.ndarray, n: int, gx: np.ndarray, gw: np.ndarray
+    buf: np.ndarray, tau: np.ndarray, n: int, gx: np.ndarray, gw: np.ndarray, eps: float
 ) -> tuple[Any, ...]:  # pragma: no cover - compiled
     """``OnlineApproximator._natural_fit`` for the ``endpoints`` variant (4 or more points) in
     one call: the points ``d = buf[:n] - buf[0]``, the fit over ``t`` (:func:`power_sums`,
     :func:`fit_endpoints`), its arc lengths (:func:`gauss_legendre_length`), the refit over
     them and the projection (:func:`project`) - the same kernels and formulas in the same
-    order, without the Python steps and 5 kernel calls between them. Returns (solved, d,
-    coef_t, T_t, ssr_t, u_t, s, T_s, ssr_s, coef_s, then the projection's u and distances);
+    order, without the Python steps and 5 kernel calls between them. When a distance exceeds
+    ``eps`` the fallback's projection (``OnlineApproximator._scaled_t_fit``: the fit over ``t``,
+    its own ``u``) is computed too. Returns (solved, d, coef_t, T_t, ssr_t, u_t, s, T_s, ssr_s,
+    coef_s, the projection's u and distances, the fallback's u and distances or empty arrays);
     not solved (a degenerate grid): the caller takes the general route."""
     d = np.empty((n, 2))
     x0, y0 = buf[0, 0], buf[0, 1]
@@ -826,7 +828,7 @@ def natural_fit_endpoints(
     ok, coef_t, ssr_t = fit_endpoints(S, D, Q, ex, ey)
     empty = np.zeros(0)
     if not ok:
-        return False, d, coef_t, T, 0.0, u, empty, 0.0, 0.0, coef_t, empty, empty
+        return False, d, coef_t, T, 0.0, u, empty, 0.0, 0.0, coef_t, empty, empty, empty, empty
     s = gauss_legendre_length(coef_t[0], coef_t[1], u, gx, gw)
     T_s = s[n - 1]
     us = np.zeros(n)
@@ -836,6 +838,12 @@ def natural_fit_endpoints(
     S, D, Q = power_sums(us, d)
     ok, coef_s, ssr_s = fit_endpoints(S, D, Q, ex, ey)
     if not ok:
-        return False, d, coef_t, T, ssr_t, u, s, T_s, 0.0, coef_s, empty, empty
+        return False, d, coef_t, T, ssr_t, u, s, T_s, 0.0, coef_s, empty, empty, empty, empty
     up, dist = project(coef_s, us, d, 3)
-    return True, d, coef_t, T, ssr_t, u, s, T_s, ssr_s, coef_s, up, dist
+    far = False
+    for i in range(n):
+        far = far or dist[i] > eps
+    if not far:
+        return True, d, coef_t, T, ssr_t, u, s, T_s, ssr_s, coef_s, up, dist, empty, empty
+    up2, dist2 = project(coef_t, u, d, 3)
+    return True, d, coef_t, T, ssr_t, u, s, T_s, ssr_s, coef_s, up, dist, up2, dist2

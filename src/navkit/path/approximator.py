@@ -438,12 +438,15 @@ class OnlineApproximator:
         same formulas, sums in point order: equal to the NumPy passes to rounding)."""
         if self.compiled and variant == "endpoints" and n_use >= 4:
             # the whole step in one call (session 6; a degenerate grid takes the route below)
-            ok, d, c_t, T_t, ssr_t, u_t, s, T_s, ssr_s, c_s, u, dist = (
-                _kernels().natural_fit_endpoints(self._buf, self._tau, n_use, _GL_X, _GL_W)
+            ok, d, c_t, T_t, ssr_t, u_t, s, T_s, ssr_s, c_s, u, dist, u2, dist2 = (
+                _kernels().natural_fit_endpoints(
+                    self._buf, self._tau, n_use, _GL_X, _GL_W, self._eps
+                )
             )
             if ok:
                 fit_t = CubicFit(coef=c_t, T=T_t, ssr=ssr_t)
-                self._fit_t = (n_use, fit_t, u_t, s, d)  # for the fallback (_scaled_t_fit)
+                # for the fallback (_scaled_t_fit), with its projection when it will be needed
+                self._fit_t = (n_use, fit_t, u_t, s, d, (u2, dist2) if len(u2) else None)
                 return CubicFit(coef=c_s, T=T_s, ssr=ssr_s), u * T_s, dist
         d = self._buf[:n_use] - anchor
         tau = self._tau[:n_use]
@@ -462,7 +465,7 @@ class OnlineApproximator:
         u_t = tau / fit_t.T
         s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u_t, _GL_X, _GL_W)
         # the fallback (_scaled_t_fit) starts from the same fit over t and arc lengths
-        self._fit_t = (n_use, fit_t, u_t, s, d)
+        self._fit_t = (n_use, fit_t, u_t, s, d, None)
         fit_s = self._fit_compiled(variant, s, d)
         u, dist = K.project(fit_s.coef, s / fit_s.T, d, 3)
         return fit_s, u * fit_s.T, dist
@@ -495,14 +498,16 @@ class OnlineApproximator:
         if self.compiled:
             K = _kernels()
             cached, self._fit_t = self._fit_t, None
+            projected = None
             if cached is not None and cached[0] == n_use:  # _natural_fit's first two steps
-                _, fit_t, u, s, d = cached
+                _, fit_t, u, s, d, projected = cached
             else:
                 fit_t = self._fit_compiled(variant, tau, d)
                 u = tau / fit_t.T
                 s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u, _GL_X, _GL_W)
             fit = CubicFit(coef=fit_t.coef, T=float(s[-1]), ssr=fit_t.ssr)
-            u2, dist = K.project(fit.coef, u, d, 3)
+            # the projection below, done by natural_fit_endpoints when a point was beyond eps
+            u2, dist = projected if projected is not None else K.project(fit.coef, u, d, 3)
             return fit, u2 * fit.T, dist
         fit_t = fit_points(variant, tau, d, tangent=self._tangent)
         u = tau / fit_t.T
