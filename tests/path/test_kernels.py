@@ -204,10 +204,13 @@ def test_compiled_chain_is_the_numpy_chain():
 
 def test_natural_fit_kernel_matches_numpy(rng):
     """``_kernels.natural_fit_endpoints`` (the freeze's fit over t, arc lengths, refit and
-    projection in one call) against the NumPy steps of ``OnlineApproximator._natural_fit``."""
+    projection in one call, in a reused workspace) against the NumPy steps of
+    ``OnlineApproximator._natural_fit`` and, when a point is beyond eps, ``_scaled_t_fit``."""
     from navkit.path import _kernels as K
     from navkit.path.spline import _GL_W, _GL_X
 
+    W = np.full((K.W_ROWS, 2100), np.nan)  # reused: stale numbers from the last trial must not leak
+    speed = np.full(5 * 2100, np.nan)
     for trial in range(20):
         n = int(rng.integers(4, 2000))
         t = np.linspace(0, rng.uniform(0.3, 2.0), n)
@@ -218,18 +221,16 @@ def test_natural_fit_kernel_matches_numpy(rng):
         a._tau = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T)), 0, 0, 0]
         fit, s, dev = a._natural_fit("endpoints", a._buf[0].copy(), n)
         eps = (0.005, 1.0)[trial % 2]  # with a point beyond eps the fallback is computed too
-        ok, d, c_t, T_t, _, u_t, s_k, T_s, _, c_s, u, dist, u2, dist2 = K.natural_fit_endpoints(
-            a._buf, a._tau, n, _GL_X, _GL_W, eps
+        ok, far, _, _, c_t, T_s, _, c_s = K.natural_fit_endpoints(
+            a._buf, a._tau, n, _GL_X, _GL_W, eps, W, speed
         )
-        assert ok
-        assert len(u2) == (n if dev.max() > eps else 0)
-        if len(u2):
-            fit_f, s_f, dev_f = a._scaled_t_fit("endpoints", a._buf[0].copy(), n)
-            assert np.abs(c_t - fit_f.coef).max() <= 1e-9 * np.abs(fit_f.coef).max()
-            assert np.abs(u2 * s_k[-1] - s_f).max() <= 1e-9 * fit_f.T
-            assert np.abs(dist2 - dev_f).max() <= 1e-9
-        assert np.array_equal(d, a._buf[:n] - a._buf[0])
+        assert ok and far == bool(dev.max() > eps)
         assert abs(T_s - fit.T) <= 1e-12 * fit.T
         assert np.abs(c_s - fit.coef).max() <= 1e-9 * np.abs(fit.coef).max()
-        assert np.abs(u * T_s - s).max() <= 1e-9 * fit.T
-        assert np.abs(dist - dev).max() <= 1e-9
+        assert np.abs(W[K.W_UP, :n] * T_s - s).max() <= 1e-9 * fit.T
+        assert np.abs(W[K.W_DIST, :n] - dev).max() <= 1e-9
+        if far:
+            fit_f, s_f, dev_f = a._scaled_t_fit("endpoints", a._buf[0].copy(), n)
+            assert np.abs(c_t - fit_f.coef).max() <= 1e-9 * np.abs(fit_f.coef).max()
+            assert np.abs(W[K.W_UP2, :n] * W[K.W_S, n - 1] - s_f).max() <= 1e-9 * fit_f.T
+            assert np.abs(W[K.W_DIST2, :n] - dev_f).max() <= 1e-9

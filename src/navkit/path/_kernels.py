@@ -9,8 +9,6 @@ as the oracle, ``tests/path/test_kernels.py``). Numba, ``cache=True``; imported 
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from numba import njit
 
@@ -211,20 +209,7 @@ def power_sums(
     """``fitting.power_sums`` in one pass: ``S (7,)`` = sums of ``u^p``, ``D (2, 4)`` = sums of
     ``d u^p``, ``Q`` = sum of ``|d|^2`` (powers by products, sums in point order: equal to the
     NumPy version to rounding)."""
-    S = np.zeros(7)
-    D = np.zeros((2, 4))
-    Q = 0.0
-    for i in range(len(u)):
-        x = u[i]
-        p = 1.0
-        for k in range(7):
-            S[k] += p
-            if k < 4:
-                D[0, k] += d[i, 0] * p
-                D[1, k] += d[i, 1] * p
-            p *= x
-        Q += d[i, 0] * d[i, 0] + d[i, 1] * d[i, 1]
-    return S, D, Q
+    return _power_sums_xy(u, d[:, 0], d[:, 1], len(u))
 
 
 @njit(cache=True)
@@ -236,23 +221,9 @@ def gauss_legendre_length(
     per node, 12x slower here and equal to within 1e-16 relative for speeds far from the
     float64 range's ends), then the running sum in point order."""
     n = len(u)
-    m = len(gx)
-    speed = np.empty(n * m)
-    for i in range(1, n):
-        h = u[i] - u[i - 1]
-        for k in range(m):
-            t = u[i - 1] + h * gx[k]
-            dx = ax[1] + t * (2.0 * ax[2] + 3.0 * ax[3] * t)
-            dy = ay[1] + t * (2.0 * ay[2] + 3.0 * ay[3] * t)
-            speed[i * m + k] = np.sqrt(dx * dx + dy * dy)
+    speed = np.empty(n * len(gx))
     out = np.zeros(n)
-    acc = 0.0
-    for i in range(1, n):
-        tot = 0.0
-        for k in range(m):
-            tot += speed[i * m + k] * gw[k]
-        acc += (u[i] - u[i - 1]) * tot
-        out[i] = acc
+    _gauss_legendre_into(ax, ay, u, n, gx, gw, speed, out)
     return out
 
 
@@ -293,45 +264,15 @@ def project(
     at a time in branch-free loops LLVM vectorises; distances as ``sqrt(dx^2 + dy^2)`` instead
     of ``np.hypot`` (within 1e-16 relative, see :func:`gauss_legendre_length`)."""
     n = len(u0)
-    c00, c01, c02, c03 = c[0, 0], c[0, 1], c[0, 2], c[0, 3]
-    c10, c11, c12, c13 = c[1, 0], c[1, 1], c[1, 2], c[1, 3]
-    ui = np.empty(n)
-    u = np.empty(n)
     X = np.empty(n)  # the points' coordinates as two contiguous arrays: the loops vectorise
     Y = np.empty(n)  # (4x faster than reading the (n, 2) rows)
     for i in range(n):
-        ui[i] = min(max(u0[i], 0.0), 1.0)
-        u[i] = ui[i]
         X[i] = d[i, 0]
         Y[i] = d[i, 1]
-    for _ in range(iterations):
-        for i in range(n):
-            x = u[i]
-            px, py = X[i], Y[i]
-            rx = c00 + x * (c01 + x * (c02 + x * c03)) - px
-            ry = c10 + x * (c11 + x * (c12 + x * c13)) - py
-            dx = c01 + x * (2 * c02 + 3 * c03 * x)
-            dy = c11 + x * (2 * c12 + 3 * c13 * x)
-            ddx = 2 * c02 + 6 * c03 * x
-            ddy = 2 * c12 + 6 * c13 * x
-            g = rx * dx + ry * dy
-            H = dx * dx + dy * dy + rx * ddx + ry * ddy
-            ok = H > 1e-300
-            step = g / (H if ok else 1.0)
-            u[i] = min(max(x - (step if ok else 0.0), 0.0), 1.0)
+    ui = np.empty(n)
+    u = np.empty(n)
     dist = np.empty(n)
-    for i in range(n):
-        x, x0 = u[i], ui[i]
-        px, py = X[i], Y[i]
-        ex = c00 + x * (c01 + x * (c02 + x * c03)) - px
-        ey = c10 + x * (c11 + x * (c12 + x * c13)) - py
-        r_new = np.sqrt(ex * ex + ey * ey)
-        ex = c00 + x0 * (c01 + x0 * (c02 + x0 * c03)) - px
-        ey = c10 + x0 * (c11 + x0 * (c12 + x0 * c13)) - py
-        r_old = np.sqrt(ex * ex + ey * ey)
-        better = r_new <= r_old
-        u[i] = x if better else x0
-        dist[i] = r_new if better else r_old
+    _project_into(c, u0, X, Y, n, iterations, ui, u, dist)
     return u, dist
 
 
@@ -504,7 +445,9 @@ def find_crossings(
 
 # ---------------------------------------------------------------------- the chain's updates (session 6)
 @njit(cache=True)
-def _quadratic_roots(a: float, b: float, c: float, out: np.ndarray, n: int) -> int:  # pragma: no cover
+def _quadratic_roots(
+    a: float, b: float, c: float, out: np.ndarray, n: int
+) -> int:  # pragma: no cover
     """``loops._quadratic_roots`` appending to ``out`` from index ``n``; returns the new count."""
     if abs(a) < 1e-300:
         if abs(b) > 1e-300:
@@ -524,7 +467,9 @@ def _quadratic_roots(a: float, b: float, c: float, out: np.ndarray, n: int) -> i
 
 
 @njit(cache=True)
-def monotone_breaks(ax: np.ndarray, ay: np.ndarray, length: float) -> np.ndarray:  # pragma: no cover
+def monotone_breaks(
+    ax: np.ndarray, ay: np.ndarray, length: float
+) -> np.ndarray:  # pragma: no cover
     """``loops.monotone_breaks`` (the same roots, order and tolerance): ``0 = u_0 < ... < u_m =
     length`` with at most 4 inner breaks."""
     roots = np.empty(4)
@@ -800,50 +745,162 @@ def fit_endpoints(
     return False, coef, 0.0
 
 
+# rows of the freeze's workspace (``natural_fit_endpoints``; ``OnlineApproximator._work``)
+W_X, W_Y, W_U, W_S, W_US, W_UP, W_DIST, W_UP2, W_DIST2, W_UI, W_OUT = range(11)
+W_ROWS = 11
+
+
+@njit(cache=True)
+def _power_sums_xy(
+    u: np.ndarray, X: np.ndarray, Y: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray, float]:  # pragma: no cover - compiled
+    """:func:`power_sums` of the points ``(X[i], Y[i])``, ``i < n`` (the same sums in the same
+    order)."""
+    S = np.zeros(7)
+    D = np.zeros((2, 4))
+    Q = 0.0
+    for i in range(n):
+        x = u[i]
+        p = 1.0
+        for k in range(7):
+            S[k] += p
+            if k < 4:
+                D[0, k] += X[i] * p
+                D[1, k] += Y[i] * p
+            p *= x
+        Q += X[i] * X[i] + Y[i] * Y[i]
+    return S, D, Q
+
+
+@njit(cache=True)
+def _gauss_legendre_into(
+    ax: np.ndarray,
+    ay: np.ndarray,
+    u: np.ndarray,
+    n: int,
+    gx: np.ndarray,
+    gw: np.ndarray,
+    speed: np.ndarray,
+    out: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """:func:`gauss_legendre_length` of ``u[:n]`` into ``out[:n]`` (``speed``: scratch of
+    ``n * len(gx)``; the same loops)."""
+    m = len(gx)
+    for i in range(1, n):
+        h = u[i] - u[i - 1]
+        for k in range(m):
+            t = u[i - 1] + h * gx[k]
+            dx = ax[1] + t * (2.0 * ax[2] + 3.0 * ax[3] * t)
+            dy = ay[1] + t * (2.0 * ay[2] + 3.0 * ay[3] * t)
+            speed[i * m + k] = np.sqrt(dx * dx + dy * dy)
+    if n > 0:
+        out[0] = 0.0
+    acc = 0.0
+    for i in range(1, n):
+        tot = 0.0
+        for k in range(m):
+            tot += speed[i * m + k] * gw[k]
+        acc += (u[i] - u[i - 1]) * tot
+        out[i] = acc
+
+
+@njit(cache=True)
+def _project_into(
+    c: np.ndarray,
+    u0: np.ndarray,
+    X: np.ndarray,
+    Y: np.ndarray,
+    n: int,
+    iterations: int,
+    ui: np.ndarray,
+    u: np.ndarray,
+    dist: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """:func:`project` of the points ``(X[i], Y[i])``, ``i < n``, into ``u[:n]``, ``dist[:n]``
+    (``ui``: scratch; the same loops)."""
+    c00, c01, c02, c03 = c[0, 0], c[0, 1], c[0, 2], c[0, 3]
+    c10, c11, c12, c13 = c[1, 0], c[1, 1], c[1, 2], c[1, 3]
+    for i in range(n):
+        ui[i] = min(max(u0[i], 0.0), 1.0)
+        u[i] = ui[i]
+    for _ in range(iterations):
+        for i in range(n):
+            x = u[i]
+            px, py = X[i], Y[i]
+            rx = c00 + x * (c01 + x * (c02 + x * c03)) - px
+            ry = c10 + x * (c11 + x * (c12 + x * c13)) - py
+            dx = c01 + x * (2 * c02 + 3 * c03 * x)
+            dy = c11 + x * (2 * c12 + 3 * c13 * x)
+            ddx = 2 * c02 + 6 * c03 * x
+            ddy = 2 * c12 + 6 * c13 * x
+            g = rx * dx + ry * dy
+            H = dx * dx + dy * dy + rx * ddx + ry * ddy
+            ok = H > 1e-300
+            step = g / (H if ok else 1.0)
+            u[i] = min(max(x - (step if ok else 0.0), 0.0), 1.0)
+    for i in range(n):
+        x, x0 = u[i], ui[i]
+        px, py = X[i], Y[i]
+        ex = c00 + x * (c01 + x * (c02 + x * c03)) - px
+        ey = c10 + x * (c11 + x * (c12 + x * c13)) - py
+        r_new = np.sqrt(ex * ex + ey * ey)
+        ex = c00 + x0 * (c01 + x0 * (c02 + x0 * c03)) - px
+        ey = c10 + x0 * (c11 + x0 * (c12 + x0 * c13)) - py
+        r_old = np.sqrt(ex * ex + ey * ey)
+        better = r_new <= r_old
+        u[i] = x if better else x0
+        dist[i] = r_new if better else r_old
+
+
 @njit(cache=True)
 def natural_fit_endpoints(
-    buf: np.ndarray, tau: np.ndarray, n: int, gx: np.ndarray, gw: np.ndarray, eps: float
-) -> tuple[Any, ...]:  # pragma: no cover - compiled
+    buf: np.ndarray,
+    tau: np.ndarray,
+    n: int,
+    gx: np.ndarray,
+    gw: np.ndarray,
+    eps: float,
+    W: np.ndarray,
+    speed: np.ndarray,
+) -> tuple[bool, bool, float, float, np.ndarray, float, float, np.ndarray]:  # pragma: no cover
     """``OnlineApproximator._natural_fit`` for the ``endpoints`` variant (4 or more points) in
-    one call: the points ``d = buf[:n] - buf[0]``, the fit over ``t`` (:func:`power_sums`,
-    :func:`fit_endpoints`), its arc lengths (:func:`gauss_legendre_length`), the refit over
-    them and the projection (:func:`project`) - the same kernels and formulas in the same
-    order, without the Python steps and 5 kernel calls between them. When a distance exceeds
-    ``eps`` the fallback's projection (``OnlineApproximator._scaled_t_fit``: the fit over ``t``,
-    its own ``u``) is computed too. Returns (solved, d, coef_t, T_t, ssr_t, u_t, s, T_s, ssr_s,
-    coef_s, the projection's u and distances, the fallback's u and distances or empty arrays);
-    not solved (a degenerate grid): the caller takes the general route."""
-    d = np.empty((n, 2))
+    one call: the points ``buf[:n] - buf[0]``, the fit over ``t`` (power sums,
+    :func:`fit_endpoints`), its arc lengths (Gauss-Legendre), the refit over them and the
+    projection - the loops of :func:`power_sums`, :func:`gauss_legendre_length` and
+    :func:`project` in the same order, without the Python steps and 5 kernel calls between
+    them, and in the caller's workspace ``W`` (rows ``W_*``, ``n`` columns used; ``speed`` of
+    ``5 n``) instead of ~25 fresh arrays of up to ``5 n`` numbers: on the 2-core VM their
+    page faults cost as much as the arithmetic (session 6). When a distance exceeds ``eps``
+    the fallback's projection (``OnlineApproximator._scaled_t_fit``: the fit over ``t`` at
+    its own ``u``) is computed too (rows ``W_UP2``, ``W_DIST2``). Returns (solved, fallback
+    computed, T_t, ssr_t, coef_t, T_s, ssr_s, coef_s); not solved (a degenerate grid): the
+    caller takes the general route."""
+    X, Y, u, s, us = W[W_X], W[W_Y], W[W_U], W[W_S], W[W_US]
     x0, y0 = buf[0, 0], buf[0, 1]
     for i in range(n):
-        d[i, 0] = buf[i, 0] - x0
-        d[i, 1] = buf[i, 1] - y0
+        X[i] = buf[i, 0] - x0
+        Y[i] = buf[i, 1] - y0
     T = tau[n - 1]
-    u = np.zeros(n)
-    if T > 0:
-        for i in range(n):
-            u[i] = tau[i] / T
-    ex, ey = d[n - 1, 0], d[n - 1, 1]
-    S, D, Q = power_sums(u, d)
+    for i in range(n):
+        u[i] = tau[i] / T if T > 0 else 0.0
+    ex, ey = X[n - 1], Y[n - 1]
+    S, D, Q = _power_sums_xy(u, X, Y, n)
     ok, coef_t, ssr_t = fit_endpoints(S, D, Q, ex, ey)
-    empty = np.zeros(0)
     if not ok:
-        return False, d, coef_t, T, 0.0, u, empty, 0.0, 0.0, coef_t, empty, empty, empty, empty
-    s = gauss_legendre_length(coef_t[0], coef_t[1], u, gx, gw)
+        return False, False, T, 0.0, coef_t, 0.0, 0.0, coef_t
+    _gauss_legendre_into(coef_t[0], coef_t[1], u, n, gx, gw, speed, s)
     T_s = s[n - 1]
-    us = np.zeros(n)
-    if T_s > 0:
-        for i in range(n):
-            us[i] = s[i] / T_s
-    S, D, Q = power_sums(us, d)
+    for i in range(n):
+        us[i] = s[i] / T_s if T_s > 0 else 0.0
+    S, D, Q = _power_sums_xy(us, X, Y, n)
     ok, coef_s, ssr_s = fit_endpoints(S, D, Q, ex, ey)
     if not ok:
-        return False, d, coef_t, T, ssr_t, u, s, T_s, 0.0, coef_s, empty, empty, empty, empty
-    up, dist = project(coef_s, us, d, 3)
+        return False, False, T, ssr_t, coef_t, T_s, 0.0, coef_s
+    dist = W[W_DIST]
+    _project_into(coef_s, us, X, Y, n, 3, W[W_UI], W[W_UP], dist)
     far = False
     for i in range(n):
         far = far or dist[i] > eps
-    if not far:
-        return True, d, coef_t, T, ssr_t, u, s, T_s, ssr_s, coef_s, up, dist, empty, empty
-    up2, dist2 = project(coef_t, u, d, 3)
-    return True, d, coef_t, T, ssr_t, u, s, T_s, ssr_s, coef_s, up, dist, up2, dist2
+    if far:
+        _project_into(coef_t, u, X, Y, n, 3, W[W_UI], W[W_UP2], W[W_DIST2])
+    return True, far, T, ssr_t, coef_t, T_s, ssr_s, coef_s
