@@ -140,3 +140,97 @@ def test_freeze_kernels_match_numpy(rng):
         un, dn = project(CubicFit(coef=coef, T=1.0, ssr=0.0), u0, d)
         assert np.abs(dk - dn).max() <= 1e-12 * max(dn.max(), 1.0)
         assert np.abs(uk - un).max() <= 1e-9
+
+
+def test_monotone_breaks_kernel_is_the_python_one(rng):
+    """``_kernels.monotone_breaks`` gives ``loops.monotone_breaks`` bit for bit, degenerate
+    cubics (lines, parabolas, double roots, roots at the ends) included."""
+    from navkit.path import _kernels as K
+    from navkit.path.loops import monotone_breaks
+
+    cases = [rng.normal(size=(2, 4)) for _ in range(300)]
+    cases += [
+        np.array([[0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 0.0, 0.0]]),  # a line along x
+        np.array([[0.0, 1.0, -0.5, 0.0], [0.0, 0.0, 1.0, 0.0]]),  # x turns at u = 1
+        np.array([[0.0, 3.0, -3.0, 1.0], [1.0, 0.0, 0.0, 0.0]]),  # double root of x' at u = 1
+        np.array([[0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]]),  # roots at u = 0
+    ]
+    for c in cases:
+        for length in (0.5, 1.0, 3.0):
+            expected = monotone_breaks(c[0], c[1], length)
+            got = K.monotone_breaks(c[0].copy(), c[1].copy(), length)
+            assert np.array_equal(got, expected)
+
+
+def test_compiled_chain_is_the_numpy_chain():
+    """``LoopFreeChain.append`` as one kernel call per step (push + search, cut + search) leaves
+    the NumPy chain's state: the same segments, monotone pieces, leaf boxes and root box, the
+    same cuts (crossings bit for bit) with the same pre-cut segments."""
+    from navkit.path.loops import LoopFreeChain
+
+    t = np.linspace(0, 6 * np.pi, 900)
+    xy = np.c_[10 * np.sin(t), 5 * np.sin(2 * t) + 0.02 * t]  # a figure eight, three times
+    ref = OnlineApproximator(ApproximatorSettings(tolerance=0.05, remove_loops=False))
+    ref.compiled = ref._chain.compiled = False
+    for p in xy:
+        ref.add(p)
+    raw = ref.finish().raw_spline
+    chains = []
+    for compiled in (True, False):
+        chain = LoopFreeChain()
+        chain.compiled = compiled
+        for k in range(raw.n_segments):
+            chain.append(raw.ax[k], raw.ay[k], raw.length[k])
+        chains.append(chain)
+    a, b = chains
+    assert len(a.cuts) == len(b.cuts) >= 2
+    for x, y in zip(a.cuts, b.cuts, strict=True):
+        assert (x.s_start, x.s_end) == (y.s_start, y.s_end)
+        assert np.array_equal(x.point, y.point)
+        for u, v in zip(x.segments, y.segments, strict=True):
+            assert np.array_equal(u, v)
+    assert (a.n_seg, a.n_piece) == (b.n_seg, b.n_piece)
+    n, m = a.n_seg, a.n_piece
+    for name in ("_ax", "_ay", "_len", "_s0"):
+        assert np.array_equal(getattr(a, name)[:n], getattr(b, name)[:n])
+    assert np.array_equal(a._seg_first_piece[: n + 1], b._seg_first_piece[: n + 1])
+    for name in ("_pseg", "_pu0", "_pu1"):
+        assert np.array_equal(getattr(a, name)[:m], getattr(b, name)[:m])
+    for box in ("_lo", "_hi"):
+        x, y = getattr(a, box), getattr(b, box)
+        assert np.array_equal(x[a._cap : a._cap + m], y[b._cap : b._cap + m])
+        assert np.array_equal(x[1], y[1])  # the root: the whole chain
+
+
+def test_natural_fit_kernel_matches_numpy(rng):
+    """``_kernels.natural_fit_endpoints`` (the freeze's fit over t, arc lengths, refit and
+    projection in one call, in a reused workspace) against the NumPy steps of
+    ``OnlineApproximator._natural_fit`` and, when a point is beyond eps, ``_scaled_t_fit``."""
+    from navkit.path import _kernels as K
+    from navkit.path.spline import _GL_W, _GL_X
+
+    W = np.full((K.W_ROWS, 2100), np.nan)  # reused: stale numbers from the last trial must not leak
+    speed = np.full(5 * 2100, np.nan)
+    for trial in range(20):
+        n = int(rng.integers(4, 2000))
+        t = np.linspace(0, rng.uniform(0.3, 2.0), n)
+        xy = np.c_[np.cos(t), np.sin(t)] * rng.uniform(1, 30) + rng.normal(0, 0.01, (n, 2))
+        a = OnlineApproximator(ApproximatorSettings(tolerance=0.05))
+        a.compiled = False
+        a._buf = np.vstack([xy, np.zeros((3, 2))])  # rows beyond n are not read
+        a._tau = np.r_[0.0, np.cumsum(np.hypot(*np.diff(xy, axis=0).T)), 0, 0, 0]
+        fit, s, dev = a._natural_fit("endpoints", a._buf[0].copy(), n)
+        eps = (0.005, 1.0)[trial % 2]  # with a point beyond eps the fallback is computed too
+        ok, far, _, _, c_t, T_s, _, c_s = K.natural_fit_endpoints(
+            a._buf, a._tau, n, _GL_X, _GL_W, eps, W, speed
+        )
+        assert ok and far == bool(dev.max() > eps)
+        assert abs(T_s - fit.T) <= 1e-12 * fit.T
+        assert np.abs(c_s - fit.coef).max() <= 1e-9 * np.abs(fit.coef).max()
+        assert np.abs(W[K.W_UP, :n] * T_s - s).max() <= 1e-9 * fit.T
+        assert np.abs(W[K.W_DIST, :n] - dev).max() <= 1e-9
+        if far:
+            fit_f, s_f, dev_f = a._scaled_t_fit("endpoints", a._buf[0].copy(), n)
+            assert np.abs(c_t - fit_f.coef).max() <= 1e-9 * np.abs(fit_f.coef).max()
+            assert np.abs(W[K.W_UP2, :n] * W[K.W_S, n - 1] - s_f).max() <= 1e-9 * fit_f.T
+            assert np.abs(W[K.W_DIST2, :n] - dev_f).max() <= 1e-9

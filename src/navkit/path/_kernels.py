@@ -209,20 +209,7 @@ def power_sums(
     """``fitting.power_sums`` in one pass: ``S (7,)`` = sums of ``u^p``, ``D (2, 4)`` = sums of
     ``d u^p``, ``Q`` = sum of ``|d|^2`` (powers by products, sums in point order: equal to the
     NumPy version to rounding)."""
-    S = np.zeros(7)
-    D = np.zeros((2, 4))
-    Q = 0.0
-    for i in range(len(u)):
-        x = u[i]
-        p = 1.0
-        for k in range(7):
-            S[k] += p
-            if k < 4:
-                D[0, k] += d[i, 0] * p
-                D[1, k] += d[i, 1] * p
-            p *= x
-        Q += d[i, 0] * d[i, 0] + d[i, 1] * d[i, 1]
-    return S, D, Q
+    return _power_sums_xy(u, d[:, 0], d[:, 1], len(u))
 
 
 @njit(cache=True)
@@ -234,23 +221,9 @@ def gauss_legendre_length(
     per node, 12x slower here and equal to within 1e-16 relative for speeds far from the
     float64 range's ends), then the running sum in point order."""
     n = len(u)
-    m = len(gx)
-    speed = np.empty(n * m)
-    for i in range(1, n):
-        h = u[i] - u[i - 1]
-        for k in range(m):
-            t = u[i - 1] + h * gx[k]
-            dx = ax[1] + t * (2.0 * ax[2] + 3.0 * ax[3] * t)
-            dy = ay[1] + t * (2.0 * ay[2] + 3.0 * ay[3] * t)
-            speed[i * m + k] = np.sqrt(dx * dx + dy * dy)
+    speed = np.empty(n * len(gx))
     out = np.zeros(n)
-    acc = 0.0
-    for i in range(1, n):
-        tot = 0.0
-        for k in range(m):
-            tot += speed[i * m + k] * gw[k]
-        acc += (u[i] - u[i - 1]) * tot
-        out[i] = acc
+    _gauss_legendre_into(ax, ay, u, n, gx, gw, speed, out)
     return out
 
 
@@ -291,45 +264,15 @@ def project(
     at a time in branch-free loops LLVM vectorises; distances as ``sqrt(dx^2 + dy^2)`` instead
     of ``np.hypot`` (within 1e-16 relative, see :func:`gauss_legendre_length`)."""
     n = len(u0)
-    c00, c01, c02, c03 = c[0, 0], c[0, 1], c[0, 2], c[0, 3]
-    c10, c11, c12, c13 = c[1, 0], c[1, 1], c[1, 2], c[1, 3]
-    ui = np.empty(n)
-    u = np.empty(n)
     X = np.empty(n)  # the points' coordinates as two contiguous arrays: the loops vectorise
     Y = np.empty(n)  # (4x faster than reading the (n, 2) rows)
     for i in range(n):
-        ui[i] = min(max(u0[i], 0.0), 1.0)
-        u[i] = ui[i]
         X[i] = d[i, 0]
         Y[i] = d[i, 1]
-    for _ in range(iterations):
-        for i in range(n):
-            x = u[i]
-            px, py = X[i], Y[i]
-            rx = c00 + x * (c01 + x * (c02 + x * c03)) - px
-            ry = c10 + x * (c11 + x * (c12 + x * c13)) - py
-            dx = c01 + x * (2 * c02 + 3 * c03 * x)
-            dy = c11 + x * (2 * c12 + 3 * c13 * x)
-            ddx = 2 * c02 + 6 * c03 * x
-            ddy = 2 * c12 + 6 * c13 * x
-            g = rx * dx + ry * dy
-            H = dx * dx + dy * dy + rx * ddx + ry * ddy
-            ok = H > 1e-300
-            step = g / (H if ok else 1.0)
-            u[i] = min(max(x - (step if ok else 0.0), 0.0), 1.0)
+    ui = np.empty(n)
+    u = np.empty(n)
     dist = np.empty(n)
-    for i in range(n):
-        x, x0 = u[i], ui[i]
-        px, py = X[i], Y[i]
-        ex = c00 + x * (c01 + x * (c02 + x * c03)) - px
-        ey = c10 + x * (c11 + x * (c12 + x * c13)) - py
-        r_new = np.sqrt(ex * ex + ey * ey)
-        ex = c00 + x0 * (c01 + x0 * (c02 + x0 * c03)) - px
-        ey = c10 + x0 * (c11 + x0 * (c12 + x0 * c13)) - py
-        r_old = np.sqrt(ex * ex + ey * ey)
-        better = r_new <= r_old
-        u[i] = x if better else x0
-        dist[i] = r_new if better else r_old
+    _project_into(c, u0, X, Y, n, iterations, ui, u, dist)
     return u, dist
 
 
@@ -341,15 +284,27 @@ def within(
     (points ``buf - buf[0]`` at ``u = tau / tau[n - 1]``): every residual ``|C(u_i) - d_i|``
     (``fitting.residuals``) within ``limit``, or, with ``geometric``, every point beyond it
     within ``limit`` of the curve (``fitting.project``, 3 Newton steps). The same formulas
-    point by point; stops at the first point that fails (only the verdict is used)."""
+    point by point; stops at the first point that fails (only the verdict is used).
+
+    Session 6: the points are visited from the last one back (each point's verdict does not
+    depend on the others, so neither does the answer): the point that ends a segment is
+    usually the new one or close to it, and the ~2000 points before it were all visited
+    before. A residual clearly inside the limit (``dx^2 + dy^2 <= (limit (1 - 1e-12))^2``,
+    a few roundings from ``hypot``'s exact result) passes without the libm ``hypot`` call;
+    the others take the exact test."""
     T = tau[n - 1]
     x0, y0 = buf[0, 0], buf[0, 1]
-    for i in range(n):
+    inner = limit * (1.0 - 1e-12)
+    inner2 = inner * inner if limit > 1e-100 else -1.0  # (squares of tiny limits underflow)
+    for i in range(n - 1, -1, -1):
         u = tau[i] / T
         px, py = buf[i, 0] - x0, buf[i, 1] - y0
         cx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3]))
         cy = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3]))
-        r = np.hypot(cx - px, cy - py)
+        ex, ey = cx - px, cy - py
+        if ex * ex + ey * ey <= inner2:
+            continue
+        r = np.hypot(ex, ey)
         if r <= limit:
             continue
         if not geometric or not r > limit:  # (NaN: not from finite points) rejected
@@ -498,3 +453,473 @@ def find_crossings(
         sa[:w], sb[:w], ua0[:w], ua1[:w], ub0[:w], ub1[:w], ax, ay, s0, f,
         precision, min_loop_length, max_pairs, first_only,
     )  # fmt: skip
+
+
+# ---------------------------------------------------------------------- the chain's updates (session 6)
+@njit(cache=True)
+def _quadratic_roots(
+    a: float, b: float, c: float, out: np.ndarray, n: int
+) -> int:  # pragma: no cover
+    """``loops._quadratic_roots`` appending to ``out`` from index ``n``; returns the new count."""
+    if abs(a) < 1e-300:
+        if abs(b) > 1e-300:
+            out[n] = -c / b
+            return n + 1
+        return n
+    disc = b * b - 4.0 * a * c
+    if disc < 0:
+        return n
+    q = -0.5 * (b + np.copysign(np.sqrt(disc), b))
+    out[n] = q / a
+    n += 1
+    if abs(q) > 1e-300:
+        out[n] = c / q
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def monotone_breaks(
+    ax: np.ndarray, ay: np.ndarray, length: float
+) -> np.ndarray:  # pragma: no cover
+    """``loops.monotone_breaks`` (the same roots, order and tolerance): ``0 = u_0 < ... < u_m =
+    length`` with at most 4 inner breaks."""
+    roots = np.empty(4)
+    n = _quadratic_roots(3.0 * ax[3], 2.0 * ax[2], ax[1], roots, 0)
+    n = _quadratic_roots(3.0 * ay[3], 2.0 * ay[2], ay[1], roots, n)
+    inner = np.empty(4)
+    m = 0
+    for i in range(n):  # keep 0 < r < length, insertion-sorted
+        r = roots[i]
+        if 0.0 < r < length:
+            j = m
+            while j > 0 and inner[j - 1] > r:
+                inner[j] = inner[j - 1]
+                j -= 1
+            inner[j] = r
+            m += 1
+    tol = 1e-12 * max(length, 1.0)
+    cuts = np.empty(m + 2)
+    cuts[0] = 0.0
+    w = 1
+    for i in range(m):
+        r = inner[i]
+        if r - cuts[w - 1] > tol and length - r > tol:
+            cuts[w] = r
+            w += 1
+    cuts[w] = length
+    return cuts[: w + 1]
+
+
+@njit(cache=True)
+def push_segment(
+    seg_ax: np.ndarray,
+    seg_ay: np.ndarray,
+    seg_len: np.ndarray,
+    s0: np.ndarray,
+    first_piece: np.ndarray,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    n_seg: int,
+    n_piece: int,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    length: float,
+) -> int:  # pragma: no cover - compiled
+    """``LoopFreeChain._push_segment``: segment ``n_seg`` := ``(ax, ay, length)`` starting at the
+    chain's end, its monotone pieces appended after piece ``n_piece`` and their leaves and
+    ancestors updated. The caller has made room (segments, at most 5 pieces, tree capacity).
+    Returns the new piece count."""
+    k = n_seg
+    for c in range(4):
+        seg_ax[k, c] = ax[c]
+        seg_ay[k, c] = ay[c]
+    seg_len[k] = length
+    s0[k] = s0[k - 1] + seg_len[k - 1] if k > 0 else 0.0
+    breaks = monotone_breaks(ax, ay, length)
+    a = n_piece
+    b = n_piece + len(breaks) - 1
+    first_piece[k] = a
+    for i in range(a, b):
+        pseg[i] = k
+        pu0[i] = breaks[i - a]
+        pu1[i] = breaks[i - a + 1]
+    first_piece[k + 1] = b
+    update_leaves(lo, hi, cap, a, b, b, pseg, pu0, pu1, seg_ax, seg_ay)
+    return b
+
+
+@njit(cache=True)
+def _cubic_shift(c: np.ndarray, u0: float) -> np.ndarray:  # pragma: no cover - compiled
+    """``spline.cubic_shift`` (the same formulas)."""
+    out = np.empty(4)
+    out[0] = c[0] + u0 * (c[1] + u0 * (c[2] + u0 * c[3]))
+    out[1] = c[1] + u0 * (2.0 * c[2] + 3.0 * c[3] * u0)
+    out[2] = c[2] + 3.0 * c[3] * u0
+    out[3] = c[3]
+    return out
+
+
+@njit(cache=True)
+def _locate(s0: np.ndarray, seg_len: np.ndarray, n_seg: int, s: float) -> tuple[int, float]:
+    """``LoopFreeChain._locate``: ``bisect_right(s0[:n_seg], s) - 1`` clipped to a segment, and
+    the offset in it clipped to its length."""  # pragma: no cover - compiled
+    lo_i, hi_i = 0, n_seg
+    while lo_i < hi_i:
+        mid = (lo_i + hi_i) // 2
+        if s < s0[mid]:
+            hi_i = mid
+        else:
+            lo_i = mid + 1
+    k = min(max(lo_i - 1, 0), n_seg - 1)
+    return k, min(max(s - s0[k], 0.0), seg_len[k])
+
+
+@njit(cache=True)
+def _first_crossing(
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    first: int,
+    n_piece: int,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    s0: np.ndarray,
+    f: np.ndarray,
+    precision: float,
+    min_loop_length: float,
+    max_pairs: int,
+) -> tuple[bool, float, float, float, float, int]:  # pragma: no cover - compiled
+    """:func:`find_crossings` with ``first_only`` and ``LoopFreeChain._crossings``' choice (the
+    smallest ``s_a``, then the largest ``s_b``, then the first found: ``np.lexsort``'s first):
+    (found, s_a, s_b, x, y, truncated passes)."""
+    A, B, P, truncated = find_crossings(
+        lo, hi, cap, first, n_piece, pseg, pu0, pu1, ax, ay, s0, f,
+        precision, min_loop_length, max_pairs, True,
+    )  # fmt: skip
+    if len(A) == 0:
+        return False, 0.0, 0.0, 0.0, 0.0, truncated
+    k = 0
+    for i in range(1, len(A)):
+        if A[i] < A[k] or (A[i] == A[k] and B[i] > B[k]):
+            k = i
+    return True, A[k], B[k], P[k, 0], P[k, 1], truncated
+
+
+@njit(cache=True)
+def append_search(
+    seg_ax: np.ndarray,
+    seg_ay: np.ndarray,
+    seg_len: np.ndarray,
+    s0: np.ndarray,
+    first_piece: np.ndarray,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    n_seg: int,
+    n_piece: int,
+    ax: np.ndarray,
+    ay: np.ndarray,
+    length: float,
+    f: np.ndarray,
+    precision: float,
+    min_loop_length: float,
+    max_pairs: int,
+    search: bool,
+) -> tuple[int, bool, float, float, float, float, int]:  # pragma: no cover - compiled
+    """``LoopFreeChain.append``'s first step in one call: :func:`push_segment`, then (with
+    ``search``) the first crossing of the new segment's pieces (:func:`_first_crossing`).
+    Returns (piece count, found, s_a, s_b, x, y, truncated passes)."""
+    n_new = push_segment(
+        seg_ax, seg_ay, seg_len, s0, first_piece, pseg, pu0, pu1, lo, hi, cap, n_seg, n_piece,
+        ax, ay, length,
+    )  # fmt: skip
+    if not search:
+        return n_new, False, 0.0, 0.0, 0.0, 0.0, 0
+    m = n_seg + 1
+    found, sa, sb, x, y, tr = _first_crossing(
+        lo, hi, cap, first_piece[n_seg], n_new, pseg, pu0, pu1, seg_ax[:m], seg_ay[:m], s0[:m],
+        f, precision, min_loop_length, max_pairs,
+    )  # fmt: skip
+    return n_new, found, sa, sb, x, y, tr
+
+
+@njit(cache=True)
+def cut_search(
+    seg_ax: np.ndarray,
+    seg_ay: np.ndarray,
+    seg_len: np.ndarray,
+    s0: np.ndarray,
+    first_piece: np.ndarray,
+    pseg: np.ndarray,
+    pu0: np.ndarray,
+    pu1: np.ndarray,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    cap: int,
+    n_seg: int,
+    n_piece: int,
+    s_a: float,
+    s_b: float,
+    f: np.ndarray,
+    precision: float,
+    min_loop_length: float,
+    max_pairs: int,
+) -> tuple[int, int, int, bool, float, float, float, float, int]:  # pragma: no cover - compiled
+    """``LoopFreeChain._cut`` and the next search in one call: locate ``s_a`` and ``s_b``, drop
+    the segments from the one holding ``s_a`` on (their leaves emptied), push the part of that
+    segment before ``s_a`` (if longer than 1e-12) and the part of the one holding ``s_b`` after
+    it (``cubic_shift``'s formulas), then look for the first crossing of that last segment.
+    The caller has made room for 2 more segments and 10 more pieces. Returns (index of the
+    segment holding ``s_b`` before the cut, segment count, piece count, found, s_a, s_b, x, y,
+    truncated passes)."""
+    ka, ua = _locate(s0, seg_len, n_seg, s_a)
+    kb, ub = _locate(s0, seg_len, n_seg, s_b)
+    tx = _cubic_shift(seg_ax[kb], ub)
+    ty = _cubic_shift(seg_ay[kb], ub)
+    t_len = seg_len[kb] - ub
+    hx = seg_ax[ka].copy()
+    hy = seg_ay[ka].copy()
+    # truncate to ka segments: their pieces' leaves become empty boxes
+    first = first_piece[ka]
+    if n_piece > first:
+        update_leaves(lo, hi, cap, first, n_piece, first, pseg, pu0, pu1, seg_ax, seg_ay)
+    n_seg, n_piece = ka, first
+    if ua > 1e-12:
+        n_piece = push_segment(
+            seg_ax, seg_ay, seg_len, s0, first_piece, pseg, pu0, pu1, lo, hi, cap, n_seg,
+            n_piece, hx, hy, ua,
+        )  # fmt: skip
+        n_seg += 1
+    k = n_seg
+    n_piece = push_segment(
+        seg_ax, seg_ay, seg_len, s0, first_piece, pseg, pu0, pu1, lo, hi, cap, n_seg, n_piece,
+        tx, ty, t_len,
+    )  # fmt: skip
+    n_seg += 1
+    found, sa, sb, x, y, tr = _first_crossing(
+        lo, hi, cap, first_piece[k], n_piece, pseg, pu0, pu1, seg_ax[:n_seg], seg_ay[:n_seg],
+        s0[:n_seg], f, precision, min_loop_length, max_pairs,
+    )  # fmt: skip
+    return kb, n_seg, n_piece, found, sa, sb, x, y, tr
+
+
+# ---------------------------------------------------------------------- the freeze (session 6)
+@njit(cache=True)
+def fit_endpoints(
+    S: np.ndarray, D: np.ndarray, Q: float, ex: float, ey: float
+) -> tuple[bool, np.ndarray, float]:  # pragma: no cover - compiled
+    """``fitting._fit_endpoints`` (the same operations in the same order): (solved, coef
+    ``(2, 4)``, ssr); not solved on a degenerate grid (the caller falls back to
+    ``fitting._fit_general``)."""
+    S2, S3, S4, S5, S6 = S[2], S[3], S[4], S[5], S[6]
+    k1x, k1y, k2x, k2y = ex, ey, 0.0, 0.0
+    rr = (
+        Q
+        - 2.0 * (k1x * D[0, 1] + k1y * D[1, 1] + k2x * D[0, 2] + k2y * D[1, 2])
+        + (k1x**2 + k1y**2) * S2
+        + 2.0 * (k1x * k2x + k1y * k2y) * S3
+        + (k2x**2 + k2y**2) * S4
+    )
+    Rx1 = D[0, 1] - k1x * S2 - k2x * S3
+    Rx2 = D[0, 2] - k1x * S3 - k2x * S4
+    Rx3 = D[0, 3] - k1x * S4 - k2x * S5
+    Ry1 = D[1, 1] - k1y * S2 - k2y * S3
+    Ry2 = D[1, 2] - k1y * S3 - k2y * S4
+    Ry3 = D[1, 3] - k1y * S4 - k2y * S5
+    g00 = S4 - 2 * S3 + S2
+    g01 = S5 - S4 - S3 + S2
+    g11 = S6 - 2 * S4 + S2
+    bx0, bx1 = Rx2 - Rx1, Rx3 - Rx1
+    by0, by1 = Ry2 - Ry1, Ry3 - Ry1
+    det = g00 * g11 - g01 * g01
+    diag = g00 * g11
+    coef = np.zeros((2, 4))
+    if diag > 0 and det > 1e-13 * diag:
+        cx0 = (bx0 * g11 - g01 * bx1) / det
+        cx1 = (g00 * bx1 - bx0 * g01) / det
+        cy0 = (by0 * g11 - g01 * by1) / det
+        cy1 = (g00 * by1 - by0 * g01) / det
+        coef[0, 1], coef[0, 2], coef[0, 3] = k1x - cx0 - cx1, k2x + cx0, 0.0 + cx1
+        coef[1, 1], coef[1, 2], coef[1, 3] = k1y - cy0 - cy1, k2y + cy0, 0.0 + cy1
+        ssr = rr - (0 + (cx0 * bx0 + cy0 * by0) + (cx1 * bx1 + cy1 * by1))
+        return True, coef, max(ssr, 0.0)
+    return False, coef, 0.0
+
+
+# rows of the freeze's workspace (``natural_fit_endpoints``; ``OnlineApproximator._work``)
+W_X, W_Y, W_U, W_S, W_US, W_UP, W_DIST, W_UP2, W_DIST2, W_UI, W_OUT = range(11)
+W_ROWS = 11
+
+
+@njit(cache=True)
+def _power_sums_xy(
+    u: np.ndarray, X: np.ndarray, Y: np.ndarray, n: int
+) -> tuple[np.ndarray, np.ndarray, float]:  # pragma: no cover - compiled
+    """:func:`power_sums` of the points ``(X[i], Y[i])``, ``i < n`` (the same sums in the same
+    order)."""
+    S = np.zeros(7)
+    D = np.zeros((2, 4))
+    Q = 0.0
+    for i in range(n):
+        x = u[i]
+        p = 1.0
+        for k in range(7):
+            S[k] += p
+            if k < 4:
+                D[0, k] += X[i] * p
+                D[1, k] += Y[i] * p
+            p *= x
+        Q += X[i] * X[i] + Y[i] * Y[i]
+    return S, D, Q
+
+
+@njit(cache=True)
+def _gauss_legendre_into(
+    ax: np.ndarray,
+    ay: np.ndarray,
+    u: np.ndarray,
+    n: int,
+    gx: np.ndarray,
+    gw: np.ndarray,
+    speed: np.ndarray,
+    out: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """:func:`gauss_legendre_length` of ``u[:n]`` into ``out[:n]`` (``speed``: scratch of
+    ``len(gx) n``). Session 6: node by node over all intervals (a contiguous loop over
+    the intervals LLVM vectorises; interval by interval the 5 nodes were a short loop it did
+    not: 63 -> 15 us for 2000 points); each interval's weighted sum still adds its nodes in
+    order, then the running sum in point order: the same numbers."""
+    m = len(gx)
+    for k in range(m):
+        g = gx[k]
+        row = k * n
+        for i in range(1, n):
+            h = u[i] - u[i - 1]
+            t = u[i - 1] + h * g
+            dx = ax[1] + t * (2.0 * ax[2] + 3.0 * ax[3] * t)
+            dy = ay[1] + t * (2.0 * ay[2] + 3.0 * ay[3] * t)
+            speed[row + i] = np.sqrt(dx * dx + dy * dy)
+    for i in range(n):  # out[i]: interval i's weighted sum of speeds, then the running sum
+        out[i] = 0.0
+    for k in range(m):
+        w = gw[k]
+        row = k * n
+        for i in range(1, n):
+            out[i] += speed[row + i] * w
+    acc = 0.0
+    for i in range(1, n):
+        acc += (u[i] - u[i - 1]) * out[i]
+        out[i] = acc
+
+
+@njit(cache=True)
+def _project_into(
+    c: np.ndarray,
+    u0: np.ndarray,
+    X: np.ndarray,
+    Y: np.ndarray,
+    n: int,
+    iterations: int,
+    ui: np.ndarray,
+    u: np.ndarray,
+    dist: np.ndarray,
+) -> None:  # pragma: no cover - compiled
+    """:func:`project` of the points ``(X[i], Y[i])``, ``i < n``, into ``u[:n]``, ``dist[:n]``
+    (``ui``: scratch; the same loops)."""
+    c00, c01, c02, c03 = c[0, 0], c[0, 1], c[0, 2], c[0, 3]
+    c10, c11, c12, c13 = c[1, 0], c[1, 1], c[1, 2], c[1, 3]
+    for i in range(n):
+        ui[i] = min(max(u0[i], 0.0), 1.0)
+        u[i] = ui[i]
+    for _ in range(iterations):
+        for i in range(n):
+            x = u[i]
+            px, py = X[i], Y[i]
+            rx = c00 + x * (c01 + x * (c02 + x * c03)) - px
+            ry = c10 + x * (c11 + x * (c12 + x * c13)) - py
+            dx = c01 + x * (2 * c02 + 3 * c03 * x)
+            dy = c11 + x * (2 * c12 + 3 * c13 * x)
+            ddx = 2 * c02 + 6 * c03 * x
+            ddy = 2 * c12 + 6 * c13 * x
+            g = rx * dx + ry * dy
+            H = dx * dx + dy * dy + rx * ddx + ry * ddy
+            ok = H > 1e-300
+            step = g / (H if ok else 1.0)
+            u[i] = min(max(x - (step if ok else 0.0), 0.0), 1.0)
+    for i in range(n):
+        x, x0 = u[i], ui[i]
+        px, py = X[i], Y[i]
+        ex = c00 + x * (c01 + x * (c02 + x * c03)) - px
+        ey = c10 + x * (c11 + x * (c12 + x * c13)) - py
+        r_new = np.sqrt(ex * ex + ey * ey)
+        ex = c00 + x0 * (c01 + x0 * (c02 + x0 * c03)) - px
+        ey = c10 + x0 * (c11 + x0 * (c12 + x0 * c13)) - py
+        r_old = np.sqrt(ex * ex + ey * ey)
+        better = r_new <= r_old
+        u[i] = x if better else x0
+        dist[i] = r_new if better else r_old
+
+
+@njit(cache=True)
+def natural_fit_endpoints(
+    buf: np.ndarray,
+    tau: np.ndarray,
+    n: int,
+    gx: np.ndarray,
+    gw: np.ndarray,
+    eps: float,
+    W: np.ndarray,
+    speed: np.ndarray,
+) -> tuple[bool, bool, float, float, np.ndarray, float, float, np.ndarray]:  # pragma: no cover
+    """``OnlineApproximator._natural_fit`` for the ``endpoints`` variant (4 or more points) in
+    one call: the points ``buf[:n] - buf[0]``, the fit over ``t`` (power sums,
+    :func:`fit_endpoints`), its arc lengths (Gauss-Legendre), the refit over them and the
+    projection - the loops of :func:`power_sums`, :func:`gauss_legendre_length` and
+    :func:`project` in the same order, without the Python steps and 5 kernel calls between
+    them, and in the caller's workspace ``W`` (rows ``W_*``, ``n`` columns used; ``speed``:
+    ``5 n``, the Gauss-Legendre nodes) instead of ~25 fresh arrays of up to ``5 n`` numbers
+    (session 6: their page faults were a good part of the freeze on the 2-core VM). When a distance exceeds ``eps``
+    the fallback's projection (``OnlineApproximator._scaled_t_fit``: the fit over ``t`` at
+    its own ``u``) is computed too (rows ``W_UP2``, ``W_DIST2``). Returns (solved, fallback
+    computed, T_t, ssr_t, coef_t, T_s, ssr_s, coef_s); not solved (a degenerate grid): the
+    caller takes the general route."""
+    X, Y, u, s, us = W[W_X], W[W_Y], W[W_U], W[W_S], W[W_US]
+    x0, y0 = buf[0, 0], buf[0, 1]
+    for i in range(n):
+        X[i] = buf[i, 0] - x0
+        Y[i] = buf[i, 1] - y0
+    T = tau[n - 1]
+    for i in range(n):
+        u[i] = tau[i] / T if T > 0 else 0.0
+    ex, ey = X[n - 1], Y[n - 1]
+    S, D, Q = _power_sums_xy(u, X, Y, n)
+    ok, coef_t, ssr_t = fit_endpoints(S, D, Q, ex, ey)
+    if not ok:
+        return False, False, T, 0.0, coef_t, 0.0, 0.0, coef_t
+    _gauss_legendre_into(coef_t[0], coef_t[1], u, n, gx, gw, speed, s)
+    T_s = s[n - 1]
+    for i in range(n):
+        us[i] = s[i] / T_s if T_s > 0 else 0.0
+    S, D, Q = _power_sums_xy(us, X, Y, n)
+    ok, coef_s, ssr_s = fit_endpoints(S, D, Q, ex, ey)
+    if not ok:
+        return False, False, T, ssr_t, coef_t, T_s, 0.0, coef_s
+    dist = W[W_DIST]
+    _project_into(coef_s, us, X, Y, n, 3, W[W_UI], W[W_UP], dist)
+    far = False
+    for i in range(n):
+        far = far or dist[i] > eps
+    if far:
+        _project_into(coef_t, u, X, Y, n, 3, W[W_UI], W[W_UP2], W[W_DIST2])
+    return True, far, T, ssr_t, coef_t, T_s, ssr_s, coef_s

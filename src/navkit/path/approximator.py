@@ -259,6 +259,7 @@ class OnlineApproximator:
         self._tangent: NDArray[np.float64] | None = None
         self._last: NDArray[np.float64] | None = None
         self._fit_t: tuple[Any, ...] | None = None  # the last freeze's fit over t (compiled)
+        self._work: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
 
     # ------------------------------------------------------------------ state
     @property
@@ -436,6 +437,22 @@ class OnlineApproximator:
         With ``compiled`` (the default) the O(n) passes - power sums, Gauss-Legendre arc
         lengths, Newton projection - run as compiled loops (:mod:`navkit.path._kernels`; the
         same formulas, sums in point order: equal to the NumPy passes to rounding)."""
+        if self.compiled and variant == "endpoints" and n_use >= 4:
+            # the whole step in one call (session 6; a degenerate grid takes the route below)
+            K = _kernels()
+            W, speed = self._workspace(n_use)
+            ok, far, T_t, ssr_t, c_t, T_s, ssr_s, c_s = K.natural_fit_endpoints(
+                self._buf, self._tau, n_use, _GL_X, _GL_W, self._eps, W, speed
+            )
+            if ok:
+                fit_t = CubicFit(coef=c_t, T=T_t, ssr=ssr_t)
+                # for the fallback (_scaled_t_fit), with its projection when it will be needed;
+                # rows of the workspace, valid until the next freeze
+                n = n_use
+                far_uv = (W[K.W_UP2, :n], W[K.W_DIST2, :n]) if far else None
+                self._fit_t = (n, fit_t, W[K.W_U, :n], W[K.W_S, :n], None, far_uv)
+                s = np.multiply(W[K.W_UP, :n], T_s, out=W[K.W_OUT, :n])
+                return CubicFit(coef=c_s, T=T_s, ssr=ssr_s), s, W[K.W_DIST, :n]
         d = self._buf[:n_use] - anchor
         tau = self._tau[:n_use]
         if not self.compiled:
@@ -453,10 +470,19 @@ class OnlineApproximator:
         u_t = tau / fit_t.T
         s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u_t, _GL_X, _GL_W)
         # the fallback (_scaled_t_fit) starts from the same fit over t and arc lengths
-        self._fit_t = (n_use, fit_t, u_t, s, d)
+        self._fit_t = (n_use, fit_t, u_t, s, d, None)
         fit_s = self._fit_compiled(variant, s, d)
         u, dist = K.project(fit_s.coef, s / fit_s.T, d, 3)
         return fit_s, u * fit_s.T, dist
+
+    def _workspace(self, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The freeze's scratch arrays (``_kernels.natural_fit_endpoints``), kept between
+        freezes: fresh arrays of up to 10,000 numbers per freeze cost page faults on every
+        freeze (session 6)."""
+        if self._work is None or self._work[0].shape[1] < n:
+            size = max(n, len(self._tau))
+            self._work = (np.zeros((_kernels().W_ROWS, size)), np.zeros(5 * size))
+        return self._work
 
     def _fit_compiled(
         self, variant: str, tau: NDArray[np.float64], d: NDArray[np.float64]
@@ -481,20 +507,27 @@ class OnlineApproximator:
         self, variant: str, anchor: NDArray[np.float64], n_use: int
     ) -> tuple[CubicFit, NDArray[np.float64], NDArray[np.float64]]:
         """The fit over t with its parameter rescaled to the arc length (fallback of step 1.6)."""
-        d = self._buf[:n_use] - anchor
         tau = self._tau[:n_use]
         if self.compiled:
             K = _kernels()
             cached, self._fit_t = self._fit_t, None
+            d: NDArray[np.float64] | None
             if cached is not None and cached[0] == n_use:  # _natural_fit's first two steps
-                _, fit_t, u, s, d = cached
+                _, fit_t, u, s, d, projected = cached
             else:
+                d = self._buf[:n_use] - anchor
                 fit_t = self._fit_compiled(variant, tau, d)
                 u = tau / fit_t.T
                 s = K.gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u, _GL_X, _GL_W)
+                projected = None
             fit = CubicFit(coef=fit_t.coef, T=float(s[-1]), ssr=fit_t.ssr)
-            u2, dist = K.project(fit.coef, u, d, 3)
+            if projected is None:  # (natural_fit_endpoints did it when a point was beyond eps)
+                projected = K.project(
+                    fit.coef, u, self._buf[:n_use] - anchor if d is None else d, 3
+                )
+            u2, dist = projected
             return fit, u2 * fit.T, dist
+        d = self._buf[:n_use] - anchor
         fit_t = fit_points(variant, tau, d, tangent=self._tangent)
         u = tau / fit_t.T
         s = gauss_legendre_length(fit_t.coef[0], fit_t.coef[1], u)
@@ -507,7 +540,7 @@ class OnlineApproximator:
     ) -> None:
         self._pts.append(np.array(pts, dtype=np.float64).reshape(-1, 2))
         self._pt_s.append(np.asarray(s, dtype=np.float64))
-        self._pt_dev.append(np.asarray(dev, dtype=np.float64))
+        self._pt_dev.append(np.array(dev, dtype=np.float64))  # (may be a workspace row)
 
     # ------------------------------------------------------------------ the end
     def finish(self, seconds_per_point: ArrayLike | None = None) -> ApproximationResult:

@@ -515,6 +515,10 @@ class LoopFreeChain:
         remove_loops: bool = True,
     ) -> list[LoopCut]:
         """Append a segment; with ``remove_loops`` cut every loop it closes (returns the cuts)."""
+        if self.compiled:
+            return self._append_compiled(
+                np.asarray(ax, float), np.asarray(ay, float), float(length), remove_loops
+            )
         k = self._push_segment(np.asarray(ax, float), np.asarray(ay, float), float(length))
         cuts: list[LoopCut] = []
         if not remove_loops:
@@ -527,6 +531,76 @@ class LoopFreeChain:
             k = self._cut(best)
             cuts.append(self.cuts[-1])
         return cuts
+
+    def _reserve(self, pieces: int) -> None:
+        """Room for 2 more segments and ``pieces`` more pieces, in the arrays and in the tree
+        (grown as ``_update_leaves`` grows it: the same boxes, all leaves rebuilt)."""
+        self._grow_segments()
+        need = self.n_piece + pieces
+        if need > len(self._pseg):
+            size = max(2 * len(self._pseg), need)
+            self._pseg = np.resize(self._pseg, size)
+            self._pu0 = np.resize(self._pu0, size)
+            self._pu1 = np.resize(self._pu1, size)
+        if need > self._cap:
+            self._update_leaves(self.n_piece, need)
+
+    def _append_compiled(
+        self, ax: NDArray[np.float64], ay: NDArray[np.float64], length: float, remove_loops: bool
+    ) -> list[LoopCut]:
+        """``append`` in one kernel call per step (session 6): the push of the segment with its
+        first crossing search (``_kernels.append_search``), then per loop the cut with the next
+        search (``_kernels.cut_search``) - the same segments, pieces, boxes and crossings as
+        ``_push_segment`` / ``find_crossings`` / ``_cut`` (the NumPy oracle, ``compiled``
+        False), without their ~15 Python-level steps and 4 kernel calls per cut."""
+        from navkit.path import _kernels
+
+        self._reserve(5)  # a segment has at most 4 inner monotone breaks
+        n_piece, found, s_a, s_b, x, y, truncated = _kernels.append_search(
+            self._ax, self._ay, self._len, self._s0, self._seg_first_piece, self._pseg,
+            self._pu0, self._pu1, self._lo, self._hi, self._cap, self.n_seg, self.n_piece,
+            ax, ay, length, self._f, self.precision, self.min_loop_length, self.max_pairs,
+            remove_loops,
+        )  # fmt: skip
+        self.n_seg += 1
+        self.n_piece = n_piece
+        cuts: list[LoopCut] = []
+        for _ in range(64):
+            if truncated:
+                self._warn_truncated(truncated)
+            if not found:
+                break
+            # the chain before the cut, for the loop's polyline (its first kb + 1 segments)
+            n = self.n_seg
+            before = (self._len[:n].copy(), self._ax[:n].copy(), self._ay[:n].copy())
+            self._reserve(10)  # the head and the tail of the cut
+            kb, self.n_seg, self.n_piece, found_next, sa2, sb2, x2, y2, truncated = (
+                _kernels.cut_search(
+                    self._ax, self._ay, self._len, self._s0, self._seg_first_piece, self._pseg,
+                    self._pu0, self._pu1, self._lo, self._hi, self._cap, self.n_seg,
+                    self.n_piece, s_a, s_b, self._f, self.precision, self.min_loop_length,
+                    self.max_pairs,
+                )
+            )  # fmt: skip
+            cut = LoopCut(
+                s_start=s_a,
+                s_end=s_b,
+                point=np.array([x, y]),
+                segments=(before[0][: kb + 1], before[1][: kb + 1], before[2][: kb + 1]),
+            )
+            self.cuts.append(cut)
+            cuts.append(cut)
+            log.debug("loop cut: s in [%.4f, %.4f] (%.3f m)", s_a, s_b, s_b - s_a)
+            found, s_a, s_b, x, y = found_next, sa2, sb2, x2, y2
+        return cuts
+
+    def _warn_truncated(self, truncated: int) -> None:
+        log.warning(
+            "loop search: more than %d overlapping sub-pairs (curves on top of each "
+            "other?) in %d passes; kept those with the smallest s",
+            self.max_pairs,
+            truncated,
+        )
 
     def _locate(self, s: float) -> tuple[int, float]:
         # np.searchsorted(s0, s, side="right") - 1 and np.clip, on plain floats
