@@ -933,7 +933,9 @@ def _mvee_rows(H: NDArray[np.float64], hoff: NDArray[np.int64]) -> NDArray[np.fl
 
 # The records of a frame's shapes (hundreds) are built without the dataclasses' ``__init__``,
 # whose per-field ``object.__setattr__`` (the price of ``frozen=True``) is ~3x the cost of
-# filling ``__dict__`` directly; these classes have no ``__post_init__`` and stay frozen.
+# filling ``__dict__`` directly; these classes have no ``__post_init__`` and stay frozen. The
+# fields are stored one by one into the instance's ``__dict__`` (no keyword dictionary built
+# and merged per record as with ``__dict__.update(x=...)``: ~1.5-2x faster, session 6).
 
 
 def _ellipses(rows: NDArray[np.float64]) -> list[Ellipse]:
@@ -941,7 +943,13 @@ def _ellipses(rows: NDArray[np.float64]) -> list[Ellipse]:
     out = []
     for x, y, a, b, angle in rows.tolist():
         e = new(Ellipse)
-        e.__dict__.update(x=x, y=y, a=a, b=b, angle=angle, kind="ellipse")
+        d = e.__dict__
+        d["x"] = x
+        d["y"] = y
+        d["a"] = a
+        d["b"] = b
+        d["angle"] = angle
+        d["kind"] = "ellipse"
         out.append(e)
     return out
 
@@ -951,7 +959,11 @@ def _circles(rows: NDArray[np.float64]) -> list[Circle]:
     out = []
     for x, y, r in rows.tolist():
         c = new(Circle)
-        c.__dict__.update(x=x, y=y, radius=r, kind="circle")
+        d = c.__dict__
+        d["x"] = x
+        d["y"] = y
+        d["radius"] = r
+        d["kind"] = "circle"
         out.append(c)
     return out
 
@@ -961,7 +973,12 @@ def _rectangles(rows: NDArray[np.float64]) -> list[Rectangle]:
     out = []
     for xmin, xmax, ymin, ymax in rows.tolist():
         r = new(Rectangle)
-        r.__dict__.update(xmin=xmin, xmax=xmax, ymin=ymin, ymax=ymax, kind="rectangle")
+        d = r.__dict__
+        d["xmin"] = xmin
+        d["xmax"] = xmax
+        d["ymin"] = ymin
+        d["ymax"] = ymax
+        d["kind"] = "rectangle"
         out.append(r)
     return out
 

@@ -25,34 +25,10 @@ from navkit.obstacles._kernels import (
 
 __all__ = [
     "ground_cells_kernel",
-    "guaranteed_sets_kernel",
     "map_groups_kernel",
     "split_kernel",
     "vertex_kernel",
 ]
-
-
-@njit(cache=True)
-def guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off):  # type: ignore[no-untyped-def]
-    """A7's input in a CSR layout: per obstacle its vertices' ``(x, y)`` (``v_xyz`` rows
-    ``v_off[k]:v_off[k + 1]``) followed by its shadow vertices (``s_xy``, ``s_off``), as the
-    twin's ``np.concatenate([vertices, shadows])``. Returns ``(g_xy (N, 2), g_off (n + 1,))``."""
-    n = len(v_off) - 1
-    g_off = np.empty(n + 1, np.int64)
-    for k in range(n + 1):
-        g_off[k] = v_off[k] + s_off[k]
-    g = np.empty((g_off[n], 2))
-    for k in range(n):
-        p = g_off[k]
-        for r in range(v_off[k], v_off[k + 1]):
-            g[p, 0] = v_xyz[r, 0]
-            g[p, 1] = v_xyz[r, 1]
-            p += 1
-        for r in range(s_off[k], s_off[k + 1]):
-            g[p, 0] = s_xy[r, 0]
-            g[p, 1] = s_xy[r, 1]
-            p += 1
-    return g, g_off
 
 
 # ------------------------------------------------------------------------------------------
@@ -758,50 +734,25 @@ def ground_cells_kernel(P, sel, cell_m, quantile, work_f, work_i):  # type: igno
 
 @njit(cache=True, error_model="numpy")
 def map_groups_kernel(flat, tri, tri_obstacle, shadows, ntri, vid, boundary, n):  # type: ignore[no-untyped-def]
-    """Boundary vertices ``(x, y)``, all vertices ``(x, y, z)`` and shadow vertex sets
-    ``(x, y)`` of obstacles 1..n in CSR layouts (each with offsets ``(n + 1,)``), the shadow
-    areas and the triangle counts, in the twin's orders (vertices in raster order; a shadow
-    set's vertices sorted by index, each once; areas summed in raster order). Two passes over
-    the vertices and one over the shadow triangles ``shadows`` (raster order) with their
-    owners in ``tri_obstacle``; the triangle counts ``ntri (n,)`` are stage 6's
-    (:func:`split_kernel`)."""
-    vf = vid.ravel()
-    bf = boundary.ravel()
-    nv = len(vf)
-    v_off = np.zeros(n + 1, np.int64)
-    b_off = np.zeros(n + 1, np.int64)
-    for k in range(nv):
-        a = vf[k]
-        if a > 0:
-            v_off[a] += 1
-            if bf[k]:
-                b_off[a] += 1
-    for a in range(1, n + 1):  # counts -> offsets: id a's rows are off[a - 1]:off[a]
-        v_off[a] += v_off[a - 1]
-        b_off[a] += b_off[a - 1]
-    tv, tb = v_off[n], b_off[n]
-    v_xyz = np.empty((tv, 3))
-    b_xy = np.empty((tb, 2))
-    vfill = v_off.copy()
-    bfill = b_off.copy()
-    for k in range(nv):
-        a = vf[k]
-        if a > 0:
-            p = vfill[a - 1]
-            v_xyz[p, 0] = flat[k, 0]
-            v_xyz[p, 1] = flat[k, 1]
-            v_xyz[p, 2] = flat[k, 2]
-            vfill[a - 1] = p + 1
-            if bf[k]:
-                q = bfill[a - 1]
-                b_xy[q, 0] = flat[k, 0]
-                b_xy[q, 1] = flat[k, 1]
-                bfill[a - 1] = q + 1
-    # the shadow triangles with an owner (raster order): counts per owner and areas
+    """Stage 8's per-obstacle sets in CSR layouts (offsets ``(n + 1,)``) for obstacles 1..n:
+    boundary vertices ``(x, y)`` (``b_off``, ``b_xy``) and A7's input, the obstacle's
+    vertices' ``(x, y)`` followed by its shadow vertices' (``g_off``, ``g_xy``: the twin's
+    ``np.concatenate([vertices, shadows])``), with the number of vertices, their lowest and
+    highest ``z`` (``np.minimum`` / ``np.maximum``: a NaN wins), the shadow areas and the
+    triangle counts, in the twin's orders (vertices in raster order; a shadow set's vertices
+    sorted by index, each once; areas summed in raster order).
+
+    One pass over the shadow triangles ``shadows`` (raster order, owners in
+    ``tri_obstacle``) and two over the vertices; the vertices' coordinates go straight to
+    their place in ``g_xy`` (no per-obstacle vertex array and no second copy for A7: those
+    were ~1.6 MB of memory traffic per frame). The triangle counts ``ntri (n,)`` are stage
+    6's (:func:`split_kernel`)."""
+    # the shadow triangles with an owner (raster order): counts per owner, areas, vertices
     C2 = tri_obstacle.shape[1]
     area = np.zeros(n + 1)
     t_cnt = np.zeros(n + 1, np.int64)
-    sh = np.empty(len(shadows), np.int64)
+    sh_own = np.empty(len(shadows), np.int64)
+    sh_v = np.empty((len(shadows), 3), np.int64)
     ns = 0
     ownf = tri_obstacle.ravel()
     for k in range(len(shadows)):
@@ -810,10 +761,11 @@ def map_groups_kernel(flat, tri, tri_obstacle, shadows, ntri, vid, boundary, n):
         if a <= 0:
             continue
         r, c = f // C2, f % C2
-        t_cnt[a] += 1
-        sh[ns] = f
-        ns += 1
         i0, i1, i2 = tri[r, c, 0], tri[r, c, 1], tri[r, c, 2]
+        t_cnt[a] += 1
+        sh_own[ns] = a
+        sh_v[ns, 0], sh_v[ns, 1], sh_v[ns, 2] = i0, i1, i2
+        ns += 1
         v0x, v0y = flat[i0, 0], flat[i0, 1]
         area[a] += 0.5 * abs(
             (flat[i1, 0] - v0x) * (flat[i2, 1] - v0y) - (flat[i2, 0] - v0x) * (flat[i1, 1] - v0y)
@@ -824,25 +776,72 @@ def map_groups_kernel(flat, tri, tri_obstacle, shadows, ntri, vid, boundary, n):
     fill = t_off.copy()
     verts = np.empty(3 * ns, np.int64)
     for k in range(ns):
-        t = sh[k]
-        a = ownf[t]
-        r, c = t // C2, t % C2
+        a = sh_own[k]
         p = fill[a]
-        verts[p] = tri[r, c, 0]
-        verts[p + 1] = tri[r, c, 1]
-        verts[p + 2] = tri[r, c, 2]
+        verts[p] = sh_v[k, 0]
+        verts[p + 1] = sh_v[k, 1]
+        verts[p + 2] = sh_v[k, 2]
         fill[a] = p + 3
-    s_off = np.zeros(n + 1, np.int64)
+    s_cnt = np.zeros(n + 1, np.int64)
     m = 0
-    for a in range(1, n + 1):
-        seg = np.sort(verts[t_off[a] : t_off[a + 1]])
+    for a in range(1, n + 1):  # each owner's vertices sorted (in place), each once
+        seg = verts[t_off[a] : t_off[a + 1]]
+        seg.sort()
+        m0 = m
         for k in range(len(seg)):
             if k == 0 or seg[k] != seg[k - 1]:
                 verts[m] = seg[k]
                 m += 1
-        s_off[a] = m
-    s_xy = np.empty((m, 2))
-    for k in range(m):
-        s_xy[k, 0] = flat[verts[k], 0]
-        s_xy[k, 1] = flat[verts[k], 1]
-    return b_off, b_xy, v_off, v_xyz, s_off, s_xy, area[1:], ntri
+        s_cnt[a] = m - m0
+    # the vertices: counts per obstacle, then the coordinates in place
+    vf = vid.ravel()
+    bf = boundary.ravel()
+    nv = len(vf)
+    v_cnt = np.zeros(n + 1, np.int64)
+    b_off = np.zeros(n + 1, np.int64)
+    for k in range(nv):
+        a = vf[k]
+        if a > 0:
+            v_cnt[a] += 1
+            if bf[k]:
+                b_off[a] += 1
+    g_off = np.zeros(n + 1, np.int64)
+    for a in range(1, n + 1):  # counts -> offsets: id a's rows are off[a - 1]:off[a]
+        g_off[a] = g_off[a - 1] + v_cnt[a] + s_cnt[a]
+        b_off[a] += b_off[a - 1]
+    g_xy = np.empty((g_off[n], 2))
+    b_xy = np.empty((b_off[n], 2))
+    z_min = np.full(n, np.inf)
+    z_max = np.full(n, -np.inf)
+    gfill = g_off.copy()
+    bfill = b_off.copy()
+    for k in range(nv):
+        a = vf[k]
+        if a > 0:
+            x, y, z = flat[k, 0], flat[k, 1], flat[k, 2]
+            p = gfill[a - 1]
+            g_xy[p, 0] = x
+            g_xy[p, 1] = y
+            gfill[a - 1] = p + 1
+            if z < z_min[a - 1] or z != z:  # np.minimum: a NaN stays
+                if z_min[a - 1] == z_min[a - 1]:
+                    z_min[a - 1] = z
+            if z > z_max[a - 1] or z != z:
+                if z_max[a - 1] == z_max[a - 1]:
+                    z_max[a - 1] = z
+            if bf[k]:
+                q = bfill[a - 1]
+                b_xy[q, 0] = x
+                b_xy[q, 1] = y
+                bfill[a - 1] = q + 1
+    # each obstacle's shadow vertices after its own
+    q = 0
+    for a in range(1, n + 1):
+        p = gfill[a - 1]
+        for k in range(q, q + s_cnt[a]):
+            w = verts[k]
+            g_xy[p, 0] = flat[w, 0]
+            g_xy[p, 1] = flat[w, 1]
+            p += 1
+        q += s_cnt[a]
+    return b_off, b_xy, g_off, g_xy, v_cnt[1:], z_min, z_max, area[1:], ntri

@@ -633,10 +633,14 @@ def _build_compiled(
         return []
     from navkit.obstacles import _kernels_map
 
-    b_off, b_xy, v_off, v_xyz, s_off, s_xy, shadow_area, ntri = _kernels_map.map_groups_kernel(
-        P.reshape(-1, 3), tri, tri_obstacle, shadows, ntri, vid, boundary, n
+    b_off, b_xy, g_off, g_xy, n_points, z_min, z_max, shadow_area, ntri = (
+        _kernels_map.map_groups_kernel(
+            P.reshape(-1, 3), tri, tri_obstacle, shadows, ntri, vid, boundary, n
+        )
     )
-    return _assemble_compiled(b_xy, b_off, v_xyz, v_off, s_xy, s_off, shadow_area, ntri, settings)
+    return _assemble_compiled(
+        b_xy, b_off, g_xy, g_off, n_points, z_min, z_max, shadow_area, ntri, settings
+    )
 
 
 def _assemble_obstacles(
@@ -688,22 +692,21 @@ def _assemble_obstacles(
 def _assemble_compiled(
     b_xy: NDArray[np.float64],
     b_off: NDArray[np.int64],
-    v_xyz: NDArray[np.float64],
-    v_off: NDArray[np.int64],
-    s_xy: NDArray[np.float64],
-    s_off: NDArray[np.int64],
+    g_xy: NDArray[np.float64],
+    g_off: NDArray[np.int64],
+    n_points: NDArray[np.int64],
+    z_min: NDArray[np.float64],
+    z_max: NDArray[np.float64],
     shadow_area: NDArray[Any],
     ntri: NDArray[Any],
     settings: ObstacleSettings,
 ) -> list[Obstacle]:
     """:func:`_assemble_obstacles` on CSR vertex sets (rows ``off[k]:off[k + 1]`` of obstacle
-    ``k + 1``): the hulls and shapes of all obstacles in a few kernel calls
-    (:func:`navkit.geometry.shapes.hulls_csr`, :func:`~navkit.geometry.shapes.shapes_csr`),
-    the same obstacles as the twin."""
-    from navkit.obstacles import _kernels_map
-
+    ``k + 1``: ``b_xy`` its boundary vertices, ``g_xy`` its vertices and then its shadow
+    vertices, A7's input) with the per-obstacle vertex counts and heights: the hulls and shapes
+    of all obstacles in a few kernel calls (:func:`navkit.geometry.shapes.hulls_csr`,
+    :func:`~navkit.geometry.shapes.shapes_csr`), the same obstacles as the twin."""
     n = len(b_off) - 1
-    g_xy, g_off = _kernels_map.guaranteed_sets_kernel(v_xyz, v_off, s_xy, s_off)
     H, hoff, chain = hulls_csr(b_xy, b_off)
     shapes = shapes_csr(H, hoff, settings.shapes)
     if settings.guaranteed_shapes:
@@ -712,33 +715,30 @@ def _assemble_compiled(
         guaranteed = shapes_csr(G, goff, settings.guaranteed_shapes)
     else:
         guaranteed = [{} for _ in range(n)]
-    starts = v_off[:-1]
-    z_min = np.minimum.reduceat(v_xyz[:, 2], starts).tolist()
-    z_max = np.maximum.reduceat(v_xyz[:, 2], starts).tolist()
-    n_points = np.diff(v_off).tolist()
+    zlo, zhi, n_pts = z_min.tolist(), z_max.tolist(), n_points.tolist()
     n_tri = ntri.tolist()
     area = shadow_area.tolist()
     bo, ho, go = b_off.tolist(), hoff.tolist(), g_off.tolist()
     # the records without the frozen dataclass's ``__init__`` (its per-field
     # ``object.__setattr__`` is ~5x the cost of filling ``__dict__``; Obstacle has no
-    # ``__post_init__``), as the shapes' records (``geometry.shapes._ellipses``)
+    # ``__post_init__``), as the shapes' records (``geometry.shapes._ellipses``): the fields
+    # stored one by one, no keyword dictionary per record
     new = object.__new__
     out = []
     for k in range(n):
         o = new(Obstacle)
-        o.__dict__.update(
-            id=k + 1,
-            n_triangles=n_tri[k],
-            n_points=n_points[k],
-            z_min=z_min[k],
-            z_max=z_max[k],
-            boundary_xy=b_xy[bo[k] : bo[k + 1]],
-            polygon_xy=H[ho[k] : ho[k + 1]],
-            shadow_xy=g_xy[go[k] : go[k + 1]],
-            shadow_area=area[k],
-            shapes=shapes[k],
-            guaranteed=guaranteed[k],
-        )
+        d = o.__dict__
+        d["id"] = k + 1
+        d["n_triangles"] = n_tri[k]
+        d["n_points"] = n_pts[k]
+        d["z_min"] = zlo[k]
+        d["z_max"] = zhi[k]
+        d["boundary_xy"] = b_xy[bo[k] : bo[k + 1]]
+        d["polygon_xy"] = H[ho[k] : ho[k + 1]]
+        d["shadow_xy"] = g_xy[go[k] : go[k + 1]]
+        d["shadow_area"] = area[k]
+        d["shapes"] = shapes[k]
+        d["guaranteed"] = guaranteed[k]
         out.append(o)
     return out
 
