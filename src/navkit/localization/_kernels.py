@@ -220,10 +220,7 @@ def expand_sums(
     grid_up: np.ndarray,
     table_up: np.ndarray,
     threshold: float,
-    floor: float,
-) -> tuple[
-    np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
-]:  # pragma: no cover - compiled
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """The children of branch-and-bound nodes and their score sums in one pass
     (``_Search._children`` then ``_Search._sums`` / ``_sums_group``).
 
@@ -242,9 +239,7 @@ def expand_sums(
     ``sum / (255 N)``, is not above ``threshold`` none of its four children can be (each
     child's block lies inside the parent's), so they are not generated - the caller prunes at
     that threshold anyway (pass ``-inf`` where it does not), and the search visits the same
-    nodes in the same order. A sub-group left out whose bound is above ``floor`` is returned
-    (its rotation, the parent's ``ix, iy`` and the bound's sum: the last four arrays) for a
-    deferred second pass (``depth_first``'s ``floor``); ``floor = inf`` returns none.
+    nodes in the same order.
     """
     use_up = split > 1 and table_up.shape[0] > 0
     P = len(k)
@@ -255,7 +250,6 @@ def expand_sums(
     out = np.empty(cap, np.int64)
     N = table.shape[1]
     m = 0
-    ns = 0  # sub-groups left out above the floor: stored from the arrays' end (no allocation)
     for p in range(P):
         x0 = ix[p]
         y0 = iy[p]
@@ -276,9 +270,6 @@ def expand_sums(
                 for i in range(N):
                     up += grid_up[np.uint64(table_up[row, i] + b)]
                 if not up / (255.0 * N) > threshold:
-                    if up / (255.0 * N) > floor:  # (children + these <= cap)
-                        ns += 1
-                        ck[cap - ns], cx[cap - ns], cy[cap - ns], out[cap - ns] = kk, x0, y0, up
                     continue
             a0 = 0
             a1 = 0
@@ -313,8 +304,7 @@ def expand_sums(
                 cy[m] = y0 + s
                 out[m] = a3
                 m += 1
-    e = cap - ns
-    return ck[:m], cx[:m], cy[:m], out[:m], ck[e:], cx[e:], cy[e:], out[e:]
+    return ck[:m], cx[:m], cy[:m], out[:m]
 
 
 @njit(cache=True)
@@ -432,42 +422,6 @@ def _before(k: int, x: int, y: int, bk: float, bx: float, by: float) -> bool:  #
     return y < by
 
 
-@njit(cache=True, inline="always")
-def _defer(
-    d: np.ndarray, nd: int, lv: int, k: int, x: int, y: int, b: float, part: int
-) -> None:  # pragma: no cover - compiled
-    """Row ``nd`` of the deferred nodes ``d``: ``level, k, ix, iy, bound, part`` as float64
-    (exact: integers below 2^53). The caller grows ``d`` first (:func:`_grow_rows`)."""
-    d[nd, 0] = lv
-    d[nd, 1] = k
-    d[nd, 2] = x
-    d[nd, 3] = y
-    d[nd, 4] = b
-    d[nd, 5] = part
-
-
-@njit(cache=True)
-def _grow_rows(d: np.ndarray, n: int) -> np.ndarray:  # pragma: no cover - compiled
-    if n <= d.shape[0]:
-        return d
-    e = np.empty((max(n, 2 * d.shape[0]), d.shape[1]), d.dtype)
-    e[: d.shape[0]] = d
-    return e
-
-
-@njit(cache=True, inline="always")
-def _pruned(v: np.ndarray, a: int, e: int, thr: float, floor: float, di: np.ndarray) -> int:
-    """Indices ``i`` in ``[a, e)`` with ``floor < v[i] <= thr`` into ``di``, their count -
-    branch-free (a store per element, the index advanced by the test): a branchy test over every
-    child measured ~10 % of a pass that defers nothing."""  # pragma: no cover - compiled
-    q = 0
-    for i in range(a, e):
-        x = v[i]
-        di[q] = i
-        q += (x <= thr) & (x > floor)
-    return q
-
-
 @njit(cache=True)
 def depth_first(
     flat_all: np.ndarray,
@@ -491,7 +445,6 @@ def depth_first(
     budget: int,
     batch: int,
     scale: float,
-    floor: float,
 ):  # type: ignore[no-untyped-def]  # pragma: no cover - compiled
     """``_Search.run``'s depth-first branch-and-bound (``descend``) in one loop, an explicit
     stack of levels instead of recursion (recursive cached kernels crash, ``docs/kernels.md``).
@@ -501,22 +454,14 @@ def depth_first(
     above ``keep x lower`` and the budget lasts, the children of the live nodes from
     :func:`expand_sums`, at the leaves the best leaf raising ``lower`` / ``seen`` (of equal
     scores the lowest ``(k, ix, iy)``: :func:`_before`) and every leaf above ``keep x lower``
-    collected in order; other children above ``keep x lower`` descended into at once. Level
-    ``lv``'s table is ``tables[row_start[lv]:row_stop[lv]]`` (its rows the rotations, or the
-    rotation groups of ``2^a_lv[lv]``); its grid the level's slice of ``flat_all`` (``cells``
-    per level) for single rotations, ``flat_all`` itself for groups (their table holds the
-    level). ``best`` and ``seen`` are ``[score, k, ix, iy]`` (``best[0] = -inf``: none),
-    updated in place.
+    collected in order; other children above ``keep x lower``
+    descended into at once. Level ``lv``'s table is ``tables[row_start[lv]:row_stop[lv]]``
+    (its rows the rotations, or the rotation groups of ``2^a_lv[lv]``); its grid the level's
+    slice of ``flat_all`` (``cells`` per level) for single rotations, ``flat_all`` itself for
+    groups (their table holds the level). ``best`` and ``seen`` are ``[score, k, ix, iy]``
+    (``best[0] = -inf``: none), updated in place.
 
-    Every node pruned (bound ``<= keep x lower``) whose bound is above ``floor`` is deferred:
-    returned as rows ``level, k, ix, iy, bound, part`` (float64) (leaves at level 0; ``part = 1``: a rotation
-    of a group that splits into single rotations, bounded over the parent's block and left out
-    by :func:`expand_sums` - its children are that rotation's four translations). The optimistic
-    first pass resumes from these instead of searching again from the top (``_Search.run``);
-    once a leaf beats the start ``lower`` it will not, and none are kept.
-
-    Returns ``lower, budget, evaluated``, the collected leaves ``score, k, ix, iy`` and the
-    deferred nodes.
+    Returns ``lower, budget, evaluated`` and the collected leaves ``score, k, ix, iy``.
     """
     D = h0 + 1
     fk = [np.empty(0, np.int64) for _ in range(D)]
@@ -529,9 +474,6 @@ def depth_first(
     lx = np.empty(256, np.int64)
     ly = np.empty(256, np.int64)
     nl = 0
-    d = np.empty((4096, 6), np.float64)
-    nd = 0
-    di = np.empty(4096, np.int64)  # scratch: indices of pruned nodes (_pruned)
     evaluated = 0
     empty = tables[0:0]
 
@@ -545,15 +487,6 @@ def depth_first(
         k, ix, iy, b = fk[h], fx[h], fy[h], fb[h]
         a = cur[h]
         if a >= len(k) or b[a] <= keep * lower or budget <= 0:
-            if budget > 0 and floor < np.inf:  # the rest is pruned (sorted: stop at the floor)
-                for i in range(a, len(k)):
-                    if not b[i] > floor:
-                        break
-                    if nd >= d.shape[0]:
-                        d = _grow_rows(d, nd + 1)
-                    _defer(d, nd, h, k[i], ix[i], iy[i], b[i], 0)
-                    nd += 1
-            cur[h] = len(k)
             h += 1  # this level is done: back to its parent's next batch
             continue
         e = min(a + batch, len(k))
@@ -563,15 +496,6 @@ def depth_first(
         for i in range(a, e):
             if b[i] > thr:
                 m += 1
-        if floor < np.inf:  # (a separate loop: the plain loops stay as fast as without)
-            if len(di) < e:
-                di = np.empty(2 * e, np.int64)
-            q = _pruned(b, a, e, thr, floor, di)
-            d = _grow_rows(d, nd + q)
-            for j in range(q):
-                i = di[j]
-                _defer(d, nd, h, k[i], ix[i], iy[i], b[i], 0)
-                nd += 1
         pk = np.empty(m, np.int64)
         px = np.empty(m, np.int64)
         py = np.empty(m, np.int64)
@@ -592,16 +516,10 @@ def depth_first(
         else:
             grid_up = flat_all[h * cells : (h + 1) * cells]
             tab_up = tab
-        ck, cx, cy, sums, sk, sx, sy, ss = expand_sums(
+        ck, cx, cy, sums = expand_sums(
             grid, tab, al, pk, px, py, 1 << (h - 1), split, 1 << al, K, n, Wp, grid_up,
-            tab_up, thr, floor,
+            tab_up, thr,
         )  # fmt: skip
-        if floor < np.inf:
-            for i in range(len(sk)):
-                if nd >= d.shape[0]:
-                    d = _grow_rows(d, nd + 1)
-                _defer(d, nd, h, sk[i], sx[i], sy[i], ss[i] / scale, 1)
-                nd += 1
         nc = len(ck)
         evaluated += nc
         budget -= nc
@@ -623,10 +541,8 @@ def depth_first(
                 ):
                     lower = cb[j]
                     best[0], best[1], best[2], best[3] = cb[j], ck[j], cx[j], cy[j]
-                    floor = np.inf  # a leaf beat the start: no deferred pass will follow
-                    nd = 0
-                t = keep * lower
                 if keep < 1.0:
+                    t = keep * lower
                     for i in range(nc):
                         if cb[i] > t:
                             if nl >= len(ls):
@@ -636,30 +552,12 @@ def depth_first(
                                 ly = _grow(ly, nl + 1)
                             ls[nl], lk[nl], lx[nl], ly[nl] = cb[i], ck[i], cx[i], cy[i]
                             nl += 1
-                if floor < np.inf:
-                    if len(di) < nc:
-                        di = np.empty(2 * nc, np.int64)
-                    q = _pruned(cb, 0, nc, t, floor, di)
-                    d = _grow_rows(d, nd + q)
-                    for j in range(q):
-                        i = di[j]
-                        _defer(d, nd, 0, ck[i], cx[i], cy[i], cb[i], 0)
-                        nd += 1
             continue
         t = keep * lower
         m = 0
         for i in range(nc):
             if cb[i] > t:
                 m += 1
-        if floor < np.inf:
-            if len(di) < nc:
-                di = np.empty(2 * nc, np.int64)
-            q = _pruned(cb, 0, nc, t, floor, di)
-            d = _grow_rows(d, nd + q)
-            for j in range(q):
-                i = di[j]
-                _defer(d, nd, lv, ck[i], cx[i], cy[i], cb[i], 0)
-                nd += 1
         if m == 0:
             continue
         sel = np.empty(m, np.int64)
@@ -676,4 +574,4 @@ def depth_first(
         fk[lv], fx[lv], fy[lv], fb[lv] = ck[so], cx[so], cy[so], bb[o]
         cur[lv] = 0
         h = lv
-    return lower, budget, evaluated, ls[:nl], lk[:nl], lx[:nl], ly[:nl], d[:nd]
+    return lower, budget, evaluated, ls[:nl], lk[:nl], lx[:nl], ly[:nl]

@@ -285,8 +285,6 @@ class _BnBState:
     best: tuple[float, int, int, int] | None
     budget: int
     seen: tuple[float, int, int, int] = (-np.inf, 0, 0, 0)  # best leaf visited, any score
-    # nodes pruned above a floor, chunks of (level, k, ix, iy, bound, part): see _Search.run
-    deferred: list[tuple[NDArray[np.int64], ...]] = field(default_factory=list)
 
 
 def _better(score: float, key: tuple[int, int, int], than: tuple[float, int, int, int]) -> bool:
@@ -319,9 +317,6 @@ class _Search:
     beam = 64  # width of the beam search that seeds the lower bound (see run)
     breadth = 4096  # nodes: levels are expanded whole while they stay this small (see run)
     optimism = 0.03  # the first pass assumes a leaf within this fraction of the top bound
-    # ... and keeps the nodes it prunes with a bound above keep x (1 - resume_depth x
-    # optimism) x the top bound, to resume from when no leaf beats its assumption (see run)
-    resume_depth = 4.0
 
     def __init__(
         self,
@@ -641,22 +636,20 @@ class _Search:
         # expand_sums); for a split into smaller groups that bound was measured not to pay
         # (Acapulco: 6 % fewer nodes for the extra pass), so none
         grid_up, table_up = (self.flat_all, _NO_TABLE) if a else (self.flat[h], self.F)
-        ck, cx, cy, sums, *_ = _kernels.expand_sums(
+        ck, cx, cy, sums = _kernels.expand_sums(
             grid, table, a, k, ix, iy, 2 ** (h - 1), split, 2**a, len(self.thetas), self.n,
-            self.Wp, grid_up, table_up, float(threshold), np.inf,
+            self.Wp, grid_up, table_up, float(threshold),
         )  # fmt: skip
         self.evaluated += len(ck)
         return ck, cx, cy, sums / (255.0 * self.F.shape[1])
 
     def _depth_first(  # type: ignore[no-untyped-def]
-        self, h: int, k, ix, iy, bound, keep: float, state: _BnBState, floor: float = np.inf
+        self, h: int, k, ix, iy, bound, keep: float, state: _BnBState
     ) -> None:
         """``run``'s ``descend`` from level ``h`` as one compiled loop
         (:func:`navkit.localization._kernels.depth_first`: the same nodes in the same order,
         the same best leaf, the same collected leaves in the same order); updates ``state``,
-        ``self.leaves`` (appended) and ``self.evaluated``; the nodes it prunes with a bound
-        above ``floor`` are appended to ``state.deferred`` (rotations of a split group left
-        out by ``expand_sums`` as their four children, see ``_partial_children``)."""
+        ``self.leaves`` and ``self.evaluated``."""
         from navkit.localization import _kernels
 
         levels = len(self.a)
@@ -676,44 +669,19 @@ class _Search:
         assert table.dtype == np.int32
         best = np.array(state.best if state.best is not None else (-np.inf, 0, 0, 0), float)
         seen = np.array(state.seen, dtype=np.float64)
-        lower, budget, ev, ls, lk, lx, ly, dd = _kernels.depth_first(
+        lower, budget, ev, ls, lk, lx, ly = _kernels.depth_first(
             self.flat.reshape(-1), self.flat.shape[1], table, start, stop,
             np.array(self.a, dtype=np.int64), len(self.thetas), self.n, self.Wp, h,
             k.astype(np.int64), ix.astype(np.int64), iy.astype(np.int64), bound, keep,
             float(state.lower), best, seen, int(state.budget), self.batch, 255.0 * N,
-            float(floor),
         )  # fmt: skip
         state.lower, state.budget = float(lower), int(budget)
         self.evaluated += int(ev)
         if np.isfinite(best[0]):
             state.best = (float(best[0]), int(best[1]), int(best[2]), int(best[3]))
         state.seen = (float(seen[0]), int(seen[1]), int(seen[2]), int(seen[3]))
-        if keep < 1.0 and len(ls):
-            self.leaves.append((ls, lk, lx, ly))
-        if len(dd):  # rows of level, k, ix, iy, bound, part (exact integers in float64)
-            i = dd[:, [0, 1, 2, 3, 5]].astype(np.int64)
-            state.deferred.append((i[:, 0], i[:, 1], i[:, 2], i[:, 3], dd[:, 4], i[:, 4]))
-
-    def _partial_children(  # type: ignore[no-untyped-def]
-        self, lv: NDArray[np.int64], k, ix, iy
-    ):
-        """Levels and the four children (at level ``lv - 1``) of single rotations ``k`` over their parent's
-        block ``(ix, iy)`` at level ``lv`` (``expand_sums`` left them out for a deferred pass)
-        and their bounds; as ``_expand`` of one rotation, no split."""
-        from navkit.localization import _kernels
-
-        out = []
-        for h in np.unique(lv):
-            m = lv == h
-            ck, cx, cy, sums, *_ = _kernels.expand_sums(
-                self.flat[h - 1], self.F, 0, k[m], ix[m], iy[m], 2 ** (int(h) - 1), 1, 1,
-                len(self.thetas), self.n, self.Wp, self.flat[h], _NO_TABLE, -np.inf, np.inf,
-            )  # fmt: skip
-            self.evaluated += len(ck)
-            cb = sums / (255.0 * self.F.shape[1])
-            out.append((np.full(len(ck), h - 1, np.int64), ck, cx, cy, cb))
-        cl, ck, cx, cy, cb = (np.concatenate(a) for a in zip(*out, strict=True))
-        return cl, ck, cx, cy, cb
+        if keep < 1.0:
+            self.leaves = [(ls, lk, lx, ly)]
 
     def _order(self, bound: NDArray[np.float64]) -> NDArray[np.intp]:
         """``np.argsort(-bound, kind="stable")``; compiled, for large batches: the same
@@ -754,6 +722,11 @@ class _Search:
         there (``beam`` nodes per level) for a first bound, then the depth-first search, first
         from an optimistic bound (``optimism``; exact, see the comment there). ``seeds`` is
         no longer used (the beam replaced the greedy descents).
+
+        Of leaves with the same (integer) score the lowest ``(k, ix, iy)`` is the answer
+        (``_better``; the kernel's ``_before``): with ``keep < 1`` every leaf of the best score is
+        visited, so the answer does not depend on the visiting order (a reordered search returns
+        the same leaf); with ``keep = 1`` a tie in a pruned branch is not seen.
         """
         self.leaves = []
         L = levels - 1
@@ -808,33 +781,20 @@ class _Search:
         # raise the lower bound early and prune the rest.
         state = _BnBState(lower, best, cap)
 
-        def defer(h: int, k, ix, iy, b) -> None:  # type: ignore[no-untyped-def]
-            # (once a leaf beat the start no deferred pass follows: none kept, as the kernel)
-            if len(k) and state.best is None:
-                z = np.zeros(len(k), np.int64)
-                state.deferred.append((z + h, k, ix, iy, b, z))
-
         def descend(
             h: int,
             k: NDArray[np.intp],
             ix: NDArray[np.intp],
             iy: NDArray[np.intp],
             bound: NDArray[np.float64],
-            floor: float,
         ) -> None:
             order = self._order(bound)
             k, ix, iy, bound = k[order], ix[order], iy[order], bound[order]
             for a in range(0, len(k), self.batch):
-                if state.budget <= 0:
-                    return
-                if bound[a] <= keep * state.lower:  # the rest is pruned
-                    r = bound[a:] > floor
-                    defer(h, k[a:][r], ix[a:][r], iy[a:][r], bound[a:][r])
+                if bound[a] <= keep * state.lower or state.budget <= 0:
                     return
                 sl = slice(a, a + self.batch)
                 live = bound[sl] > keep * state.lower
-                r = ~live & (bound[sl] > floor)
-                defer(h, k[sl][r], ix[sl][r], iy[sl][r], bound[sl][r])
                 ck, cx, cy, cb = self._expand(
                     h, k[sl][live], ix[sl][live], iy[sl][live], exclude, keep * state.lower
                 )
@@ -850,104 +810,50 @@ class _Search:
                         ):
                             state.lower = float(cb[j])
                             state.best = (float(cb[j]), *key)
-                            state.deferred = []
-                        m = cb > keep * state.lower
                         if keep < 1.0:
+                            m = cb > keep * state.lower
                             self.leaves.append((cb[m], ck[m], cx[m], cy[m]))
-                        r = ~m & (cb > floor)
-                        defer(0, ck[r], cx[r], cy[r], cb[r])
                 else:
                     m = cb > keep * state.lower
-                    r = ~m & (cb > floor)
-                    defer(h - 1, ck[r], cx[r], cy[r], cb[r])
                     if m.any():
-                        descend(h - 1, ck[m], cx[m], cy[m], cb[m], floor)
+                        descend(h - 1, ck[m], cx[m], cy[m], cb[m])
 
-        def search(
-            start: float, start_best: tuple[float, int, int, int] | None, floor: float
-        ) -> None:
+        def search(start: float, start_best: tuple[float, int, int, int] | None) -> None:
             state.lower, state.best = start, start_best
             self.leaves = []
-            state.deferred = []
             live = bound > keep * start
-            r = ~live & (bound > floor)
-            defer(h, k[r], ix[r], iy[r], bound[r])
             if self.compiled and exclude is None:
-                self._depth_first(h, k[live], ix[live], iy[live], bound[live], keep, state, floor)
+                self._depth_first(h, k[live], ix[live], iy[live], bound[live], keep, state)
             else:
-                descend(h, k[live], ix[live], iy[live], bound[live], floor)
-
-        def resume(start: float, start_best: tuple[float, int, int, int] | None) -> None:
-            # the nodes the optimistic pass pruned above the floor, searched from `start`
-            # (every node the pass expanded stays expanded: its leaves above keep x tau are
-            # collected, and no leaf of it beats tau)
-            state.lower, state.best = start, start_best
-            if not state.deferred:
-                return
-            dl, dk, dx, dy, db, dp = (np.concatenate(a) for a in zip(*state.deferred, strict=True))
-            state.deferred = []
-            m = db > keep * start
-            part, whole = m & (dp == 1), m & (dp == 0)
-            nodes = [(dl[whole], dk[whole], dx[whole], dy[whole], db[whole])]
-            if part.any():  # rotations of a split group left out by expand_sums: their children
-                ch = self._partial_children(dl[part], dk[part], dx[part], dy[part])
-                state.budget -= len(ch[1])
-                nodes.append(ch)
-            dl, dk, dx, dy, db = (np.concatenate(a) for a in zip(*nodes, strict=True))
-            lv0 = dl == 0  # leaves: exact scores
-            if lv0.any():
-                cb, ck, cx, cy = db[lv0], dk[lv0], dx[lv0], dy[lv0]
-                j = _argbest(cb, ck, cx, cy)
-                key = (int(ck[j]), int(cx[j]), int(cy[j]))
-                if cb[j] > state.lower or (
-                    state.best is not None and _better(float(cb[j]), key, state.best)
-                ):
-                    state.lower = float(cb[j])
-                    state.best = (float(cb[j]), *key)
-                if keep < 1.0:
-                    self.leaves.append((cb, ck, cx, cy))
-            for lv in range(h, 0, -1):
-                r = (dl == lv) & (db > keep * state.lower)
-                if not r.any() or state.budget <= 0:
-                    continue
-                if self.compiled and exclude is None:
-                    self._depth_first(lv, dk[r], dx[r], dy[r], db[r], keep, state)
-                else:
-                    descend(lv, dk[r], dx[r], dy[r], db[r], np.inf)
+                descend(h, k[live], ix[live], iy[live], bound[live])
 
         # An optimistic start: the bounds of the frontier cap the optimum, and a global fix's
         # optimum is usually within a few % of that cap (coarse scores of 0.96-1.0 on the real
         # logs). Searching as if a leaf of score tau = (1 - optimism) x cap were known prunes
         # from the start what a bound found late would prune only after the waste (up to 7x
         # fewer nodes on the Acapulco log). Still exact: every node pruned has a bound
-        # <= keep x tau, so every leaf above keep x tau is visited (and collected); if one
-        # beats tau the search is complete. Otherwise the best leaf visited (or the beam's, if
-        # better) is a lower bound b of the optimum, and the search resumes from the nodes the
-        # pass pruned with a bound above keep x b (kept above keep x the beam's bound, the
-        # least b can be): the pass's own nodes are not visited again (session 6; before, a
-        # second search from the top repeated them - ~45 % of a fix on the Acapulco scans whose
-        # optimum is under tau). The order of the leaves then differs from one search from the
-        # top, so equal scores resolve by the explicit tie-break (_better: the lowest
-        # (k, ix, iy)), which with keep < 1 makes the answer independent of the order: every
-        # leaf of the best score is visited.
-        cap_ = float(bound.max()) if len(bound) else lower
-        tau = (1.0 - self.optimism) * cap_
+        # <= keep x tau, so every leaf above keep x tau is visited; if one beats tau the
+        # search is complete, if the best visited leaf b lies in (keep x tau, tau] it is the
+        # optimum and a second pass from b collects the leaves in (keep x b, keep x tau];
+        # if none is above keep x tau the plain search runs from the beam's bound.
+        tau = (1.0 - self.optimism) * float(bound.max()) if len(bound) else lower
         if tau > lower:
-            # pruned nodes are kept above keep x `floor` only (all of them would cost more to
-            # record than the resumed pass saves); a resume from under `floor` searches again
-            floor = max(lower, (1.0 - self.resume_depth * self.optimism) * cap_)
-            search(tau, None, keep * floor)
+            search(tau, None)
             if state.best is not None:
                 return state.best, bool(state.budget > 0)
             if state.budget <= 0:  # out of budget: the beam's leaf is the best known
                 return best, False
-            sn = state.seen
-            if sn[0] > lower or (best is not None and _better(sn[0], sn[1:], best)):
-                lower, best = sn[0], sn
-            if lower >= floor:
-                resume(lower, best)
+            found = [a[0] for a in self.leaves if len(a[0])]
+            b = float(max(np.max(a) for a in found)) if found else -1.0
+            if b > max(keep * tau, lower):
+                # b is the optimum: search again from just under it (the leaf is found again)
+                search(np.nextafter(b, -np.inf), None)
                 return state.best, bool(state.budget > 0)
-        search(lower, best, np.inf)
+            if state.seen[0] > lower:
+                # the best leaf the pass visited (an exact score) is a better start than the
+                # beam's
+                lower, best = state.seen[0], state.seen
+        search(lower, best)
         return state.best, bool(state.budget > 0)
 
 
