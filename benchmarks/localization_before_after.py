@@ -130,12 +130,23 @@ def main() -> None:
                 good = _ok(f.pose, r) and (kind == "track" or f.ok)
                 ok.setdefault(f"{kind} {label}", []).append(good)
             a, b = fixes["before"], fixes["after"]
-            same &= bool(
+            agree = bool(
                 a.ok == b.ok
                 and np.allclose(a.pose, b.pose, rtol=0, atol=args.tol)
                 and a.ambiguity.reason == b.ambiguity.reason
                 and np.isclose(a.ambiguity.extent, b.ambiguity.extent, rtol=0, atol=args.tol)
             )
+            same &= agree
+            if not agree:  # list it: pose, score, verdict and runner-up of both
+                for label, f in (("before", a), ("after", b)):
+                    print(
+                        f"  {name} {kind} scan {k} {label}: pose {np.round(f.pose, 4)} "
+                        f"score {f.score:.6f} ok {f.ok} reason {f.ambiguity.reason!r} "
+                        f"second {f.ambiguity.second_score:.6f} at "
+                        f"{np.round(f.ambiguity.second_pose, 4)} "
+                        f"{'success' if _ok(f.pose, r) else 'miss'}",
+                        flush=True,
+                    )
             if kind == "track":
                 c0 = time.process_time()
                 est = icp_2d(fld.points, tree, pts, p)

@@ -7,7 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from navkit.localization import LikelihoodField, MatcherSettings, analyse_peak, score_poses
+from navkit.localization import (
+    LikelihoodField,
+    MatcherSettings,
+    analyse_peak,
+    match_scan,
+    score_poses,
+)
 from navkit.localization.matcher import _Search, _thin
 from tests.localization.helpers import LSHAPE, RECT, sample_walls, scan_points
 
@@ -185,3 +191,88 @@ def test_rotation_group_bounds_are_upper_bounds_and_the_search_stays_exact(rng, 
         found = set(zip(lk.tolist(), lx.tolist(), ly.tolist(), strict=True))
         want_set = np.flatnonzero(leaf > keep * leaf.max())
         assert {(int(k[j]), int(ix[j]), int(iy[j])) for j in want_set} <= found
+
+
+def _twin_map() -> tuple[LikelihoodField, np.ndarray]:
+    """A map holding the same asymmetric wall pattern twice, 4 m (64 cells) apart along x, and
+    the pattern's points. Everything is binary-exact (resolution 1/16 m, points on a 1/64 m
+    grid, the shift a whole number of cells, and of coarse cells of 4), so the two copies'
+    field values - and every score of a pose and of the pose shifted by 4 m - are identical:
+    two equally good poses."""
+    step = 1 / 64
+    a = np.arange(0.0, 2.0 + step / 2, step)
+    b = np.arange(0.0, 1.25 + step / 2, step)
+    c = np.arange(0.0, 0.5 + step / 2, step)
+    pattern = np.concatenate(
+        [np.c_[a, 0 * a], np.c_[0 * b, b], np.c_[0 * c + 2.0, c], np.c_[a[:48], 0 * a[:48] + 1.25]]
+    )
+    shift = np.array([4.0, 0.0])
+    fld = LikelihoodField.from_points(np.vstack([pattern, pattern + shift]), 0.0625, 0.1)
+    return fld, pattern
+
+
+def _lowest_best(k, ix, iy, score):  # type: ignore[no-untyped-def]
+    """The documented answer: of the leaves with the best score, the lowest ``(k, ix, iy)``."""
+    top = np.flatnonzero(score == score.max())
+    j = top[np.lexsort((iy[top], ix[top], k[top]))[0]]
+    return int(k[j]), int(ix[j]), int(iy[j]), len(top)
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_equal_best_scores_resolve_to_the_lowest_rotation_and_translation(compiled):
+    """Two poses score the same (the twin map): the search returns the leaf with the lowest
+    ``(k, ix, iy)`` of those with the best score (brute force), whatever order it visits them in
+    - the compiled kernels and the NumPy oracle alike, whether the optimistic first pass finds
+    the optimum or falls short of it."""
+    fld, pattern = _twin_map()
+    th = 0.3
+    R = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
+    pts = _thin((pattern - [1.0, 0.6]) @ R.T, 0.1)  # the pattern seen from (1.0, 0.6, 0.3)
+    K = 96
+    thetas = -np.pi + np.arange(K) * (2 * np.pi / K)
+    old = _Search.compiled
+    _Search.compiled = compiled
+    try:
+        k = ix = iy = leaf = want = None
+        for optimism in (0.03, 0.0, 0.3):  # a first pass that finds the optimum / falls short
+            search = _Search(
+                fld, pts, thetas, np.array([-0.5, -0.25]), 112, cache=[], levels=7, rot_groups=3
+            )
+            if leaf is None:  # brute force, once
+                k, ix, iy, leaf = _all(search)
+                want = _lowest_best(k, ix, iy, leaf)
+                assert want[3] >= 2  # a tie, at least the two copies
+                assert ix[leaf == leaf.max()].max() - want[1] >= 64  # ... one of them 4 m away
+            search.optimism = optimism
+            best, exact = search.run(levels=7, lower=-1.0, cap=10**9, keep=0.9)
+            assert exact and best[0] == leaf.max()
+            assert best[1:] == want[:3]
+    finally:
+        _Search.compiled = old
+
+
+def test_global_fix_on_two_equally_good_poses_is_the_documented_one():
+    """A global fix on the twin map: both backends return the copy with the lower coarse
+    ``(k, ix, iy)`` - the lower x here (the same heading) - and report the other as the second
+    peak (its coarse leaf ties with the winner's)."""
+    fld, pattern = _twin_map()
+    th = 0.3
+    R = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])
+    pts = (pattern - [1.0, 0.6]) @ R.T
+    s = MatcherSettings(global_resolution=0.25)
+    fixes = []
+    for compiled in (True, False):
+        old = _Search.compiled
+        _Search.compiled = compiled
+        try:
+            fixes.append(match_scan(fld, pts, None, s))
+        finally:
+            _Search.compiled = old
+    a, b = fixes
+    assert np.array_equal(a.pose, b.pose) and a.score == b.score
+    assert np.allclose(a.pose, [1.0, 0.6, th], atol=0.05)
+    assert a.ambiguity.reason == b.ambiguity.reason == "second peak"
+    # the runner-up is the other copy's coarse leaf: the winner's, 16 coarse cells (4 m) on
+    assert np.array_equal(a.ambiguity.second_pose, b.ambiguity.second_pose)
+    assert a.ambiguity.second_score == b.ambiguity.second_score
+    assert np.allclose(a.ambiguity.second_pose[:2] - [4.0, 0.0], a.pose[:2], atol=0.25)

@@ -412,6 +412,17 @@ def _grow(a: np.ndarray, n: int) -> np.ndarray:  # pragma: no cover - compiled
 
 
 @njit(cache=True)
+def _before(k: int, x: int, y: int, bk: float, bx: float, by: float) -> bool:  # pragma: no cover
+    """``(k, x, y) < (bk, bx, by)`` lexicographically: the tie-break between leaves of the same
+    integer score (the lowest ``(k, ix, iy)`` wins, ``matcher._Search.run``)."""
+    if k != bk:
+        return k < bk
+    if x != bx:
+        return x < bx
+    return y < by
+
+
+@njit(cache=True)
 def depth_first(
     flat_all: np.ndarray,
     cells: int,
@@ -441,8 +452,9 @@ def depth_first(
     The same search step by step: at each level the nodes sorted by bound (descending,
     stable: :func:`order_desc`), expanded ``batch`` at a time while the batch's first bound is
     above ``keep x lower`` and the budget lasts, the children of the live nodes from
-    :func:`expand_sums`, at the leaves the first best leaf raising ``lower`` / ``seen`` and every
-    leaf above ``keep x lower`` collected in order; other children above ``keep x lower``
+    :func:`expand_sums`, at the leaves the best leaf raising ``lower`` / ``seen`` (of equal
+    scores the lowest ``(k, ix, iy)``: :func:`_before`) and every leaf above ``keep x lower``
+    collected in order; other children above ``keep x lower``
     descended into at once. Level ``lv``'s table is ``tables[row_start[lv]:row_stop[lv]]``
     (its rows the rotations, or the rotation groups of ``2^a_lv[lv]``); its grid the level's
     slice of ``flat_all`` (``cells`` per level) for single rotations, ``flat_all`` itself for
@@ -516,11 +528,17 @@ def depth_first(
             if nc:
                 j = 0
                 for i in range(1, nc):
-                    if cb[i] > cb[j]:
+                    if cb[i] > cb[j] or (
+                        cb[i] == cb[j] and _before(ck[i], cx[i], cy[i], ck[j], cx[j], cy[j])
+                    ):
                         j = i
-                if cb[j] > seen[0]:
+                if cb[j] > seen[0] or (
+                    cb[j] == seen[0] and _before(ck[j], cx[j], cy[j], seen[1], seen[2], seen[3])
+                ):
                     seen[0], seen[1], seen[2], seen[3] = cb[j], ck[j], cx[j], cy[j]
-                if cb[j] > lower:
+                if cb[j] > lower or (
+                    cb[j] == best[0] and _before(ck[j], cx[j], cy[j], best[1], best[2], best[3])
+                ):
                     lower = cb[j]
                     best[0], best[1], best[2], best[3] = cb[j], ck[j], cx[j], cy[j]
                 if keep < 1.0:

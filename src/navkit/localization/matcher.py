@@ -287,6 +287,21 @@ class _BnBState:
     seen: tuple[float, int, int, int] = (-np.inf, 0, 0, 0)  # best leaf visited, any score
 
 
+def _better(score: float, key: tuple[int, int, int], than: tuple[float, int, int, int]) -> bool:
+    """A leaf beats ``than`` (``(score, k, ix, iy)``): a higher score, or the same score and a
+    lower ``(k, ix, iy)`` - the explicit tie-break that makes the search's answer the map's and
+    the scan's, not the visiting order's (``_Search.run``)."""
+    return score > than[0] or (score == than[0] and key < (than[1], than[2], than[3]))
+
+
+def _argbest(cb: NDArray[np.float64], ck, cx, cy) -> int:  # type: ignore[no-untyped-def]
+    """Index of the best leaf of a batch: the highest score, of those the lowest ``(k, ix, iy)``."""
+    top = np.flatnonzero(cb == cb.max())
+    if len(top) == 1:
+        return int(top[0])
+    return int(top[np.lexsort((cy[top], cx[top], ck[top]))[0]])
+
+
 class _Search:
     """One branch-and-bound search over a rotation list and a square translation window.
 
@@ -707,6 +722,11 @@ class _Search:
         there (``beam`` nodes per level) for a first bound, then the depth-first search, first
         from an optimistic bound (``optimism``; exact, see the comment there). ``seeds`` is
         no longer used (the beam replaced the greedy descents).
+
+        Of leaves with the same (integer) score the lowest ``(k, ix, iy)`` is the answer
+        (``_better``; the kernel's ``_before``): with ``keep < 1`` every leaf of the best score is
+        visited, so the answer does not depend on the visiting order (a reordered search returns
+        the same leaf); with ``keep = 1`` a tie in a pruned branch is not seen.
         """
         self.leaves = []
         L = levels - 1
@@ -749,7 +769,7 @@ class _Search:
             if not len(ck):
                 break
             if hh == 1:
-                j = int(np.argmax(cb))
+                j = _argbest(cb, ck, cx, cy)
                 if cb[j] > lower:
                     lower = float(cb[j])
                     best = (lower, int(ck[j]), int(cx[j]), int(cy[j]))
@@ -781,12 +801,15 @@ class _Search:
                 state.budget -= len(ck)
                 if h == 1:
                     if len(cb):
-                        j = int(np.argmax(cb))
-                        if cb[j] > state.seen[0]:
-                            state.seen = (float(cb[j]), int(ck[j]), int(cx[j]), int(cy[j]))
-                        if cb[j] > state.lower:
+                        j = _argbest(cb, ck, cx, cy)
+                        key = (int(ck[j]), int(cx[j]), int(cy[j]))
+                        if _better(float(cb[j]), key, state.seen):
+                            state.seen = (float(cb[j]), *key)
+                        if cb[j] > state.lower or (
+                            state.best is not None and _better(float(cb[j]), key, state.best)
+                        ):
                             state.lower = float(cb[j])
-                            state.best = (float(cb[j]), int(ck[j]), int(cx[j]), int(cy[j]))
+                            state.best = (float(cb[j]), *key)
                         if keep < 1.0:
                             m = cb > keep * state.lower
                             self.leaves.append((cb[m], ck[m], cx[m], cy[m]))
@@ -1204,8 +1227,9 @@ def match_scan(
     # kept by the search) outside the winner's neighbourhood.
     ls, lk, lx, ly = (np.concatenate(a) for a in zip(*sec_search.leaves, strict=True))
     cand = (ls > s.second_peak_ratio * sb[0]) & ~exclude(lk, lx, ly)
-    if cand.any():
-        j = int(np.flatnonzero(cand)[np.argmax(ls[cand])])
+    if cand.any():  # of equal scores the lowest (k, ix, iy): independent of the search order
+        c = np.flatnonzero(cand)
+        j = int(c[_argbest(ls[c], lk[c], lx[c], ly[c])])
         second = (float(ls[j]), int(lk[j]), int(lx[j]), int(ly[j]))
     evaluated += search.evaluated if search is not None else 0
     second_score, second_pose = float("nan"), np.full(3, np.nan)
