@@ -310,7 +310,7 @@ def mesh_and_classes(
         )
     else:
         ok, vray, rng, z_min, z_max, normal, jump, labels, found_rules = arena(inner + kept)
-    outs = (ok, normal, vray, rng, z_min, z_max, jump, labels, found_rules)
+    outs = [ok, normal, vray, rng, z_min, z_max, jump, labels, found_rules]
     _kernels.stages_2_5_kernel(
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(valid, dtype=np.bool_),
