@@ -210,10 +210,9 @@ def test_build_map_false_stops_after_stage_7_with_the_same_labels(backend):
 
 
 def test_a_detection_keeps_its_arrays_when_the_next_frame_runs():
-    """The compiled stages keep work arrays between frames of one grid shape (stage 6's
-    obstacle ids and codes, the mesh arrays no detection returns): every array a detection
-    returns must stay as it was when the next frame of the same shape is detected, and equal
-    to the NumPy backend's."""
+    """The compiled stages keep work arrays between frames of one grid shape
+    (``_buffers.cached_work``): every array a detection returns must stay as it was when the
+    next frame of the same shape is detected, and equal the NumPy backend's."""
     step, _ = step_scan()
     flat = flat_scan(height=2.0, n_az=41, n_el=41)
     st = ObstacleSettings(backend="compiled")

@@ -17,6 +17,8 @@ from navkit.obstacles._kernels import (
     _OFF_J,
     _find,
     _kth,
+    _max_nan,
+    _min_nan,
     _renumber_by_min,
     _union,
 )
@@ -93,17 +95,9 @@ def _put_window(vid, bnd, p, q, a0, a1, a2, b0, b1, b2):  # type: ignore[no-unty
 def _boundary_ids(obs_lab, n_az, n_el, wrap):  # type: ignore[no-untyped-def]
     """``segment.boundary_vertices``, row by row: obstacle
     id per vertex (the largest incident) and boundary."""
+    R, W = obs_lab.shape
     vid = np.empty((n_az, n_el), np.int32)
     bnd = np.empty((n_az, n_el), np.bool_)
-    return _boundary_ids_into(obs_lab, wrap, vid, bnd)
-
-
-@njit(cache=True)
-def _boundary_ids_into(obs_lab, wrap, vid, bnd):  # type: ignore[no-untyped-def]
-    """:func:`_boundary_ids` into ``vid (n_az, n_el) int32`` and ``bnd (n_az, n_el) bool``
-    (any content on entry: stage 6 passes kept work arrays, no fresh pages)."""
-    R, W = obs_lab.shape
-    n_az, n_el = vid.shape
     zero = np.zeros(W, obs_lab.dtype)
     for p in range(n_az):
         rowp = obs_lab[p] if p < R else zero
@@ -118,9 +112,7 @@ def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-
     """``segment.merge_close_components`` (a union-find on the
     obstacle ids; the components do not depend on the order of the unions) with the boundary
     vertices from :func:`_boundary_ids`. ``obs_lab`` (C-contiguous) is relabelled in place."""
-    vid = np.empty(P.shape[:2], np.int32)
-    bnd = np.empty(P.shape[:2], np.bool_)
-    lut, m, merged = _merge_lut(obs_lab, n, P, wrap, distance_m, gap, vid, bnd)
+    lut, m, merged = _merge_lut(obs_lab, n, P, wrap, distance_m, gap)
     if not merged:
         return obs_lab, n
     flat = obs_lab.ravel()
@@ -130,15 +122,14 @@ def _merge_close_rows(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-
 
 
 @njit(cache=True)
-def _merge_lut(obs_lab, n, P, wrap, distance_m, gap, vid, bnd):  # type: ignore[no-untyped-def]
+def _merge_lut(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped-def]
     """The merging of :func:`_merge_close_rows` without the relabelling: ``(lut (n + 1,),
     number of merged ids, whether any two merged)``; a boundary vertex's point is read only
     when another obstacle's vertex is in its window. A row of vertices is skipped when the
     rows of its windows hold one obstacle id at most (no other id to merge with: about half
-    the rows of a SemanticKITTI frame). ``vid``, ``bnd``: work arrays for
-    :func:`_boundary_ids_into`."""
+    the rows of a SemanticKITTI frame)."""
     n_az, n_el = P.shape[0], P.shape[1]
-    _boundary_ids_into(obs_lab, wrap, vid, bnd)
+    vid, bnd = _boundary_ids(obs_lab, n_az, n_el, wrap)
     # per row of vertices: the smallest and largest obstacle id in it (0, 0: none)
     rlo = np.zeros(n_az, np.int32)
     rhi = np.zeros(n_az, np.int32)
@@ -206,19 +197,6 @@ def _merge_lut(obs_lab, n, P, wrap, distance_m, gap, vid, bnd):  # type: ignore[
         return np.arange(n + 1).astype(np.int32), n, False
     lut, m = _renumber_by_min(parent, n)
     return lut, m, True
-
-
-@njit(cache=True, inline="always")
-def _max_nan_nb(a, b):  # type: ignore[no-untyped-def]
-    """``_kernels._max_nan`` as one select (NaN if either is NaN, ``a`` on ties and when both
-    are NaN): no branch for the compiler to keep."""
-    return b if (b > a) | (b != b) else a
-
-
-@njit(cache=True, inline="always")
-def _min_nan_nb(a, b):  # type: ignore[no-untyped-def]
-    """``_kernels._min_nan`` as one select (see :func:`_max_nan_nb`)."""
-    return b if (b < a) | (b != b) else a
 
 
 # ------------------------------------------------------------------------------------------
@@ -316,20 +294,12 @@ def split_kernel(  # type: ignore[no-untyped-def]
     main_share,
     work_i8,
     work_i32,
-    work_f64,
-    work_v,
-    work_b,
 ):
     """Stage 6 (twin: ``detector._split``): obstacle components, the size / height /
     noise-patch filters, merging of close components and the shadows' owners, with the ground
     components of stage 7 from the same union-find. ``labels`` is changed in place (dropped
-    components back to ground). ``work_i8 (3, R, C) int8``, ``work_i32 (11, R, C) int32``,
-    ``work_f64 (R * C,) float64``, ``work_v (n_az, n_el) int32`` and ``work_b (n_az, n_el)
-    bool`` are work arrays (any content; kept between calls by the caller): every array of the
-    kernel but ``tri_obstacle``, ``shadows`` and the small per-obstacle ones is one of them
-    (``obs_lab`` and ``tcode`` too, stage 7's inputs: views of ``work_i32`` / ``work_i8``,
-    valid until the next call of this thread with this grid shape), so that a frame faults in
-    no fresh pages for them (178 minor faults per SemanticKITTI frame before).
+    components back to ground). ``work_i8 (R * C,) int8`` and ``work_i32 (7, R * C) int32``
+    are work arrays (any content; kept between calls by the caller).
 
     Returns ``obs_lab, n, tri_obstacle, tcode, shadows, ntri``: ``tri_obstacle`` the obstacle
     id of
@@ -348,18 +318,18 @@ def split_kernel(  # type: ignore[no-untyped-def]
     and per-set arrays indexed by the root need no clearing.
     """
     R, C = labels.shape
-    cls = work_i8[0].ravel()
-    parent = work_i32[0].ravel()
-    new = work_i32[1].ravel()  # per root: the component's number (written at the root first)
-    sl = work_i32[2].ravel()  # per shadow triangle: its shadow zone
-    shf = work_i32[3].ravel()  # the shadow triangles in raster order
-    obf = work_i32[4].ravel()  # the obstacle triangles in raster order
-    ground_size = work_i32[5].ravel()  # per ground root: the component's size
-    groots = work_i32[6].ravel()  # the roots of the ground sets (some joined later by drops)
+    cls = work_i8
+    parent = work_i32[0]
+    new = work_i32[1]  # per root: the component's number (written at the root first)
+    sl = work_i32[2]  # per shadow triangle: its shadow zone
+    shf = work_i32[3]  # the shadow triangles in raster order
+    obf = work_i32[4]  # the obstacle triangles in raster order
+    ground_size = work_i32[5]  # per ground root: the component's size
+    groots = work_i32[6]  # the roots of the ground sets (some joined later by the drops)
     _class_union_find(labels, wrap, cls, parent)
     # obstacle and shadow components numbered by first appearance in raster order; every
     # triangle pointed at its root on the way
-    lab = work_i32[10]
+    lab = np.empty((R, C), np.int32)
     labf = lab.ravel()
     n = 0
     ns = 0
@@ -411,17 +381,17 @@ def split_kernel(  # type: ignore[no-untyped-def]
         for a in range(1, n + 1):
             start[a + 1] = start[a] + size[a]
         fill = start.copy()
-        zs = work_f64  # their mid heights by label
+        zs = np.empty(nt, np.float64)  # their mid heights by label
         # those with a ground neighbour (the lift's pairs): row, column, label and which of
         # the four offsets (``_OFF_I``, ``_OFF_J``; rows cyclic with ``wrap``) is ground
-        bi_ = work_i32[7].ravel()
-        bj_ = work_i32[8].ravel()
-        ba_ = work_i32[9].ravel()
-        bm_ = work_i8[2].ravel()
+        bi_ = np.empty(nt, np.int32)
+        bj_ = np.empty(nt, np.int32)
+        ba_ = np.empty(nt, np.int32)
+        bm_ = np.empty(nt, np.int8)
         nbd = 0
         i = 0
-        # branch-free (the label changes and the ground neighbours do not predict: ~2x faster
-        # than keeping a run's sums in registers); per label the same order of the sums
+        ca = 0  # the label of the current run
+        chi, clo, csm, cfill = hi[0], lo[0], sm[0], fill[0]
         for k in range(nt):
             f = obf[k]
             while f >= (i + 1) * C:  # raster order: the row without a division
@@ -438,18 +408,25 @@ def split_kernel(  # type: ignore[no-untyped-def]
             if j > 0:
                 mk |= 2 if labels[i, j - 1] == 0 else 0
                 mk |= 4 if (dn >= 0 and labels[dn, j - 1] == 0) else 0
-            bi_[nbd] = i  # written always, kept when a neighbour is ground
-            bj_[nbd] = j
-            ba_[nbd] = a
-            bm_[nbd] = mk
-            nbd += 1 if mk != 0 else 0
-            zx, zn = zmax[i, j], zmin[i, j]
-            hi[a] = _max_nan_nb(hi[a], zx)
-            lo[a] = _min_nan_nb(lo[a], zn)
-            zm = np.float64(h * (zx + zn))
-            sm[a] += zm
-            zs[fill[a]] = zm
-            fill[a] += 1
+            if mk:
+                bi_[nbd] = i
+                bj_[nbd] = j
+                ba_[nbd] = a
+                bm_[nbd] = mk
+                nbd += 1
+            if a != ca:  # a run of one label: its sums in registers, the same order
+                if ca:
+                    hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
+                ca = a
+                chi, clo, csm, cfill = hi[a], lo[a], sm[a], fill[a]
+            chi = _max_nan(chi, zmax[i, j])
+            clo = _min_nan(clo, zmin[i, j])
+            zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
+            csm += zm
+            zs[cfill] = zm
+            cfill += 1
+        if ca:
+            hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
         # lift over the adjacent ground, the sums in the twin's pair order (per offset: the
         # pairs inside the array in raster order, then the ones across the seam)
         cnt_g = np.zeros(n + 1, np.int64)
@@ -529,7 +506,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
         n = m2
         mlut = np.arange(n + 1).astype(np.int32)
         if n >= 2 and gap >= 1 and distance_m > 0:
-            mlut, n, merged = _merge_lut(lab, n, P, wrap, distance_m, gap, work_v, work_b)
+            mlut, n, merged = _merge_lut(lab, n, P, wrap, distance_m, gap)
             if merged:  # the obstacle triangles only (every other id is 0)
                 for k in range(nt):
                     f = obf[k]
@@ -547,12 +524,8 @@ def split_kernel(  # type: ignore[no-untyped-def]
             big = max(big, ground_size[g])
     thr = main_share * big
     ithr = math.ceil(thr)  # an integer size s is >= thr exactly when s >= ceil(thr)
-    tcode = work_i8[1]
+    tcode = np.empty((R, C), np.int8)
     tflat = tcode.ravel()
-    # obstacle ids, and the owners of the shadows (below): the one fresh (R, C) array, filled
-    # in the same pass (no separate copy of ``lab``)
-    tri_obstacle = np.empty((R, C), np.int32)
-    trif = tri_obstacle.ravel()
     # the flag of classes -4 .. 0 (shadow behind, side shadow, obstacle, unreliable, ground) by
     # the class's byte (-4 .. -1 are 252 .. 255); any other class 0
     flag = np.zeros(256, np.int8)
@@ -569,7 +542,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
             parent[f] = r
             main = (t == 0) & (ground_size[r] >= ithr)
             tflat[f] = _MAIN if main else flag[np.uint8(t)]
-            trif[f] = labf[f]
+    tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
     shadows = shf[:nsh].copy()
     if ns == 0 or n == 0:
         return lab, n, tri_obstacle, tcode, shadows, ntri[1:]
@@ -632,6 +605,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
                     best[z] = b
             for t in range(a0, a1):
                 cnt[bz[t]] = 0
+    trif = tri_obstacle.ravel()
     for t in range(nsh):
         f = shf[t]
         trif[f] = best[sl[f]]

@@ -295,8 +295,7 @@ def _detect_from_stage_1(
 
     # stages 2-5: mesh, normals, characteristic parameters H_s, validity codes C_d, production
     # rules P1-P5 -> classes (compiled: one pass over the grid, all charged to "mesh")
-    # (``scratch``: the mesh arrays the detection does not return are kept work arrays)
-    mesh, labels, _rules = mesh_and_classes(P, valid, origin, settings, wrap=wrap, scratch=True)
+    mesh, labels, _rules = mesh_and_classes(P, valid, origin, settings, wrap=wrap)
     clock.lap("mesh")
     clock.lap("classes")
 
@@ -390,23 +389,18 @@ def _split(
     return obs_lab, n, owner
 
 
-def _work_6_7(R: int, C: int, n_az: int, n_el: int) -> list[NDArray[Any]]:
-    """The work arrays of the compiled stages 6 and 7 for ``R x C`` triangles and ``n_az x
-    n_el`` vertices, kept between calls under one key (``_buffers.cached_work`` keeps four):
-    ``int8 (3, R, C)``, ``int32 (11, R, C)``, ``float64 (R * C,)``, ``int32 (n_az, n_el)``,
-    ``bool (n_az, n_el)`` (stage 6: ``split_kernel``'s work arrays; its ``obs_lab`` and
-    ``tcode`` are views of them), ``float64 (4, N)``, ``int64 (3, N)`` (stage 7)."""
+def _work_6_7(R: int, C: int, N: int) -> list[NDArray[Any]]:
+    """The work arrays of the compiled stages 6 and 7 for ``R x C`` triangles and ``N``
+    vertices, kept between calls under one key (``_buffers.cached_work`` keeps four):
+    ``int8 (R * C,)``, ``int32 (7, R * C)`` (stage 6), ``float64 (4, N)``, ``int64 (3, N)``
+    (stage 7)."""
     from navkit.obstacles._buffers import cached_work
 
-    N = n_az * n_el
     return cached_work(
-        ("split", R, C, n_az, n_el),
+        ("split", R, C, N),
         lambda: [
-            np.empty((3, R, C), np.int8),
-            np.empty((11, R, C), np.int32),
-            np.empty(R * C),
-            np.empty((n_az, n_el), np.int32),
-            np.empty((n_az, n_el), np.bool_),
+            np.empty(R * C, np.int8),
+            np.empty((7, R * C), np.int32),
             np.empty((4, N)),
             np.empty((3, N), np.int64),
         ],
@@ -432,13 +426,11 @@ def _compiled_split(
     owners (the twin's separate ``owner`` array is not built), each triangle's code
     for stage 7 (class, main ground zone: the ground components come from the same union-find
     as the obstacle and shadow components), and for stage 8 the shadow triangles (flat
-    indices, raster order) and each obstacle's number of triangles. The obstacle ids and the
-    codes are views of the kept work arrays (stage 7 reads them before the next detection of
-    this thread; the detection returns neither), ``tri_obstacle`` is a fresh array."""
+    indices, raster order) and each obstacle's number of triangles."""
     from navkit.obstacles import _kernels_map
 
     R, C = labels.shape
-    work = _work_6_7(R, C, P.shape[0], P.shape[1])
+    work_i8, work_i32, _, _ = _work_6_7(R, C, P.shape[0] * P.shape[1])
     obs_lab, n, tri_obstacle, tcode, shadows, ntri = _kernels_map.split_kernel(
         labels,
         mesh.z_min.astype(np.float32, copy=False),
@@ -451,7 +443,8 @@ def _compiled_split(
         float(settings.merge_distance_m),
         int(settings.merge_gap_cells),
         MAIN_GROUND_SHARE,
-        *work[:5],
+        work_i8,
+        work_i32,
     )
     return obs_lab, int(n), tri_obstacle, tcode, shadows, ntri
 
@@ -497,7 +490,7 @@ def _compiled_vertices(
     from navkit.obstacles import _kernels, _kernels_map
     from navkit.obstacles.ground import fill_missing_cells
 
-    work_f, work_i = _work_6_7(labels.shape[0], labels.shape[1], *valid.shape)[5:]
+    _, _, work_f, work_i = _work_6_7(labels.shape[0], labels.shape[1], valid.size)
     vid, boundary, vlab, _main, ref = _kernels_map.vertex_kernel(
         tcode, obs_lab, valid, bool(wrap), work_i[2]
     )

@@ -179,7 +179,6 @@ def mesh_and_classes(
     *,
     wrap: bool,
     rules: bool = False,
-    scratch: bool = False,
 ) -> tuple[MeshCharacteristics, NDArray[np.int8], dict[str, NDArray[np.bool_]]]:
     """Stages 2-5: the mesh with H_s and C_d (:func:`~navkit.obstacles.mesh.build_mesh`), the
     robust normals (:func:`~navkit.obstacles.mesh.robust_cell_normals`, when
@@ -204,13 +203,6 @@ def mesh_and_classes(
         The mesh closes across the azimuth seam.
     rules : bool
         Also return the rules P1-P5 (the compiled pass writes them only when asked).
-    scratch : bool
-        Compiled backend: the mesh arrays a detection does not return (``valid``, ``vray``,
-        ``range``, ``z_min``, ``z_max``: ~4.8 MB on a SemanticKITTI grid) are views of work
-        arrays kept between calls (per grid shape and thread), valid only until the next call
-        with ``scratch`` of this thread; the returned triangles, normals, jump codes and
-        classes are fresh arrays either way. The detector asks for it: fresh pages cost the
-        kernel's zeroing of each new huge page on this VM (~5 % of a detection's CPU time).
 
     Returns
     -------
@@ -288,29 +280,19 @@ def mesh_and_classes(
         ),
     )
     rr, rc = (R, C2) if rules else (0, 0)
-    # the outputs: those the caller keeps from a fresh allocation, the others (with
-    # ``scratch``) from kept work arrays
-    kept = [
-        ((R, C2, 3), np.float32),
-        ((R, C2), np.bool_),
-        ((R, C2), np.int8),
-        ((5, rr, rc), np.bool_),
-    ]
-    inner = [
-        ((R, C2), np.bool_),
-        ((n_az, n_el, 3), np.float32),
-        ((R, C2), np.float32),
-        ((R, C2), np.float32),
-        ((R, C2), np.float32),
-    ]
-    if scratch:
-        normal, jump, labels, found_rules = arena(kept)
-        ok, vray, rng, z_min, z_max = cached_work(
-            ("stages 2-5 mesh", n_az, n_el, bool(wrap)), lambda: arena(inner)
-        )
-    else:
-        ok, vray, rng, z_min, z_max, normal, jump, labels, found_rules = arena(inner + kept)
-    outs = [ok, normal, vray, rng, z_min, z_max, jump, labels, found_rules]
+    outs = arena(
+        [
+            ((R, C2), np.bool_),
+            ((R, C2, 3), np.float32),
+            ((n_az, n_el, 3), np.float32),
+            ((R, C2), np.float32),
+            ((R, C2), np.float32),
+            ((R, C2), np.float32),
+            ((R, C2), np.bool_),
+            ((R, C2), np.int8),
+            ((5, rr, rc), np.bool_),
+        ]
+    )
     _kernels.stages_2_5_kernel(
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(valid, dtype=np.bool_),
@@ -336,6 +318,7 @@ def mesh_and_classes(
         *work,
         *outs,
     )
+    ok, normal, vray, rng, z_min, z_max, jump, labels, found_rules = outs
     tri = triangle_indices(n_az, n_el, wrap)
     mesh = MeshCharacteristics(tri, ok, normal, vray, rng, z_min, z_max, jump)
     found = dict(zip(("P1", "P2", "P3", "P4", "P5"), found_rules, strict=True)) if rules else {}
