@@ -78,15 +78,13 @@ def test_flat_ground_is_all_ground_even_with_noise(rng):
         assert np.all(det.vertex_labels == GROUND)
 
 
-def test_a_step_is_an_obstacle_and_its_far_side_a_shadow():
-    # level ground with a 0.6 m high, 2 m deep wall-like block from x = 6 m in a 20 deg sector:
-    # the block's front face is steep (P1), its top is carried by P5, the ground hidden behind it
-    # spans a jump down (shadow behind)
+def step_scan():
+    """Level ground with a 0.6 m high, 2 m deep wall-like block from x = 6 m in a 20 deg sector
+    (41 x 41 grid, sensor at 2 m): the scan and the block's sector (per azimuth row)."""
     scan = flat_scan(height=2.0, n_az=41, n_el=41)
     el = scan.elevation
     d = scan.ranges.copy()
-    az_deg = np.degrees(scan.azimuth)
-    sector = np.abs(az_deg) <= 10
+    sector = np.abs(np.degrees(scan.azimuth)) <= 10
     for i in np.flatnonzero(sector):
         ca = math.cos(scan.azimuth[i])
         for j, b in enumerate(el):
@@ -100,7 +98,15 @@ def test_a_step_is_an_obstacle_and_its_far_side_a_shadow():
             h_top = (2.0 - 0.6) / math.tan(-b)
             if h0 <= h_top <= 8.0 / ca:
                 d[i, j] = h_top / math.cos(b)
-    det = detect_obstacles(RangeScan(d, scan.azimuth, scan.elevation, sensor_height=2.0))
+    return RangeScan(d, scan.azimuth, scan.elevation, sensor_height=2.0), sector
+
+
+def test_a_step_is_an_obstacle_and_its_far_side_a_shadow():
+    # the block's front face is steep (P1), its top is carried by P5, the ground hidden behind it
+    # spans a jump down (shadow behind)
+    scan, sector = step_scan()
+    az_deg = np.degrees(scan.azimuth)
+    det = detect_obstacles(scan)
     assert len(det.obstacles) == 1
     ob = det.obstacles[0]
     assert ob.height == pytest.approx(0.6, abs=0.05)
@@ -201,3 +207,24 @@ def test_build_map_false_stops_after_stage_7_with_the_same_labels(backend):
     assert set(np.unique(part.vertex_obstacle[part.vertex_obstacle > 0])) == {
         o.id for o in full.obstacles
     }
+
+
+def test_a_detection_keeps_its_arrays_when_the_next_frame_runs():
+    """The compiled stages keep work arrays between frames of one grid shape
+    (``_buffers.cached_work``): every array a detection returns must stay as it was when the
+    next frame of the same shape is detected, and equal the NumPy backend's."""
+    step, _ = step_scan()
+    flat = flat_scan(height=2.0, n_az=41, n_el=41)
+    st = ObstacleSettings(backend="compiled")
+    first = detect_obstacles(step, st)
+    names = ("points", "valid", "normals", "jump", "triangle_labels", "triangle_obstacle")
+    names += ("vertex_labels", "vertex_obstacle", "boundary")
+    kept = {k: getattr(first, k).copy() for k in names}
+    assert first.triangle_obstacle.max() >= 1 and first.boundary.any()
+    second = detect_obstacles(flat, st)
+    assert second.triangle_obstacle.max() == 0
+    ref = detect_obstacles(step, ObstacleSettings(backend="numpy"))
+    for k in names:
+        assert np.array_equal(getattr(first, k), kept[k], equal_nan=k in ("points", "normals")), k
+        if k != "normals":  # float32 normals: the twins agree to rounding (test_kernels)
+            assert np.array_equal(getattr(first, k), getattr(ref, k), equal_nan=k == "points"), k
