@@ -25,8 +25,11 @@ $(VENV)/.bench-installed: $(STAMP)
 demo: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/navkit demo --out out/demo --overwrite
 
+# The suite runs on TEST_WORKERS processes (pytest-xdist), one test file per worker at a time, so
+# that a file's kernels compile once; 2 = the CI machine's cores. TEST_WORKERS=0 runs serially.
+TEST_WORKERS ?= 2
 test: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/python -m pytest -q -p no:cacheprovider
+	MPLBACKEND=Agg $(BIN)/python -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile
 
 bench: $(VENV)/.bench-installed
 	MPLBACKEND=Agg $(BIN)/python -m benchmarks
