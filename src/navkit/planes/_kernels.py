@@ -490,11 +490,12 @@ def label_image(
 
 @njit(cache=True)
 def plane_rows(
-    M: np.ndarray,
+    M: np.ndarray, rayleigh: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
     """TLS planes of raw moment rows ``(G, 13)`` (see ``extract._planes_from_rows``): the
     smallest eigenpair of each covariance by the closed form of ``extract.smallest_eigenpairs``
-    row by row. Returns normals ``(G, 3)`` away from the origin, rho, RMS, means ``(G, 3)`` and
+    row by row (``rayleigh``: the eigenvalue as the Rayleigh quotient of the unit vector, as
+    there). Returns normals ``(G, 3)`` away from the origin, rho, RMS, means ``(G, 3)`` and
     a flag per row whose smallest eigenvalue is repeated (the caller takes LAPACK's vector
     there)."""
     G = M.shape[0]
@@ -553,6 +554,11 @@ def plane_rows(
         bx /= inv
         by /= inv
         bz /= inv
+        if rayleigh and not rank1[g]:  # v^T (C v), left to right (the NumPy version's order)
+            u0 = a00 * bx + a01 * by + a02 * bz
+            u1 = a01 * bx + a11 * by + a12 * bz
+            u2 = a02 * bx + a12 * by + a22 * bz
+            lam = bx * u0 + by * u1 + bz * u2
         d = bx * mx + by * my + bz * mz
         if d < 0:
             bx, by, bz = -bx, -by, -bz
@@ -1019,3 +1025,161 @@ def outline_samples(
                         )
                     pos[k] += 1
     return uv, cuts, q_used, qcut
+
+
+@njit(cache=True)
+def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """Sums of the rows of ``M (G, 13)`` per group ``groups (G,)`` (-1 = none): ``(n_groups,
+    13)``, rows added in their order (``extract._sum_rows`` adds them by a BLAS product: the
+    same sums up to the order of the float64 additions)."""
+    R = np.zeros((n_groups, M.shape[1]), np.float64)
+    for g in range(len(groups)):
+        k = groups[g]
+        if k >= 0:
+            for t in range(M.shape[1]):
+                R[k, t] += M[g, t]
+    return R
+
+
+@njit(cache=True)
+def prune_merge(
+    M: np.ndarray,
+    normal: np.ndarray,
+    mean: np.ndarray,
+    bound: np.ndarray,
+    planar: np.ndarray,
+    eh: np.ndarray,
+    ev: np.ndarray,
+    hc: int,
+    wc: int,
+    min_cells: int,
+    cos_t: float,
+    distance_factor: float,
+    rms_base: float,
+    rms_quadratic: float,
+) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Steps 3-4 of the extraction (``extract._prune_merge`` with ``extract._grow_regions``'
+    components) in one call, and the planes of the final regions: the components of the planar
+    patches, their region planes (sums of the patch rows, :func:`plane_rows`), the patches that
+    disagree with their region's plane dropped, the components again, the coplanar regions'
+    components (:func:`dense_components`) and the planes of the merged regions.
+
+    Returns a status (0 = done; 1 = a region's smallest eigenvalue is repeated: the caller
+    takes the NumPy path, whose LAPACK vector the closed form does not reproduce), the number of
+    regions, the region of each patch ``(G,)`` (-1 = none) and the regions' normals ``(n, 3)``
+    and rho ``(n,)``. The tests in the oracle's order: the dot products of ``numpy.einsum``'s
+    three terms ``(a0 b0 + a2 b2) + a1 b1`` (:func:`_dot3`); the merge's normal products (a
+    BLAS product there) left to right - a decision could differ only on an exact tie."""
+    G = hc * wc
+    empty = np.zeros((0, 3), np.float64)
+    n_reg, comp = cell_components(planar.reshape(hc, wc), eh, ev, min_cells)
+    if n_reg == 0:
+        return 0, 0, comp, empty, np.zeros(0)
+    rn, rd, _, _, rank1 = plane_rows(sum_rows(comp, n_reg, M))
+    if rank1.any():
+        return 1, 0, comp, empty, np.zeros(0)
+    keep = np.zeros(G, np.bool_)
+    for g in range(G):
+        k = comp[g]
+        if planar[g] and k >= 0:
+            keep[g] = (_dot3(normal, g, rn, k) > cos_t) and (
+                abs(_dot3(rn, k, mean, g) - rd[k]) < distance_factor * bound[g]
+            )
+    n_reg, comp = cell_components(keep.reshape(hc, wc), eh, ev, min_cells)
+    if n_reg == 0:
+        return 0, 0, comp, empty, np.zeros(0)
+    rn, rd, _, rmean, rank1 = plane_rows(sum_rows(comp, n_reg, M))
+    if rank1.any():
+        return 1, 0, comp, empty, np.zeros(0)
+    rtol = np.empty(n_reg, np.float64)
+    for a in range(n_reg):
+        rtol[a] = distance_factor * (rms_base + rms_quadratic * _dot3(rmean, a, rmean, a))
+    same = np.zeros((n_reg, n_reg), np.bool_)
+    for a in range(n_reg):
+        for b in range(n_reg):
+            nn = rn[a, 0] * rn[b, 0] + rn[a, 1] * rn[b, 1] + rn[a, 2] * rn[b, 2]
+            dm = rn[a, 0] * rmean[b, 0] + rn[a, 1] * rmean[b, 1] + rn[a, 2] * rmean[b, 2]
+            same[a, b] = (nn > cos_t) and (abs(dm - rd[a]) < max(rtol[a], rtol[b]))
+    for a in range(n_reg):
+        for b in range(a + 1, n_reg):
+            both = same[a, b] and same[b, a]
+            same[a, b] = both
+            same[b, a] = both
+    n_m, merged = dense_components(same)
+    for g in range(G):
+        if comp[g] >= 0:
+            comp[g] = merged[comp[g]]
+    if n_m == n_reg:  # no regions joined: their planes stand
+        return 0, n_m, comp, rn, rd
+    rn, rd, _, _, rank1 = plane_rows(sum_rows(comp, n_m, M))
+    if rank1.any():
+        return 1, 0, comp, empty, np.zeros(0)
+    return 0, n_m, comp, rn, rd
+
+
+@njit(cache=True)
+def _close3(grid: np.ndarray, tmp: np.ndarray) -> int:  # pragma: no cover - compiled
+    """OpenCV's ``morphologyEx(grid, MORPH_CLOSE, ones((3, 3)))`` of a 0 / 1 raster ``(h, w)``
+    in place (``tmp``: scratch of the same shape) and its number of non-zero cells afterwards.
+    OpenCV's default border: outside the raster counts as 0 for the dilation and is ignored by
+    the erosion. Both as a row pass then a column pass (a 3 x 3 max / min is separable)."""
+    h, w = grid.shape
+    for op in range(2):  # 0: dilation (max), 1: erosion (min)
+        for y in range(h):
+            g = grid[y]
+            t = tmp[y]
+            if w == 1:
+                t[0] = g[0]
+                continue
+            if op == 0:
+                t[0] = max(g[0], g[1])
+                for x in range(1, w - 1):
+                    t[x] = max(max(g[x - 1], g[x]), g[x + 1])
+                t[w - 1] = max(g[w - 2], g[w - 1])
+            else:
+                t[0] = min(g[0], g[1])
+                for x in range(1, w - 1):
+                    t[x] = min(min(g[x - 1], g[x]), g[x + 1])
+                t[w - 1] = min(g[w - 2], g[w - 1])
+        for y in range(h):
+            a = tmp[max(y - 1, 0)]
+            b = tmp[y]
+            c = tmp[min(y + 1, h - 1)]
+            o = grid[y]
+            if op == 0:
+                for x in range(w):
+                    o[x] = max(max(a[x], b[x]), c[x])
+            else:
+                for x in range(w):
+                    o[x] = min(min(a[x], b[x]), c[x])
+    n = 0
+    for y in range(h):
+        g = grid[y]
+        for x in range(w):
+            n += g[x] != 0
+    return n
+
+
+@njit(cache=True)
+def close_rasters(
+    buf: np.ndarray, start: np.ndarray, shape: np.ndarray, status: np.ndarray
+) -> np.ndarray:  # pragma: no cover - compiled
+    """The 3 x 3 closing of every raster of :func:`outline_rasters` (``status == 0``; raster
+    ``k`` at ``buf[start[k]:]``, ``shape[k] = (columns, rows)``) in place, as
+    ``segments.outline_of_raster`` closes one with OpenCV (:func:`_close3`: the same cells), and
+    their numbers of covered cells ``(K,)`` (0 for the others)."""
+    K = len(status)
+    cells = np.zeros(K, np.int64)
+    big = 0
+    for k in range(K):
+        if status[k] == 0:
+            big = max(big, shape[k, 0] * shape[k, 1])
+    tmp = np.empty(big, np.uint8)
+    for k in range(K):
+        if status[k] != 0:
+            continue
+        w = shape[k, 0]
+        h = shape[k, 1]
+        grid = buf[start[k] : start[k] + w * h].reshape(h, w)
+        cells[k] = _close3(grid, tmp[: w * h].reshape(h, w))
+    return cells
