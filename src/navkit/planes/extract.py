@@ -703,39 +703,26 @@ def _refine_border(
     candidate slot (the oracle: same labels, moments within float64 rounding).
     """
     B = len(cand)
-    ci, cj = np.divmod(ids, wc)
-    ref = pt.ref[ids]  # (B, 3) float32
     n32 = rn.astype(np.float32)
     rho32 = rd.astype(np.float32)
     own = comp[ids]
     ltype = np.int16 if n_reg < 32767 else np.int32
-    # the compiled kernel writes every pixel's label
-    label = np.empty((B, c, c), ltype) if compiled else np.full((B, c, c), -1, ltype)
+    if compiled:  # the offsets and strides below are computed in the kernel, the same floats
+        label = np.empty((B, c, c), ltype)  # the kernel writes every pixel's label
+        complete, M, cpoints, cregion = _kernels().refine_pixels(
+            pt.P, pt.ref, pt.tol_scale, pt.tol_base, ids, own, cand, n32, rho32, pt.M,
+            float(raster), wc, c, label, n_reg,
+        )  # fmt: skip
+        return _Border(ids, label, complete, M, cpoints, cregion)
+    ci, cj = np.divmod(ids, wc)
+    ref = pt.ref[ids]  # (B, 3) float32
+    label = np.full((B, c, c), -1, ltype)
     # n . ref - rho per (patch, candidate), float32 (-1 slots: unused)
     kc = np.maximum(cand, 0)
     nk = n32[kc]  # (B, m, 3)
     off = nk[..., 0] * ref[:, None, 0] + nk[..., 1] * ref[:, None, 1]
     off += nk[..., 2] * ref[:, None, 2]
     off -= rho32[kc]
-    if compiled:
-        stride = _sample_stride(pt.M[ids], c, raster)
-        complete, M, cpoints, cregion = _kernels().refine_pixels(
-            pt.P,
-            pt.ref,
-            pt.tol_scale,
-            pt.tol_base,
-            ids,
-            own,
-            cand,
-            off,
-            n32,
-            stride,
-            wc,
-            c,
-            label,
-            n_reg,
-        )
-        return _Border(ids, label, complete, M, cpoints, cregion)
     complete, G = _refine_border_numpy(pt, ids, ci, cj, own, cand, off, n32, label, hc, wc, c)
     mixed = np.flatnonzero(~complete)
     M = np.zeros((n_reg, _NM))
