@@ -403,17 +403,17 @@ def refine_pixels(
                 _raw_row(row, s0, ref64, sd, ssd)
                 for t in range(13):
                     Mreg[k, t] += row[t]
-        # outline samples: labelled pixels on every stride-th row and column, raster order
-        # every st-th row / column: extract._sample_stride's float64 operations
+        # outline samples: labelled pixels on every st-th row and column, raster order (st:
+        # extract._sample_stride's float64 operations)
         nm = max(M[g, 0], 1.0)
         m0 = M[g, 1] / nm
         m1 = M[g, 2] / nm
         m2 = M[g, 3] / nm
         tr = M[g, 4] / nm - m0 * m0 + M[g, 8] / nm - m1 * m1 + M[g, 12] / nm - m2 * m2
         spacing = np.sqrt(6.0 * max(tr, 0.0)) / c
-        t = np.floor(raster / (sqrt2 * spacing)) if spacing > 0 else np.inf
-        t = t if t >= 1.0 else 1.0
-        st = np.int64(min(t, c))
+        tf = np.floor(raster / (sqrt2 * spacing)) if spacing > 0 else np.inf
+        tf = tf if tf >= 1.0 else 1.0
+        st = np.int64(min(tf, c))
         for r in range(0, c, st):
             for q in range(0, c, st):
                 p = r * c + q
