@@ -431,45 +431,40 @@ def refine_pixels(
 def label_image(
     valid: np.ndarray,
     lab_cell: np.ndarray,
-    cell_count: np.ndarray,
     ids: np.ndarray,
     complete: np.ndarray,
     label: np.ndarray,
     new_id: np.ndarray,
+    sizes: np.ndarray,
     H: int,
     W: int,
-    K: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """The label image and the inliers of each segment in raster order (see
     ``extract._extract``): ``valid (hc c, wc c)``, ``lab_cell (hc, wc)`` the segment of each
-    wholesale patch (-1 = none), ``cell_count (G,)`` the valid pixels of each patch, ``ids
-    (B,)`` the border patches, ``complete (B,)`` those assigned whole (the others are mixed:
-    refined pixel by pixel), ``label (B, c, c)`` their pixels' regions (-1 = none) and ``new_id``
-    the segment of region + 1. Returns ``labels (H, W)`` int64 (-1 = none), the inlier indices ``row * W + col``
-    of all segments one after the other and the ``(K + 1,)`` cuts between segments.
+    wholesale patch (-1 = none), ``ids (B,)`` the border patches, ``complete (B,)`` those
+    assigned whole (the others are mixed: refined pixel by pixel), ``label (B, c, c)`` their
+    pixels' regions (-1 = none), ``new_id`` the segment of region + 1 and ``sizes (K,)`` the
+    segments' inlier counts. Returns ``labels (H, W)`` int64 (-1 = none), the inlier indices
+    ``row * W + col`` of all segments one after the other and the ``(K + 1,)`` cuts between
+    segments.
 
-    The segments' sizes come first (a wholesale patch adds its valid pixels), so that one raster
-    pass writes each label once and places each inlier."""
+    The segments' sizes ``sizes (K,)`` are known (the counts of their final moments: the valid
+    pixels of the wholesale patches plus the mixed patches' pixels of the segment; session 6:
+    the kernel counted them in a first pass over the mixed patches' labels), so that one raster
+    pass writes each label once and places each inlier. A size that does not match the labels
+    raises (checked before every write of a mixed patch's inlier and after every row of a
+    wholesale patch, which can overrun by at most ``c - 1`` slots: the buffer has them spare)."""
     hc, wc = lab_cell.shape
     c = valid.shape[0] // hc
+    K = len(sizes)
     mix = np.full(hc * wc, -1, np.int64)
     for b in range(len(ids)):
         if not complete[b]:
             mix[ids[b]] = b
-    count = np.zeros(K + 1, np.int64)
-    for i in range(hc):
-        for j in range(wc):
-            b = mix[i * wc + j]
-            if b >= 0:
-                for r in range(c):
-                    for q in range(c):
-                        count[new_id[label[b, r, q] + 1] + 1] += 1
-            elif lab_cell[i, j] >= 0:
-                count[lab_cell[i, j] + 1] += np.int64(cell_count[i * wc + j])
     cuts = np.zeros(K + 1, np.int64)
     for k in range(K):
-        cuts[k + 1] = cuts[k] + count[k + 1]
-    inl = np.empty(cuts[K], np.int64)
+        cuts[k + 1] = cuts[k] + sizes[k]
+    inl = np.empty(cuts[K] + c, np.int64)
     pos = cuts[:K].copy()
     labels = np.empty((H, W), np.int64)
     for y in range(H):
@@ -487,6 +482,8 @@ def label_image(
                     v = new_id[label[b, r, q] + 1]
                     labels[y, x0 + q] = v
                     if v >= 0:
+                        if pos[v] >= cuts[v + 1]:
+                            raise ValueError("label_image: a segment's size is too small")
                         inl[pos[v]] = y * W + x0 + q
                         pos[v] += 1
             elif s >= 0:  # the labels branch-free, then the inliers with a local position
@@ -500,13 +497,18 @@ def label_image(
                     if vr[q]:
                         inl[p] = i0 + q
                         p += 1
+                if p > cuts[s + 1]:
+                    raise ValueError("label_image: a segment's size is too small")
                 pos[s] = p
             else:
                 for q in range(c):
                     labels[y, x0 + q] = -1
         for x in range(wc * c, W):
             labels[y, x] = -1
-    return labels, inl, cuts
+    for k in range(K):
+        if pos[k] != cuts[k + 1]:
+            raise ValueError("label_image: a segment's size is too large")
+    return labels, inl[: cuts[K]], cuts
 
 
 @njit(cache=True)

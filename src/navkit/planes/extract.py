@@ -894,7 +894,7 @@ def _extract(
     lab_cell = new_id[np.where(wholesale, comp, -1) + 1].reshape(hc, wc)
     if compiled:
         labels, inl, cuts = _kernels().label_image(
-            pt.valid, lab_cell, pt.M[:, 0], ids, bd.complete, bd.label, new_id, H, W, len(keep)
+            pt.valid, lab_cell, ids, bd.complete, bd.label, new_id, count[keep], H, W
         )
         inliers = [inl[cuts[k] : cuts[k + 1]] for k in range(len(keep))]
     else:
