@@ -247,3 +247,66 @@ def test_largest_contour_is_opencvs(rng):
         n += 1
         assert _largest_contour(contours) is max(contours, key=cv2.contourArea)
     assert n > 40
+
+
+def test_close_rasters_is_opencvs_closing(rng):
+    """The compiled 3 x 3 closing of rasters packed one after the other gives OpenCV's
+    ``morphologyEx(MORPH_CLOSE)`` cells (its default border) and their count, on random
+    rasters down to 1 x 1; rasters of another status are left alone."""
+    import cv2
+
+    from navkit.planes._kernels import close_rasters
+
+    shapes = [(int(rng.integers(1, 40)), int(rng.integers(1, 40))) for _ in range(40)]
+    shapes += [(1, 1), (1, 7), (9, 1), (2, 2)]
+    grids = [(rng.random(s) < rng.uniform(0.05, 0.9)).astype(np.uint8) for s in shapes]
+    start = np.concatenate([[0], np.cumsum([g.size for g in grids])]).astype(np.int64)
+    shape = np.array([(g.shape[1], g.shape[0]) for g in grids], np.int64)
+    status = np.zeros(len(grids), np.int64)
+    status[3] = 2
+    buf = np.concatenate([g.ravel() for g in grids])
+    cells = close_rasters(buf, start, shape, status)
+    kernel = np.ones((3, 3), np.uint8)
+    for k, g in enumerate(grids):
+        got = buf[start[k] : start[k + 1]].reshape(g.shape)
+        want = g if status[k] else cv2.morphologyEx(g, cv2.MORPH_CLOSE, kernel)
+        assert np.array_equal(got, want)
+        assert cells[k] == (0 if status[k] else np.count_nonzero(want))
+
+
+def test_degenerate_region_takes_the_numpy_steps(monkeypatch):
+    """A region whose points lie on a line (repeated smallest eigenvalue: the closed form has
+    no LAPACK vector) makes the compiled steps 3-4 (``prune_merge``) report it; the extraction
+    then takes the NumPy steps and still agrees with the oracle."""
+    from navkit.planes import extract
+
+    P = np.zeros((100, 120, 3))  # y = 0, z = 2: the covariances are exactly diag(a, 0, 0)
+    P[:, :, 0] = np.linspace(-1.0, 1.0, 120)[None, :]
+    P[:, :, 2] = 2.0
+    steps = []
+    numpy_steps = extract._prune_merge
+    monkeypatch.setattr(
+        extract, "_prune_merge", lambda *a, **k: steps.append(k) or numpy_steps(*a, **k)
+    )
+    assert assert_same(P) >= 1
+    assert len(steps) == 2  # the compiled path's fallback, then the oracle's own call
+
+
+def test_canonical_planes_are_canonical_plane_bit_for_bit(rng):
+    """The extraction's vectorised :func:`navkit.geometry.canonical_plane` gives its bits on
+    random nearly-unit normals, and its special cases (a plane through the origin) row by
+    row."""
+    from navkit.geometry import canonical_plane
+    from navkit.planes.extract import _canonical_planes
+
+    n = rng.normal(size=(500, 3))
+    n /= np.sqrt((n * n).sum(axis=1))[:, None]
+    n *= 1 + rng.normal(scale=1e-15, size=(500, 1))
+    rho = rng.uniform(0.1, 5.0, 500)
+    for k in (500, 3):
+        if k == 3:
+            rho[:3] = [1.0, 0.0, 2.0]  # one through the origin: the row-by-row path
+        got_n, got_r = _canonical_planes(n[:k], rho[:k])
+        for i in range(k):
+            want_n, want_r = canonical_plane(n[i], float(rho[i]))
+            assert np.array_equal(got_n[i], want_n) and got_r[i] == want_r

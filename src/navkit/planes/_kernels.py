@@ -228,9 +228,10 @@ def refine_pixels(
     ids: np.ndarray,
     own: np.ndarray,
     cand: np.ndarray,
-    off: np.ndarray,
     n32: np.ndarray,
-    stride: np.ndarray,
+    rho32: np.ndarray,
+    M: np.ndarray,
+    raster: float,
     wc: int,
     c: int,
     label: np.ndarray,
@@ -240,8 +241,12 @@ def refine_pixels(
 
     ``P (H, W, 3)`` the points, ``ref (G, 3)`` the patches' float32 means, ``tol_scale r^2 +
     tol_base`` the inlier bound, ``ids (B,)`` patches, ``own (B,)`` their regions (-1 = none),
-    ``cand (B, m)`` candidate regions (-1 padded), ``off (B, m)`` float32 ``n . ref - rho`` per
-    (patch, candidate), ``n32 (n_reg, 3)`` float32 normals. The centred float32 coordinates and
+    ``cand (B, m)`` candidate regions (-1 padded), ``n32 (n_reg, 3)`` float32 normals and
+    ``rho32 (n_reg,)`` distances, ``M (G, 13)`` the patch moments and ``raster`` the outline
+    cell. Per (patch, candidate) the float32 offset ``n . ref - rho`` and per patch the outline
+    samples' stride (``extract._sample_stride``) are computed here as the NumPy path computes
+    them (the same float32 / float64 operations in the same order; session 6: ~20 NumPy calls
+    less). The centred float32 coordinates and
     the bound are recomputed exactly as :func:`patch_moments` / the NumPy path define them.
     Fills ``label (B, c, c)`` (closest candidate within the bound, -1 = none; ties keep the
     earlier slot). Returns ``complete (B,)``, the raw float64 moments ``(n_reg, 13)`` of the
@@ -259,6 +264,8 @@ def refine_pixels(
     """
     B, m = cand.shape
     cc = c * c
+    sqrt2 = np.sqrt(2.0)
+    off = np.empty(m, np.float32)
     complete = np.empty(B, np.bool_)
     Mreg = np.zeros((n_reg, 13), np.float64)
     row = np.empty(13, np.float64)
@@ -297,6 +304,11 @@ def refine_pixels(
         n_slot = 0
         while n_slot < m and cand[b, n_slot] >= 0:
             n_slot += 1
+        for s in range(n_slot):  # n . ref - rho in float32: ((n0 r0 + n1 r1) + n2 r2) - rho
+            k = cand[b, s]
+            o01 = np.float32(np.float32(n32[k, 0] * mx) + np.float32(n32[k, 1] * my))
+            o012 = np.float32(o01 + np.float32(n32[k, 2] * mz))
+            off[s] = np.float32(o012 - rho32[k])
         for r in range(c):
             src0 = ((i * c + r) * W + j * c) * 3
             Pr = Pflat[src0 : src0 + 3 * c]  # a slice: indices known >= 0, the loop vectorises
@@ -322,7 +334,7 @@ def refine_pixels(
             n0 = n32[k32, 0]
             n1 = n32[k32, 1]
             n2 = n32[k32, 2]
-            o = off[b, s]
+            o = off[s]
             for p in range(cc):
                 dist = abs(
                     np.float32(
@@ -391,8 +403,17 @@ def refine_pixels(
                 _raw_row(row, s0, ref64, sd, ssd)
                 for t in range(13):
                     Mreg[k, t] += row[t]
-        # outline samples: labelled pixels on every stride-th row and column, raster order
-        st = stride[b]
+        # outline samples: labelled pixels on every st-th row and column, raster order (st:
+        # extract._sample_stride's float64 operations)
+        nm = max(M[g, 0], 1.0)
+        m0 = M[g, 1] / nm
+        m1 = M[g, 2] / nm
+        m2 = M[g, 3] / nm
+        tr = M[g, 4] / nm - m0 * m0 + M[g, 8] / nm - m1 * m1 + M[g, 12] / nm - m2 * m2
+        spacing = np.sqrt(6.0 * max(tr, 0.0)) / c
+        tf = np.floor(raster / (sqrt2 * spacing)) if spacing > 0 else np.inf
+        tf = tf if tf >= 1.0 else 1.0
+        st = np.int64(min(tf, c))
         for r in range(0, c, st):
             for q in range(0, c, st):
                 p = r * c + q
@@ -410,45 +431,40 @@ def refine_pixels(
 def label_image(
     valid: np.ndarray,
     lab_cell: np.ndarray,
-    cell_count: np.ndarray,
     ids: np.ndarray,
     complete: np.ndarray,
     label: np.ndarray,
     new_id: np.ndarray,
+    sizes: np.ndarray,
     H: int,
     W: int,
-    K: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """The label image and the inliers of each segment in raster order (see
     ``extract._extract``): ``valid (hc c, wc c)``, ``lab_cell (hc, wc)`` the segment of each
-    wholesale patch (-1 = none), ``cell_count (G,)`` the valid pixels of each patch, ``ids
-    (B,)`` the border patches, ``complete (B,)`` those assigned whole (the others are mixed:
-    refined pixel by pixel), ``label (B, c, c)`` their pixels' regions (-1 = none) and ``new_id``
-    the segment of region + 1. Returns ``labels (H, W)`` int64 (-1 = none), the inlier indices ``row * W + col``
-    of all segments one after the other and the ``(K + 1,)`` cuts between segments.
+    wholesale patch (-1 = none), ``ids (B,)`` the border patches, ``complete (B,)`` those
+    assigned whole (the others are mixed: refined pixel by pixel), ``label (B, c, c)`` their
+    pixels' regions (-1 = none), ``new_id`` the segment of region + 1 and ``sizes (K,)`` the
+    segments' inlier counts. Returns ``labels (H, W)`` int64 (-1 = none), the inlier indices
+    ``row * W + col`` of all segments one after the other and the ``(K + 1,)`` cuts between
+    segments.
 
-    The segments' sizes come first (a wholesale patch adds its valid pixels), so that one raster
-    pass writes each label once and places each inlier."""
+    The segments' sizes ``sizes (K,)`` are known (the counts of their final moments: the valid
+    pixels of the wholesale patches plus the mixed patches' pixels of the segment; session 6:
+    the kernel counted them in a first pass over the mixed patches' labels), so that one raster
+    pass writes each label once and places each inlier. A size that does not match the labels
+    raises (checked before every write of a mixed patch's inlier and after every row of a
+    wholesale patch, which can overrun by at most ``c - 1`` slots: the buffer has them spare)."""
     hc, wc = lab_cell.shape
     c = valid.shape[0] // hc
+    K = len(sizes)
     mix = np.full(hc * wc, -1, np.int64)
     for b in range(len(ids)):
         if not complete[b]:
             mix[ids[b]] = b
-    count = np.zeros(K + 1, np.int64)
-    for i in range(hc):
-        for j in range(wc):
-            b = mix[i * wc + j]
-            if b >= 0:
-                for r in range(c):
-                    for q in range(c):
-                        count[new_id[label[b, r, q] + 1] + 1] += 1
-            elif lab_cell[i, j] >= 0:
-                count[lab_cell[i, j] + 1] += np.int64(cell_count[i * wc + j])
     cuts = np.zeros(K + 1, np.int64)
     for k in range(K):
-        cuts[k + 1] = cuts[k] + count[k + 1]
-    inl = np.empty(cuts[K], np.int64)
+        cuts[k + 1] = cuts[k] + sizes[k]
+    inl = np.empty(cuts[K] + c, np.int64)
     pos = cuts[:K].copy()
     labels = np.empty((H, W), np.int64)
     for y in range(H):
@@ -466,6 +482,8 @@ def label_image(
                     v = new_id[label[b, r, q] + 1]
                     labels[y, x0 + q] = v
                     if v >= 0:
+                        if pos[v] >= cuts[v + 1]:
+                            raise ValueError("label_image: a segment's size is too small")
                         inl[pos[v]] = y * W + x0 + q
                         pos[v] += 1
             elif s >= 0:  # the labels branch-free, then the inliers with a local position
@@ -479,22 +497,28 @@ def label_image(
                     if vr[q]:
                         inl[p] = i0 + q
                         p += 1
+                if p > cuts[s + 1]:
+                    raise ValueError("label_image: a segment's size is too small")
                 pos[s] = p
             else:
                 for q in range(c):
                     labels[y, x0 + q] = -1
         for x in range(wc * c, W):
             labels[y, x] = -1
-    return labels, inl, cuts
+    for k in range(K):
+        if pos[k] != cuts[k + 1]:
+            raise ValueError("label_image: a segment's size is too large")
+    return labels, inl[: cuts[K]], cuts
 
 
 @njit(cache=True)
 def plane_rows(
-    M: np.ndarray,
+    M: np.ndarray, rayleigh: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
     """TLS planes of raw moment rows ``(G, 13)`` (see ``extract._planes_from_rows``): the
     smallest eigenpair of each covariance by the closed form of ``extract.smallest_eigenpairs``
-    row by row. Returns normals ``(G, 3)`` away from the origin, rho, RMS, means ``(G, 3)`` and
+    row by row (``rayleigh``: the eigenvalue as the Rayleigh quotient of the unit vector, as
+    there). Returns normals ``(G, 3)`` away from the origin, rho, RMS, means ``(G, 3)`` and
     a flag per row whose smallest eigenvalue is repeated (the caller takes LAPACK's vector
     there)."""
     G = M.shape[0]
@@ -553,6 +577,11 @@ def plane_rows(
         bx /= inv
         by /= inv
         bz /= inv
+        if rayleigh and not rank1[g]:  # v^T (C v), left to right (the NumPy version's order)
+            u0 = a00 * bx + a01 * by + a02 * bz
+            u1 = a01 * bx + a11 * by + a12 * bz
+            u2 = a02 * bx + a12 * by + a22 * bz
+            lam = bx * u0 + by * u1 + bz * u2
         d = bx * mx + by * my + bz * mz
         if d < 0:
             bx, by, bz = -bx, -by, -bz
@@ -1019,3 +1048,161 @@ def outline_samples(
                         )
                     pos[k] += 1
     return uv, cuts, q_used, qcut
+
+
+@njit(cache=True)
+def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """Sums of the rows of ``M (G, 13)`` per group ``groups (G,)`` (-1 = none): ``(n_groups,
+    13)``, rows added in their order (``extract._sum_rows`` adds them by a BLAS product: the
+    same sums up to the order of the float64 additions)."""
+    R = np.zeros((n_groups, M.shape[1]), np.float64)
+    for g in range(len(groups)):
+        k = groups[g]
+        if k >= 0:
+            for t in range(M.shape[1]):
+                R[k, t] += M[g, t]
+    return R
+
+
+@njit(cache=True)
+def prune_merge(
+    M: np.ndarray,
+    normal: np.ndarray,
+    mean: np.ndarray,
+    bound: np.ndarray,
+    planar: np.ndarray,
+    eh: np.ndarray,
+    ev: np.ndarray,
+    hc: int,
+    wc: int,
+    min_cells: int,
+    cos_t: float,
+    distance_factor: float,
+    rms_base: float,
+    rms_quadratic: float,
+) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
+    """Steps 3-4 of the extraction (``extract._prune_merge`` with ``extract._grow_regions``'
+    components) in one call, and the planes of the final regions: the components of the planar
+    patches, their region planes (sums of the patch rows, :func:`plane_rows`), the patches that
+    disagree with their region's plane dropped, the components again, the coplanar regions'
+    components (:func:`dense_components`) and the planes of the merged regions.
+
+    Returns a status (0 = done; 1 = a region's smallest eigenvalue is repeated: the caller
+    takes the NumPy path, whose LAPACK vector the closed form does not reproduce), the number of
+    regions, the region of each patch ``(G,)`` (-1 = none) and the regions' normals ``(n, 3)``
+    and rho ``(n,)``. The tests in the oracle's order: the dot products of ``numpy.einsum``'s
+    three terms ``(a0 b0 + a2 b2) + a1 b1`` (:func:`_dot3`); the merge's normal products (a
+    BLAS product there) left to right - a decision could differ only on an exact tie."""
+    G = hc * wc
+    empty = np.zeros((0, 3), np.float64)
+    n_reg, comp = cell_components(planar.reshape(hc, wc), eh, ev, min_cells)
+    if n_reg == 0:
+        return 0, 0, comp, empty, np.zeros(0)
+    rn, rd, _, _, rank1 = plane_rows(sum_rows(comp, n_reg, M))
+    if rank1.any():
+        return 1, 0, comp, empty, np.zeros(0)
+    keep = np.zeros(G, np.bool_)
+    for g in range(G):
+        k = comp[g]
+        if planar[g] and k >= 0:
+            keep[g] = (_dot3(normal, g, rn, k) > cos_t) and (
+                abs(_dot3(rn, k, mean, g) - rd[k]) < distance_factor * bound[g]
+            )
+    n_reg, comp = cell_components(keep.reshape(hc, wc), eh, ev, min_cells)
+    if n_reg == 0:
+        return 0, 0, comp, empty, np.zeros(0)
+    rn, rd, _, rmean, rank1 = plane_rows(sum_rows(comp, n_reg, M))
+    if rank1.any():
+        return 1, 0, comp, empty, np.zeros(0)
+    rtol = np.empty(n_reg, np.float64)
+    for a in range(n_reg):
+        rtol[a] = distance_factor * (rms_base + rms_quadratic * _dot3(rmean, a, rmean, a))
+    same = np.zeros((n_reg, n_reg), np.bool_)
+    for a in range(n_reg):
+        for b in range(n_reg):
+            nn = rn[a, 0] * rn[b, 0] + rn[a, 1] * rn[b, 1] + rn[a, 2] * rn[b, 2]
+            dm = rn[a, 0] * rmean[b, 0] + rn[a, 1] * rmean[b, 1] + rn[a, 2] * rmean[b, 2]
+            same[a, b] = (nn > cos_t) and (abs(dm - rd[a]) < max(rtol[a], rtol[b]))
+    for a in range(n_reg):
+        for b in range(a + 1, n_reg):
+            both = same[a, b] and same[b, a]
+            same[a, b] = both
+            same[b, a] = both
+    n_m, merged = dense_components(same)
+    for g in range(G):
+        if comp[g] >= 0:
+            comp[g] = merged[comp[g]]
+    if n_m == n_reg:  # no regions joined: their planes stand
+        return 0, n_m, comp, rn, rd
+    rn, rd, _, _, rank1 = plane_rows(sum_rows(comp, n_m, M))
+    if rank1.any():
+        return 1, 0, comp, empty, np.zeros(0)
+    return 0, n_m, comp, rn, rd
+
+
+@njit(cache=True)
+def _close3(grid: np.ndarray, tmp: np.ndarray) -> int:  # pragma: no cover - compiled
+    """OpenCV's ``morphologyEx(grid, MORPH_CLOSE, ones((3, 3)))`` of a 0 / 1 raster ``(h, w)``
+    in place (``tmp``: scratch of the same shape) and its number of non-zero cells afterwards.
+    OpenCV's default border: outside the raster counts as 0 for the dilation and is ignored by
+    the erosion. Both as a row pass then a column pass (a 3 x 3 max / min is separable)."""
+    h, w = grid.shape
+    for op in range(2):  # 0: dilation (max), 1: erosion (min)
+        for y in range(h):
+            g = grid[y]
+            t = tmp[y]
+            if w == 1:
+                t[0] = g[0]
+                continue
+            if op == 0:
+                t[0] = max(g[0], g[1])
+                for x in range(1, w - 1):
+                    t[x] = max(max(g[x - 1], g[x]), g[x + 1])
+                t[w - 1] = max(g[w - 2], g[w - 1])
+            else:
+                t[0] = min(g[0], g[1])
+                for x in range(1, w - 1):
+                    t[x] = min(min(g[x - 1], g[x]), g[x + 1])
+                t[w - 1] = min(g[w - 2], g[w - 1])
+        for y in range(h):
+            a = tmp[max(y - 1, 0)]
+            b = tmp[y]
+            c = tmp[min(y + 1, h - 1)]
+            o = grid[y]
+            if op == 0:
+                for x in range(w):
+                    o[x] = max(max(a[x], b[x]), c[x])
+            else:
+                for x in range(w):
+                    o[x] = min(min(a[x], b[x]), c[x])
+    n = 0
+    for y in range(h):
+        g = grid[y]
+        for x in range(w):
+            n += g[x] != 0
+    return n
+
+
+@njit(cache=True)
+def close_rasters(
+    buf: np.ndarray, start: np.ndarray, shape: np.ndarray, status: np.ndarray
+) -> np.ndarray:  # pragma: no cover - compiled
+    """The 3 x 3 closing of every raster of :func:`outline_rasters` (``status == 0``; raster
+    ``k`` at ``buf[start[k]:]``, ``shape[k] = (columns, rows)``) in place, as
+    ``segments.outline_of_raster`` closes one with OpenCV (:func:`_close3`: the same cells), and
+    their numbers of covered cells ``(K,)`` (0 for the others)."""
+    K = len(status)
+    cells = np.zeros(K, np.int64)
+    big = 0
+    for k in range(K):
+        if status[k] == 0:
+            big = max(big, shape[k, 0] * shape[k, 1])
+    tmp = np.empty(big, np.uint8)
+    for k in range(K):
+        if status[k] != 0:
+            continue
+        w = shape[k, 0]
+        h = shape[k, 1]
+        grid = buf[start[k] : start[k] + w * h].reshape(h, w)
+        cells[k] = _close3(grid, tmp[: w * h].reshape(h, w))
+    return cells

@@ -61,7 +61,7 @@ from navkit.planes.segments import (
     ExtractionResult,
     PlaneSegment,
     outline_from_points,
-    outline_of_raster,
+    outline_of_closed,
 )
 
 __all__ = [
@@ -150,7 +150,7 @@ _DEFAULT_SETTINGS = ExtractionSettings()
 
 
 def smallest_eigenpairs(
-    C: NDArray[np.float64],
+    C: NDArray[np.float64], *, rayleigh: bool = False
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Smallest eigenvalue and its unit eigenvector of many symmetric 3 x 3 matrices.
 
@@ -163,10 +163,20 @@ def smallest_eigenpairs(
     eigenvalue (no defined normal: a line or a blob of points) gets one eigenvector of its
     eigenspace, an all-zero matrix ``(0, 0, 1)``.
 
+    The closed-form eigenvalue loses accuracy when the spread is extreme: its absolute error is
+    ~eps x the largest eigenvalue (a floor seen to 20 m: 1e3 m^2 against a thickness of 4e-6
+    m^2, 1e-6 relative; LAPACK's ``eigh`` 1e-8). ``rayleigh``: the eigenvalue is the Rayleigh
+    quotient ``v^T C v`` of the unit vector instead - its first-order error vanishes, and the
+    vector is accurate to ~eps x the eigenvalue gap - which matched an extended-precision
+    inverse iteration to 12 digits on that floor (the rows with a repeated smallest eigenvalue
+    keep the closed form's value).
+
     Parameters
     ----------
     C : (G, 3, 3) array
         Symmetric matrices (covariances, m^2).
+    rayleigh : bool
+        Eigenvalues as Rayleigh quotients (see above; the final planes of an extraction).
 
     Returns
     -------
@@ -214,6 +224,12 @@ def smallest_eigenpairs(
         best[rank1] = V[:, :, 0]
         best_n[rank1] = 1.0
     best /= np.sqrt(np.einsum("gi,gi->g", best, best))[:, None]
+    if rayleigh:  # v^T (C v), left to right (navkit.planes._kernels.plane_rows' order)
+        v0, v1, v2 = best[:, 0], best[:, 1], best[:, 2]
+        u0 = a00 * v0 + a01 * v1 + a02 * v2
+        u1 = a01 * v0 + a11 * v1 + a12 * v2
+        u2 = a02 * v0 + a12 * v1 + a22 * v2
+        lam = np.where(rank1, lam, v0 * u0 + v1 * u1 + v2 * u2)
     return np.maximum(lam, 0.0), best
 
 
@@ -282,25 +298,25 @@ def _sum_rows(
 
 
 def _planes_from_rows(
-    M: NDArray[np.float64], compiled: bool = False
+    M: NDArray[np.float64], compiled: bool = False, rayleigh: bool = False
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """TLS planes of moment rows: normals ``(G, 3)`` pointing away from the origin, rho ``(G,)``,
-    RMS orthogonal residual ``(G,)`` and means ``(G, 3)`` (metres). ``compiled`` (many rows):
-    the closed form row by row in one loop (:func:`navkit.planes._kernels.plane_rows`; equal
-    to the NumPy closed form up to the last bits of ``arccos`` / ``cos``)."""
-    if compiled and len(M) > 64:
-        normal, rho, rms, mean, rank1 = _kernels().plane_rows(np.ascontiguousarray(M))
+    RMS orthogonal residual ``(G,)`` and means ``(G, 3)`` (metres), by the closed form of
+    :func:`smallest_eigenpairs`. ``compiled``: row by row in one loop
+    (:func:`navkit.planes._kernels.plane_rows`; equal to the NumPy closed form up to the last
+    bits of ``arccos`` / ``cos``). ``rayleigh``: the RMS from the Rayleigh quotient of the
+    normal (:func:`smallest_eigenpairs`; accurate for the final planes' extreme spreads)."""
+    if compiled:
+        normal, rho, rms, mean, rank1 = _kernels().plane_rows(np.ascontiguousarray(M), rayleigh)
         if rank1.any():  # a repeated smallest eigenvalue: LAPACK's vector, as the NumPy path
             _rank1_normals(M, rank1, normal, rho)
         return normal, rho, rms, mean
     n = np.maximum(M[:, 0], 1.0)
     m = M[:, 1:4] / n[:, None]
     C = M[:, 4:].reshape(-1, 3, 3) / n[:, None, None] - m[:, :, None] * m[:, None, :]
-    if len(C) > 64:
-        lam, normal = smallest_eigenpairs(C)
-    else:  # a few regions: LAPACK has less overhead than the closed form's ~40 array operations
-        w, V = np.linalg.eigh(C)
-        lam, normal = np.maximum(w[:, 0], 0.0), V[:, :, 0]
+    # the closed form for any number of rows (the few dozen region rows too: LAPACK's eigh had
+    # less overhead there, but the compiled path fits them with the same closed form)
+    lam, normal = smallest_eigenpairs(C, rayleigh=rayleigh)
     d = np.einsum("gi,gi->g", normal, m)
     normal[d < 0] *= -1
     return normal, np.abs(d), np.sqrt(lam), m
@@ -472,16 +488,23 @@ def _grow_regions(
     """Steps 2-4: planar patches, region growing, pruning, merging.
 
     Returns the number of regions, the region of each patch ``(G,)`` (``-1`` = none), the
-    number of planar patches and, when the merge joined no regions, the regions' planes
-    ``(normals, rho)`` (``_planes_from_rows(_sum_rows(comp, n, M))``, already computed for the
-    merge test; else ``None``).
+    number of planar patches and the regions' planes ``(normals, rho)``
+    (``_planes_from_rows(_sum_rows(comp, n, M))``) when they are known - the NumPy path has them
+    when the merge joined no regions (computed for the merge test), the compiled path always
+    (:func:`navkit.planes._kernels.prune_merge`: steps 3-4 in one call) - else ``None``.
     """
     c = int(s.cell)
     G = hc * wc
-    normal, d, rms, mean = _planes_from_rows(M, compiled)
     cos_t = np.cos(np.radians(s.angle_deg))
     if compiled:  # the planar test, the edge tests and the components as compiled loops
         kern = _kernels()
+        normal, d, rms, mean, rank1 = kern.plane_rows(M)
+        # a repeated smallest eigenvalue: LAPACK's vector as the NumPy path, but only for the
+        # patches that can pass the planar test - the edges and the pruning use no other
+        # patch's plane (the ~100 empty patches and the 1- or 2-pixel ones need none)
+        rank1 &= M[:, 0] >= s.min_fill * c * c
+        if rank1.any():
+            _rank1_normals(M, rank1, normal, d)
         bound, planar, eh, ev = kern.patch_graph(
             normal,
             d,
@@ -497,11 +520,21 @@ def _grow_regions(
             s.distance_factor,
         )
 
+        status, n, comp, rn, rd = kern.prune_merge(
+            M, normal, mean, bound, planar, eh, ev, hc, wc, int(s.min_cells), float(cos_t),
+            s.distance_factor, s.rms_base, s.rms_quadratic,
+        )  # fmt: skip
+        if status == 0:
+            return int(n), comp, int(planar.sum()), ((rn, rd) if n else None)
+
+        # a region's smallest eigenvalue is repeated (a degenerate grid): step by step, LAPACK's
+        # vector for that region as in the NumPy path
         def union_find(keep: NDArray[np.bool_]) -> tuple[int, NDArray[np.int64]]:
             n, comp = kern.cell_components(keep.reshape(hc, wc), eh, ev, int(s.min_cells))
             return int(n), comp
 
         return _prune_merge(M, normal, mean, bound, planar, union_find, s, cos_t, compiled)
+    normal, d, rms, mean = _planes_from_rows(M)
     bound = s.noise(np.einsum("gi,gi->g", mean, mean))
     planar = (M[:, 0] >= s.min_fill * c * c) & (rms < bound)
     ids = np.arange(G).reshape(hc, wc)
@@ -670,39 +703,26 @@ def _refine_border(
     candidate slot (the oracle: same labels, moments within float64 rounding).
     """
     B = len(cand)
-    ci, cj = np.divmod(ids, wc)
-    ref = pt.ref[ids]  # (B, 3) float32
     n32 = rn.astype(np.float32)
     rho32 = rd.astype(np.float32)
     own = comp[ids]
     ltype = np.int16 if n_reg < 32767 else np.int32
-    # the compiled kernel writes every pixel's label
-    label = np.empty((B, c, c), ltype) if compiled else np.full((B, c, c), -1, ltype)
+    if compiled:  # the offsets and strides below are computed in the kernel, the same floats
+        label = np.empty((B, c, c), ltype)  # the kernel writes every pixel's label
+        complete, M, cpoints, cregion = _kernels().refine_pixels(
+            pt.P, pt.ref, pt.tol_scale, pt.tol_base, ids, own, cand, n32, rho32, pt.M,
+            float(raster), wc, c, label, n_reg,
+        )  # fmt: skip
+        return _Border(ids, label, complete, M, cpoints, cregion)
+    ci, cj = np.divmod(ids, wc)
+    ref = pt.ref[ids]  # (B, 3) float32
+    label = np.full((B, c, c), -1, ltype)
     # n . ref - rho per (patch, candidate), float32 (-1 slots: unused)
     kc = np.maximum(cand, 0)
     nk = n32[kc]  # (B, m, 3)
     off = nk[..., 0] * ref[:, None, 0] + nk[..., 1] * ref[:, None, 1]
     off += nk[..., 2] * ref[:, None, 2]
     off -= rho32[kc]
-    if compiled:
-        stride = _sample_stride(pt.M[ids], c, raster)
-        complete, M, cpoints, cregion = _kernels().refine_pixels(
-            pt.P,
-            pt.ref,
-            pt.tol_scale,
-            pt.tol_base,
-            ids,
-            own,
-            cand,
-            off,
-            n32,
-            stride,
-            wc,
-            c,
-            label,
-            n_reg,
-        )
-        return _Border(ids, label, complete, M, cpoints, cregion)
     complete, G = _refine_border_numpy(pt, ids, ci, cj, own, cand, off, n32, label, hc, wc, c)
     mixed = np.flatnonzero(~complete)
     M = np.zeros((n_reg, _NM))
@@ -860,8 +880,10 @@ def _extract(
     wholesale = wholesale.ravel()
     wholesale[ids[bd.complete]] = True
     # 6. final planes from the moments of their inliers: wholesale patches + mixed pixels
-    Mf = _sum_rows(np.where(wholesale, comp, -1), n_reg, pt.M) + bd.M
-    normal, rho, rms, mean = _planes_from_rows(Mf)
+    whole = np.where(wholesale, comp, -1)
+    Mf = _kernels().sum_rows(whole, n_reg, pt.M) if compiled else _sum_rows(whole, n_reg, pt.M)
+    Mf += bd.M
+    normal, rho, rms, mean = _planes_from_rows(Mf, compiled, rayleigh=True)
     count = np.rint(Mf[:, 0]).astype(np.int64)
     keep = np.flatnonzero(count >= s.min_cells * c * c * s.min_fill)
     keep = keep[np.argsort(-count[keep], kind="stable")]  # segments by decreasing inlier count
@@ -872,7 +894,7 @@ def _extract(
     lab_cell = new_id[np.where(wholesale, comp, -1) + 1].reshape(hc, wc)
     if compiled:
         labels, inl, cuts = _kernels().label_image(
-            pt.valid, lab_cell, pt.M[:, 0], ids, bd.complete, bd.label, new_id, H, W, len(keep)
+            pt.valid, lab_cell, ids, bd.complete, bd.label, new_id, count[keep], H, W
         )
         inliers = [inl[cuts[k] : cuts[k + 1]] for k in range(len(keep))]
     else:
@@ -880,12 +902,11 @@ def _extract(
             pt.valid, lab_cell, ids, mixed, bd, new_id, segmap, H, W
         )
     kept = count[keep]
-    planes = []
-    for new, k in enumerate(keep):
-        n, r = canonical_plane(normal[k], float(rho[k]))
-        planes.append(
-            Plane(normal=n, rho=r, centroid=mean[k], rms=float(rms[k]), count=int(kept[new]))
-        )
+    cn, cr = _canonical_planes(normal[keep], rho[keep])
+    planes = [
+        Plane(normal=cn[i], rho=float(cr[i]), centroid=mean[k], rms=float(rms[k]), count=int(n))
+        for i, (k, n) in enumerate(zip(keep, kept, strict=True))
+    ]
     outlines = _outlines(
         pt,
         labels,
@@ -958,6 +979,23 @@ def _label_image_numpy(
     flat_lab = lab_small.ravel()
     inliers = [np.flatnonzero(flat_lab[row_lo[k] : row_hi[k]] == k) + row_lo[k] for k in range(K)]
     return lab_small.astype(np.int64), inliers
+
+
+def _canonical_planes(
+    normal: NDArray[np.float64], rho: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """:func:`navkit.geometry.canonical_plane` of every row ``(K, 3)``, ``(K,)`` at once, the
+    same bits (the norm as ``numpy.linalg.norm``'s dot product, left to right: checked equal on
+    2e5 random vectors; ~4 us a plane per call saved). A zero or non-finite normal or a plane
+    through the origin (``_orient``'s special cases) takes ``canonical_plane`` row by row."""
+    n0, n1, n2 = normal[:, 0], normal[:, 1], normal[:, 2]
+    norm = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = rho / norm
+    if not (np.all(np.isfinite(norm) & (norm > 0)) and np.all(r > 1e-12)):
+        rows = [canonical_plane(n, float(d)) for n, d in zip(normal, rho, strict=True)]
+        return np.array([n for n, _ in rows]).reshape(-1, 3), np.array([d for _, d in rows])
+    return normal / norm[:, None], r
 
 
 def _plane_frames(planes: list[Plane]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -1093,8 +1131,10 @@ def _outlines_compiled(
 ) -> list[tuple[NDArray[np.float64], float]]:
     """``outline_from_points(uv[cuts[k]:cuts[k + 1]:step[k]], cell, quads=quads[qcuts[k]:
     qcuts[k + 1]])`` for every segment ``k``, the same outlines and areas: the rasters of all
-    segments drawn in one compiled pass (:func:`navkit.planes._kernels.outline_rasters`), then
-    per segment OpenCV's polygon fill, closing and contour (``outline_of_raster``)."""
+    segments drawn in one compiled pass (:func:`navkit.planes._kernels.outline_rasters`), per
+    segment OpenCV's polygon fill, the closings of all rasters in one compiled pass
+    (:func:`navkit.planes._kernels.close_rasters`, OpenCV's cells) and per segment the contour
+    (``segments.outline_of_closed``)."""
     buf, start, shape, lo, status, qint, qfin = _kernels().outline_rasters(
         np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2),
         cuts,
@@ -1103,20 +1143,25 @@ def _outlines_compiled(
         qcuts,
         float(cell),
     )
-    out = []
-    for k in range(len(cuts) - 1):
-        ql, qh = qcuts[k], qcuts[k + 1]
-        if status[k] == 1:  # fewer than 3 points and corners
-            out.append((np.zeros((0, 2)), 0.0))
-            continue
-        if status[k] == 2:  # a huge raster: outline_from_points coarsens it
-            uv_k = uv[cuts[k] : cuts[k + 1] : step[k]]
-            out.append(outline_from_points(uv_k, cell, quads=quads[ql:qh]))
-            continue
+    K = len(cuts) - 1
+    grids = []
+    for k in range(K):
         w, h = int(shape[k, 0]), int(shape[k, 1])
         grid = buf[start[k] : start[k] + w * h].reshape(h, w)
-        qk = qint[ql:qh][qfin[ql:qh]]
-        if len(qk):
-            cv2.fillPoly(grid, list(qk), 1, cv2.LINE_8, 4)
-        out.append(outline_of_raster(grid, lo[k], cell))
+        grids.append(grid)
+        if status[k] == 0:
+            qk = qint[qcuts[k] : qcuts[k + 1]][qfin[qcuts[k] : qcuts[k + 1]]]
+            if len(qk):
+                cv2.fillPoly(grid, list(qk), 1, cv2.LINE_8, 4)
+    covered = _kernels().close_rasters(buf, start, shape, status)  # OpenCV's 3 x 3 closing
+    out = []
+    for k in range(K):
+        if status[k] == 1:  # fewer than 3 points and corners
+            out.append((np.zeros((0, 2)), 0.0))
+        elif status[k] == 2:  # a huge raster: outline_from_points coarsens it
+            uv_k = uv[cuts[k] : cuts[k + 1] : step[k]]
+            out.append(outline_from_points(uv_k, cell, quads=quads[qcuts[k] : qcuts[k + 1]]))
+        else:
+            area = float(covered[k]) * cell * cell
+            out.append(outline_of_closed(grids[k], area, lo[k], cell))
     return out

@@ -112,7 +112,16 @@ def outline_of_raster(
     counter-clockwise. The organised extraction fills the rasters of all planes in one
     compiled pass and calls this per plane (the same outlines)."""
     grid = np.asarray(cv2.morphologyEx(grid, cv2.MORPH_CLOSE, _CLOSE_3X3), np.uint8)
-    area = float(np.count_nonzero(grid)) * cell * cell
+    return outline_of_closed(grid, float(np.count_nonzero(grid)) * cell * cell, lo, cell)
+
+
+def outline_of_closed(
+    grid: NDArray[np.uint8], area: float, lo: NDArray[np.float64], cell: float
+) -> tuple[NDArray[np.float64], float]:
+    """:func:`outline_of_raster` after its closing: ``grid`` is the closed raster and
+    ``area`` its covered area (m^2). The organised extraction closes the rasters of all planes
+    in one compiled pass (``navkit.planes._kernels.close_rasters``, the same cells) and calls
+    this per plane."""
     contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
         return np.zeros((0, 2)), area
