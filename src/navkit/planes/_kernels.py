@@ -219,6 +219,23 @@ def patch_moments(
     return M, ref
 
 
+@njit(cache=True, inline="always")
+def _patch_stride(
+    M: np.ndarray, g: int, c: int, cell: float, sqrt2: float
+) -> np.int64:  # pragma: no cover - compiled
+    """The pixel stride of patch ``g``'s outline samples from its scatter (moment row ``M[g]``):
+    ``extract._sample_stride``'s float64 operations, in the same order."""
+    n = max(M[g, 0], 1.0)
+    m0 = M[g, 1] / n
+    m1 = M[g, 2] / n
+    m2 = M[g, 3] / n
+    tr = M[g, 4] / n - m0 * m0 + M[g, 8] / n - m1 * m1 + M[g, 12] / n - m2 * m2
+    spacing = np.sqrt(6.0 * max(tr, 0.0)) / c
+    t = np.floor(cell / (sqrt2 * spacing)) if spacing > 0 else np.inf
+    t = t if t >= 1.0 else 1.0
+    return np.int64(min(t, c))
+
+
 @njit(cache=True)
 def refine_pixels(
     P: np.ndarray,
@@ -405,15 +422,7 @@ def refine_pixels(
                     Mreg[k, t] += row[t]
         # outline samples: labelled pixels on every st-th row and column, raster order (st:
         # extract._sample_stride's float64 operations)
-        nm = max(M[g, 0], 1.0)
-        m0 = M[g, 1] / nm
-        m1 = M[g, 2] / nm
-        m2 = M[g, 3] / nm
-        tr = M[g, 4] / nm - m0 * m0 + M[g, 8] / nm - m1 * m1 + M[g, 12] / nm - m2 * m2
-        spacing = np.sqrt(6.0 * max(tr, 0.0)) / c
-        tf = np.floor(raster / (sqrt2 * spacing)) if spacing > 0 else np.inf
-        tf = tf if tf >= 1.0 else 1.0
-        st = np.int64(min(tf, c))
+        st = _patch_stride(M, g, c, raster, sqrt2)
         for r in range(0, c, st):
             for q in range(0, c, st):
                 p = r * c + q
@@ -991,15 +1000,7 @@ def outline_samples(
             n_use[k + 1] += 1
             continue
         # the pixel stride of a patch rasterised pixel by pixel (extract._sample_stride)
-        n = max(M[g, 0], 1.0)
-        m0 = M[g, 1] / n
-        m1 = M[g, 2] / n
-        m2 = M[g, 3] / n
-        tr = M[g, 4] / n - m0 * m0 + M[g, 8] / n - m1 * m1 + M[g, 12] / n - m2 * m2
-        spacing = np.sqrt(6.0 * max(tr, 0.0)) / c
-        t = np.floor(cell / (sqrt2 * spacing)) if spacing > 0 else np.inf
-        t = t if t >= 1.0 else 1.0
-        st = np.int64(min(t, c))
+        st = _patch_stride(M, g, c, cell, sqrt2)
         stride[p] = st
         for r in range(0, c, st):
             for q in range(0, c, st):
