@@ -13,12 +13,18 @@ folder (so "empty cache" means what a fresh clone has), rounds interleaved:
 - ``eager, empty cache``: compiling in the process on first use (what this code did before the
   policy existed).
 
+``--kernels-vs-twins`` runs another comparison instead, of this code only: ``navkit compile``
+once into a fresh cache, then rounds alternating the demo on the compiled kernels (``auto`` with
+the stamp found: every kernel loaded from the cache, as on every run after the first) and on the
+NumPy twins (``NAVKIT_JIT=numpy``). It answers whether loading the kernels costs more than they
+save in the demo.
+
 Wall time is what the issue's rule is about ("``make demo`` on a fresh clone must not get
 slower"); CPU time of the demo process is reported too (the background compilation's CPU is not
 in it). Run from the repository root::
 
     PYTHONPATH=.:src .venv/bin/python benchmarks/cold_start.py [--before 4f29c21] [--rounds 2] \
-        [--no-eager]
+        [--no-eager | --kernels-vs-twins]
 """
 
 from __future__ import annotations
@@ -69,7 +75,15 @@ def main() -> None:
     ap.add_argument(
         "--no-eager", action="store_true", help="skip the eager case (the longest, ~1.5 min CPU)"
     )
+    ap.add_argument(
+        "--kernels-vs-twins",
+        action="store_true",
+        help="this code only: kernels loaded from a warm cache against the NumPy twins",
+    )
     args = ap.parse_args()
+    if args.kernels_vs_twins:
+        _print(_kernels_vs_twins(args.rounds), "this code")
+        return
     rows: dict[str, list[tuple[float, float]]] = {}
     with tempfile.TemporaryDirectory(prefix="navkit-cold-") as tmp:
         t = Path(tmp)
@@ -102,7 +116,38 @@ def main() -> None:
                 print(f"round {r + 1} done", file=sys.stderr)
         finally:
             subprocess.run(["git", "worktree", "remove", "--force", str(old)], cwd=ROOT)
-    print(f"| case (before = {args.before}) | wall s per round | CPU s per round |")
+    _print(rows, f"before = {args.before}")
+
+
+def _kernels_vs_twins(rounds: int) -> dict[str, list[tuple[float, float]]]:
+    """The demo on kernels loaded from a warm cache against the NumPy twins, rounds
+    interleaved (the cache filled once by ``navkit compile``)."""
+    rows: dict[str, list[tuple[float, float]]] = {}
+    with tempfile.TemporaryDirectory(prefix="navkit-twins-") as tmp:
+        t = Path(tmp)
+        cache = t / "cache"
+        env = dict(os.environ, PYTHONPATH=str(ROOT / "src"), NUMBA_CACHE_DIR=str(cache))
+        env.pop("NAVKIT_JIT", None)
+        subprocess.run(
+            [sys.executable, "-m", "navkit", "-q", "compile"],
+            env=env,
+            cwd=ROOT,
+            check=True,
+            capture_output=True,
+        )
+        for r in range(rounds):
+            rows.setdefault("compiled kernels (auto, stamp found)", []).append(
+                _demo(ROOT / "src", cache, "auto", t / f"o-kernels-{r}")
+            )
+            rows.setdefault("NumPy twins (NAVKIT_JIT=numpy)", []).append(
+                _demo(ROOT / "src", cache, "numpy", t / f"o-twins-{r}")
+            )
+            print(f"round {r + 1} done", file=sys.stderr)
+    return rows
+
+
+def _print(rows: dict[str, list[tuple[float, float]]], what: str) -> None:
+    print(f"| case ({what}) | wall s per round | CPU s per round |")
     print("|---|---|---|")
     for name, vals in rows.items():
         walls = ", ".join(f"{w:.1f}" for w, _ in vals)
