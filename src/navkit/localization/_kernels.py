@@ -575,3 +575,51 @@ def depth_first(
         cur[lv] = 0
         h = lv
     return lower, budget, evaluated, ls[:nl], lk[:nl], lx[:nl], ly[:nl]
+
+
+@njit(cache=True)
+def group_table(
+    cx: np.ndarray,
+    cy: np.ndarray,
+    g: int,
+    block: int,
+    pick: np.ndarray,
+    cells: int,
+    lo_x: int,
+    lo_y: int,
+    W: int,
+    out: np.ndarray,
+) -> bool:  # pragma: no cover - compiled
+    """The look-up table of the rotation groups of ``g`` rotations at a level of ``block``-wide
+    nodes (``matcher._Search._group_tables``, its NumPy version the oracle): per group ``j``
+    (rotations ``[j g, j g + g)``, the last one possibly short) and point ``i`` the extremes of
+    the point's cells ``cx, cy`` over the group, the stack index ``pick[w]`` of the narrowest
+    window at least ``w = block + max(spread x, spread y)`` wide, and ``out[j, i] = pick[w]
+    cells + (min y - lo_y) W + (min x - lo_x)``. False when ``w`` is beyond ``pick`` (no window
+    wide enough; ``out`` then incomplete)."""
+    K, N = cx.shape
+    G = out.shape[0]
+    mnx = np.empty(N, np.int64)
+    mxx = np.empty(N, np.int64)
+    mny = np.empty(N, np.int64)
+    mxy = np.empty(N, np.int64)
+    for j in range(G):
+        k0 = j * g
+        k1 = min(k0 + g, K)
+        for i in range(N):
+            mnx[i] = mxx[i] = cx[k0, i]
+            mny[i] = mxy[i] = cy[k0, i]
+        for k in range(k0 + 1, k1):
+            for i in range(N):
+                x = cx[k, i]
+                y = cy[k, i]
+                mnx[i] = min(mnx[i], x)
+                mxx[i] = max(mxx[i], x)
+                mny[i] = min(mny[i], y)
+                mxy[i] = max(mxy[i], y)
+        for i in range(N):
+            w = block + max(mxx[i] - mnx[i], mxy[i] - mny[i])
+            if w >= len(pick):
+                return False
+            out[j, i] = pick[w] * cells + (mny[i] - lo_y) * W + (mnx[i] - lo_x)
+    return True
