@@ -238,10 +238,6 @@ _ROT_GROUPS = 3  # global search: nodes cover up to 2^3 rotations (see _Search._
 _ROT_START = 3  # ... from this pyramid level up (2^(h-1) rotations at level h)
 _ROT_LAG = 1
 _GROUP_EXTRA_LEVELS = 2  # pyramid levels beyond the search's for the rotation groups' bounds
-# Rotation groups' windows of every width 2^h + o (0 < o < 2^h) on these levels (besides the
-# 2^h and 1.5 x 2^h of every level), see _stack_widths: the narrowest window covering a point's
-# cells over a group (issue 12, session 7)
-_EXACT_WIDTHS: dict[int, tuple[int, ...]] = {3: (2,), 4: (4,)}
 _NO_TABLE = np.zeros((0, 1), dtype=np.int32)  # expand_sums: no early bound of sub-groups
 
 
@@ -272,29 +268,6 @@ def _widen(level: NDArray[np.float32], s: int) -> NDArray[np.float32]:
         np.maximum(pad[:H, :W], pad[s : s + H, :W]),
         np.maximum(pad[:H, s : s + W], pad[s : s + H, s : s + W]),
     )
-
-
-def _stack_widths(n_levels: int) -> tuple[NDArray[np.int64], list[tuple[int, int]]]:
-    """The window widths of a rotation-group search's stack, in stack order, and how the
-    windows beyond the pyramid are built (``(level, offset)``: ``_widen(pyramid[level],
-    offset)``, width ``2^level + offset``).
-
-    The stack holds the ``n_levels`` max-pooled levels (``2^h`` wide), then the ``1.5 x 2^h``
-    windows of levels ``1 .. n_levels - 2``, then every width ``2^h + o`` (``0 < o < 2^h``,
-    not ``1.5 x 2^h``) of the levels ``_EXACT_WIDTH_LEVELS`` below ``n_levels - 1``: a group's
-    look-up takes the narrowest window that covers its point's cells (``_group_tables``), and a
-    node of level 3 or 4 needs ``2^h`` plus a spread of 0-10 cells - rounded up to the next of
-    ``2^h, 1.5 x 2^h, 2^(h+1)`` alone it bounds nearly every node above the pruning threshold
-    (measured, ``docs/kernels.md``, "Session 7")."""
-    widths = [2**h for h in range(n_levels)] + [3 * 2 ** (h - 1) for h in range(1, n_levels - 1)]
-    build = [(h, 2 ** (h - 1)) for h in range(1, n_levels - 1)]
-    for h, offsets in _EXACT_WIDTHS.items():
-        if h < n_levels - 1:
-            for o in offsets:
-                if o != 2 ** (h - 1):
-                    widths.append(2**h + o)
-                    build.append((h, o))
-    return np.array(widths, dtype=np.int64), build
 
 
 def _rotate(theta: NDArray[np.float64], pts: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -404,11 +377,7 @@ class _Search:
         if grouped:  # a group's look-ups reach dmax cells beyond its rotations' cells
             lo, hi = lo - dmax, hi + dmax
         flat = None
-        if grouped:
-            self.widths, build = _stack_widths(levels + extra)
-            n_stack = len(self.widths)
-        else:
-            n_stack = levels
+        n_stack = 2 * (levels + extra) - 2 if grouped else levels
         if cache is not None:
             # A region that a cached pyramid covers is reused (global searches of one map);
             # otherwise the region is grown to multiples of _REGION_BLOCK cells so that the
@@ -443,8 +412,8 @@ class _Search:
                 region[y0 - lo[1] : y1 - lo[1], x0 - lo[0] : x1 - lo[0]] = fld.values[y0:y1, x0:x1]
             # uint8 copies of the pooled levels (rounded up, so level bounds stay upper bounds).
             pyr = _pyramid(region, levels + extra)
-            if grouped:  # + the wider windows of the rotation groups (_group_tables)
-                pyr += [_widen(pyr[h], o) for h, o in build]
+            if grouped:  # + the 1.5 x 2^h windows of the rotation groups (_group_tables)
+                pyr += [_widen(pyr[h], 2 ** (h - 1)) for h in range(1, levels + extra - 1)]
             flat = np.stack([np.ceil(g * 255.0).astype(np.uint8).ravel() for g in pyr])
             if cache is not None:
                 cache.insert(0, (lo, hi, flat))
@@ -454,7 +423,7 @@ class _Search:
         self.F = self._table(cx, cy, zero, zero, lo, np.int32)  # (K, N)
         self.flat = flat
         if grouped:
-            self._group_tables(cx, cy, lo, levels)
+            self._group_tables(pts, lo, dth, levels)
 
     def _cells(
         self, thetas: NDArray[np.float64], pts: NDArray[np.float64]
@@ -529,61 +498,47 @@ class _Search:
         self.F = np.where(inside, F, 0).astype(np.int32)
 
     def _group_tables(
-        self, cx: NDArray[np.int64], cy: NDArray[np.int64], lo: NDArray[np.int64], levels: int
+        self, pts: NDArray[np.float64], lo: NDArray[np.int64], dth: float, levels: int
     ) -> None:
         """Look-up tables of the rotation groups: an exact bound over a block of rotations.
 
         A node of level ``h`` covers translations ``[ix, ix + 2^h) x [iy, iy + 2^h)`` and the
-        rotations ``[k, k + g)``, ``g = 2^a[h]``. Point ``i``'s cells at the group's rotations
-        (``cx, cy``, the leaves' own cells) span ``[mx_i, Mx_i] x [my_i, My_i]``; at every leaf
-        of the node its cell lies in the ``(2^h + s_i)``-wide square from ``(mx_i, my_i)``,
-        ``s_i = max(Mx_i - mx_i, My_i - my_i)``, and so does the maximum of the field over
-        that square bound its value there. The narrowest window of the stack at least that wide
-        (``_stack_widths``; forward blocks, so the corner is the square's) covers it: so
-        ``FG[h][group, i]`` indexes that window at that corner in the flattened stack, and a
-        node's bound is one gather, as for a single rotation. Exact: the bound is an upper
-        bound of every leaf below (the leaves themselves are single rotations, ``a[0] = 0``).
-
-        Before session 7 the square was centred on the cell at the group's central angle,
-        ``2^h + 2 d_i`` wide with ``d_i`` the arc of the point's sweep rounded up, and the
-        windows were ``2^h`` and ``1.5 x 2^h`` only: the same bound for nearly all points, and
-        on the real logs no node above the pruning threshold was cut by it (``docs/kernels.md``,
-        "Session 7"). Compiled: :func:`navkit.localization._kernels.group_table` (the same
-        table).
+        rotations ``[k, k + g)``, ``g = 2^a[h]``. Rotated by the group's central angle, point
+        ``i`` is at most ``|p_i| (g - 1) / 2 dtheta`` (the arc) from its place at any rotation
+        of the group, so its cell at any of them is within ``d_i = ceil(that / resolution)``
+        cells per axis. The maximum of the field over the ``(2^h + 2 d_i)``-wide window from
+        ``(q_i - d_i)`` bounds its value at every leaf of the node; the max-pooled level
+        ``l_i = ceil(log2(2^h + 2 d_i))`` at that corner covers the window (forward blocks).
+        So ``FG[h][group, i]`` indexes level ``l_i`` of the flattened pyramid, and a node's
+        bound is one gather, as for a single rotation. Exact: the bound is an upper bound of
+        every leaf below (the leaves themselves are single rotations, ``a[0] = 0``).
         """
+        res = self.f.resolution
         K = len(self.thetas)
+        radius = np.linalg.norm(pts, axis=1)
         cells = self.flat.shape[1]
-        order = np.argsort(self.widths, kind="stable")  # the windows, narrowest first
-        widths, which = self.widths[order], order.astype(np.int64)
-        # pick[w]: the stack index of the narrowest window at least w wide
-        pick = which[np.searchsorted(widths, np.arange(int(widths[-1]) + 1))]
+        # the windows on the stack: level h of the pyramid (2^h wide) at index h, and
+        # 1.5 x 2^h (_widen) at index nP + h - 1
+        nP = (len(self.flat) + 2) // 2
+        widths_all = np.array(
+            [2.0**h for h in range(nP)] + [1.5 * 2.0**h for h in range(1, nP - 1)]
+        )
+        order = np.argsort(widths_all, kind="stable")
+        widths, which = widths_all[order], order
         self.flat_all = self.flat.reshape(-1)
         dtype = np.int32 if self.flat.size < 2**31 - 1 else np.int64
         for h in range(1, levels):
             g = 2 ** self.a[h]
             if g == 1:
                 continue
-            G = -(-K // g)
-            if self.compiled:
-                from navkit.localization import _kernels
-
-                out = np.empty((G, cx.shape[1]), dtype=dtype)
-                ok = _kernels.group_table(
-                    cx, cy, g, 2**h, pick, cells, int(lo[0]), int(lo[1]), int(self.Wp), out
-                )
-                assert ok  # a window of the stack covers every point (the region's dmax)
-                self.FG[h] = out
-                continue
-            # the last group may be short: repeating its last rotation changes no extreme
-            last = G * g - K
-            X = np.concatenate([cx, np.repeat(cx[-1:], last, axis=0)]).reshape(G, g, -1)
-            Y = np.concatenate([cy, np.repeat(cy[-1:], last, axis=0)]).reshape(G, g, -1)
-            mx, my = X.min(axis=1), Y.min(axis=1)
-            spread = np.maximum(X.max(axis=1) - mx, Y.max(axis=1) - my)
-            w = 2**h + spread
-            assert w.max() < len(pick)  # a window of the stack covers every point
-            add = pick[w] * cells + (my - lo[1]) * self.Wp + (mx - lo[0])
-            self.FG[h] = add.astype(dtype)
+            k0 = np.arange(0, K, g)
+            centre = self.thetas[0] + (k0 + (g - 1) / 2) * dth
+            qx, qy, _ = self._cells(centre, pts)  # (G, N) each
+            d = np.ceil(radius * (g - 1) / 2 * abs(dth) / res).astype(np.int64)  # (N,)
+            j = np.searchsorted(widths, 2**h + 2 * d)  # the narrowest window that covers
+            assert j.max() < len(widths)
+            lvl = which[j]
+            self.FG[h] = self._table(qx, qy, d, (lvl * cells).astype(np.int64), lo, dtype)
 
     def scores(
         self, level: int, k: NDArray[np.intp], ix: NDArray[np.intp], iy: NDArray[np.intp]
