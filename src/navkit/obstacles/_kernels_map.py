@@ -304,77 +304,79 @@ def split_kernel(  # type: ignore[no-untyped-def]
     groots = work_i32[6]  # the roots of the ground sets (some joined later by the drops)
     _class_union_find(labels, wrap, cls, parent)
     # obstacle and shadow components numbered by first appearance in raster order; every
-    # triangle pointed at its root on the way. The same pass gathers the obstacle components'
-    # statistics (size, z extrema, sum of the mid heights, the triangles with a ground
-    # neighbour): a component's number is known at its first triangle (its root), so no second
-    # pass re-reads the labels by triangle. The per-label arrays are sized for the worst case
-    # (one component per triangle) but only written from the numbers given out (untouched
-    # pages cost nothing); the mid heights stay in raster order (``zr``, with their labels in
-    # ``oa``) and are grouped by label later, only for the components whose spread decides.
+    # triangle pointed at its root on the way
     lab = np.empty((R, C), np.int32)
     labf = lab.ravel()
-    cap = R * C + 1
-    size = np.empty(cap, np.int64)
-    hi = np.empty(cap, np.float32)
-    lo = np.empty(cap, np.float32)
-    sm = np.empty(cap, np.float64)
-    zr = np.empty(cap, np.float64)  # mid heights of the obstacle triangles, raster order
-    oa = np.empty(cap, np.int32)  # their labels
-    # those with a ground neighbour (the lift's pairs): row, column, label and which of
-    # the four offsets (``_OFF_I``, ``_OFF_J``; rows cyclic with ``wrap``) is ground
-    bi_ = np.empty(cap, np.int32)
-    bj_ = np.empty(cap, np.int32)
-    ba_ = np.empty(cap, np.int32)
-    bm_ = np.empty(cap, np.int8)
-    nbd = 0
-    h = np.float32(0.5)
     n = 0
     ns = 0
     nsh = 0
     nt = 0
     ng = 0
-    ca = 0  # the label of the current run of obstacle triangles (0: none yet)
-    chi, clo, csm, csz = np.float32(-np.inf), np.float32(np.inf), 0.0, 0
-    for i in range(R):
-        up = i - 1 if i > 0 else (R - 1 if wrap else -1)
-        dn = i + 1 if i + 1 < R else (0 if wrap else -1)
-        for j in range(C):
-            f = i * C + j
-            r = parent[parent[f]]
-            parent[f] = r
-            c = cls[f]
-            if c <= 0:
-                labf[f] = 0
-                if c == _GROUND:  # the ground sets' sizes, at their roots (reached first)
-                    if r == f:
-                        ground_size[f] = 1
-                        groots[ng] = f
-                        ng += 1
-                    else:
-                        ground_size[r] += 1
-                continue
-            if r == f:
-                if c == _OBSTACLE:
-                    n += 1
-                    new[f] = n
-                    size[n] = 0
-                    hi[n] = -np.inf
-                    lo[n] = np.inf
-                    sm[n] = 0.0
+    for f in range(R * C):
+        r = parent[parent[f]]
+        parent[f] = r
+        c = cls[f]
+        if c <= 0:
+            labf[f] = 0
+            if c == _GROUND:  # the ground sets' sizes, at their roots (reached first)
+                if r == f:
+                    ground_size[f] = 1
+                    groots[ng] = f
+                    ng += 1
                 else:
-                    ns += 1
-                    new[f] = ns
-            if c != _OBSTACLE:
-                labf[f] = 0
-                sl[f] = new[r]
-                shf[nsh] = f
-                nsh += 1
-                continue
-            a = new[r]
-            labf[f] = a
+                    ground_size[r] += 1
+            continue
+        if r == f:
+            if c == _OBSTACLE:
+                n += 1
+                new[f] = n
+            else:
+                ns += 1
+                new[f] = ns
+        if c == _OBSTACLE:
+            labf[f] = new[r]
             obf[nt] = f
-            oa[nt] = a
+            nt += 1
+        else:
+            labf[f] = 0
+            sl[f] = new[r]
+            shf[nsh] = f
+            nsh += 1
+    dropped_any = False
+    ntri = np.zeros(1, np.int64)  # per final obstacle id: its triangles
+    if n:
+        size = np.zeros(n + 1, np.int64)
+        hi = np.full(n + 1, -np.inf, np.float32)
+        lo = np.full(n + 1, np.inf, np.float32)
+        sm = np.zeros(n + 1, np.float64)
+        h = np.float32(0.5)
+        # obstacle triangles (raster order) grouped by label: a counting sort
+        for k in range(nt):
+            size[labf[obf[k]]] += 1
+        start = np.zeros(n + 2, np.int64)
+        for a in range(1, n + 1):
+            start[a + 1] = start[a] + size[a]
+        fill = start.copy()
+        zs = np.empty(nt, np.float64)  # their mid heights by label
+        # those with a ground neighbour (the lift's pairs): row, column, label and which of
+        # the four offsets (``_OFF_I``, ``_OFF_J``; rows cyclic with ``wrap``) is ground
+        bi_ = np.empty(nt, np.int32)
+        bj_ = np.empty(nt, np.int32)
+        ba_ = np.empty(nt, np.int32)
+        bm_ = np.empty(nt, np.int8)
+        nbd = 0
+        i = 0
+        ca = 0  # the label of the current run
+        chi, clo, csm, cfill = hi[0], lo[0], sm[0], fill[0]
+        for k in range(nt):
+            f = obf[k]
+            while f >= (i + 1) * C:  # raster order: the row without a division
+                i += 1
+            j = f - i * C
+            a = labf[f]
             # the ground neighbours (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)
+            up = i - 1 if i > 0 else (R - 1 if wrap else -1)
+            dn = i + 1 if i + 1 < R else (0 if wrap else -1)
             mk = 0
             if j + 1 < C:
                 mk |= 1 if labels[i, j + 1] == 0 else 0
@@ -390,21 +392,17 @@ def split_kernel(  # type: ignore[no-untyped-def]
                 nbd += 1
             if a != ca:  # a run of one label: its sums in registers, the same order
                 if ca:
-                    hi[ca], lo[ca], sm[ca], size[ca] = chi, clo, csm, csz
+                    hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
                 ca = a
-                chi, clo, csm, csz = hi[a], lo[a], sm[a], size[a]
+                chi, clo, csm, cfill = hi[a], lo[a], sm[a], fill[a]
             chi = _max_nan(chi, zmax[i, j])
             clo = _min_nan(clo, zmin[i, j])
             zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
             csm += zm
-            csz += 1
-            zr[nt] = zm
-            nt += 1
-    if ca:
-        hi[ca], lo[ca], sm[ca], size[ca] = chi, clo, csm, csz
-    dropped_any = False
-    ntri = np.zeros(1, np.int64)  # per final obstacle id: its triangles
-    if n:
+            zs[cfill] = zm
+            cfill += 1
+        if ca:
+            hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
         # lift over the adjacent ground, the sums in the twin's pair order (per offset: the
         # pairs inside the array in raster order, then the ones across the seam)
         cnt_g = np.zeros(n + 1, np.int64)
@@ -432,39 +430,15 @@ def split_kernel(  # type: ignore[no-untyped-def]
                     a = ba_[k]
                     cnt_g[a] += 1
                     sum_g[a] += np.float64(h * (zmax[ti, tj] + zmin[ti, tj]))
-        # the size / height filters and the lift; the spread (10th to 90th percentile of the
-        # mid heights) decides only where there is no lift (a patch of noise on the ground:
-        # little spread and no lift): those components' mid heights grouped by label (a
-        # counting sort over the raster-order list; a k-th smallest value does not depend on
-        # the order of the values)
-        # per label: 0 dropped by size / height, 1 kept, 2 kept unless its spread is small
-        verdict = np.zeros(n + 1, np.int8)
-        start = np.zeros(n + 2, np.int64)
+        lut = np.zeros(n + 1, np.int32)
+        m2 = 0
         for a in range(1, n + 1):
             if not (size[a] >= min_triangles and (hi[a] - lo[a]) >= min_height32):
                 continue
             lift = sm[a] / max(size[a], 1) - sum_g[a] / cnt_g[a] if cnt_g[a] > 0 else np.inf
             if lift < half:
-                verdict[a] = 2
-                start[a + 1] = size[a]
-            else:
-                verdict[a] = 1
-        for a in range(1, n + 1):
-            start[a + 1] += start[a]
-        zs = np.empty(start[n + 1], np.float64)  # the mid heights of those labels, by label
-        if start[n + 1]:
-            fill = start.copy()
-            for k in range(nt):
-                a = oa[k]
-                if verdict[a] == 2:
-                    zs[fill[a]] = zr[k]
-                    fill[a] += 1
-        lut = np.zeros(n + 1, np.int32)
-        m2 = 0
-        for a in range(1, n + 1):
-            if verdict[a] == 0:
-                continue
-            if verdict[a] == 2:
+                # a patch of noise on the ground: little spread (10th to 90th percentile of
+                # the mid heights) and no lift; computed only where it decides
                 k = size[a] - 1
                 k90, k10 = math.floor(0.9 * k), math.floor(0.1 * k)
                 seg = zs[start[a] : start[a + 1]]
@@ -475,7 +449,7 @@ def split_kernel(  # type: ignore[no-untyped-def]
             lut[a] = m2
         for k in range(nt):
             f = obf[k]
-            a = oa[k]
+            a = labf[f]
             if lut[a] == 0:
                 labels[f // C, f % C] = 0
                 cls[f] = _GROUND
