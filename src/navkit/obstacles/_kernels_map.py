@@ -196,26 +196,39 @@ def _class_union_find(labels, wrap, cls, parent):  # type: ignore[no-untyped-def
     neighbours' sets by a find each."""
     R, C = labels.shape
     seam = wrap and R > 1
-    # the component class of classes -4 .. 0 (shadow, shadow, obstacle, none, ground)
-    ctab = np.array([_SHADOW, _SHADOW, _OBSTACLE, -1, _GROUND], np.int8)
+    # the component class of classes -4 .. 0 (shadow, shadow, obstacle, none, ground) by the
+    # class's byte (-4 .. -1 are 252 .. 255; any other class: none), and unsigned flat indices
+    # (``f - C + 1`` etc. are >= 0 where read): no range test and no negative-index fix-up per
+    # access
+    ctab = np.full(256, -1, np.int8)
+    ctab[252], ctab[253], ctab[254], ctab[0] = _SHADOW, _SHADOW, _OBSTACLE, _GROUND
+    lf = labels.ravel()
+    uC = np.uint64(C)
+    one = np.uint64(1)
     for i in range(R):
         prev = -1
         cur = np.int32(0)
+        row = np.uint64(i) * uC
         for j in range(C):
-            f = i * C + j
-            t = labels[i, j]
-            c = ctab[t + 4] if (t >= -4) & (t <= 0) else np.int8(-1)
-            cls[f] = c
+            uf = row + np.uint64(j)
+            f = np.int32(uf)
+            c = ctab[np.uint8(lf[uf])]
+            cls[uf] = c
             if c < 0:
-                parent[f] = f
+                parent[uf] = f
                 prev = -1
                 continue
-            root = np.int32(f)
+            root = f
             if prev == c:
                 root = cur
             # the upper-right neighbour; already in this set when the left neighbour joined the
             # upper one (f - C) and both upper triangles are of this class (no find)
-            if i > 0 and j + 1 < C and cls[f - C + 1] == c and not (prev == c and cls[f - C] == c):
+            if (
+                i > 0
+                and j + 1 < C
+                and cls[uf - uC + one] == c
+                and not (prev == c and cls[uf - uC] == c)
+            ):
                 rb = _find(parent, f - C + 1)
                 if rb < root:
                     if root != f:
@@ -231,7 +244,7 @@ def _class_union_find(labels, wrap, cls, parent):  # type: ignore[no-untyped-def
                     root = rb
                 elif root < rb:
                     parent[rb] = root
-            parent[f] = root
+            parent[uf] = root
             prev = c
             cur = root
     return cls, parent
@@ -312,34 +325,37 @@ def split_kernel(  # type: ignore[no-untyped-def]
     nsh = 0
     nt = 0
     ng = 0
+    # unsigned indices (every index here is >= 0): no negative-index fix-up per access
     for f in range(R * C):
-        r = parent[parent[f]]
-        parent[f] = r
-        c = cls[f]
+        uf = np.uint64(f)
+        r = parent[np.uint64(parent[uf])]
+        ur = np.uint64(r)
+        parent[uf] = r
+        c = cls[uf]
         if c <= 0:
-            labf[f] = 0
+            labf[uf] = 0
             if c == _GROUND:  # the ground sets' sizes, at their roots (reached first)
                 if r == f:
-                    ground_size[f] = 1
+                    ground_size[uf] = 1
                     groots[ng] = f
                     ng += 1
                 else:
-                    ground_size[r] += 1
+                    ground_size[ur] += 1
             continue
         if r == f:
             if c == _OBSTACLE:
                 n += 1
-                new[f] = n
+                new[uf] = n
             else:
                 ns += 1
-                new[f] = ns
+                new[uf] = ns
         if c == _OBSTACLE:
-            labf[f] = new[r]
+            labf[uf] = new[ur]
             obf[nt] = f
             nt += 1
         else:
-            labf[f] = 0
-            sl[f] = new[r]
+            labf[uf] = 0
+            sl[uf] = new[ur]
             shf[nsh] = f
             nsh += 1
     dropped_any = False
@@ -368,22 +384,28 @@ def split_kernel(  # type: ignore[no-untyped-def]
         i = 0
         ca = 0  # the label of the current run
         chi, clo, csm, cfill = hi[0], lo[0], sm[0], fill[0]
+        # flat views and unsigned indices (all >= 0 where read): no negative-index fix-up
+        lbf = labels.ravel()
+        zxf = zmax.ravel()
+        znf = zmin.ravel()
+        uC = np.uint64(C)
         for k in range(nt):
             f = obf[k]
             while f >= (i + 1) * C:  # raster order: the row without a division
                 i += 1
             j = f - i * C
-            a = labf[f]
+            uf = np.uint64(f)
+            a = labf[uf]
             # the ground neighbours (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)
             up = i - 1 if i > 0 else (R - 1 if wrap else -1)
             dn = i + 1 if i + 1 < R else (0 if wrap else -1)
             mk = 0
             if j + 1 < C:
-                mk |= 1 if labels[i, j + 1] == 0 else 0
-                mk |= 8 if (up >= 0 and labels[up, j + 1] == 0) else 0
+                mk |= 1 if lbf[uf + np.uint64(1)] == 0 else 0
+                mk |= 8 if (up >= 0 and lbf[np.uint64(up) * uC + np.uint64(j + 1)] == 0) else 0
             if j > 0:
-                mk |= 2 if labels[i, j - 1] == 0 else 0
-                mk |= 4 if (dn >= 0 and labels[dn, j - 1] == 0) else 0
+                mk |= 2 if lbf[uf - np.uint64(1)] == 0 else 0
+                mk |= 4 if (dn >= 0 and lbf[np.uint64(dn) * uC + np.uint64(j - 1)] == 0) else 0
             if mk:
                 bi_[nbd] = i
                 bj_[nbd] = j
@@ -395,11 +417,13 @@ def split_kernel(  # type: ignore[no-untyped-def]
                     hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
                 ca = a
                 chi, clo, csm, cfill = hi[a], lo[a], sm[a], fill[a]
-            chi = _max_nan(chi, zmax[i, j])
-            clo = _min_nan(clo, zmin[i, j])
-            zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
+            zx = zxf[uf]
+            zn = znf[uf]
+            chi = _max_nan(chi, zx)
+            clo = _min_nan(clo, zn)
+            zm = np.float64(h * (zx + zn))
             csm += zm
-            zs[cfill] = zm
+            zs[np.uint64(cfill)] = zm
             cfill += 1
         if ca:
             hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
@@ -514,10 +538,11 @@ def split_kernel(  # type: ignore[no-untyped-def]
             # this raster pass (the unions keep parent[x] <= x and the roots smallest; a
             # ground set's members are ground triangles; the size read for another class's
             # root is not used)
-            r = parent[parent[f]]
-            parent[f] = r
-            main = (t == 0) & (ground_size[r] >= ithr)
-            tflat[f] = _MAIN if main else flag[np.uint8(t)]
+            uf = np.uint64(f)
+            r = parent[np.uint64(parent[uf])]
+            parent[uf] = r
+            main = (t == 0) & (ground_size[np.uint64(r)] >= ithr)
+            tflat[uf] = _MAIN if main else flag[np.uint8(t)]
     tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
     shadows = shf[:nsh].copy()
     if ns == 0 or n == 0:
