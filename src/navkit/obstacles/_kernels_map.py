@@ -450,10 +450,10 @@ def split_kernel(  # type: ignore[no-untyped-def]
                         continue
                     if crosses:
                         ti = ti % R
-                    tj = bj_[k] + dj
-                    a = ba_[k]
+                    q = np.uint64(ti) * uC + np.uint64(bj_[k] + dj)
+                    a = np.uint64(ba_[k])
                     cnt_g[a] += 1
-                    sum_g[a] += np.float64(h * (zmax[ti, tj] + zmin[ti, tj]))
+                    sum_g[a] += np.float64(h * (zxf[q] + znf[q]))
         lut = np.zeros(n + 1, np.int32)
         m2 = 0
         for a in range(1, n + 1):
@@ -473,19 +473,20 @@ def split_kernel(  # type: ignore[no-untyped-def]
             lut[a] = m2
         for k in range(nt):
             f = obf[k]
-            a = labf[f]
+            uf = np.uint64(f)
+            a = np.uint64(labf[uf])
             if lut[a] == 0:
-                labels[f // C, f % C] = 0
-                cls[f] = _GROUND
+                labels[f // C, f % C] = 0  # (``lbf`` is a copy if ``labels`` is strided)
+                cls[uf] = _GROUND
                 dropped_any = True
-                r = parent[f]  # the component's root, its first triangle in raster order
+                r = parent[uf]  # the component's root, its first triangle in raster order
                 if r == f:
-                    ground_size[f] = 1
+                    ground_size[uf] = 1
                     groots[ng] = f
                     ng += 1
                 else:
-                    ground_size[r] += 1
-            labf[f] = lut[a]
+                    ground_size[np.uint64(r)] += 1
+            labf[uf] = lut[a]
         if dropped_any:  # the dropped triangles join the ground around them
             nb = np.empty(4, np.int64)
             for k in range(nt):
