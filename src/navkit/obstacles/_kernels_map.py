@@ -121,6 +121,12 @@ def _merge_lut(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped
         rhi[r] = hi
     parent = np.arange(n + 1).astype(np.int64)
     merged = False
+    # flat views and unsigned indices (every index >= 0): no negative-index fix-up per access
+    vf = vid.ravel()
+    bf = bnd.ravel()
+    pf = np.ascontiguousarray(P).reshape(-1)
+    uel = np.uint64(n_el)
+    three = np.uint64(3)
     for si in range(n_az):
         lo = big
         hi = np.int32(0)
@@ -135,10 +141,12 @@ def _merge_lut(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped
                 hi = max(hi, rhi[ti])
         if hi == 0 or lo == hi:  # one id at most in the window rows: nothing to merge
             continue
+        srow = np.uint64(si) * uel
         for sj in range(n_el):
-            if not bnd[si, sj]:
+            us = srow + np.uint64(sj)
+            if not bf[us]:
                 continue
-            va = vid[si, sj]
+            va = vf[us]
             loaded = False
             px = py = pz = 0.0
             for di in range(0, gap + 1):
@@ -149,23 +157,27 @@ def _merge_lut(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped
                     ti = ti % n_az
                 j0 = sj + 1 if di == 0 else max(sj - gap, 0)
                 j1 = min(sj + gap + 1, n_el)
+                trow = np.uint64(ti) * uel
                 # branch-free first look: another obstacle's vertex in this row of the window?
                 other = False
                 for tj in range(j0, j1):
-                    vb = vid[ti, tj]
+                    vb = vf[trow + np.uint64(tj)]
                     other |= (vb > 0) & (vb != va)
                 if not other:
                     continue
                 if not loaded:
-                    px, py, pz = P[si, sj, 0], P[si, sj, 1], P[si, sj, 2]
+                    q = three * us
+                    px, py, pz = pf[q], pf[q + np.uint64(1)], pf[q + np.uint64(2)]
                     loaded = True
                 for tj in range(j0, j1):
-                    vb = vid[ti, tj]
+                    ut = trow + np.uint64(tj)
+                    vb = vf[ut]
                     if vb <= 0 or vb == va:
                         continue
-                    dx = px - P[ti, tj, 0]
-                    dy = py - P[ti, tj, 1]
-                    dz = pz - P[ti, tj, 2]
+                    q = three * ut
+                    dx = px - pf[q]
+                    dy = py - pf[q + np.uint64(1)]
+                    dz = pz - pf[q + np.uint64(2)]
                     if math.sqrt(dx * dx + dy * dy + dz * dz) < distance_m:
                         _union(parent, va, vb)
                         merged = True
