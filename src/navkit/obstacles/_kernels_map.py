@@ -663,24 +663,35 @@ def vertex_kernel(tcode, obs_lab, valid, wrap, ref):  # type: ignore[no-untyped-
         _window_ids(vid, bnd, p, rowp, rowm, n_el)
         cp = tcode[p] if p < R else zero_c
         cm = tcode[rm] if rm >= 0 else zero_c
-        for q in range(n_el):
-            if q >= 1 and q < C:
-                flags = (cp[2 * q - 2] | cp[2 * q - 1] | cp[2 * q]) | (
-                    cm[2 * q - 1] | cm[2 * q] | cm[2 * q + 1]
-                )
-            elif q == 0:
-                flags = cp[0] | cm[0] | cm[1]
-            else:
-                flags = cp[2 * q - 2] | cp[2 * q - 1] | cm[2 * q - 1]
-            ok = valid[p, q]
-            is_main = (flags & 16) != 0
-            main[p, q] = is_main
-            cl = table[flags & 15] if ok else np.int8(-1)
-            vlab[p, q] = cl
-            # main ground vertices labelled ground: the ground-height reference, raster order
-            ref[nref] = p * n_el + q
-            nref += 1 if (is_main & (cl == 0)) else 0
+        # the end vertices (fewer triangles) peeled off, the interior without a branch per
+        # vertex (unsigned indices: no negative-index fix-up); still in raster order
+        f0 = cp[0] | cm[0] | cm[1]
+        q1 = n_el - 1
+        base = p * n_el
+        nref = _vertex_flags(f0, valid[p, 0], table, main, vlab, p, 0, ref, base, nref)
+        for q in range(1, C):
+            uq = np.uint64(2 * q)
+            flags = (cp[uq - np.uint64(2)] | cp[uq - np.uint64(1)] | cp[uq]) | (
+                cm[uq - np.uint64(1)] | cm[uq] | cm[uq + np.uint64(1)]
+            )
+            nref = _vertex_flags(flags, valid[p, q], table, main, vlab, p, q, ref, base, nref)
+        if q1 >= 1:
+            f1 = cp[2 * q1 - 2] | cp[2 * q1 - 1] | cm[2 * q1 - 1]
+            nref = _vertex_flags(f1, valid[p, q1], table, main, vlab, p, q1, ref, base, nref)
     return vid, bnd, vlab, main, ref[:nref]
+
+
+@njit(cache=True, inline="always")
+def _vertex_flags(flags, ok, table, main, vlab, p, q, ref, base, nref):  # type: ignore[no-untyped-def]
+    """Vertex ``(p, q)`` of :func:`vertex_kernel` from the OR of its triangles' codes: main
+    ground, class, and its flat index appended to ``ref`` when it is a main-ground vertex
+    labelled ground (written always, kept by advancing ``nref``); returns the new ``nref``."""
+    is_main = (flags & 16) != 0
+    main[p, q] = is_main
+    cl = table[np.uint64(flags & 15)] if ok else np.int8(-1)
+    vlab[p, q] = cl
+    ref[np.uint64(nref)] = base + q
+    return nref + (1 if (is_main & (cl == 0)) else 0)
 
 
 @njit(cache=True, inline="always")
