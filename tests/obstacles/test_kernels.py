@@ -27,7 +27,7 @@ from navkit.obstacles import (
 )
 from navkit.obstacles.detector import ObstacleDetection
 from navkit.obstacles.mesh import build_mesh, robust_cell_normals
-from navkit.obstacles.rules import classify, mesh_and_classes
+from navkit.obstacles.rules import _mesh_and_classes, classify, mesh_and_classes
 
 pytest.importorskip("numba")
 
@@ -192,6 +192,16 @@ def _same_stages_2_5(P, valid, o, name, settings=None):  # type: ignore[no-untyp
             for f in _MESH_FIELDS:
                 np.testing.assert_array_equal(getattr(mc, f), getattr(mb, f), err_msg=what)
             assert rc == {}
+            # the detector's lean call: the same labels and the fields stages 6-8 read, without
+            # the ones nothing reads after stage 5
+            md, ld, rd = _mesh_and_classes(
+                P, valid, o, replace(s, backend="compiled"), wrap=wrap, rules=False, full_mesh=False
+            )
+            np.testing.assert_array_equal(ld, lb, err_msg=f"{what} lean labels")
+            for f in ("triangles", "normal", "z_min", "z_max", "jump"):
+                np.testing.assert_array_equal(getattr(md, f), getattr(mb, f), err_msg=f"{what} {f}")
+            assert md.valid.size == md.vertex_ray.size == md.range_mean.size == 0
+            assert rd == {}
 
 
 def test_fused_stages_equal_numpy_on_simulated_grids():

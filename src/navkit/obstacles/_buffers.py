@@ -13,6 +13,7 @@ the last four shapes).
 
 from __future__ import annotations
 
+import math
 import threading
 from collections import OrderedDict
 from collections.abc import Callable, Hashable, Sequence
@@ -37,12 +38,14 @@ def arena(specs: Sequence[tuple[tuple[int, ...], DTypeLike]]) -> list[NDArray[An
     boundary), so that NumPy backs them with huge pages (a few page faults instead of one per
     4 KiB); the untouched rest costs no memory.
     """
+    # plain Python integers (``math.prod``): ``np.prod`` per spec cost ~0.1 ms per call here
+    dts = [np.dtype(dtype) for _, dtype in specs]
+    counts = [math.prod(shape) for shape, _ in specs]
     offsets = []
     total = 0
-    for shape, dtype in specs:
+    for dt, n in zip(dts, counts, strict=True):
         offsets.append(total)
-        n = int(np.prod(shape, dtype=np.int64)) * np.dtype(dtype).itemsize
-        total += -(-n // _ALIGN) * _ALIGN
+        total += -(-n * dt.itemsize // _ALIGN) * _ALIGN
     if total >= (1 << 20):
         # whole 2 MiB pages, from a 2 MiB boundary: the kernel backs every page of them with a
         # huge page (the ends of an unaligned region would fault 4 KiB at a time)
@@ -53,9 +56,7 @@ def arena(specs: Sequence[tuple[tuple[int, ...], DTypeLike]]) -> list[NDArray[An
         raw = np.empty(total + _ALIGN, dtype=np.uint8)
         skip = -raw.ctypes.data % _ALIGN
     out = []
-    for (shape, dtype), off in zip(specs, offsets, strict=True):
-        dt = np.dtype(dtype)
-        n = int(np.prod(shape, dtype=np.int64))
+    for (shape, _), dt, n, off in zip(specs, dts, counts, offsets, strict=True):
         start = skip + off
         out.append(raw[start : start + n * dt.itemsize].view(dt).reshape(shape))
     return out

@@ -543,9 +543,11 @@ def robust_strides_kernel(points, valid, origin, az, support_m, max_stride):  # 
 
 
 @njit(cache=True, error_model="numpy")
-def _vertex_pass(pf, vf, origin, nv, n_el, X, Y, Z, V, D, vr):  # type: ignore[no-untyped-def]
+def _vertex_pass(pf, vf, origin, nv, n_el, X, Y, Z, V, D, vr, want_vr):  # type: ignore[no-untyped-def]
     """Stage 2-5 pass 1: float32 coordinates, validity, range and line of sight per vertex, in
-    flat arrays with one extra row (row 0 again: the seam) and one more vertex (padding)."""
+    flat arrays with one extra row (row 0 again: the seam) and one more vertex (padding). The
+    lines of sight ``vr`` only with ``want_vr`` (no stage after 5 reads them: the detector
+    skips their 1.5 MB of writes per KITTI grid)."""
     o0 = np.float32(origin[0])
     o1 = np.float32(origin[1])
     o2 = np.float32(origin[2])
@@ -560,15 +562,22 @@ def _vertex_pass(pf, vf, origin, nv, n_el, X, Y, Z, V, D, vr):  # type: ignore[n
         Z[ff] = np.float32(pflat[q + np.uint64(2)])
     for f in range(nv):
         V[f] = vf[f]
-    for f in range(nv):
-        rx = X[f] - o0
-        ry = Y[f] - o1
-        rz = Z[f] - o2
-        d = np.float32(math.sqrt(rx * rx + ry * ry + rz * rz))
-        D[f] = d
-        vr[3 * f] = rx / d
-        vr[3 * f + 1] = ry / d
-        vr[3 * f + 2] = rz / d
+    if want_vr:
+        for f in range(nv):
+            rx = X[f] - o0
+            ry = Y[f] - o1
+            rz = Z[f] - o2
+            d = np.float32(math.sqrt(rx * rx + ry * ry + rz * rz))
+            D[f] = d
+            vr[3 * f] = rx / d
+            vr[3 * f + 1] = ry / d
+            vr[3 * f + 2] = rz / d
+    else:
+        for f in range(nv):
+            rx = X[f] - o0
+            ry = Y[f] - o1
+            rz = Z[f] - o2
+            D[f] = np.float32(math.sqrt(rx * rx + ry * ry + rz * rz))
     for f in range(n_el + 1):
         g = f if f < nv else nv - 1
         X[nv + f] = X[g]
@@ -1036,6 +1045,7 @@ def stages_2_5_kernel(  # type: ignore[no-untyped-def]
     cos_c1,
     chain_min,
     want_rules,
+    want_mesh,
     F,
     B,
     lab,
@@ -1078,7 +1088,8 @@ def stages_2_5_kernel(  # type: ignore[no-untyped-def]
     bool``, ``lab (2 M,) int8``, ``PR (5, 2 M or 0) bool``, ``Df, kst (n_az n_el,)`` float64
     and int64. Outputs, filled: ``ok, normal, vray, rng, zmin, zmax, jump`` as
     :func:`mesh_kernel` returns them, ``labels (R, 2C) int8`` and ``rules (5, R, 2C) bool``
-    (P1-P5; ``(5, 0, 0)`` unless ``want_rules``).
+    (P1-P5; ``(5, 0, 0)`` unless ``want_rules``). Without ``want_mesh`` ``ok``, ``vray`` and
+    ``rng`` are not written (any shape, e.g. empty): stages 6-8 do not read them.
     """
     n_az, n_el = valid.shape
     R = n_az if wrap else n_az - 1
@@ -1087,7 +1098,18 @@ def stages_2_5_kernel(  # type: ignore[no-untyped-def]
     X, Y, Z, D = F[0], F[1], F[2], F[3]
     V = B[0]
     _vertex_pass(
-        points.reshape(nv, 3), valid.reshape(nv), origin, nv, n_el, X, Y, Z, V, D, vray.reshape(-1)
+        points.reshape(nv, 3),
+        valid.reshape(nv),
+        origin,
+        nv,
+        n_el,
+        X,
+        Y,
+        Z,
+        V,
+        D,
+        vray.reshape(-1),
+        want_mesh,
     )
     nvx, nvy, nvz = F[4], F[5], F[6]
     jp_tab = np.empty(n_el, np.int64)
@@ -1176,8 +1198,9 @@ def stages_2_5_kernel(  # type: ignore[no-untyped-def]
         _compact_normals(nx, ny, nz, nb, n_el, C2, normal_f[3 * o :])
         _compact(lo, nb, n_el, C2, outs_f[0][o:])
         _compact(hi, nb, n_el, C2, outs_f[1][o:])
-        _compact(rg, nb, n_el, C2, outs_f[2][o:])
-        _compact(okp, nb, n_el, C2, ok_f[o:])
+        if want_mesh:
+            _compact(rg, nb, n_el, C2, outs_f[2][o:])
+            _compact(okp, nb, n_el, C2, ok_f[o:])
         _compact(jp, nb, n_el, C2, jump_f_out[o:])
         _compact(lab, nb, n_el, C2, labels_f[o:])
         if want_rules:

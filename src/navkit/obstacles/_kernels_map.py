@@ -121,6 +121,12 @@ def _merge_lut(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped
         rhi[r] = hi
     parent = np.arange(n + 1).astype(np.int64)
     merged = False
+    # flat views and unsigned indices (every index >= 0): no negative-index fix-up per access
+    vf = vid.ravel()
+    bf = bnd.ravel()
+    pf = np.ascontiguousarray(P).reshape(-1)
+    uel = np.uint64(n_el)
+    three = np.uint64(3)
     for si in range(n_az):
         lo = big
         hi = np.int32(0)
@@ -135,10 +141,12 @@ def _merge_lut(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped
                 hi = max(hi, rhi[ti])
         if hi == 0 or lo == hi:  # one id at most in the window rows: nothing to merge
             continue
+        srow = np.uint64(si) * uel
         for sj in range(n_el):
-            if not bnd[si, sj]:
+            us = srow + np.uint64(sj)
+            if not bf[us]:
                 continue
-            va = vid[si, sj]
+            va = vf[us]
             loaded = False
             px = py = pz = 0.0
             for di in range(0, gap + 1):
@@ -149,23 +157,27 @@ def _merge_lut(obs_lab, n, P, wrap, distance_m, gap):  # type: ignore[no-untyped
                     ti = ti % n_az
                 j0 = sj + 1 if di == 0 else max(sj - gap, 0)
                 j1 = min(sj + gap + 1, n_el)
+                trow = np.uint64(ti) * uel
                 # branch-free first look: another obstacle's vertex in this row of the window?
                 other = False
                 for tj in range(j0, j1):
-                    vb = vid[ti, tj]
+                    vb = vf[trow + np.uint64(tj)]
                     other |= (vb > 0) & (vb != va)
                 if not other:
                     continue
                 if not loaded:
-                    px, py, pz = P[si, sj, 0], P[si, sj, 1], P[si, sj, 2]
+                    q = three * us
+                    px, py, pz = pf[q], pf[q + np.uint64(1)], pf[q + np.uint64(2)]
                     loaded = True
                 for tj in range(j0, j1):
-                    vb = vid[ti, tj]
+                    ut = trow + np.uint64(tj)
+                    vb = vf[ut]
                     if vb <= 0 or vb == va:
                         continue
-                    dx = px - P[ti, tj, 0]
-                    dy = py - P[ti, tj, 1]
-                    dz = pz - P[ti, tj, 2]
+                    q = three * ut
+                    dx = px - pf[q]
+                    dy = py - pf[q + np.uint64(1)]
+                    dz = pz - pf[q + np.uint64(2)]
                     if math.sqrt(dx * dx + dy * dy + dz * dz) < distance_m:
                         _union(parent, va, vb)
                         merged = True
@@ -196,26 +208,39 @@ def _class_union_find(labels, wrap, cls, parent):  # type: ignore[no-untyped-def
     neighbours' sets by a find each."""
     R, C = labels.shape
     seam = wrap and R > 1
-    # the component class of classes -4 .. 0 (shadow, shadow, obstacle, none, ground)
-    ctab = np.array([_SHADOW, _SHADOW, _OBSTACLE, -1, _GROUND], np.int8)
+    # the component class of classes -4 .. 0 (shadow, shadow, obstacle, none, ground) by the
+    # class's byte (-4 .. -1 are 252 .. 255; any other class: none), and unsigned flat indices
+    # (``f - C + 1`` etc. are >= 0 where read): no range test and no negative-index fix-up per
+    # access
+    ctab = np.full(256, -1, np.int8)
+    ctab[252], ctab[253], ctab[254], ctab[0] = _SHADOW, _SHADOW, _OBSTACLE, _GROUND
+    lf = labels.ravel()
+    uC = np.uint64(C)
+    one = np.uint64(1)
     for i in range(R):
         prev = -1
         cur = np.int32(0)
+        row = np.uint64(i) * uC
         for j in range(C):
-            f = i * C + j
-            t = labels[i, j]
-            c = ctab[t + 4] if (t >= -4) & (t <= 0) else np.int8(-1)
-            cls[f] = c
+            uf = row + np.uint64(j)
+            f = np.int32(uf)
+            c = ctab[np.uint8(lf[uf])]
+            cls[uf] = c
             if c < 0:
-                parent[f] = f
+                parent[uf] = f
                 prev = -1
                 continue
-            root = np.int32(f)
+            root = f
             if prev == c:
                 root = cur
             # the upper-right neighbour; already in this set when the left neighbour joined the
             # upper one (f - C) and both upper triangles are of this class (no find)
-            if i > 0 and j + 1 < C and cls[f - C + 1] == c and not (prev == c and cls[f - C] == c):
+            if (
+                i > 0
+                and j + 1 < C
+                and cls[uf - uC + one] == c
+                and not (prev == c and cls[uf - uC] == c)
+            ):
                 rb = _find(parent, f - C + 1)
                 if rb < root:
                     if root != f:
@@ -231,7 +256,7 @@ def _class_union_find(labels, wrap, cls, parent):  # type: ignore[no-untyped-def
                     root = rb
                 elif root < rb:
                     parent[rb] = root
-            parent[f] = root
+            parent[uf] = root
             prev = c
             cur = root
     return cls, parent
@@ -312,34 +337,37 @@ def split_kernel(  # type: ignore[no-untyped-def]
     nsh = 0
     nt = 0
     ng = 0
+    # unsigned indices (every index here is >= 0): no negative-index fix-up per access
     for f in range(R * C):
-        r = parent[parent[f]]
-        parent[f] = r
-        c = cls[f]
+        uf = np.uint64(f)
+        r = parent[np.uint64(parent[uf])]
+        ur = np.uint64(r)
+        parent[uf] = r
+        c = cls[uf]
         if c <= 0:
-            labf[f] = 0
+            labf[uf] = 0
             if c == _GROUND:  # the ground sets' sizes, at their roots (reached first)
                 if r == f:
-                    ground_size[f] = 1
+                    ground_size[uf] = 1
                     groots[ng] = f
                     ng += 1
                 else:
-                    ground_size[r] += 1
+                    ground_size[ur] += 1
             continue
         if r == f:
             if c == _OBSTACLE:
                 n += 1
-                new[f] = n
+                new[uf] = n
             else:
                 ns += 1
-                new[f] = ns
+                new[uf] = ns
         if c == _OBSTACLE:
-            labf[f] = new[r]
+            labf[uf] = new[ur]
             obf[nt] = f
             nt += 1
         else:
-            labf[f] = 0
-            sl[f] = new[r]
+            labf[uf] = 0
+            sl[uf] = new[ur]
             shf[nsh] = f
             nsh += 1
     dropped_any = False
@@ -368,22 +396,28 @@ def split_kernel(  # type: ignore[no-untyped-def]
         i = 0
         ca = 0  # the label of the current run
         chi, clo, csm, cfill = hi[0], lo[0], sm[0], fill[0]
+        # flat views and unsigned indices (all >= 0 where read): no negative-index fix-up
+        lbf = labels.ravel()
+        zxf = zmax.ravel()
+        znf = zmin.ravel()
+        uC = np.uint64(C)
         for k in range(nt):
             f = obf[k]
             while f >= (i + 1) * C:  # raster order: the row without a division
                 i += 1
             j = f - i * C
-            a = labf[f]
+            uf = np.uint64(f)
+            a = labf[uf]
             # the ground neighbours (offsets (0, +-1), (+-1, -+1), rows cyclic with wrap)
             up = i - 1 if i > 0 else (R - 1 if wrap else -1)
             dn = i + 1 if i + 1 < R else (0 if wrap else -1)
             mk = 0
             if j + 1 < C:
-                mk |= 1 if labels[i, j + 1] == 0 else 0
-                mk |= 8 if (up >= 0 and labels[up, j + 1] == 0) else 0
+                mk |= 1 if lbf[uf + np.uint64(1)] == 0 else 0
+                mk |= 8 if (up >= 0 and lbf[np.uint64(up) * uC + np.uint64(j + 1)] == 0) else 0
             if j > 0:
-                mk |= 2 if labels[i, j - 1] == 0 else 0
-                mk |= 4 if (dn >= 0 and labels[dn, j - 1] == 0) else 0
+                mk |= 2 if lbf[uf - np.uint64(1)] == 0 else 0
+                mk |= 4 if (dn >= 0 and lbf[np.uint64(dn) * uC + np.uint64(j - 1)] == 0) else 0
             if mk:
                 bi_[nbd] = i
                 bj_[nbd] = j
@@ -395,11 +429,13 @@ def split_kernel(  # type: ignore[no-untyped-def]
                     hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
                 ca = a
                 chi, clo, csm, cfill = hi[a], lo[a], sm[a], fill[a]
-            chi = _max_nan(chi, zmax[i, j])
-            clo = _min_nan(clo, zmin[i, j])
-            zm = np.float64(h * (zmax[i, j] + zmin[i, j]))
+            zx = zxf[uf]
+            zn = znf[uf]
+            chi = _max_nan(chi, zx)
+            clo = _min_nan(clo, zn)
+            zm = np.float64(h * (zx + zn))
             csm += zm
-            zs[cfill] = zm
+            zs[np.uint64(cfill)] = zm
             cfill += 1
         if ca:
             hi[ca], lo[ca], sm[ca], fill[ca] = chi, clo, csm, cfill
@@ -426,10 +462,10 @@ def split_kernel(  # type: ignore[no-untyped-def]
                         continue
                     if crosses:
                         ti = ti % R
-                    tj = bj_[k] + dj
-                    a = ba_[k]
+                    q = np.uint64(ti) * uC + np.uint64(bj_[k] + dj)
+                    a = np.uint64(ba_[k])
                     cnt_g[a] += 1
-                    sum_g[a] += np.float64(h * (zmax[ti, tj] + zmin[ti, tj]))
+                    sum_g[a] += np.float64(h * (zxf[q] + znf[q]))
         lut = np.zeros(n + 1, np.int32)
         m2 = 0
         for a in range(1, n + 1):
@@ -449,19 +485,20 @@ def split_kernel(  # type: ignore[no-untyped-def]
             lut[a] = m2
         for k in range(nt):
             f = obf[k]
-            a = labf[f]
+            uf = np.uint64(f)
+            a = np.uint64(labf[uf])
             if lut[a] == 0:
-                labels[f // C, f % C] = 0
-                cls[f] = _GROUND
+                labels[f // C, f % C] = 0  # (``lbf`` is a copy if ``labels`` is strided)
+                cls[uf] = _GROUND
                 dropped_any = True
-                r = parent[f]  # the component's root, its first triangle in raster order
+                r = parent[uf]  # the component's root, its first triangle in raster order
                 if r == f:
-                    ground_size[f] = 1
+                    ground_size[uf] = 1
                     groots[ng] = f
                     ng += 1
                 else:
-                    ground_size[r] += 1
-            labf[f] = lut[a]
+                    ground_size[np.uint64(r)] += 1
+            labf[uf] = lut[a]
         if dropped_any:  # the dropped triangles join the ground around them
             nb = np.empty(4, np.int64)
             for k in range(nt):
@@ -514,10 +551,11 @@ def split_kernel(  # type: ignore[no-untyped-def]
             # this raster pass (the unions keep parent[x] <= x and the roots smallest; a
             # ground set's members are ground triangles; the size read for another class's
             # root is not used)
-            r = parent[parent[f]]
-            parent[f] = r
-            main = (t == 0) & (ground_size[r] >= ithr)
-            tflat[f] = _MAIN if main else flag[np.uint8(t)]
+            uf = np.uint64(f)
+            r = parent[np.uint64(parent[uf])]
+            parent[uf] = r
+            main = (t == 0) & (ground_size[np.uint64(r)] >= ithr)
+            tflat[uf] = _MAIN if main else flag[np.uint8(t)]
     tri_obstacle = lab.copy()  # obstacle ids, and the owners of the shadows (below)
     shadows = shf[:nsh].copy()
     if ns == 0 or n == 0:
@@ -625,24 +663,35 @@ def vertex_kernel(tcode, obs_lab, valid, wrap, ref):  # type: ignore[no-untyped-
         _window_ids(vid, bnd, p, rowp, rowm, n_el)
         cp = tcode[p] if p < R else zero_c
         cm = tcode[rm] if rm >= 0 else zero_c
-        for q in range(n_el):
-            if q >= 1 and q < C:
-                flags = (cp[2 * q - 2] | cp[2 * q - 1] | cp[2 * q]) | (
-                    cm[2 * q - 1] | cm[2 * q] | cm[2 * q + 1]
-                )
-            elif q == 0:
-                flags = cp[0] | cm[0] | cm[1]
-            else:
-                flags = cp[2 * q - 2] | cp[2 * q - 1] | cm[2 * q - 1]
-            ok = valid[p, q]
-            is_main = (flags & 16) != 0
-            main[p, q] = is_main
-            cl = table[flags & 15] if ok else np.int8(-1)
-            vlab[p, q] = cl
-            # main ground vertices labelled ground: the ground-height reference, raster order
-            ref[nref] = p * n_el + q
-            nref += 1 if (is_main & (cl == 0)) else 0
+        # the end vertices (fewer triangles) peeled off, the interior without a branch per
+        # vertex (unsigned indices: no negative-index fix-up); still in raster order
+        f0 = cp[0] | cm[0] | cm[1]
+        q1 = n_el - 1
+        base = p * n_el
+        nref = _vertex_flags(f0, valid[p, 0], table, main, vlab, p, 0, ref, base, nref)
+        for q in range(1, C):
+            uq = np.uint64(2 * q)
+            flags = (cp[uq - np.uint64(2)] | cp[uq - np.uint64(1)] | cp[uq]) | (
+                cm[uq - np.uint64(1)] | cm[uq] | cm[uq + np.uint64(1)]
+            )
+            nref = _vertex_flags(flags, valid[p, q], table, main, vlab, p, q, ref, base, nref)
+        if q1 >= 1:
+            f1 = cp[2 * q1 - 2] | cp[2 * q1 - 1] | cm[2 * q1 - 1]
+            nref = _vertex_flags(f1, valid[p, q1], table, main, vlab, p, q1, ref, base, nref)
     return vid, bnd, vlab, main, ref[:nref]
+
+
+@njit(cache=True, inline="always")
+def _vertex_flags(flags, ok, table, main, vlab, p, q, ref, base, nref):  # type: ignore[no-untyped-def]
+    """Vertex ``(p, q)`` of :func:`vertex_kernel` from the OR of its triangles' codes: main
+    ground, class, and its flat index appended to ``ref`` when it is a main-ground vertex
+    labelled ground (written always, kept by advancing ``nref``); returns the new ``nref``."""
+    is_main = (flags & 16) != 0
+    main[p, q] = is_main
+    cl = table[np.uint64(flags & 15)] if ok else np.int8(-1)
+    vlab[p, q] = cl
+    ref[np.uint64(nref)] = base + q
+    return nref + (1 if (is_main & (cl == 0)) else 0)
 
 
 @njit(cache=True, inline="always")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import logging
 import math
 import time
@@ -17,7 +18,7 @@ from navkit.obstacles.grids import ScanGrid
 from navkit.obstacles.ground import refine_by_ground_height
 from navkit.obstacles.mesh import MeshCharacteristics
 from navkit.obstacles.mounting import Mounting
-from navkit.obstacles.rules import GROUND, OBSTACLE, mesh_and_classes
+from navkit.obstacles.rules import GROUND, OBSTACLE, _mesh_and_classes
 from navkit.obstacles.segment import (
     assign_shadows,
     boundary_vertices,
@@ -295,7 +296,10 @@ def _detect_from_stage_1(
 
     # stages 2-5: mesh, normals, characteristic parameters H_s, validity codes C_d, production
     # rules P1-P5 -> classes (compiled: one pass over the grid, all charged to "mesh")
-    mesh, labels, _rules = mesh_and_classes(P, valid, origin, settings, wrap=wrap)
+    # (the mesh's valid, vertex_ray and range_mean are not computed: nothing below reads them)
+    mesh, labels, _rules = _mesh_and_classes(
+        P, valid, origin, settings, wrap=wrap, rules=False, full_mesh=False
+    )
     clock.lap("mesh")
     clock.lap("classes")
 
@@ -790,6 +794,21 @@ def unsort_vertex_array(scan: RangeScan, values: NDArray[Any]) -> NDArray[Any]:
     return out
 
 
+def _with_wrap(settings: ObstacleSettings, wrap: bool) -> ObstacleSettings:
+    """``settings`` with ``wrap_azimuth=wrap``, one validated copy per pair: ``replace`` runs
+    ``__post_init__``'s checks (~0.25 ms), which a detection per frame need not repeat
+    (settings holding an unhashable value are copied each time)."""
+    try:
+        return _with_wrap_cached(settings, wrap)
+    except TypeError:
+        return replace(settings, wrap_azimuth=wrap)
+
+
+@functools.lru_cache(maxsize=32)
+def _with_wrap_cached(settings: ObstacleSettings, wrap: bool) -> ObstacleSettings:
+    return replace(settings, wrap_azimuth=wrap)
+
+
 def detect_obstacles_in_grid(
     grid: ScanGrid,
     mounting: Mounting | None = None,
@@ -808,7 +827,7 @@ def detect_obstacles_in_grid(
     t0, c0 = time.perf_counter(), time.process_time()
     clock = _Clock()  # the compiled stage 1 below charges it
     if settings.wrap_azimuth is None:
-        settings = replace(settings, wrap_azimuth=grid.wraps)
+        settings = _with_wrap(settings, bool(grid.wraps))
     R = mounting.R_body_sensor
     S = grid.points
     if (
