@@ -387,6 +387,8 @@ class _Patches:
     M: NDArray[np.float64]  # (G, 13) raw moment rows
     tol_scale: np.float32  # the inlier bound at range r: tol_scale r^2 + tol_base
     tol_base: np.float32
+    # compiled path only: each patch's float32 coordinates (G, 3, c c), 0 where invalid
+    XP: NDArray[np.float32] | None = None
     # NumPy path only (the compiled refinement recomputes them for the patches it needs):
     D: NDArray[np.float32] | None = None  # (3, Hc, Wc) coordinates minus their patch's ref
     tol: NDArray[np.float32] | None = None  # (Hc, Wc) inlier bound, -1 where invalid
@@ -412,8 +414,9 @@ def _patch_moments(
     tol_scale = np.float32(s.inlier_factor * s.rms_quadratic)
     tol_base = np.float32(s.inlier_factor * s.rms_base)
     if compiled:
-        M, ref_g = _kernels().patch_moments(np.ascontiguousarray(P), hc, wc, c, valid)
-        return _Patches(P, valid, ref_g, M, tol_scale, tol_base)
+        XP = _WS.get("XP", (hc * wc, 3, c * c), np.float32)
+        M, ref_g = _kernels().patch_moments(np.ascontiguousarray(P), hc, wc, c, valid, XP)
+        return _Patches(P, valid, ref_g, M, tol_scale, tol_base, XP=XP)
     X = _WS.get("X", (3, Hc, Wc), np.float32)
     r2 = _WS.get("r2", (Hc, Wc), np.float32)
     for k in range(3):
@@ -710,7 +713,7 @@ def _refine_border(
     if compiled:  # the offsets and strides below are computed in the kernel, the same floats
         label = np.empty((B, c, c), ltype)  # the kernel writes every pixel's label
         complete, M, cpoints, cregion = _kernels().refine_pixels(
-            pt.P, pt.ref, pt.tol_scale, pt.tol_base, ids, own, cand, n32, rho32, pt.M,
+            pt.XP, pt.ref, pt.tol_scale, pt.tol_base, ids, own, cand, n32, rho32, pt.M,
             float(raster), wc, c, label, n_reg,
         )  # fmt: skip
         return _Border(ids, label, complete, M, cpoints, cregion)
