@@ -114,9 +114,7 @@ def patch_moments(
     mc = np.empty((3, Wc), np.float32)  # each column's patch mean
     nn = np.empty(wc, np.float32)  # the band's patch counts
     buf = np.empty(3 * Wc, np.float32)  # one image row in float32, interleaved
-    cc = c * c
-    Xf = X.reshape(-1)
-    XPf = XP.reshape(-1)
+    XP4 = XP.reshape(G, 3, c, c)
     for i in range(hc):
         # pass 1: coordinates and validity; column sums of the count and coordinates (the
         # first row added to 0: the same sums as NumPy's, up to the sign of a zero sum)
@@ -157,16 +155,12 @@ def patch_moments(
             vy = valid[y]
             for x in range(Wc):
                 vy[x] = Vr[x] != 0
-        for j in range(wc):  # the band's coordinates patch by patch (for refine_pixels)
+        for j in range(wc):  # the band's coordinates patch by patch (for refine_pixels; 4-D
+            q0 = j * c  # indices, no slices: 0.17 ms a frame alone, 0.22 with 1-D slices)
             for a in range(3):
-                d0 = ((i * wc + j) * 3 + a) * cc
-                dst = XPf[d0 : d0 + cc]
                 for r in range(c):
-                    s0 = (a * c + r) * Wc + j * c
-                    src = Xf[s0 : s0 + c]
-                    o = r * c
                     for q in range(c):
-                        dst[o + q] = src[q]
+                        XP4[i * wc + j, a, r, q] = X[a, r, q0 + q]
         for j in range(wc):
             g = i * wc + j
             q0 = j * c
