@@ -44,6 +44,7 @@ are re-exported here.
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -244,7 +245,7 @@ class _Workspace(threading.local):
         self.buffers: dict[str, NDArray] = {}
 
     def get(self, name: str, shape: tuple[int, ...], dtype: type) -> NDArray:
-        n = int(np.prod(shape, dtype=np.int64))
+        n = math.prod(shape)  # Python ints (numpy.prod: ~5 us a call)
         buf = self.buffers.get(name)
         if buf is None or buf.dtype != np.dtype(dtype) or buf.size < n:
             buf = np.empty(max(n, 1), dtype)
@@ -255,12 +256,17 @@ class _Workspace(threading.local):
 _WS = _Workspace()
 
 
+_KERNELS: list = []  # the kernel module once imported (~10 look-ups a frame)
+
+
 def _kernels():  # type: ignore[no-untyped-def]
     """The compiled kernels (:mod:`navkit.planes._kernels`), imported on first use so that
     ``import navkit`` does not load Numba."""
-    from navkit.planes import _kernels
+    if not _KERNELS:
+        from navkit.planes import _kernels
 
-    return _kernels
+        _KERNELS.append(_kernels)
+    return _KERNELS[0]
 
 
 # ------------------------------------------------------------------------------ moments
@@ -1014,7 +1020,13 @@ def _plane_frames(planes: list[Plane]) -> tuple[NDArray[np.float64], NDArray[np.
     ref[~use_x, 1] = 1.0
     u = ref - np.where(use_x, n[:, 0], n[:, 1])[:, None] * n
     u /= np.sqrt(np.einsum("ki,ki->k", u, u))[:, None]
-    axes = np.stack([u, np.cross(n, u)], axis=1)
+    # n x u written out: numpy.cross's products and differences in its order (the same bits;
+    # ~20 us a frame less than its axis handling)
+    v = np.empty_like(u)
+    v[:, 0] = n[:, 1] * u[:, 2] - n[:, 2] * u[:, 1]
+    v[:, 1] = n[:, 2] * u[:, 0] - n[:, 0] * u[:, 2]
+    v[:, 2] = n[:, 0] * u[:, 1] - n[:, 1] * u[:, 0]
+    axes = np.stack([u, v], axis=1)
     off = np.einsum("kai,ki->ka", axes, rho[:, None] * n)
     return axes, off
 
