@@ -55,6 +55,12 @@ def test_patch_moments_bit_identical(pairs):
         b = _patch_moments(P, s, hc, wc, False)
         for x, y in zip(A, (b.M, b.ref, b.valid), strict=True):
             assert np.array_equal(x, y)
+        # the float32 coordinates patch by patch (G, 3, cell^2), 0 where invalid: what the
+        # compiled refinement reads instead of the float64 grid
+        X = P[: hc * cell, : wc * cell].astype(np.float32)
+        X[~b.valid] = 0.0
+        X = X.reshape(hc, cell, wc, cell, 3).transpose(0, 2, 4, 1, 3).reshape(hc * wc, 3, -1)
+        assert a.XP is not None and np.array_equal(a.XP, X)
 
 
 @pytest.mark.parametrize("n_dirs", [1, 2, 3])

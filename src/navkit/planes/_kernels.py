@@ -18,8 +18,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from navkit._intrinsics import prefetch
-
 MAX_CELL = 128  # NumPy's PW_BLOCKSIZE: a patch's row sums are one pairwise block up to it
 
 
@@ -82,12 +80,14 @@ def _raw_row(
 
 @njit(cache=True)
 def patch_moments(
-    P: np.ndarray, hc: int, wc: int, c: int, valid: np.ndarray
+    P: np.ndarray, hc: int, wc: int, c: int, valid: np.ndarray, XP: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Step 1 of the extraction, one band of ``c`` rows at a time (see
     ``extract._patch_moments``).
 
-    Fills ``valid (hc c, wc c)`` (finite, non-zero range) and returns per patch the raw float64
+    Fills ``valid (hc c, wc c)`` (finite, non-zero range) and ``XP (G, 3, c c)`` (each patch's
+    float32 coordinates, 0 where invalid, patch by patch: :func:`refine_pixels` reads the
+    border patches from it - session 7) and returns per patch the raw float64
     moment row ``(G, 13)`` (count, sums, sums of outer products: the float32 sums about the
     patch's float32 mean converted as ``extract._moment_rows`` does) and that mean ``(G, 3)``.
 
@@ -114,6 +114,7 @@ def patch_moments(
     mc = np.empty((3, Wc), np.float32)  # each column's patch mean
     nn = np.empty(wc, np.float32)  # the band's patch counts
     buf = np.empty(3 * Wc, np.float32)  # one image row in float32, interleaved
+    XP4 = XP.reshape(G, 3, c, c)
     for i in range(hc):
         # pass 1: coordinates and validity; column sums of the count and coordinates (the
         # first row added to 0: the same sums as NumPy's, up to the sign of a zero sum)
@@ -154,6 +155,12 @@ def patch_moments(
             vy = valid[y]
             for x in range(Wc):
                 vy[x] = Vr[x] != 0
+        for j in range(wc):  # the band's coordinates patch by patch (for refine_pixels; 4-D
+            q0 = j * c  # indices, no slices: 0.17 ms a frame alone, 0.22 with 1-D slices)
+            for a in range(3):
+                for r in range(c):
+                    for q in range(c):
+                        XP4[i * wc + j, a, r, q] = X[a, r, q0 + q]
         for j in range(wc):
             g = i * wc + j
             q0 = j * c
@@ -238,7 +245,7 @@ def _patch_stride(
 
 @njit(cache=True)
 def refine_pixels(
-    P: np.ndarray,
+    XP: np.ndarray,
     ref: np.ndarray,
     tol_scale: np.float32,
     tol_base: np.float32,
@@ -256,15 +263,16 @@ def refine_pixels(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Step 5, the border patches pixel by pixel (see ``extract._refine_border``).
 
-    ``P (H, W, 3)`` the points, ``ref (G, 3)`` the patches' float32 means, ``tol_scale r^2 +
+    ``XP (G, 3, c c)`` the patches' float32 coordinates from :func:`patch_moments` (0 where
+    invalid), ``ref (G, 3)`` the patches' float32 means, ``tol_scale r^2 +
     tol_base`` the inlier bound, ``ids (B,)`` patches, ``own (B,)`` their regions (-1 = none),
     ``cand (B, m)`` candidate regions (-1 padded), ``n32 (n_reg, 3)`` float32 normals and
     ``rho32 (n_reg,)`` distances, ``M (G, 13)`` the patch moments and ``raster`` the outline
     cell. Per (patch, candidate) the float32 offset ``n . ref - rho`` and per patch the outline
     samples' stride (``extract._sample_stride``) are computed here as the NumPy path computes
     them (the same float32 / float64 operations in the same order; session 6: ~20 NumPy calls
-    less). The centred float32 coordinates and
-    the bound are recomputed exactly as :func:`patch_moments` / the NumPy path define them.
+    less). The centred float32 coordinates and the bound are recomputed exactly as
+    :func:`patch_moments` / the NumPy path define them.
     Fills ``label (B, c, c)`` (closest candidate within the bound, -1 = none; ties keep the
     earlier slot). Returns ``complete (B,)``, the raw float64 moments ``(n_reg, 13)`` of the
     pixels of the incomplete patches per region (per (patch, candidate): the float64 sums of d
@@ -274,10 +282,12 @@ def refine_pixels(
     ``(3, K)``, and their regions ``(K,)`` (patch by patch, raster order within one).
 
     A whole patch at a time, in loops over its ``c c`` pixels (400: 50 AVX2 vectors, no
-    remainder; a row of 20 pixels was 8 + 8 + 4 scalar): its rows of float64 points converted
-    to float32 in flat loops, then the bound and the centred coordinates, then one sweep per
-    candidate. The mixed patches' sums add only the pixels of the candidate (the other pixels
-    added exact zeros before: the same sums).
+    remainder; a row of 20 pixels was 8 + 8 + 4 scalar): the bound and the centred
+    coordinates from the patch's contiguous float32 block (session 7: before, its 20 rows of
+    float64 points were read from the grid, converted and de-interleaved here - the same
+    floats, as an invalid pixel's 0 has range 0 as its NaN had none; those loads were ~40 % of
+    the kernel), then one sweep per candidate. The mixed patches' sums add only the pixels of
+    the candidate (the other pixels added exact zeros before: the same sums).
     """
     B, m = cand.shape
     cc = c * c
@@ -291,7 +301,6 @@ def refine_pixels(
     ssd = np.empty(6, np.float64)
     pts = np.empty((3, B * cc), np.float32)
     preg = np.empty(B * cc, np.int64)
-    buf = np.empty(3 * cc, np.float32)  # the patch's points in float32, interleaved
     dx = np.empty(cc, np.float32)
     dy = np.empty(cc, np.float32)
     dz = np.empty(cc, np.float32)
@@ -299,21 +308,9 @@ def refine_pixels(
     best = np.empty(cc, np.float32)
     lab = np.empty(cc, np.int32)  # 32-bit: as many lanes as the float32 distances
     n_pts = 0
-    W = P.shape[1]
-    Pflat = P.reshape(-1)  # flat indices: no reshape per row (a helper call each)
     lflat = label.reshape(-1)
-    for b in range(B):
-        if b + 2 < B:  # the rows of the patch after next towards the cache (~10 % faster
-            gn = ids[b + 2]  # when the grid is no longer in the cache: patches out of order)
-            i2 = gn // wc
-            base = ((i2 * c) * W + (gn - i2 * wc) * c) * 3
-            for r in range(c):
-                for e in range(0, 3 * c, 8):  # 8 float64 a cache line
-                    prefetch(Pflat, base + r * 3 * W + e)  # type: ignore[call-arg]
-                prefetch(Pflat, base + r * 3 * W + 3 * c - 1)  # type: ignore[call-arg]
+    for b in range(B):  # (no software prefetch: the blocks are contiguous - tried, no gain)
         g = ids[b]
-        i = g // wc
-        j = g - i * wc
         mx = ref[g, 0]
         my = ref[g, 1]
         mz = ref[g, 2]
@@ -326,16 +323,13 @@ def refine_pixels(
             o01 = np.float32(np.float32(n32[k, 0] * mx) + np.float32(n32[k, 1] * my))
             o012 = np.float32(o01 + np.float32(n32[k, 2] * mz))
             off[s] = np.float32(o012 - rho32[k])
-        for r in range(c):
-            src0 = ((i * c + r) * W + j * c) * 3
-            Pr = Pflat[src0 : src0 + 3 * c]  # a slice: indices known >= 0, the loop vectorises
-            o = 3 * c * r
-            for k in range(3 * c):
-                buf[o + k] = np.float32(Pr[k])
+        xg = XP[g, 0]
+        yg = XP[g, 1]
+        zg = XP[g, 2]
         for p in range(cc):
-            px = buf[3 * p]
-            py = buf[3 * p + 1]
-            pz = buf[3 * p + 2]
+            px = xg[p]
+            py = yg[p]
+            pz = zg[p]
             r2 = np.float32(
                 np.float32(np.float32(px * px) + np.float32(py * py)) + np.float32(pz * pz)
             )
