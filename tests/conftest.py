@@ -56,24 +56,3 @@ def cli():
         return runner.invoke(app, [str(a) for a in args], catch_exceptions=False)
 
     return _run
-
-
-_WARMUP_FILE = "tests/runtime/test_warmup.py"
-
-
-def pytest_collection_modifyitems(session, config, items):
-    """Hand ``tests/runtime/test_warmup.py`` out before the other ``tests/runtime`` files.
-
-    Its one test runs ``navkit compile`` and a mission in subprocesses (~3 min on a 2-core
-    machine) in a single worker (``make test`` hands out whole files, ``--dist loadfile``).
-    Collected last, it ran alone while the other worker idled (the suite's last ~2 min); first, on
-    an empty cache, it compiled every kernel while the other worker compiled the same ones (11 min
-    11 s against 10 min 26 s, ``docs/benchmarks.md``). Before ``tests/runtime`` the capabilities'
-    test files have filled the cache, and ``tests/runtime``, ``sim``, ``stereo`` and ``viz`` run on
-    the other worker meanwhile. Only the order changes, never what runs."""
-    warm = [it for it in items if it.nodeid.startswith(_WARMUP_FILE)]
-    if not warm:
-        return
-    rest = [it for it in items if not it.nodeid.startswith(_WARMUP_FILE)]
-    at = next((i for i, it in enumerate(rest) if it.nodeid.startswith("tests/runtime/")), len(rest))
-    items[:] = rest[:at] + warm + rest[at:]
