@@ -1060,6 +1060,29 @@ def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  #
 
 
 @njit(cache=True)
+def _region_planes(
+    cells: np.ndarray,
+    M: np.ndarray,
+    eh: np.ndarray,
+    ev: np.ndarray,
+    hc: int,
+    wc: int,
+    min_cells: int,
+) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
+    """The components of the patches ``cells (G,)`` and their planes (sums of the patch rows,
+    :func:`plane_rows`): ``(status, n, region of each patch, normals, rho, means)``, status 1
+    when a region's smallest eigenvalue is repeated (:func:`prune_merge`), no planes when ``n``
+    is 0 or status is 1."""
+    n_reg, comp = cell_components(cells.reshape(hc, wc), eh, ev, min_cells)
+    if n_reg == 0:
+        return 0, 0, comp, np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
+    rn, rd, _, rmean, rank1 = plane_rows(sum_rows(comp, n_reg, M))
+    if rank1.any():
+        return 1, n_reg, comp, np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3))
+    return 0, n_reg, comp, rn, rd, rmean
+
+
+@njit(cache=True)
 def prune_merge(
     M: np.ndarray,
     normal: np.ndarray,
@@ -1090,12 +1113,9 @@ def prune_merge(
     BLAS product there) left to right - a decision could differ only on an exact tie."""
     G = hc * wc
     empty = np.zeros((0, 3), np.float64)
-    n_reg, comp = cell_components(planar.reshape(hc, wc), eh, ev, min_cells)
-    if n_reg == 0:
-        return 0, 0, comp, empty, np.zeros(0)
-    rn, rd, _, _, rank1 = plane_rows(sum_rows(comp, n_reg, M))
-    if rank1.any():
-        return 1, 0, comp, empty, np.zeros(0)
+    status, n_reg, comp, rn, rd, _ = _region_planes(planar, M, eh, ev, hc, wc, min_cells)
+    if status != 0 or n_reg == 0:
+        return status, 0, comp, empty, np.zeros(0)
     keep = np.zeros(G, np.bool_)
     for g in range(G):
         k = comp[g]
@@ -1103,12 +1123,9 @@ def prune_merge(
             keep[g] = (_dot3(normal, g, rn, k) > cos_t) and (
                 abs(_dot3(rn, k, mean, g) - rd[k]) < distance_factor * bound[g]
             )
-    n_reg, comp = cell_components(keep.reshape(hc, wc), eh, ev, min_cells)
-    if n_reg == 0:
-        return 0, 0, comp, empty, np.zeros(0)
-    rn, rd, _, rmean, rank1 = plane_rows(sum_rows(comp, n_reg, M))
-    if rank1.any():
-        return 1, 0, comp, empty, np.zeros(0)
+    status, n_reg, comp, rn, rd, rmean = _region_planes(keep, M, eh, ev, hc, wc, min_cells)
+    if status != 0 or n_reg == 0:
+        return status, 0, comp, empty, np.zeros(0)
     rtol = np.empty(n_reg, np.float64)
     for a in range(n_reg):
         rtol[a] = distance_factor * (rms_base + rms_quadratic * _dot3(rmean, a, rmean, a))
