@@ -13,6 +13,8 @@ weighted. ``rms`` is the root-mean-square orthogonal residual.
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -116,8 +118,14 @@ class Line2D:
 def canonical_plane(normal: ArrayLike, rho: float) -> tuple[NDArray[np.float64], float]:
     """Normalise ``(normal, rho)`` to a unit normal and ``rho >= 0`` (see module conventions)."""
     n = np.asarray(normal, dtype=np.float64)
-    norm = np.linalg.norm(n)
-    if not np.isfinite(norm) or norm == 0:
+    if n.shape != (3,):
+        raise DegenerateGeometryError(f"plane normal must have 3 components, got shape {n.shape}")
+    # The norm as three products and two sums, left to right: IEEE-exact operations, so every CPU
+    # and the vectorised form (``planes.extract._canonical_planes``) give the same bits; a BLAS
+    # dot product (``numpy.linalg.norm``) may fuse multiply-adds on some CPUs and not on others.
+    n0, n1, n2 = float(n[0]), float(n[1]), float(n[2])
+    norm = math.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+    if not math.isfinite(norm) or norm == 0:
         raise DegenerateGeometryError("plane normal has zero length")
     return _orient(n / norm, float(rho) / float(norm))
 
