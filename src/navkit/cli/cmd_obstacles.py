@@ -11,6 +11,9 @@ import typer
 
 from navkit.batch.obstacle_frames import (
     OUTPUTS,
+    PITCH_DOMAIN,
+    ROLL_DOMAIN,
+    SENSOR_HEIGHT_DOMAIN,
     InputOptions,
     MapOptions,
     RunSettings,
@@ -132,12 +135,6 @@ SENSOR_OPTION = typer.Option(
     "realsense-d435 (beam layout, intrinsics, plausible height).",
 )
 
-SENSOR_HEIGHT_DOMAIN = Domain(lo=0.0, lo_open=True)
-"""``--sensor-height`` / ``[inputs] sensor_height_m``: the sensor is above the ground it
-classifies (the detector levels the cloud and puts the ground plane ``h`` below the sensor); a
-height <= 0 would put that plane at or above the sensor, where no ray meets it from above, so it
-is refused rather than read as a sensor looking up at a ceiling."""
-
 SENSOR_HEIGHT_OPTION = option(
     None,
     "--sensor-height",
@@ -163,8 +160,6 @@ COLUMNS_OPTION = option(
     domain=POSITIVE_INT,
     help="Azimuth columns of a lidar cloud (default: recovered).",
 )
-ROLL_DOMAIN = Domain(lo=-180.0, hi=180.0, note="signed: either side")
-PITCH_DOMAIN = Domain(lo=-90.0, hi=90.0, note="signed: positive looking down")
 C0_DOMAIN = Domain(lo=0.0, hi=90.0, lo_open=True, hi_open=True)
 
 
@@ -300,7 +295,7 @@ def _resolve_settings(ctx: typer.Context, config: Path | None) -> tuple[Any, Any
     for key, val in cli_inputs.items():
         if option_of.get(key, key) in given or key not in merged:
             merged[key] = val
-    opts, _ = _with_preset(InputOptions(**merged))
+    opts, _ = _with_preset(_in_table(config, "inputs", InputOptions, merged))
     origin = o["origin"]
     geo = _parse_floats(origin, 3 if origin.count(",") == 2 else 2, "--origin") if origin else None
     cli_map: dict[str, Any] = {
@@ -319,7 +314,21 @@ def _resolve_settings(ctx: typer.Context, config: Path | None) -> tuple[Any, Any
         mcfg.get("origin"),
         "outputs" in given or "outputs" in cfg["map"],
     )
-    return settings, opts, MapOptions(**mcfg)
+    return settings, opts, _in_table(config, "map", MapOptions, mcfg)
+
+
+def _in_table(config: Path | None, table: str, cls: Any, values: dict[str, Any]) -> Any:
+    """``cls(**values)``; an error names ``--config``'s file and table when one is given."""
+    from navkit.errors import ConfigError
+
+    try:
+        return cls(**values)
+    except ConfigError as exc:
+        if config is None:
+            raise
+        raise ConfigError(
+            exc.message, source=config, field=f"[{table}] {exc.field}", expected=exc.expected
+        ) from None
 
 
 def _run_frames(
