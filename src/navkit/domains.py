@@ -26,7 +26,10 @@ from navkit.errors import InputError
 
 __all__ = [
     "COUNT",
+    "DEPTH_SCALE",
     "DOMAIN_KEY",
+    "FOCAL_LENGTH",
+    "IMAGE_SIDE",
     "MAX_MAGNITUDE",
     "NON_NEGATIVE",
     "NON_NEGATIVE_INT",
@@ -34,7 +37,9 @@ __all__ = [
     "POSITIVE_INT",
     "SEED",
     "Domain",
+    "check_intrinsics",
     "domain_field",
+    "inside_image",
 ]
 
 #: No number a robot measures or counts is beyond this in SI units (1e9 m, 1e9 s, 1e9 points);
@@ -116,7 +121,7 @@ class Domain:
         if self.integer and not v.is_integer():
             return f"is {value!r}, not a whole number"
         if not self.unbounded and abs(v) > MAX_MAGNITUDE:
-            return f"is {value!r}, beyond the bound {MAX_MAGNITUDE:.0e} on any setting"
+            return f"is {value!r}, beyond the bound {MAX_MAGNITUDE:.0e} on any navkit number"
         if self.lo is not None and (v < self.lo or (self.lo_open and v == self.lo)):
             return f"is {value!r}"
         if self.hi is not None and (v > self.hi or (self.hi_open and v == self.hi)):
@@ -160,6 +165,39 @@ class Domain:
         if source is None:
             raise error(why, source=name, expected=self.describe())
         raise error(why, source=source, field=name, expected=self.describe())
+
+    def check_array(
+        self,
+        values: Any,
+        name: str,
+        *,
+        source: Any = None,
+        error: type[InputError] = InputError,
+    ) -> None:
+        """:meth:`check` for every entry of an array; the error names the first bad entry's
+        index (``"v[3]: is 1e+308 ..."``)."""
+        import numpy as np
+
+        full = np.asarray(values, dtype=np.float64)
+        a = full.ravel()
+        with np.errstate(invalid="ignore"):
+            suspect = ~np.isfinite(a)
+            if not self.unbounded:
+                suspect |= np.abs(a) > MAX_MAGNITUDE
+            if self.lo is not None:
+                suspect |= a <= self.lo
+            if self.hi is not None:
+                suspect |= a >= self.hi
+            if self.integer or self.multiple_of:
+                suspect |= a != np.round(a)
+        for i in np.flatnonzero(suspect):
+            why = self.why_not(float(a[i]))
+            if why is not None:
+                index = ", ".join(str(int(k)) for k in np.unravel_index(i, full.shape))
+                where = f"{name}[{index}]"
+                if source is None:
+                    raise error(why, source=where, expected=self.describe())
+                raise error(why, source=source, field=where, expected=self.describe())
 
     def edges(self) -> tuple[list[float], list[float]]:
         """Values just inside and just outside the domain (for tests): the bounds and their
@@ -205,3 +243,45 @@ POSITIVE_INT = Domain(integer=True, lo=1)
 NON_NEGATIVE_INT = Domain(integer=True, lo=0)
 COUNT = POSITIVE_INT
 SEED = Domain(integer=True, lo=0, unbounded=True)
+
+# ------------------------------------------------------------------ camera intrinsics (files)
+#: An image side in pixels.
+IMAGE_SIDE = Domain(integer=True, lo=1, hi=100_000)
+#: A focal length in pixels.
+FOCAL_LENGTH = POSITIVE
+#: Raw depth units per metre (``metres = raw / depth_scale``).
+DEPTH_SCALE = POSITIVE
+
+
+def inside_image(side: int) -> Domain:
+    """The domain of a principal point coordinate on an image side of ``side`` pixels."""
+    return Domain(lo=0.0, hi=float(side), note="inside the image")
+
+
+def check_intrinsics(
+    values: dict[str, Any],
+    *,
+    source: Any,
+    error: type[InputError] = InputError,
+) -> tuple[int, int]:
+    """Check the intrinsics fields of a camera file; return ``(width, height)``.
+
+    ``values`` holds ``fx``, ``fy`` (focal lengths, > 0), ``cx``, ``cy`` (principal point,
+    inside the image: ``cx`` in [0, width], ``cy`` in [0, height]), ``width``, ``height``
+    (positive integers) and optionally ``depth_scale`` (> 0).
+
+    Raises
+    ------
+    InputError
+        (``error``) naming ``source``, the field and its domain.
+    """
+    for name in ("width", "height"):
+        IMAGE_SIDE.check(values[name], name, source=source, error=error)
+    width, height = int(values["width"]), int(values["height"])
+    for name in ("fx", "fy"):
+        FOCAL_LENGTH.check(values[name], name, source=source, error=error)
+    inside_image(width).check(values["cx"], "cx", source=source, error=error)
+    inside_image(height).check(values["cy"], "cy", source=source, error=error)
+    if "depth_scale" in values:
+        DEPTH_SCALE.check(values["depth_scale"], "depth_scale", source=source, error=error)
+    return width, height

@@ -121,7 +121,7 @@ def disparity_cmd(
                 expected="the calibrated image size",
             )
         nd = num_disparities if num_disparities > 0 else _calib_num_disparities(calib)
-        G, M = _read_reference(gt, mask)  # every input read before anything is written
+        G, M = _read_reference(gt, mask, L.shape[:2])  # every input read before any output
         bs = block_size or (9 if matcher == MatcherChoice.bm else 3)
         settings = DisparitySettings(
             matcher=matcher.value,
@@ -191,19 +191,28 @@ def _calib_num_disparities(calib: Path) -> int:
     or 128 when the file does not say."""
     import numpy as np
 
+    from navkit.errors import InputError
     from navkit.io.stereo import read_middlebury_calib
 
     try:
         ndisp = read_middlebury_calib(calib)[1].get("ndisp", 0.0)
-    except Exception:  # not a Middlebury file
+    except InputError:  # not a Middlebury file (a bad one was refused when the rig was read)
         ndisp = 0.0
     return int(16 * np.ceil(ndisp / 16)) if ndisp > 0 else 128
 
 
-def _read_reference(gt: Path | None, mask: Path | None) -> tuple[Any, Any]:
-    """Ground-truth disparity (NaN where unknown) and the non-occluded mask (255), or None."""
+def _read_reference(gt: Path | None, mask: Path | None, shape: tuple[int, ...]) -> tuple[Any, Any]:
+    """Ground-truth disparity (NaN where unknown) and the non-occluded mask (255), or None;
+    both must have the left image's ``shape`` (rows, columns).
+
+    Raises
+    ------
+    InputError
+        Naming the ground truth or the mask whose size differs from the image's.
+    """
     import numpy as np
 
+    from navkit.errors import InputError
     from navkit.io.images import read_image, read_pfm
 
     if gt is None:
@@ -214,6 +223,14 @@ def _read_reference(gt: Path | None, mask: Path | None) -> tuple[Any, Any]:
     if mask is not None:
         m = read_image(mask)
         M = (m if m.ndim == 2 else m[..., 0]) == 255
+    for name, path, arr in (("--gt", gt, G), ("--mask", mask, M)):
+        if arr is not None and arr.shape[:2] != tuple(shape):
+            raise InputError(
+                f"is {arr.shape[1]} x {arr.shape[0]} pixels",
+                source=path,
+                field=name,
+                expected=f"the left image's size, {shape[1]} x {shape[0]}",
+            )
     return G, M
 
 
