@@ -63,6 +63,10 @@ TUM_DEFAULT = {"fx": 525.0, "fy": 525.0, "cx": 319.5, "cy": 239.5}
 _IMAGE_SUFFIXES = (".png", ".pgm")
 
 
+#: YAML's spellings of the special floats (read, then refused by the fields' domains).
+_YAML_SPECIAL = {".inf": "inf", "+.inf": "inf", "-.inf": "-inf", ".nan": "nan"}
+
+
 def read_camera_yaml(path: str | Path) -> dict[str, float]:
     """Flat ``key: value`` YAML of numbers (``fx``, ``fy``, ``cx``, ``cy``, ``depth_scale``, ...).
 
@@ -87,7 +91,7 @@ def read_camera_yaml(path: str | Path) -> dict[str, float]:
         if not m:
             raise FormatError(f"line {n} is {line!r}", source=p, expected="'key: number' lines")
         try:
-            out[m.group(1)] = float(m.group(2))
+            out[m.group(1)] = float(_YAML_SPECIAL.get(m.group(2).lower(), m.group(2)))
         except ValueError:
             raise FormatError(
                 f"line {n}: {m.group(2)!r} is not a number",
