@@ -290,3 +290,211 @@ def test_second_input_bad_leaves_nothing(inputs: Inputs, runner: Any, tmp_path: 
     bad.write_bytes(b"\x93NUMPY")
     res = run_case(runner, tmp_path, ["obstacles", "detect", inputs.range_image, bad])
     assert res.exit_code == 2
+
+
+# ------------------------------------------------------------------ declared domains
+def _numeric_params() -> list[tuple[str, Any]]:
+    return [
+        (command, p)
+        for command in COMMANDS
+        for p in COMMANDS[command].params
+        if _kind(p) in ("int", "float")
+    ]
+
+
+def test_every_numeric_option_declares_a_domain() -> None:
+    """Every numeric option is declared with ``navkit.cli.common.option`` and a Domain."""
+    from navkit.cli.common import option_domain, option_name
+
+    missing = [f"{c} {option_name(p)}" for c, p in _numeric_params() if option_domain(p) is None]
+    assert not missing, f"numeric options without a declared domain: {missing}"
+
+
+def _text(value: float, integer: bool) -> str:
+    if math.isnan(value):
+        return "nan"
+    return str(int(value)) if integer else repr(float(value))
+
+
+def _edge_cases() -> list[tuple[str, str, str, bool]]:
+    from navkit.cli.common import option_domain
+
+    cases = []
+    for command, p in _numeric_params():
+        domain = option_domain(p)
+        if domain is None:
+            continue
+        inside, outside = domain.edges()
+        integer = _kind(p) == "int"
+        for v in outside:
+            if integer and (math.isnan(v) or not float(v).is_integer()):
+                continue  # click refuses a non-integer for an int option itself
+            cases.append((command, p.name, _text(v, integer), False))
+        cases += [(command, p.name, _text(v, integer), True) for v in inside]
+    return cases
+
+
+EDGE_CASES = _edge_cases()
+
+
+@pytest.mark.parametrize(("command", "param", "value", "inside"), EDGE_CASES)
+def test_domain_edges(
+    command: str, param: str, value: str, inside: bool, inputs: Inputs, runner: Any, tmp_path: Path
+) -> None:
+    """Each numeric option at the edges of its declared domain: just outside is a one-line
+    ``error:`` (exit 2) naming the option and the domain, before any input is read; just inside
+    is accepted by the domain check (the command itself is not run: that is the other tests')."""
+    from navkit.cli.common import option_domain, option_name
+
+    p = next(q for q in COMMANDS[command].params if q.name == param)
+    domain = option_domain(p)
+    number = int(value) if _kind(p) == "int" and value != "nan" else float(value)
+    if inside:
+        assert domain.contains(number), (command, param, value, domain.describe())
+        return
+    args = inputs.base(command)  # the domain check comes first: the inputs are never read
+    if args is None:
+        args = []
+        for q in COMMANDS[command].params:
+            if q.required and q.name != "out":
+                missing = inputs.root / "does-not-exist"
+                args += [missing] if q.param_type_name == "argument" else [q.opts[0], missing]
+    out = tmp_path / "out"
+    res = runner(*command.split(), *args, p.opts[0], value, "--out", out)
+    lines = res.output.strip().splitlines()
+    ok = (
+        res.exit_code == 2
+        and len(lines) == 1
+        and lines[0].startswith(f"error: {option_name(p)}: ")
+        and domain.describe() in lines[0]
+        and not (out.exists() and any(out.iterdir()))
+    )
+    record("cli", "errors" if ok else "failures")
+    assert ok, f"navkit {command} {p.opts[0]} {value}: exit {res.exit_code}\n{res.output}"
+
+
+@pytest.mark.parametrize(
+    ("args", "option", "expected"),
+    [
+        (["obstacles", "detect", "x", "--sensor-height", "-1e9"], "--sensor-height", "> 0"),
+        (["obstacles", "detect", "x", "--rings", "0"], "--rings", "an integer >= 1"),
+        (["obstacles", "detect", "x", "--rings", "-1"], "--rings", "an integer >= 1"),
+        (["obstacles", "detect", "x", "--resolution", "0"], "--resolution", "> 0"),
+        (["obstacles", "detect", "x", "--extent", "0"], "--extent", "> 0"),
+        (["stereo", "disparity", "l", "r", "--calib", "c", "--num-disparities", "-16"],
+         "--num-disparities", "multiple of 16"),
+        (["stereo", "disparity", "l", "r", "--calib", "c", "--max-depth", "-1"],
+         "--max-depth", "> 0"),
+        (["planes", "extract", "x", "--nu", "0"], "--nu", "> 0"),
+    ],
+)  # fmt: skip
+def test_held_out_domain_cases(
+    args: list[str], option: str, expected: str, runner: Any, tmp_path: Path
+) -> None:
+    """The options a held-out fuzz run found accepted outside their domain."""
+    res = runner(*args, "--out", tmp_path / "out")
+    assert res.exit_code == 2, res.output
+    line = res.output.strip()
+    assert "\n" not in line and line.startswith(f"error: {option}: ") and expected in line
+
+
+def test_trajectory_beyond_the_magnitude_bound(runner: Any, tmp_path: Path) -> None:
+    """A speed of 1e308 in an odometry log (it overflowed the spline fit's sums) and a TUM
+    position beyond 1e9 m: clean errors naming the file and the field."""
+    odo = tmp_path / "odo.txt"
+    odo.write_text("0 1e308 0\n1 1e308 0\n2 1e308 0.1\n3 1 0\n")
+    res = runner("path", "record", odo, "--format", "odometry", "--out", tmp_path / "a")
+    assert res.exit_code == 2 and "internal error" not in res.output, res.output
+    assert "odo.txt" in res.output and "'v[0]'" in res.output
+    tum = tmp_path / "far.tum"
+    tum.write_text("".join(f"{i} {i * 1e299} 0 0 0 0 0 1\n" for i in range(5)))
+    res = runner("path", "record", tum, "--out", tmp_path / "b")
+    assert res.exit_code == 2 and "far.tum" in res.output and "position" in res.output, res.output
+
+
+def test_mask_of_another_size(inputs: Inputs, runner: Any, tmp_path: Path) -> None:
+    """``--gt`` / ``--mask`` of another size than the images: an error naming the file, before
+    any output (it was a NumPy broadcast error, an internal error)."""
+    import cv2
+
+    from navkit.io.images import write_pfm
+
+    h, w = cv2.imread(str(inputs.left), cv2.IMREAD_UNCHANGED).shape[:2]
+    gt = tmp_path / "gt.pfm"
+    write_pfm(gt, np.full((h, w), 5.0, np.float32))
+    mask = tmp_path / "mask.png"
+    cv2.imwrite(str(mask), np.full((h + 3, w), 255, np.uint8))
+    base = [inputs.left, inputs.right, "--calib", inputs.stereo / "calib.yaml", "--gt", gt]
+    res = run_case(runner, tmp_path, ["stereo", "disparity", *base, "--mask", mask])
+    assert res.exit_code == 2 and "--mask" in res.output and "mask.png" in res.output
+    write_pfm(gt, np.full((h, w + 1), 5.0, np.float32))
+    res = run_case(runner, tmp_path, ["stereo", "disparity", *base])
+    assert res.exit_code == 2 and "--gt" in res.output
+
+
+def _rgbd_folder(root: Path, camera: str) -> Path:
+    import cv2
+
+    (root / "color").mkdir(parents=True)
+    (root / "depth").mkdir()
+    cv2.imwrite(str(root / "color" / "0.png"), np.full((8, 10, 3), 100, np.uint8))
+    cv2.imwrite(str(root / "depth" / "0.png"), np.full((8, 10), 1500, np.uint16))
+    (root / "camera.yaml").write_text(camera)
+    return root
+
+
+CAMERA = "fx: 5\nfy: 5\ncx: 4.5\ncy: 3.5\ndepth_scale: 1000\n"
+
+
+@pytest.mark.parametrize(
+    ("change", "field", "expected"),
+    [
+        ("depth_scale: 0", "depth_scale", "> 0"),
+        ("depth_scale: -1000", "depth_scale", "> 0"),
+        ("depth_scale: .nan", "depth_scale", "> 0"),
+        ("cx: 10.5", "cx", "in [0, 10]"),
+        ("cx: -1", "cx", "in [0, 10]"),
+        ("cy: 9", "cy", "in [0, 8]"),
+        ("width: .inf", "width", "an integer in [1, 100000]"),
+        ("width: .nan", "width", "an integer in [1, 100000]"),
+        ("height: 0", "height", "an integer in [1, 100000]"),
+        ("fx: 0", "fx", "> 0"),
+    ],
+)
+def test_camera_yaml_domains(
+    change: str, field: str, expected: str, runner: Any, tmp_path: Path
+) -> None:
+    """camera.yaml fields outside their domains (``width: .inf`` was an internal error)."""
+    key = change.split(":")[0]
+    text = "".join(line + "\n" for line in CAMERA.splitlines() if not line.startswith(key + ":"))
+    folder = _rgbd_folder(tmp_path / "seq", text + change + "\n")
+    res = run_case(runner, tmp_path, ["planes", "extract", folder])
+    line = res.output.strip()
+    assert res.exit_code == 2 and "\n" not in line, res.output
+    assert "camera.yaml" in line and f"'{field}'" in line and expected in line, line
+
+
+@pytest.mark.parametrize(
+    ("change", "field"),
+    [("doffs=nan", "doffs"), ("ndisp=-16", "ndisp"), ("ndisp=12.5", "ndisp"),
+     ("width=inf", "width"), ("baseline=0", "baseline")],
+)  # fmt: skip
+def test_middlebury_calib_domains(
+    change: str, field: str, inputs: Inputs, runner: Any, tmp_path: Path
+) -> None:
+    """A Middlebury calib.txt with a field outside its domain: an error naming it."""
+    import cv2
+
+    h, w = cv2.imread(str(inputs.left), cv2.IMREAD_UNCHANGED).shape[:2]
+    fields = {
+        "cam0": f"[40 0 {w / 2}; 0 40 {h / 2}; 0 0 1]",
+        "cam1": f"[40 0 {w / 2}; 0 40 {h / 2}; 0 0 1]",
+        "doffs": "0", "baseline": "200", "width": str(w), "height": str(h), "ndisp": "32",
+    }  # fmt: skip
+    key, value = change.split("=")
+    fields[key] = value
+    calib = tmp_path / "calib.txt"
+    calib.write_text("".join(f"{k}={v}\n" for k, v in fields.items()))
+    args = ["stereo", "disparity", inputs.left, inputs.right, "--calib", calib]
+    res = run_case(runner, tmp_path, args)
+    assert res.exit_code == 2 and "calib.txt" in res.output and f"'{field}'" in res.output

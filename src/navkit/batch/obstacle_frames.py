@@ -12,8 +12,13 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
+from navkit.domains import POSITIVE, POSITIVE_INT, Domain, domain_field
+
 __all__ = [
     "OUTPUTS",
+    "PITCH_DOMAIN",
+    "ROLL_DOMAIN",
+    "SENSOR_HEIGHT_DOMAIN",
     "InputOptions",
     "MapOptions",
     "RunSettings",
@@ -29,20 +34,41 @@ occupancy grid ``map.pgm`` + ``map.yaml``, the figure ``map.png``, ``map.geojson
 needs ``--origin``)."""
 
 
+SENSOR_HEIGHT_DOMAIN = Domain(lo=0.0, lo_open=True)
+"""``--sensor-height`` / ``[inputs] sensor_height_m`` (m): the sensor is above the ground it
+classifies (the detector levels the cloud and puts the ground plane ``h`` below the sensor); a
+height <= 0 would put that plane at or above the sensor, where no ray meets it from above, so it
+is refused rather than read as a sensor looking up at a ceiling."""
+ROLL_DOMAIN = Domain(lo=-180.0, hi=180.0, note="signed: either side")
+PITCH_DOMAIN = Domain(lo=-90.0, hi=90.0, note="signed: positive looking down")
+
+
 @dataclass(frozen=True)
 class InputOptions:
-    """How inputs are read and mounted (the ``[inputs]`` table of ``settings.toml``)."""
+    """How inputs are read and mounted (the ``[inputs]`` table of ``settings.toml``); each
+    number is checked against its declared domain (the same as the CLI option's)."""
 
     sensor: str | None = None
-    sensor_height_m: float | None = None
-    roll_deg: float = 0.0
-    pitch_deg: float = 0.0
+    sensor_height_m: float | None = domain_field(None, SENSOR_HEIGHT_DOMAIN)
+    roll_deg: float = domain_field(0.0, ROLL_DOMAIN)
+    pitch_deg: float = domain_field(0.0, PITCH_DOMAIN)
     gravity: tuple[float, float, float] | None = None
-    rings: int | None = None
-    columns: int | None = None
+    rings: int | None = domain_field(None, POSITIVE_INT)
+    columns: int | None = domain_field(None, POSITIVE_INT)
     ring_method: str = "auto"
     intrinsics: tuple[float, float, float, float] | None = None
-    depth_scale: float = 1000.0
+    depth_scale: float = domain_field(1000.0, POSITIVE)
+
+    def __post_init__(self) -> None:
+        from navkit.errors import ConfigError
+        from navkit.geometry._validate import check_settings
+
+        check_settings(self)
+        for name, n in (("gravity", 3), ("intrinsics", 4)):
+            _check_numbers(getattr(self, name), n, name, ConfigError)
+        if self.intrinsics is not None:
+            for k, v in zip(("fx", "fy"), self.intrinsics[:2], strict=True):
+                POSITIVE.check(v, f"intrinsics {k}", source="InputOptions", error=ConfigError)
 
 
 @dataclass(frozen=True)
@@ -50,10 +76,31 @@ class MapOptions:
     """What is written per frame (the ``[map]`` table of ``settings.toml``)."""
 
     outputs: tuple[str, ...] = ("labels", "obstacles")
-    resolution_m: float = 0.1
-    extent_m: float | None = 40.0
+    resolution_m: float = domain_field(0.1, POSITIVE)
+    extent_m: float | None = domain_field(40.0, POSITIVE)
     png_shapes: tuple[str, ...] = ("A1", "A6")
     origin: tuple[float, ...] | None = None
+
+    def __post_init__(self) -> None:
+        from navkit.geometry._validate import check_settings
+
+        check_settings(self)
+
+
+def _check_numbers(values: Any, n: int, name: str, error: Any) -> None:
+    """``values`` None or ``n`` finite numbers, else ``error`` naming ``name``."""
+    import math
+
+    if values is None:
+        return
+    try:
+        ok = len(values) == n and all(math.isfinite(float(v)) for v in values)
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise error(
+            f"is {values!r}", source="InputOptions", field=name, expected=f"{n} finite numbers"
+        )
 
 
 @dataclass(frozen=True)

@@ -50,7 +50,7 @@ class CameraOverride:
 def open_rgbd(path: Path, cam: CameraOverride) -> Any:
     """An RGB-D folder; a simple layout without ``camera.yaml`` needs ``--intrinsics``."""
     from navkit.errors import DataNotFoundError
-    from navkit.io.rgbd import open_rgbd_sequence
+    from navkit.io.rgbd import open_rgbd_sequence, read_camera_yaml
 
     given = cam.as_dict()
     if (
@@ -63,8 +63,13 @@ def open_rgbd(path: Path, cam: CameraOverride) -> Any:
             "--intrinsics FX,FY,CX,CY (pixels; and --depth-scale when not 1000) or write "
             "camera.yaml with fx, fy, cx, cy, depth_scale"
         )
-    if not (path / "rgb.txt").is_file():
-        given.setdefault("depth_scale", DEFAULT_DEPTH_SCALE)
+    yaml = path / "camera.yaml"
+    if (
+        not (path / "rgb.txt").is_file()
+        and "depth_scale" not in given
+        and not (yaml.is_file() and "depth_scale" in read_camera_yaml(yaml))
+    ):  # the default only where neither the command line nor the folder's camera.yaml says
+        given["depth_scale"] = DEFAULT_DEPTH_SCALE
     return open_rgbd_sequence(path, given)
 
 

@@ -13,6 +13,9 @@ from typing import Any
 
 import typer
 
+from navkit.cli.common import option
+from navkit.domains import Domain
+
 __all__ = [
     "EXIT_SOME_FAILED",
     "RESUME",
@@ -25,11 +28,10 @@ __all__ = [
 
 EXIT_SOME_FAILED = 3
 
-WORKERS = typer.Option(
+WORKERS = option(
     None,
     "--workers",
-    min=1,
-    max=1024,
+    domain=Domain(integer=True, lo=1, hi=1024),
     help="Run the inputs on a local Dask cluster of N worker processes (needs the cluster extra).",
 )
 SCHEDULER = typer.Option(

@@ -16,7 +16,11 @@ from pathlib import Path
 
 import typer
 
-from navkit.cli.common import RERUN, RERUN_SAVE, cli_errors, progress, write_run_files
+from navkit.cli.common import RERUN, RERUN_SAVE, cli_errors, option, progress, write_run_files
+from navkit.domains import SEED, Domain
+
+#: A position in the world frame: either sign.
+WORLD_COORDINATE = Domain(note="world frame, either sign")
 
 log = logging.getLogger(__name__)
 
@@ -39,13 +43,22 @@ def register(app: typer.Typer) -> None:
             help="Settings TOML: its [mission] table (as in the settings.toml a run writes) "
             "overrides the mission's settings.",
         ),
-        seed: int = typer.Option(0, "--seed", help="Seed of the sensor noise."),
+        seed: int = option(0, "--seed", domain=SEED, help="Seed of the sensor noise."),
         scene: str = typer.Option(
             "yard", "--scene", help="Built-in world name or a scene TOML file."
         ),
-        x: float = typer.Option(None, "--x", help="Robot x (m); default: the world's start."),  # type: ignore[assignment]
-        y: float = typer.Option(None, "--y", help="Robot y (m); default: the world's start."),  # type: ignore[assignment]
-        heading_deg: float = typer.Option(None, "--heading-deg", help="Robot heading (deg)."),  # type: ignore[assignment]
+        x: float = option(
+            None, "--x", domain=WORLD_COORDINATE, help="Robot x (m); default: the world's start."
+        ),
+        y: float = option(
+            None, "--y", domain=WORLD_COORDINATE, help="Robot y (m); default: the world's start."
+        ),
+        heading_deg: float = option(
+            None,
+            "--heading-deg",
+            domain=Domain(lo=-360.0, hi=360.0, note="signed: counter-clockwise from x"),
+            help="Robot heading (deg).",
+        ),
         small: bool = typer.Option(False, "--small", help="Low resolution (fast; for tests)."),
         rerun: bool = RERUN,
         rerun_save: Path | None = RERUN_SAVE,

@@ -31,7 +31,8 @@ from typing import Any
 import typer
 
 from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
-from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
+from navkit.cli.common import check_out_dir, cli_errors, option, progress, write_run_files
+from navkit.domains import POSITIVE, POSITIVE_INT, Domain
 
 log = logging.getLogger(__name__)
 
@@ -53,6 +54,14 @@ class BuildInput:
     max_range: float
 
 
+MAX_RANGE = option(
+    30.0,
+    "--max-range",
+    domain=POSITIVE,
+    help="Laser readings at or beyond this distance (m) are no return.",
+)
+
+
 def _read_toml(path: Path) -> dict[str, Any]:
     from navkit.io.textfiles import load_toml_file
 
@@ -63,11 +72,11 @@ def _read_toml(path: Path) -> dict[str, Any]:
 def build_cmd(
     input: Path = typer.Argument(..., help="CARMEN log (.log/.log.gz) or stereo frame folder."),
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
-    every: int = typer.Option(1, "--every", min=1, help="Use every N-th scan / frame."),
-    resolution: float | None = typer.Option(None, help="Occupancy grid cell (m); default 0.05."),
-    max_range: float = typer.Option(
-        30.0, help="Laser readings at or beyond this distance (m) are no return."
+    every: int = option(1, "--every", domain=POSITIVE_INT, help="Use every N-th scan / frame."),
+    resolution: float | None = option(
+        None, "--resolution", domain=POSITIVE, help="Occupancy grid cell (m); default 0.05."
     ),
+    max_range: float = MAX_RANGE,
     config: Path | None = typer.Option(
         None, "--config", help="TOML with a [map] table (as in the settings.toml written)."
     ),
@@ -154,18 +163,26 @@ def locate_cmd(
     prior: PriorChoice = typer.Option(
         PriorChoice.none, help="none: global search; odometry: last fix + odometry."
     ),
-    every: int = typer.Option(
-        1, "--every", min=1, help="Localize every N-th scan / frame (group)."
+    every: int = option(
+        1, "--every", domain=POSITIVE_INT, help="Localize every N-th scan / frame (group)."
     ),
-    group: int = typer.Option(1, "--group", min=1, help=_GROUP_HELP),
-    max_range: float = typer.Option(
-        30.0, help="Laser readings at or beyond this distance (m) are no return."
+    group: int = option(1, "--group", domain=POSITIVE_INT, help=_GROUP_HELP),
+    max_range: float = MAX_RANGE,
+    sigma: float | None = option(
+        None, "--sigma", domain=POSITIVE, help="Likelihood field width (m); default 0.1."
     ),
-    sigma: float | None = typer.Option(None, help="Likelihood field width (m); default 0.1."),
-    success_m: float = typer.Option(
-        0.3, help="A fix within this distance (m) of the reference is a success."
+    success_m: float = option(
+        0.3,
+        "--success-m",
+        domain=POSITIVE,
+        help="A fix within this distance (m) of the reference is a success.",
     ),
-    success_deg: float = typer.Option(5.0, help="... and within this heading error (degrees)."),
+    success_deg: float = option(
+        5.0,
+        "--success-deg",
+        domain=Domain(lo=0.0, hi=180.0, lo_open=True),
+        help="... and within this heading error (degrees).",
+    ),
     known_heading: bool = typer.Option(False, "--known-heading", help=_KNOWN_HEADING_HELP),
     refine: bool | None = typer.Option(None, "--refine/--no-refine", help=_REFINE_HELP),
     config: Path | None = typer.Option(

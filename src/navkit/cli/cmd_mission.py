@@ -8,7 +8,8 @@ from pathlib import Path
 import typer
 
 from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
-from navkit.cli.common import RERUN, RERUN_SAVE
+from navkit.cli.common import RERUN, RERUN_SAVE, option
+from navkit.domains import SEED
 
 mission_app = typer.Typer(
     help="The integrated mission: out, map, localize, come back.", no_args_is_help=True
@@ -47,7 +48,7 @@ def run(
         help="Settings TOML: its [mission] table (as in the settings.toml a run writes) "
         "overrides the mission file's settings.",
     ),
-    seed: int = typer.Option(None, "--seed", help="Seed of every random draw."),  # type: ignore[assignment]
+    seed: int = option(None, "--seed", domain=SEED, help="Seed of every random draw."),
     small: bool = typer.Option(False, "--small", help="Reduced sensor resolutions (quick runs)."),
     rerun: bool = RERUN,
     rerun_save: Path | None = RERUN_SAVE,

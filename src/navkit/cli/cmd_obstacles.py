@@ -11,6 +11,9 @@ import typer
 
 from navkit.batch.obstacle_frames import (
     OUTPUTS,
+    PITCH_DOMAIN,
+    ROLL_DOMAIN,
+    SENSOR_HEIGHT_DOMAIN,
     InputOptions,
     MapOptions,
     RunSettings,
@@ -24,7 +27,8 @@ from navkit.cli.batching import (
     expand_sources,
     run_inputs,
 )
-from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
+from navkit.cli.common import check_out_dir, cli_errors, option, progress, write_run_files
+from navkit.domains import POSITIVE, POSITIVE_INT, Domain
 
 log = logging.getLogger(__name__)
 
@@ -131,9 +135,10 @@ SENSOR_OPTION = typer.Option(
     "realsense-d435 (beam layout, intrinsics, plausible height).",
 )
 
-SENSOR_HEIGHT_OPTION = typer.Option(
+SENSOR_HEIGHT_OPTION = option(
     None,
     "--sensor-height",
+    domain=SENSOR_HEIGHT_DOMAIN,
     help="Sensor height above the ground (m). Default: the .npz's, else measured from the "
     "ground in the first frame and reported in summary.json.",
 )
@@ -146,10 +151,16 @@ ORIGIN_OPTION = typer.Option(
 )
 
 
-RINGS_OPTION = typer.Option(None, "--rings", help="Beams of a lidar cloud (default: recovered).")
-COLUMNS_OPTION = typer.Option(
-    None, "--columns", help="Azimuth columns of a lidar cloud (default: recovered)."
+RINGS_OPTION = option(
+    None, "--rings", domain=POSITIVE_INT, help="Beams of a lidar cloud (default: recovered)."
 )
+COLUMNS_OPTION = option(
+    None,
+    "--columns",
+    domain=POSITIVE_INT,
+    help="Azimuth columns of a lidar cloud (default: recovered).",
+)
+C0_DOMAIN = Domain(lo=0.0, hi=90.0, lo_open=True, hi_open=True)
 
 
 @obstacles_app.command("detect")
@@ -168,14 +179,18 @@ def detect(
     ),
     sensor: str | None = SENSOR_OPTION,
     sensor_height: float | None = SENSOR_HEIGHT_OPTION,
-    roll_deg: float = typer.Option(0.0, "--roll-deg", help="Sensor roll in the level frame (deg)."),
-    pitch_deg: float = typer.Option(
-        0.0, "--pitch-deg", help="Sensor pitch, positive looking down (deg)."
+    roll_deg: float = option(
+        0.0, "--roll-deg", domain=ROLL_DOMAIN, help="Sensor roll in the level frame (deg)."
+    ),
+    pitch_deg: float = option(
+        0.0, "--pitch-deg", domain=PITCH_DOMAIN, help="Sensor pitch in the level frame (deg)."
     ),
     gravity: str | None = typer.Option(
         None, "--gravity", help="Gravity in the sensor frame GX,GY,GZ (overrides roll and pitch)."
     ),
-    c0_deg: float | None = typer.Option(None, "--c0-deg", help="Largest traversable slope (deg)."),
+    c0_deg: float | None = option(
+        None, "--c0-deg", domain=C0_DOMAIN, help="Largest traversable slope (deg)."
+    ),
     shapes: str | None = typer.Option(
         None, "--shapes", help="Shapes to compute, comma-separated (A1..A6, MEC, MVEE)."
     ),
@@ -185,12 +200,14 @@ def detect(
     intrinsics: str | None = typer.Option(
         None, "--intrinsics", help="Depth images: FX,FY,CX,CY (pixels)."
     ),
-    depth_scale: float = typer.Option(
-        1000.0, "--depth-scale", help="Depth images: raw units per metre."
+    depth_scale: float = option(
+        1000.0, "--depth-scale", domain=POSITIVE, help="Depth images: raw units per metre."
     ),
-    resolution: float = typer.Option(0.1, "--resolution", help="Occupancy grid cell (m)."),
-    extent: float = typer.Option(
-        40.0, "--extent", help="Half-width of the maps around the sensor (m)."
+    resolution: float = option(
+        0.1, "--resolution", domain=POSITIVE, help="Occupancy grid cell (m)."
+    ),
+    extent: float = option(
+        40.0, "--extent", domain=POSITIVE, help="Half-width of the maps around the sensor (m)."
     ),
     plot_shapes: str = typer.Option(
         "A1,A6", "--plot-shapes", help="Shapes in map.png and map.geojson, comma-separated."
@@ -278,7 +295,7 @@ def _resolve_settings(ctx: typer.Context, config: Path | None) -> tuple[Any, Any
     for key, val in cli_inputs.items():
         if option_of.get(key, key) in given or key not in merged:
             merged[key] = val
-    opts, _ = _with_preset(InputOptions(**merged))
+    opts, _ = _with_preset(_in_table(config, "inputs", InputOptions, merged))
     origin = o["origin"]
     geo = _parse_floats(origin, 3 if origin.count(",") == 2 else 2, "--origin") if origin else None
     cli_map: dict[str, Any] = {
@@ -297,7 +314,21 @@ def _resolve_settings(ctx: typer.Context, config: Path | None) -> tuple[Any, Any
         mcfg.get("origin"),
         "outputs" in given or "outputs" in cfg["map"],
     )
-    return settings, opts, MapOptions(**mcfg)
+    return settings, opts, _in_table(config, "map", MapOptions, mcfg)
+
+
+def _in_table(config: Path | None, table: str, cls: Any, values: dict[str, Any]) -> Any:
+    """``cls(**values)``; an error names ``--config``'s file and table when one is given."""
+    from navkit.errors import ConfigError
+
+    try:
+        return cls(**values)
+    except ConfigError as exc:
+        if config is None:
+            raise
+        raise ConfigError(
+            exc.message, source=config, field=f"[{table}] {exc.field}", expected=exc.expected
+        ) from None
 
 
 def _run_frames(

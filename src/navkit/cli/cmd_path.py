@@ -30,7 +30,8 @@ from navkit.cli.batching import (
     exit_if_failed,
     run_inputs,
 )
-from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
+from navkit.cli.common import check_out_dir, cli_errors, option, progress, write_run_files
+from navkit.domains import NON_NEGATIVE, POSITIVE, SEED, Domain
 
 log = logging.getLogger(__name__)
 
@@ -81,8 +82,12 @@ def record(
         help="Trajectory file(s): TUM, KITTI, EuRoC or a 'time v omega' log (paths or fsspec "
         "URLs). Several files: one output folder each, named after the file.",
     ),
-    tolerance: float = typer.Option(
-        0.05, "--tolerance", "-e", help="eps: max distance of a point from the spline (m)."
+    tolerance: float = option(
+        0.05,
+        "--tolerance",
+        "-e",
+        domain=POSITIVE,
+        help="eps: max distance of a point from the spline (m).",
     ),
     out: Path = typer.Option(..., "--out", "-o", help=OUT_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
@@ -98,7 +103,9 @@ def record(
     keep_loops: bool = typer.Option(
         False, "--keep-loops", help="Store the path without loop removal."
     ),
-    precision: float = typer.Option(1e-4, "--precision", help="Loop search precision (m)."),
+    precision: float = option(
+        1e-4, "--precision", domain=POSITIVE, help="Loop search precision (m)."
+    ),
     workers: int | None = WORKERS,
     scheduler: str | None = SCHEDULER,
     resume: bool = RESUME,
@@ -183,13 +190,17 @@ def _record_batch(
     )
 
 
-VO_SCALE_SIGMA = typer.Option(0.02, "--vo-scale-sigma", help="VO per-step relative scale noise.")
-VO_HEADING_SIGMA_DEG = typer.Option(
-    0.2, "--vo-heading-sigma-deg", help="VO per-step heading noise (deg)."
+RUN_COUNT = Domain(integer=True, lo=1, hi=10_000)
+VO_SCALE_SIGMA = option(
+    0.02, "--vo-scale-sigma", domain=NON_NEGATIVE, help="VO per-step relative scale noise."
 )
-RUNS_PER_TASK = typer.Option(
-    25, "--runs-per-task", min=1, max=10_000, help="Runs simulated together in one task."
+VO_HEADING_SIGMA_DEG = option(
+    0.2, "--vo-heading-sigma-deg", domain=NON_NEGATIVE, help="VO per-step heading noise (deg)."
 )
+RUNS_PER_TASK = option(
+    25, "--runs-per-task", domain=RUN_COUNT, help="Runs simulated together in one task."
+)
+TURN_DEG = Domain(lo=0.0, hi=360.0, note="the turns alternate left and right")
 
 
 @path_app.command("return")
@@ -197,23 +208,33 @@ def return_(
     path_json: str = typer.Argument(
         ..., help="A path.json written by 'navkit path record' (a path or an fsspec URL)."
     ),
-    runs: int = typer.Option(
-        40, "--runs", min=1, max=10_000, help="Number of simulated returns (paper: 40)."
+    runs: int = option(
+        40, "--runs", domain=RUN_COUNT, help="Number of simulated returns (paper: 40)."
     ),
     out: Path = typer.Option(..., "--out", "-o", help=OUT_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
-    vo_rate_hz: float = typer.Option(10.0, "--vo-rate-hz", help="VO (and control) rate (Hz)."),
-    vo_scale_sigma: float = VO_SCALE_SIGMA,
-    vo_scale_bias: float = typer.Option(0.0, "--vo-scale-bias", help="VO relative scale bias."),
-    vo_heading_sigma_deg: float = VO_HEADING_SIGMA_DEG,
-    vo_heading_bias_deg_per_m: float = typer.Option(
-        0.0, "--vo-heading-bias-deg-per-m", help="VO heading drift (deg/m)."
+    seed: int = option(0, "--seed", domain=SEED, help="Random seed."),
+    vo_rate_hz: float = option(
+        10.0, "--vo-rate-hz", domain=POSITIVE, help="VO (and control) rate (Hz)."
     ),
-    delta: float = typer.Option(0.3, "--delta", help="Look-ahead along the path (m)."),
-    speed: float = typer.Option(0.3, "--speed", help="Linear speed (m/s)."),
-    stop_radius: float = typer.Option(
-        0.05, "--stop-radius", help="Stop radius around the start (m)."
+    vo_scale_sigma: float = VO_SCALE_SIGMA,
+    vo_scale_bias: float = option(
+        0.0,
+        "--vo-scale-bias",
+        domain=Domain(lo=-1.0, lo_open=True, note="signed: VO under- or over-estimates"),
+        help="VO relative scale bias.",
+    ),
+    vo_heading_sigma_deg: float = VO_HEADING_SIGMA_DEG,
+    vo_heading_bias_deg_per_m: float = option(
+        0.0,
+        "--vo-heading-bias-deg-per-m",
+        domain=Domain(note="signed: drift to either side"),
+        help="VO heading drift (deg/m).",
+    ),
+    delta: float = option(0.3, "--delta", domain=POSITIVE, help="Look-ahead along the path (m)."),
+    speed: float = option(0.3, "--speed", domain=POSITIVE, help="Linear speed (m/s)."),
+    stop_radius: float = option(
+        0.05, "--stop-radius", domain=POSITIVE, help="Stop radius around the start (m)."
     ),
     runs_per_task: int = RUNS_PER_TASK,
     workers: int | None = WORKERS,
@@ -240,13 +261,10 @@ def return_(
             read_return_path,
             return_sweep_tasks,
         )
-        from navkit.errors import ConfigError
         from navkit.path.control import ReturnSettings
         from navkit.sensors import VisualOdometryNoise
         from navkit.sim.return_sim import simulate_returns
 
-        if runs < 1:
-            raise ConfigError(f"is {runs}", field="--runs", expected="at least 1")
         spline = read_return_path(path_json)
         vo = VisualOdometryNoise(
             rate_hz=vo_rate_hz,
@@ -330,13 +348,20 @@ def _write_returns(
 def simulate(
     out: Path = typer.Option(..., "--out", "-o", help=OUT_HELP),
     overwrite: bool = typer.Option(False, "--overwrite", help=OVERWRITE_HELP),
-    legs: int = typer.Option(7, "--legs", min=1, max=10_000, help="Number of straight legs."),
-    leg_length: float = typer.Option(0.5, "--leg-length", help="Leg length (m) (paper: 0.5)."),
-    turn_deg: float = typer.Option(90.0, "--turn-deg", help="Turn between legs (deg) (paper: 90)."),
+    legs: int = option(7, "--legs", domain=RUN_COUNT, help="Number of straight legs."),
+    leg_length: float = option(
+        0.5,
+        "--leg-length",
+        domain=Domain(lo=0.0, hi=100.0, lo_open=True),
+        help="Leg length (m) (paper: 0.5).",
+    ),
+    turn_deg: float = option(
+        90.0, "--turn-deg", domain=TURN_DEG, help="Turn between legs (deg) (paper: 90)."
+    ),
     random_turns: bool = typer.Option(
         False, "--random-turns", help="Turn left or right at random."
     ),
-    seed: int = typer.Option(0, "--seed", min=0, help="Random seed."),
+    seed: int = option(0, "--seed", domain=SEED, help="Random seed."),
     vo_scale_sigma: float = VO_SCALE_SIGMA,
     vo_heading_sigma_deg: float = VO_HEADING_SIGMA_DEG,
 ) -> None:
@@ -349,18 +374,11 @@ def simulate(
     with cli_errors():
         import numpy as np
 
-        from navkit.errors import ConfigError
         from navkit.geometry import se3_from_rt
         from navkit.io.trajectory import Trajectory, write_tum
         from navkit.sensors import VisualOdometryNoise
         from navkit.sim.return_sim import leg_drive
 
-        if legs < 1 or not leg_length > 0:
-            raise ConfigError(
-                f"legs={legs}, leg_length={leg_length}",
-                field="--legs/--leg-length",
-                expected="at least one leg of positive length",
-            )
         rng = np.random.default_rng(seed)
         vo = VisualOdometryNoise(
             scale_sigma=vo_scale_sigma, heading_sigma=np.radians(vo_heading_sigma_deg)

@@ -12,7 +12,15 @@ import typer
 
 from navkit.batch.planes_extract import CameraOverride, open_rgbd
 from navkit.cli.batching import RESUME, SCHEDULER, WORKERS, exit_if_failed, run_inputs
-from navkit.cli.common import check_out_dir, cli_errors, expand_inputs, progress, write_run_files
+from navkit.cli.common import (
+    check_out_dir,
+    cli_errors,
+    expand_inputs,
+    option,
+    progress,
+    write_run_files,
+)
+from navkit.domains import NON_NEGATIVE_INT, POSITIVE, Domain
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +45,19 @@ class PlanesRunSettings:
     reference: str = ""
 
 
+#: The domains of the numeric settings, on the command line and in ``--config``.
+DOMAINS = {
+    "nu": POSITIVE,
+    "cell": Domain(integer=True, lo=3, hi=10_000),
+    "max_frames": Domain(integer=True, lo=0, note="0 = all"),
+    "frame": NON_NEGATIVE_INT,
+    "depth_scale": POSITIVE,
+}
 _CONFIG_KEYS = {"nu": float, "cell": int, "max_frames": int, "frame": int}
+NU_OPTION = option(0.01, "--nu", domain=DOMAINS["nu"], help="Texture pixel size (m).")
+CELL_OPTION = option(
+    20, "--cell", domain=DOMAINS["cell"], help="Patch size of the organised extraction (px)."
+)
 
 
 def _config(path: Path | None) -> dict[str, Any]:
@@ -54,10 +74,11 @@ def _config(path: Path | None) -> dict[str, Any]:
         if key in table:
             try:
                 out[key] = kind(table[key])
-            except (TypeError, ValueError):
+            except (TypeError, ValueError, OverflowError):
                 raise ConfigError(
                     f"{key} = {table[key]!r}", source=path, field=key, expected=kind.__name__
                 ) from None
+            DOMAINS[key].check(table[key], key, source=path, error=ConfigError)
     cam = table.get("camera", {})
     if isinstance(cam, dict):
         out["camera"] = {k: float(v) for k, v in cam.items() if float(v) > 0}
@@ -85,16 +106,18 @@ def _intrinsics(text: str | None, depth_scale: float | None, config: dict) -> Ca
             raise InputError(f"got {text!r}", field="--intrinsics", expected="FX, FY > 0")
         vals.update(fx=fx, fy=fy, cx=cx, cy=cy)
     if depth_scale is not None:
-        if depth_scale <= 0:
-            raise InputError(f"got {depth_scale}", field="--depth-scale", expected="> 0")
         vals["depth_scale"] = depth_scale
     return CameraOverride(**{k: float(v) for k, v in vals.items() if k in _CAMERA_KEYS})
 
 
 _CAMERA_KEYS = ("fx", "fy", "cx", "cy", "depth_scale")
 INTRINSICS_HELP = "Camera intrinsics FX,FY,CX,CY (pixels); overrides the folder's."
-DEPTH_SCALE_HELP = (
-    "Raw depth units per metre (default 1000: millimetres; TUM folders 5000 as the format says)."
+DEPTH_SCALE_OPTION = option(
+    None,
+    "--depth-scale",
+    domain=DOMAINS["depth_scale"],
+    help="Raw depth units per metre (default 1000: millimetres; TUM folders 5000 as the format "
+    "says).",
 )
 
 
@@ -109,11 +132,13 @@ def extract_cmd(
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace earlier outputs in --out."),
     config: Path | None = typer.Option(None, "--config", help="Settings from a TOML file."),
-    frame: int = typer.Option(0, "--frame", help="Frame index in a sequence folder."),
-    nu: float = typer.Option(0.01, "--nu", help="Texture pixel size (m)."),
-    cell: int = typer.Option(20, "--cell", help="Patch size of the organised extraction (px)."),
+    frame: int = option(
+        0, "--frame", domain=DOMAINS["frame"], help="Frame index in a sequence folder."
+    ),
+    nu: float = NU_OPTION,
+    cell: int = CELL_OPTION,
     intrinsics: str | None = typer.Option(None, "--intrinsics", help=INTRINSICS_HELP),
-    depth_scale: float | None = typer.Option(None, "--depth-scale", help=DEPTH_SCALE_HELP),
+    depth_scale: float | None = DEPTH_SCALE_OPTION,
     workers: int | None = WORKERS,
     scheduler: str | None = SCHEDULER,
     resume: bool = RESUME,
@@ -307,11 +332,11 @@ def odometry_cmd(
     out: Path = typer.Option(..., "--out", "-o", help="Output folder."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace earlier outputs in --out."),
     config: Path | None = typer.Option(None, "--config", help="Settings from a TOML file."),
-    max_frames: int = typer.Option(
-        0, "--max-frames", help="Use at most this many frames (0 = all)."
+    max_frames: int = option(
+        0, "--max-frames", domain=DOMAINS["max_frames"], help="Use at most this many frames."
     ),
-    cell: int = typer.Option(20, "--cell", help="Patch size of the organised extraction (px)."),
-    nu: float = typer.Option(0.01, "--nu", help="Texture pixel size (m)."),
+    cell: int = CELL_OPTION,
+    nu: float = NU_OPTION,
     reference: Path | None = typer.Option(
         None,
         "--reference",
@@ -319,7 +344,7 @@ def odometry_cmd(
         "frame-N.pose.txt (a 7-Scenes input folder is its own reference).",
     ),
     intrinsics: str | None = typer.Option(None, "--intrinsics", help=INTRINSICS_HELP),
-    depth_scale: float | None = typer.Option(None, "--depth-scale", help=DEPTH_SCALE_HELP),
+    depth_scale: float | None = DEPTH_SCALE_OPTION,
 ) -> None:
     """Track a sequence: trajectory.tum (tracked frames only), frames.csv (every frame: status,
     source, reason), map.json, map.ply, map.png, summary.json.

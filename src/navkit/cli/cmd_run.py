@@ -10,7 +10,8 @@ from typing import Any
 
 import typer
 
-from navkit.cli.common import RERUN, RERUN_SAVE, STATE, check_out_dir, cli_errors
+from navkit.cli.common import RERUN, RERUN_SAVE, STATE, check_out_dir, cli_errors, option
+from navkit.domains import POSITIVE
 
 log = logging.getLogger(__name__)
 
@@ -70,8 +71,8 @@ def run_cmd(
     intrinsics: str | None = typer.Option(
         None, "--intrinsics", help="RGB-D folders without intrinsics: FX,FY,CX,CY (pixels)."
     ),
-    depth_scale: float = typer.Option(
-        1000.0, "--depth-scale", help="16-bit depth: raw units per metre."
+    depth_scale: float = option(
+        1000.0, "--depth-scale", domain=POSITIVE, help="16-bit depth: raw units per metre."
     ),
 ) -> None:
     """Stream a recording through the online capabilities; results.mcap, frames.jsonl, summary.json.

@@ -18,7 +18,8 @@ from typing import Any
 
 import typer
 
-from navkit.cli.common import check_out_dir, cli_errors, progress, write_run_files
+from navkit.cli.common import check_out_dir, cli_errors, option, progress, write_run_files
+from navkit.domains import POSITIVE, SEED, Domain
 
 log = logging.getLogger(__name__)
 
@@ -65,16 +66,27 @@ def disparity_cmd(
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace outputs already in --out."),
     matcher: MatcherChoice = typer.Option(MatcherChoice.sgbm, help="OpenCV matcher."),
-    num_disparities: int = typer.Option(
-        0, help="Search range (multiple of 16); 0 = from the calibration's ndisp, else 128."
+    num_disparities: int = option(
+        0,
+        "--num-disparities",
+        domain=Domain(integer=True, lo=0, hi=4096, multiple_of=16),
+        help="Search range (pixels); 0 = from the calibration's ndisp, else 128.",
     ),
-    block_size: int = typer.Option(0, help="Matching window (odd); 0 = 3 for SGBM, 9 for BM."),
+    block_size: int = option(
+        0,
+        "--block-size",
+        domain=Domain(integer=True, lo=0, hi=51),
+        help="Matching window (odd; BM: >= 5); 0 = 3 for SGBM, 9 for BM.",
+    ),
     lr_check: bool = typer.Option(True, help="Left-right consistency check."),
     fill: FillChoice = typer.Option(
         FillChoice.background, help="Fill rejected pixels from the background."
     ),
-    max_depth: float = typer.Option(
-        50.0, help="Points farther than this (m) are left out of points.ply."
+    max_depth: float = option(
+        50.0,
+        "--max-depth",
+        domain=POSITIVE,
+        help="Points farther than this (m) are left out of points.ply.",
     ),
     gt: Path | None = typer.Option(
         None, "--gt", help="Ground-truth disparity (PFM) to score bad-2.0 / bad-4.0."
@@ -109,7 +121,7 @@ def disparity_cmd(
                 expected="the calibrated image size",
             )
         nd = num_disparities if num_disparities > 0 else _calib_num_disparities(calib)
-        G, M = _read_reference(gt, mask)  # every input read before anything is written
+        G, M = _read_reference(gt, mask, L.shape[:2])  # every input read before any output
         bs = block_size or (9 if matcher == MatcherChoice.bm else 3)
         settings = DisparitySettings(
             matcher=matcher.value,
@@ -179,19 +191,28 @@ def _calib_num_disparities(calib: Path) -> int:
     or 128 when the file does not say."""
     import numpy as np
 
+    from navkit.errors import InputError
     from navkit.io.stereo import read_middlebury_calib
 
     try:
         ndisp = read_middlebury_calib(calib)[1].get("ndisp", 0.0)
-    except Exception:  # not a Middlebury file
+    except InputError:  # not a Middlebury file (a bad one was refused when the rig was read)
         ndisp = 0.0
     return int(16 * np.ceil(ndisp / 16)) if ndisp > 0 else 128
 
 
-def _read_reference(gt: Path | None, mask: Path | None) -> tuple[Any, Any]:
-    """Ground-truth disparity (NaN where unknown) and the non-occluded mask (255), or None."""
+def _read_reference(gt: Path | None, mask: Path | None, shape: tuple[int, ...]) -> tuple[Any, Any]:
+    """Ground-truth disparity (NaN where unknown) and the non-occluded mask (255), or None;
+    both must have the left image's ``shape`` (rows, columns).
+
+    Raises
+    ------
+    InputError
+        Naming the ground truth or the mask whose size differs from the image's.
+    """
     import numpy as np
 
+    from navkit.errors import InputError
     from navkit.io.images import read_image, read_pfm
 
     if gt is None:
@@ -202,6 +223,14 @@ def _read_reference(gt: Path | None, mask: Path | None) -> tuple[Any, Any]:
     if mask is not None:
         m = read_image(mask)
         M = (m if m.ndim == 2 else m[..., 0]) == 255
+    for name, path, arr in (("--gt", gt, G), ("--mask", mask, M)):
+        if arr is not None and arr.shape[:2] != tuple(shape):
+            raise InputError(
+                f"is {arr.shape[1]} x {arr.shape[0]} pixels",
+                source=path,
+                field=name,
+                expected=f"the left image's size, {shape[1]} x {shape[0]}",
+            )
     return G, M
 
 
@@ -212,26 +241,39 @@ def simulate_cmd(
         ..., "--out", "-o", help="Output folder, a stereo frame folder (refused if it holds files)."
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace outputs already in --out."),
-    random_poses: int = typer.Option(
-        0, "--random", min=0, max=10_000, help="Render N random poses instead of the survey."
+    random_poses: int = option(
+        0,
+        "--random",
+        domain=Domain(integer=True, lo=0, hi=10_000, note="0 = the survey"),
+        help="Render N random poses instead of the survey.",
     ),
-    width: int = typer.Option(
-        320, min=16, max=4096, help="Image width (pixels); the height is 3/4 of it."
+    width: int = option(
+        320,
+        "--width",
+        domain=Domain(integer=True, lo=16, hi=4096),
+        help="Image width (pixels); the height is 3/4 of it.",
     ),
-    hfov_deg: float = typer.Option(
-        90.0, min=1.0, max=170.0, help="Horizontal field of view (deg)."
+    hfov_deg: float = option(
+        90.0, "--hfov-deg", domain=Domain(lo=1.0, hi=170.0), help="Horizontal field of view (deg)."
     ),
-    baseline: float = typer.Option(0.2, min=1e-3, max=10.0, help="Stereo baseline (m)."),
-    height: float = typer.Option(1.2, min=0.0, max=10.0, help="Camera height above the floor (m)."),
-    turn: int = typer.Option(
+    baseline: float = option(
+        0.2, "--baseline", domain=Domain(lo=1e-3, hi=10.0), help="Stereo baseline (m)."
+    ),
+    height: float = option(
+        1.2, "--height", domain=Domain(lo=0.0, hi=10.0), help="Camera height above the floor (m)."
+    ),
+    turn: int = option(
         1,
         "--turn",
-        min=1,
-        max=360,
+        domain=Domain(integer=True, lo=1, hi=360),
         help="Frames per place: the camera turns through N headings (use with map locate --group N).",
     ),
-    seed: int = typer.Option(0, min=0, help="Seed of the random poses and the image noise."),
-    pixel_noise: float = typer.Option(1.0, min=0.0, max=255.0, help="Image noise (grey levels)."),
+    seed: int = option(
+        0, "--seed", domain=SEED, help="Seed of the random poses and the image noise."
+    ),
+    pixel_noise: float = option(
+        1.0, "--pixel-noise", domain=Domain(lo=0.0, hi=255.0), help="Image noise (grey levels)."
+    ),
 ) -> None:
     """Render a textured test room with a stereo rig (survey or random poses) into a frame folder.
 

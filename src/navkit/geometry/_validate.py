@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from navkit.domains import MAX_MAGNITUDE as _MAX_MAGNITUDE
 from navkit.errors import InputError
 
 
@@ -103,8 +104,9 @@ def check_grid_size(shape: tuple[float, ...], *, setting: str, source: str | Non
 
 
 #: No setting of a robot is beyond this in SI units (1e9 m, 1e9 s, 1e9 points); larger values
-#: are typos or fuzz and would overflow the arithmetic they feed.
-MAX_SETTING_MAGNITUDE = 1e9
+#: are typos or fuzz and would overflow the arithmetic they feed (the same bound as every
+#: :class:`navkit.domains.Domain`).
+MAX_SETTING_MAGNITUDE = _MAX_MAGNITUDE
 
 _NUMBER_TYPES = {"float": (int, float, np.integer, np.floating), "int": (int, np.integer)}
 
@@ -116,7 +118,9 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
     kind (a bool or a string from a settings file is refused), and a float must be finite (NaN
     always refused, infinity only for the fields in ``allow_inf``, e.g. "inf disables"); a field
     annotated ``bool`` must hold a bool; no number may exceed :data:`MAX_SETTING_MAGNITUDE` in
-    magnitude. Ranges are checked by each class's own ``__post_init__``.
+    magnitude. A field declared with a :class:`navkit.domains.Domain` (``field(metadata=
+    {"domain": ...})``, :func:`navkit.domains.domain_field`) must lie in it - the same check as
+    the CLI's options; other ranges are checked by each class's own ``__post_init__``.
 
     Raises
     ------
@@ -125,6 +129,7 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
     """
     import dataclasses
 
+    from navkit.domains import DOMAIN_KEY
     from navkit.errors import ConfigError
 
     cls = type(obj).__name__
@@ -163,6 +168,10 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
                 field=f.name,
                 expected="a finite number" + (" or inf" if f.name in allow_inf else ""),
             )
+        domain = f.metadata.get(DOMAIN_KEY)
+        if domain is not None:
+            domain.check(value, f.name, source=cls, error=ConfigError)
+            continue
         if abs(float(value)) > MAX_SETTING_MAGNITUDE:
             raise ConfigError(
                 f"is {value!r}",

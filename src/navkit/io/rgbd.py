@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from navkit.domains import check_intrinsics
 from navkit.errors import DataNotFoundError, FormatError, InputError
 from navkit.io.textfiles import read_text_file
 from navkit.sensors import PinholeCamera, RGBDFrame
@@ -62,8 +63,16 @@ TUM_DEFAULT = {"fx": 525.0, "fy": 525.0, "cx": 319.5, "cy": 239.5}
 _IMAGE_SUFFIXES = (".png", ".pgm")
 
 
+#: YAML's spellings of the special floats (read, then refused by the fields' domains).
+_YAML_SPECIAL = {".inf": "inf", "+.inf": "inf", "-.inf": "-inf", ".nan": "nan"}
+
+
 def read_camera_yaml(path: str | Path) -> dict[str, float]:
     """Flat ``key: value`` YAML of numbers (``fx``, ``fy``, ``cx``, ``cy``, ``depth_scale``, ...).
+
+    The fields' domains (``fx``, ``fy`` > 0, ``depth_scale`` > 0, ``width`` / ``height``
+    positive integers, ``cx`` / ``cy`` inside the image) are checked where the camera is made,
+    once the image size is known (the file may leave it out).
 
     Raises
     ------
@@ -82,7 +91,7 @@ def read_camera_yaml(path: str | Path) -> dict[str, float]:
         if not m:
             raise FormatError(f"line {n} is {line!r}", source=p, expected="'key: number' lines")
         try:
-            out[m.group(1)] = float(m.group(2))
+            out[m.group(1)] = float(_YAML_SPECIAL.get(m.group(2).lower(), m.group(2)))
         except ValueError:
             raise FormatError(
                 f"line {n}: {m.group(2)!r} is not a number",
@@ -170,8 +179,14 @@ class RGBDSequence:
 
 
 def _camera(values: dict[str, float], size: tuple[int, int], source: Path) -> PinholeCamera:
-    w = int(values.get("width", size[0]))
-    h = int(values.get("height", size[1]))
+    """The camera of an RGB-D folder: ``values`` (``camera.yaml`` and any override) with the
+    image size ``size`` where they leave it out, every field checked against its domain
+    (:func:`navkit.domains.check_intrinsics`); errors name ``camera.yaml`` when the folder has
+    one."""
+    yaml = source / "camera.yaml"
+    where = yaml if yaml.is_file() else source
+    full = {"width": size[0], "height": size[1], **values}
+    w, h = check_intrinsics(full, source=where, error=FormatError)
     try:
         return PinholeCamera(values["fx"], values["fy"], values["cx"], values["cy"], w, h)
     except InputError as exc:

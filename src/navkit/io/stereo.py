@@ -24,6 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
+from navkit.domains import POSITIVE, POSITIVE_INT, Domain, check_intrinsics
 from navkit.errors import DataNotFoundError, FormatError
 from navkit.io.atomic import write_text
 from navkit.sensors import PinholeCamera, StereoRig
@@ -66,8 +67,34 @@ def _numbers(text: str, p: Path, field: str, count: int | None = None) -> np.nda
     return arr
 
 
+#: Domains of the numeric fields of a Middlebury ``calib.txt`` besides ``cam0`` (whose
+#: intrinsics are checked by :func:`navkit.domains.check_intrinsics`).
+MIDDLEBURY_DOMAINS = {
+    "baseline": POSITIVE,  # millimetres
+    "doffs": Domain(note="pixels, either sign"),
+    "ndisp": POSITIVE_INT,
+    "isint": Domain(integer=True, lo=0, hi=1),
+    "vmin": Domain(lo=0.0),
+    "vmax": Domain(lo=0.0),
+    "dyavg": Domain(),
+    "dymax": Domain(),
+}
+
+
+def _field(kv: dict[str, str], key: str, p: Path, default: str | None = None) -> float:
+    """The number of ``key`` in a ``key=value`` file, checked against its domain."""
+    text = kv.get(key, default)
+    try:
+        value = float(str(text))
+    except ValueError:
+        raise FormatError(f"is {text!r}", source=p, field=key, expected="a number") from None
+    MIDDLEBURY_DOMAINS.get(key, Domain()).check(value, key, source=p, error=FormatError)
+    return value
+
+
 def read_middlebury_calib(path: PathLike) -> tuple[StereoRig, dict[str, float]]:
-    """Read a Middlebury 2014 ``calib.txt``.
+    """Read a Middlebury 2014 ``calib.txt``; every numeric field is checked against its domain
+    (:data:`MIDDLEBURY_DOMAINS`; ``cam0`` as intrinsics inside the ``width`` x ``height`` image).
 
     Returns
     -------
@@ -91,25 +118,29 @@ def read_middlebury_calib(path: PathLike) -> tuple[StereoRig, dict[str, float]]:
                 expected="a Middlebury 2014 calib.txt (cam0=[...], baseline=, width=, height=)",
             )
     K = _numbers(kv["cam0"], p, "cam0", 9).reshape(3, 3)
-    try:
-        baseline_mm = float(kv["baseline"])
-        width, height = int(float(kv["width"])), int(float(kv["height"]))
-        doffs = float(kv.get("doffs", "0"))
-    except ValueError as exc:
-        raise FormatError(
-            f"{exc}", source=p, field="baseline/width/height/doffs", expected="numbers"
-        ) from None
+    sizes = {k: _field(kv, k, p) for k in ("width", "height")}
+    width, height = check_intrinsics(
+        {**sizes, "fx": K[0, 0], "fy": K[1, 1], "cx": K[0, 2], "cy": K[1, 2]},
+        source=p,
+        error=FormatError,
+    )
+    baseline_mm = _field(kv, "baseline", p)
+    doffs = _field(kv, "doffs", p, "0")
     cam = PinholeCamera(
         float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), width, height
     )
     rig = StereoRig(cam, baseline_mm / 1000.0, doffs)
     extra = {}
     for k, v in kv.items():
-        if k not in ("cam0", "cam1"):
-            try:
-                extra[k] = float(v)
-            except ValueError:
-                pass
+        if k in ("cam0", "cam1"):
+            continue
+        if k in MIDDLEBURY_DOMAINS:
+            extra[k] = _field(kv, k, p)
+            continue
+        try:
+            extra[k] = float(v)
+        except ValueError:
+            pass
     return rig, extra
 
 
@@ -154,6 +185,18 @@ def read_kitti_stereo_calib(path: PathLike, image_size: tuple[int, int] | None =
             field="S_rect_02",
             expected="S_rect_02 in the file, or image_size=(width, height)",
         )
+    check_intrinsics(
+        {
+            "width": size[0],
+            "height": size[1],
+            "fx": f,
+            "fy": P2[1, 1],
+            "cx": P2[0, 2],
+            "cy": P2[1, 2],
+        },
+        source=p,
+        error=FormatError,
+    )
     cam = PinholeCamera(
         float(f), float(P2[1, 1]), float(P2[0, 2]), float(P2[1, 2]), size[0], size[1]
     )
@@ -231,10 +274,18 @@ def read_generic_yaml_calib(path: PathLike, image_size: tuple[int, int] | None =
             field="baseline",
             expected="a finite baseline > 0 (m) and a finite doffs",
         )
-    if not (0 < width <= 100_000 and 0 < height <= 100_000):
-        raise FormatError(
-            f"{width} x {height}", source=p, field="width/height", expected="1..100000 pixels"
-        )
+    check_intrinsics(
+        {
+            "width": width,
+            "height": height,
+            "fx": K[0, 0],
+            "fy": K[1, 1],
+            "cx": K[0, 2],
+            "cy": K[1, 2],
+        },
+        source=p,
+        error=FormatError,
+    )
     return StereoRig(
         PinholeCamera(
             float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), width, height

@@ -23,6 +23,7 @@ from typing import Any, Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from navkit.domains import Domain
 from navkit.errors import DataNotFoundError, FormatError, InputError
 from navkit.geometry import se3_from_xyz_quat, se3_to_xyz_quat
 from navkit.io.atomic import atomic_write
@@ -479,6 +480,14 @@ def looks_like_odometry(path: Path) -> bool:
     return False
 
 
+#: Domains of a track's numbers (``navkit path record``): positions in metres and odometry
+#: speeds either sign (a robot reverses, turns either way), bounded like every navkit number
+#: (:data:`navkit.domains.MAX_MAGNITUDE`) so the spline fit's sums stay finite.
+COORDINATE = Domain(note="metres, either sign")
+SPEED = Domain(note="m/s, either sign")
+TURN_RATE = Domain(note="rad/s, either sign")
+
+
 def load_planar_track(
     path: str | os.PathLike[str], fmt: str = "auto", plane: str = "auto"
 ) -> tuple[Any, Any, dict[str, Any], str]:
@@ -494,6 +503,8 @@ def load_planar_track(
         raise DataNotFoundError(f"{path}: no such trajectory file")
     if fmt == "odometry" or (fmt == "auto" and looks_like_odometry(path)):
         t_raw, v, w = read_odometry_log(path)
+        SPEED.check_array(v, "v", source=path, error=FormatError)
+        TURN_RATE.check_array(w, "omega", source=path, error=FormatError)
         t_odo, vw = clean_track(t_raw, np.c_[v, w], source=str(path))
         poses = integrate_odometry(t_raw if t_odo is None else t_odo, vw[:, 0], vw[:, 1])
         frame = {
@@ -501,8 +512,10 @@ def load_planar_track(
             "source": str(path),
             "note": "dead-reckoned from time v omega, start pose (0, 0, 0)",
         }
+        COORDINATE.check_array(poses[:, :2], "dead-reckoned x, y", source=path, error=FormatError)
         return t_odo, poses[:, :2], frame, "odometry"
     traj = read_trajectory(path, fmt)  # type: ignore[arg-type]
+    COORDINATE.check_array(traj.positions, "position", source=path, error=FormatError)
     t_traj, P = clean_track(traj.timestamps, traj.positions, source=str(path))
     gp = ground_plane(P, plane)
     frame = {**gp.to_dict(), "source": str(path)}

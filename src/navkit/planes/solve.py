@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from navkit.domains import POSITIVE, domain_field
 from navkit.errors import ConfigError, NavkitError
 from navkit.geometry import Plane, matrix_to_quat, quat_to_matrix, se3_from_rt
 from navkit.geometry._validate import check_settings
@@ -94,7 +95,7 @@ class SolverSettings:
     """
 
     parallel_deg: float = 15.0
-    nu: float = 0.01
+    nu: float = domain_field(0.01, POSITIVE)
     max_shift: float = 0.6
     max_turn_deg: float = 90.0
     min_overlap: int = 400
