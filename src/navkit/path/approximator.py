@@ -48,7 +48,7 @@ from navkit.path.fitting import (
     project,
     residuals,
 )
-from navkit.path.loops import LoopCut, LoopFreeChain
+from navkit.path.loops import LoopCut, LoopFreeChain, kept_intervals
 from navkit.path.spline import _GL_W, _GL_X, PathSpline, gauss_legendre_length
 
 __all__ = ["ApproximationResult", "ApproximatorSettings", "OnlineApproximator", "approximate"]
@@ -57,6 +57,13 @@ log = logging.getLogger(__name__)
 
 _POW7 = np.arange(7.0)
 _KERNELS: Any = None
+
+# The loop search resolves the stored path down to these fractions of the tolerance (or the
+# settings' absolute values, whichever is finer): a loop longer than eps / 100 is cut, so the
+# path sampled every eps / 100 is simple; the boxes are refined ten times finer than that, the
+# paper's ratio of 0.1 mm precision to 1 mm shortest loop.
+MIN_LOOP_PER_EPS = 1e-2
+LOOP_PRECISION_PER_EPS = 1e-3
 
 
 def _kernels() -> Any:
@@ -84,9 +91,12 @@ class ApproximatorSettings:
     remove_loops : bool
         Cut loops out as segments are frozen (step 1.7).
     loop_precision : float
-        Box size the crossing search refines to, metres (paper: 0.1 mm).
+        Box size the crossing search refines to, metres (paper: 0.1 mm); the search uses
+        ``min(loop_precision, tolerance / 1000)``.
     min_loop_length : float
-        Crossings closer than this along the path are not loops, metres.
+        Crossings closer than this along the path are not loops, metres; the search uses
+        ``min(min_loop_length, tolerance / 100)``, so the stored path is simple down to that
+        scale (a loop any shorter is within ``tolerance / 200`` of its crossing).
     min_step : float
         A point closer than this to the previous accepted point is a repeat and is skipped, metres.
     geometric_test : bool
@@ -179,6 +189,20 @@ class ApproximationResult:
     seconds_per_point: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     cpu_seconds_per_point: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 
+    def stored_arclength(self, raw_s: ArrayLike) -> NDArray[np.float64]:
+        """Arc length on ``spline`` of arc lengths ``raw_s`` on ``raw_spline`` (e.g.
+        ``point_s``); NaN where that part of the path was cut out with a loop. Where it is
+        finite, ``spline.position(result) == raw_spline.position(raw_s)``: an input point kept
+        this way is within ``tolerance`` of the stored path."""
+        s = np.asarray(raw_s, dtype=np.float64)
+        kept = kept_intervals(self.loops, self.raw_spline.total_length)
+        if len(kept) == 0:
+            return np.full(s.shape, np.nan)
+        before = np.concatenate([[0.0], np.cumsum(kept[:, 1] - kept[:, 0])[:-1]])
+        k = np.clip(np.searchsorted(kept[:, 0], s, side="right") - 1, 0, len(kept) - 1)
+        inside = (s >= kept[k, 0]) & (s <= kept[k, 1])
+        return np.where(inside, before[k] + (s - kept[k, 0]), np.nan)
+
     @property
     def max_deviation(self) -> float:
         """Largest deviation of an accepted point, metres (NaN without points)."""
@@ -237,7 +261,10 @@ class OnlineApproximator:
         self._min_step = float(s.min_step)
         self._eps2 = self._eps_fit**2
         self._geometric = bool(s.geometric_test)
-        self._chain = LoopFreeChain(precision=s.loop_precision, min_loop_length=s.min_loop_length)
+        self._chain = LoopFreeChain(
+            precision=min(s.loop_precision, self._eps * LOOP_PRECISION_PER_EPS),
+            min_loop_length=min(s.min_loop_length, self._eps * MIN_LOOP_PER_EPS),
+        )
         # the freeze's O(n) passes and the loop search as compiled loops (navkit.path._kernels)
         # when the process runs the kernels (navkit.jit); False: the NumPy versions (the oracle
         # the tests compare with)

@@ -15,7 +15,11 @@ are smaller than ``precision`` (0.1 mm, as in the paper). Sub-pairs whose boxes 
 pass a chord test (a sub-piece stays within ``du^2 / 8 max|C''|`` of its chord), which keeps
 near-parallel curves from multiplying the pairs. A crossing at parameters ``s1 < s2``
 makes the loop ``[s1, s2]``; loops shorter than ``min_loop_length`` are the shared end points of
-neighbouring pieces, not loops, and are pruned as soon as the arc-length bound proves it.
+neighbouring pieces, not loops, and are pruned as soon as the arc-length bound proves it. The
+crossing that is cut is then solved on the two cubics (:meth:`LoopFreeChain.exact_crossing`), so
+the kept head ends and the kept tail starts on the same point: a box of ``precision`` is
+``precision / sin(theta)`` long along branches meeting at a shallow angle ``theta``, and a cut
+there left a small crossing at the junction.
 
 Decision (the paper does not say): when a new segment crosses the old path at several places,
 the crossing with the smallest ``s1`` is cut first (it removes the largest loop, and every other
@@ -29,6 +33,7 @@ import bisect
 import functools
 import logging
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -43,6 +48,7 @@ __all__ = [
     "LoopCut",
     "LoopFreeChain",
     "find_crossings",
+    "kept_intervals",
     "monotone_breaks",
     "remove_loops",
 ]
@@ -528,7 +534,8 @@ class LoopFreeChain:
             if not hits:
                 break
             best = min(hits, key=lambda c: (c.s_a, -c.s_b))
-            k = self._cut(best)
+            sa, sb, x, y = self.exact_crossing(best.s_a, best.s_b)
+            k = self._cut(Crossing(s_a=sa, s_b=sb, point=np.array([x, y])))
             cuts.append(self.cuts[-1])
         return cuts
 
@@ -570,6 +577,7 @@ class LoopFreeChain:
                 self._warn_truncated(truncated)
             if not found:
                 break
+            s_a, s_b, x, y = self.exact_crossing(s_a, s_b)
             # the chain before the cut, for the loop's polyline (its first kb + 1 segments)
             n = self.n_seg
             before = (self._len[:n].copy(), self._ax[:n].copy(), self._ay[:n].copy())
@@ -601,6 +609,97 @@ class LoopFreeChain:
             self.max_pairs,
             truncated,
         )
+
+    def _evaluator(self) -> Callable[[float], tuple[float, float, float, float]]:
+        """``s -> (x, y, x', y')``: position and tangent of the chain at arc length ``s`` (plain
+        floats; the segment is located as :meth:`_locate` does, on lists made once)."""
+        n = self.n_seg
+        s0 = self._s0[:n].tolist()
+        lens = self._len[:n].tolist()
+        ax, ay = self._ax[:n].tolist(), self._ay[:n].tolist()
+
+        def point(s: float) -> tuple[float, float, float, float]:
+            k = min(max(bisect.bisect_right(s0, s) - 1, 0), n - 1)
+            u = min(max(s - s0[k], 0.0), lens[k])
+            x0, x1, x2, x3 = ax[k]
+            y0, y1, y2, y3 = ay[k]
+            return (
+                x0 + u * (x1 + u * (x2 + u * x3)),
+                y0 + u * (y1 + u * (y2 + u * y3)),
+                x1 + u * (2.0 * x2 + 3.0 * x3 * u),
+                y1 + u * (2.0 * y2 + 3.0 * y3 * u),
+            )
+
+        return point
+
+    def exact_crossing(self, s_a: float, s_b: float) -> tuple[float, float, float, float]:
+        """The crossing the box search found near ``(s_a, s_b)``, solved on the cubics:
+        ``(s_a, s_b, x, y)`` with ``C(s_a) = C(s_b)`` to rounding.
+
+        The box search knows a crossing only to ``precision``, and where the two branches meet
+        at a shallow angle ``theta`` that is ``precision / sin(theta)`` along each of them: cut
+        there, the kept head can run past the crossing while the tail starts before it, and the
+        two cross again in a loop shorter than ``min_loop_length`` that no later search sees.
+        Newton's method solves ``G(a, b) = (C(b) - C(a)) / (b - a) = 0``: the divided
+        difference has the crossings of ``C(a) = C(b)`` as its zeros but not the trivial ones
+        ``a = b`` (there it is ``C'(a)``, never zero), so a tiny loop at a sharp knot (a
+        reversal) converges to its crossing, not to the knot. With ``h = b - a`` and
+        ``F = C(a) - C(b)`` the step solves ``[G - C'(a), C'(b) - G] d = F``; it is halved
+        until ``|G|`` decreases. Where the branches pass within ``precision`` without crossing
+        (the search counts that as a crossing) the answer is the closest approach found
+        (the smallest ``|F|`` met) and the gap left is below ``precision``. Both ends stay
+        within half the loop's length of where the search put them, so the solution is this
+        crossing, not another one.
+        """
+        a0, b0 = float(s_a), float(s_b)
+        window = 0.5 * (b0 - a0)
+        total = self.total_length
+        point = self._evaluator()
+        a, b = a0, b0
+        pa, pb = point(a), point(b)
+        h = b - a
+        err = math.hypot(pa[0] - pb[0], pa[1] - pb[1])
+        g = err / h
+        best = (err, a, b, pa, pb)  # the closest approach so far (|G| falls, |F| may not)
+        scale = 4e-16 * (1.0 + abs(pa[0]) + abs(pa[1]))  # rounding of the positions
+        for _ in range(60):
+            if err <= scale:
+                break
+            xa, ya, dxa, dya = pa
+            xb, yb, dxb, dyb = pb
+            fx, fy = xa - xb, ya - yb
+            gx, gy = -fx / h, -fy / h
+            m11, m12, m21, m22 = gx - dxa, dxb - gx, gy - dya, dyb - gy
+            det = m11 * m22 - m12 * m21
+            c1, c2 = m11 * m11 + m21 * m21, m12 * m12 + m22 * m22
+            if det * det > 1e-24 * c1 * c2:
+                da = (fx * m22 - m12 * fy) / det
+                db = (m11 * fy - m21 * fx) / det
+            else:  # near-parallel branches: Levenberg-damped least squares
+                mu = 1e-12 * (c1 + c2) + 1e-300
+                r1, r2 = m11 * fx + m21 * fy, m12 * fx + m22 * fy
+                c = m11 * m12 + m21 * m22
+                dd = (c1 + mu) * (c2 + mu) - c * c
+                da = ((c2 + mu) * r1 - c * r2) / dd
+                db = ((c1 + mu) * r2 - c * r1) / dd
+            t = 1.0
+            for _ in range(40):  # backtracking: |G| must decrease
+                na = min(max(a + t * da, a0 - window, 0.0), a0 + window)
+                nb = min(max(b + t * db, b0 - window), b0 + window, total)
+                nh = nb - na
+                if nh > 0.0:
+                    qa, qb = point(na), point(nb)
+                    e = math.hypot(qa[0] - qb[0], qa[1] - qb[1])
+                    if e / nh < g:
+                        break
+                t *= 0.5
+            else:
+                break
+            a, b, h, pa, pb, err, g = na, nb, nh, qa, qb, e, e / nh
+            if err < best[0]:
+                best = (err, a, b, pa, pb)
+        err, a, b, pa, pb = best
+        return a, b, 0.5 * (pa[0] + pb[0]), 0.5 * (pa[1] + pb[1])
 
     def _locate(self, s: float) -> tuple[int, float]:
         # np.searchsorted(s0, s, side="right") - 1 and np.clip, on plain floats
@@ -643,6 +742,38 @@ def find_crossings(
         chain.append(spline.ax[k], spline.ay[k], spline.length[k], remove_loops=False)
         out.extend(chain.find_crossings(k))
     return out
+
+
+def kept_intervals(cuts: Sequence[LoopCut], raw_length: float) -> NDArray[np.float64]:
+    """``(K, 2)`` arc-length intervals ``[lo, hi]`` of the path before loop removal that the
+    loop-free path is made of, in path order (their lengths add up to its length).
+
+    A cut's ``s_start``, ``s_end`` refer to the chain as it was at that cut (the earlier cuts
+    already removed); replaying the cuts in order maps each back to the path before removal.
+    """
+    kept: list[tuple[float, float]] = [(0.0, float(raw_length))]
+
+    def to_raw(s: float) -> float:
+        acc = 0.0
+        for lo, hi in kept:
+            if s <= acc + (hi - lo):
+                return lo + max(s - acc, 0.0)
+            acc += hi - lo
+        return kept[-1][1] if kept else 0.0
+
+    for c in cuts:
+        ra, rb = to_raw(c.s_start), to_raw(c.s_end)
+        out: list[tuple[float, float]] = []
+        for lo, hi in kept:
+            if hi <= ra or lo >= rb:
+                out.append((lo, hi))
+                continue
+            if lo < ra:
+                out.append((lo, ra))
+            if hi > rb:
+                out.append((rb, hi))
+        kept = out
+    return np.array(kept, dtype=np.float64).reshape(-1, 2)
 
 
 def remove_loops(
