@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-$(shell cat pyproject.toml | cksum | cut -d' ' -f1)
 
-.PHONY: demo test bench lint fuzz clean
+.PHONY: demo test test-portable bench lint fuzz clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -30,6 +30,21 @@ demo: $(STAMP)
 TEST_WORKERS ?= 2
 test: $(STAMP)
 	MPLBACKEND=Agg $(BIN)/python -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile
+
+# The kernel, twin and mission tests once more as another CPU would run them: Numba compiling for
+# a generic x86-64 (no AVX) with bounds checks on, into a cache of its own, and NumPy with its
+# dispatched SIMD loops (AVX2, AVX-512 on x86; what the machine dispatches elsewhere) switched
+# off. CI runs it after `make test` (.ci/run); docs/kernels.md, "The equivalence contract".
+PORTABLE_TESTS ?= tests/geometry tests/localization/test_kernels.py tests/obstacles/test_kernels.py \
+  tests/path/test_kernels.py tests/planes/test_kernels.py tests/stereo/test_kernels.py \
+  tests/mission/test_mission.py tests/mission/test_twins.py $(wildcard tests/fuzz/test_kernel_inputs.py)
+test-portable: $(STAMP)
+	@cache=$$(mktemp -d) && \
+	npy_off=$$($(BIN)/python -c "from numpy._core._multiarray_umath import __cpu_dispatch__ as d; print(' '.join(d))" 2>/dev/null || true) && \
+	echo "portable pass: NUMBA_CPU_NAME=generic NUMBA_BOUNDSCHECK=1 NPY_DISABLE_CPU_FEATURES='$$npy_off'" && \
+	NUMBA_CPU_NAME=generic NUMBA_BOUNDSCHECK=1 NUMBA_CACHE_DIR=$$cache NPY_DISABLE_CPU_FEATURES="$$npy_off" \
+	  MPLBACKEND=Agg $(BIN)/python -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile $(PORTABLE_TESTS); \
+	rc=$$?; rm -rf $$cache; exit $$rc
 
 bench: $(VENV)/.bench-installed
 	MPLBACKEND=Agg $(BIN)/python -m benchmarks
