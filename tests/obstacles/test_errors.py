@@ -58,7 +58,7 @@ def _floor_with_box() -> np.ndarray:
     P = np.stack(
         [np.outer(np.cos(az), d * np.cos(el)), np.outer(np.sin(az), d * np.cos(el))], axis=-1
     )
-    P = np.concatenate([P, np.zeros(P.shape[:2] + (1,))], axis=-1)
+    P = np.concatenate([P, np.zeros((*P.shape[:2], 1))], axis=-1)
     P[25:35, 8:12, 2] = 0.8
     return P
 
@@ -84,7 +84,7 @@ def test_ground_grid_beyond_the_cell_bound_is_refused_by_both_backends(backend, 
     the kernel (which alone knows the reference points) and from the twin."""
     monkeypatch.setenv("NAVKIT_MAX_GRID_CELLS", "2")
     settings = ObstacleSettings(backend=backend, ground_cell_m=0.5)
-    with pytest.raises(InputError, match="ground_cell_m.*exceeds the bound of 2 cells"):
+    with pytest.raises(InputError, match=r"ground_cell_m.*exceeds the bound of 2 cells"):
         detect_obstacles_grid(_floor_with_box(), (0, 0, 1.5), settings)
 
 
