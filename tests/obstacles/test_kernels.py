@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from navkit.errors import ConfigError
+from navkit.geometry._validate import MAX_COORDINATE_M
 from navkit.obstacles import (
     Mounting,
     ObstacleSettings,
@@ -489,7 +490,10 @@ def test_stage_1_from_sensor_points_equals_to_body(rng):
         ref[~ref_ok] = np.nan
         out = np.empty_like(S)
         ok = np.empty(S.shape[:2], dtype=bool)
-        assert _kernels.body_points_kernel(S, R, float(mounting.height_m), out, ok)
+        n_valid, n_far = _kernels.body_points_kernel(
+            S, R, float(mounting.height_m), out, ok, MAX_COORDINATE_M
+        )
+        assert (n_valid, n_far) == (ref_ok.sum(), 0)
         np.testing.assert_array_equal(ok, ref_ok)
         assert ok.sum() < ok.size - 40  # the holes stay holes
         assert np.array_equal(out.view(np.int64)[ok], ref.view(np.int64)[ok])  # same bits
@@ -498,11 +502,20 @@ def test_stage_1_from_sensor_points_equals_to_body(rng):
     ok_ref = np.isfinite(S).all(axis=2)
     out = np.empty_like(S)
     ok = np.empty(S.shape[:2], dtype=bool)
-    assert _kernels.points_kernel(S, out, ok)
+    assert _kernels.points_kernel(S, out, ok, MAX_COORDINATE_M) == (ok_ref.sum(), 0)
     np.testing.assert_array_equal(ok, ok_ref)
     ref = np.where(ok_ref[..., None], S, np.nan)
     assert np.array_equal(out.view(np.int64)[ok], ref.view(np.int64)[ok])
     assert np.isnan(out[~ok]).all()
+    # the far count: finite coordinates beyond the bound, per point (NaN / inf rows are not)
+    far = S.copy()
+    far[0, 0, 1] = 2 * MAX_COORDINATE_M
+    far[0, 1, 2] = -np.inf
+    far[1, 0] = -1.5 * MAX_COORDINATE_M
+    fin = np.isfinite(far).all(axis=2)
+    n_far = (fin & (np.abs(far) > MAX_COORDINATE_M).any(axis=2)).sum()
+    assert n_far >= 1
+    assert _kernels.points_kernel(far, out, ok, MAX_COORDINATE_M) == (fin.sum(), n_far)
 
 
 def test_banded_median_equals_numpy(rng):

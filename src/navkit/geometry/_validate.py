@@ -103,6 +103,47 @@ def check_grid_size(shape: tuple[float, ...], *, setting: str, source: str | Non
         )
 
 
+#: Largest coordinate magnitude accepted in point data, metres (the same bound as the settings'
+#: :data:`MAX_SETTING_MAGNITUDE`; ``cloud_to_grid`` also treats a return beyond it as a
+#: no-return). Far beyond any sensor's range or any map, and small enough that every grid index
+#: navkit computes from a coordinate (``|x| / cell`` with a cell of a micrometre or more) fits
+#: an int64 and that float64 keeps sub-micrometre steps (a path's 1e-4 m precision): a finite
+#: value beyond it is corrupt data, refused before any kernel runs.
+MAX_COORDINATE_M = 1e9
+
+
+def check_coordinates(
+    values: NDArray[np.floating], *, field: str, source: str | None = None
+) -> None:
+    """Refuse finite coordinates beyond :data:`MAX_COORDINATE_M` in magnitude.
+
+    NaN and +-inf pass (no-returns in sensor data; each function drops them as it documents).
+    Two reductions when every value is within the bound (the usual case); the offending value
+    is located only when one is not.
+
+    Raises
+    ------
+    InputError
+        Naming the field, the largest offending value and the bound.
+    """
+    a = np.asarray(values)
+    if a.size == 0 or a.dtype.kind not in "fc":
+        return
+    if -MAX_COORDINATE_M <= a.min() and a.max() <= MAX_COORDINATE_M:  # NaN fails: slow path
+        return
+    with np.errstate(invalid="ignore"):
+        bad = np.isfinite(a) & (np.abs(a) > MAX_COORDINATE_M)
+    if bad.any():
+        worst = float(np.abs(a[bad]).max())
+        raise InputError(
+            f"has a coordinate of magnitude {worst:.3g} m ({int(bad.sum())} such values)",
+            source=source,
+            field=field,
+            expected=f"finite coordinates within +-{MAX_COORDINATE_M:.0e} m (NaN / inf = no "
+            "return)",
+        )
+
+
 #: No setting of a robot is beyond this in SI units (1e9 m, 1e9 s, 1e9 points); larger values
 #: are typos or fuzz and would overflow the arithmetic they feed (the same bound as every
 #: :class:`navkit.domains.Domain`).

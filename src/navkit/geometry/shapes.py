@@ -40,7 +40,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
 from navkit.errors import InputError
-from navkit.geometry._validate import as_points
+from navkit.geometry._validate import as_points, check_coordinates
 from navkit.jit import resolve_backend
 
 __all__ = [
@@ -253,6 +253,7 @@ def hull_points(points: ArrayLike) -> NDArray[np.float64]:
         If there is no finite point.
     """
     P = as_points(points, 2)
+    check_coordinates(P, field="points")
     P = P[np.all(np.isfinite(P), axis=1)]
     if len(P) == 0:
         raise InputError("no finite point", field="points", expected="at least one finite (x, y)")
@@ -814,10 +815,14 @@ def compute_shapes(
     if backend == "compiled":
         sets = [as_points(p, 2) for p in point_sets]
         xy = np.concatenate(sets) if sets else np.empty((0, 2))
+        check_coordinates(xy, field="point_sets")
         off = _offsets([len(p) for p in sets])
         H, hoff = (xy, off) if are_hulls else hulls_csr(xy, off)[:2]
         return shapes_csr(H, hoff, names)
-    hulls = [np.asarray(p, dtype=np.float64) if are_hulls else hull_points(p) for p in point_sets]
+    hulls = [as_points(p, 2) if are_hulls else hull_points(p) for p in point_sets]
+    if are_hulls:
+        for H in hulls:
+            check_coordinates(H, field="point_sets")
     out: list[dict[str, Any]] = [{} for _ in hulls]
     for name in names:
         if name in _BATCHED and SHAPES[name] is {"A6": ellipse_a6, "MVEE": mvee_khachiyan}[name]:

@@ -19,7 +19,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from navkit.errors import ConfigError, InputError
-from navkit.geometry._validate import as_points
+from navkit.geometry._validate import as_points, check_coordinates
 
 __all__ = ["LikelihoodField"]
 
@@ -108,6 +108,7 @@ class LikelihoodField:
         if levels < 1:
             raise ConfigError(f"is {levels}", field="levels", expected=">= 1")
         P = as_points(points, 2)
+        check_coordinates(P, field="points")
         P = P[np.all(np.isfinite(P), axis=1)]
         if len(P) == 0:
             raise InputError(
@@ -119,13 +120,14 @@ class LikelihoodField:
             B = np.asarray(bounds, dtype=np.float64).reshape(2, 2)
             lo, hi = B[0], B[1]
         lo = np.floor(lo / resolution) * resolution
-        W, H = (np.ceil((hi - lo) / resolution).astype(int) + 1).tolist()
-        if W * H > 60_000_000:
+        fW, fH = (np.ceil((hi - lo) / resolution) + 1).tolist()  # as floats: no overflow
+        if not (fW >= 1 and fH >= 1 and fW * fH <= 60_000_000):
             raise ConfigError(
-                f"needs a {H} x {W} grid",
+                f"needs a {fH:.3g} x {fW:.3g} grid",
                 field="resolution",
                 expected="a coarser resolution for a map this large",
             )
+        W, H = int(fW), int(fH)
         # Exact distances from cell centres to the nearest point (a KD-tree, limited to 4 sigma:
         # beyond it the field is < 3e-4 and set to 0), so the field has no half-cell bias.
         occ = np.zeros((H, W), dtype=bool)

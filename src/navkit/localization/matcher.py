@@ -50,7 +50,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
 from navkit.geometry import wrap_angle
-from navkit.geometry._validate import as_points, check_settings
+from navkit.geometry._validate import as_points, as_vectors, check_coordinates, check_settings
 from navkit.jit import resolve
 from navkit.localization.field import LikelihoodField, _pyramid
 
@@ -857,6 +857,25 @@ class _Search:
         return state.best, bool(state.budget > 0)
 
 
+#: Most headings one search may try: a circle at the angular step of a scan reaching 800 m on a
+#: 5 cm field (1e5), far beyond any indoor or outdoor scan matched here; more is a scan whose
+#: ranges are corrupt (or a field too fine for them), refused before the search allocates.
+_MAX_HEADINGS = 100_000
+
+
+def _heading_count(span: float, step: float, reach: float) -> int:
+    """``ceil(span / step)``, or :class:`InputError` when the step underflows (a huge reach)."""
+    n = span / step if step > 0 else np.inf
+    if not n <= _MAX_HEADINGS:
+        raise InputError(
+            f"reach {reach:.3g} m (95th percentile of the ranges) needs {n:.3g} headings",
+            field="points",
+            expected=f"ranges that need at most {_MAX_HEADINGS} headings at the field's "
+            "resolution (or set MatcherSettings.angular_step_deg)",
+        )
+    return int(np.ceil(n))
+
+
 def score_poses(fld: LikelihoodField, points: ArrayLike, poses: ArrayLike) -> NDArray[np.float64]:
     """Scores ``(M,)`` (mean nearest-cell field value) of scan points ``(N, 2)`` at poses ``(M, 3)``."""
     P = as_points(points, 2)
@@ -1127,11 +1146,17 @@ def match_scan(
     t0 = time.perf_counter()
     s = settings or _DEFAULT_SETTINGS
     P = as_points(points, 2)
+    check_coordinates(P, field="points")
     P = P[np.all(np.isfinite(P), axis=1)]
     if len(P) < 3:
         raise InputError(
             f"has {len(P)} finite points", field="points", expected="at least 3 scan points"
         )
+    if prior is not None:
+        prior = as_vectors(prior, 3, "prior", finite=True).reshape(-1)
+        if prior.shape != (3,):
+            raise InputError(f"has shape {prior.shape}", field="prior", expected="(x, y, theta)")
+        check_coordinates(prior, field="prior")
     P = _thin(P, s.point_spacing)
     r = fld.resolution
     reach = max(_p95(np.linalg.norm(P, axis=1)), r)  # P is finite here (rows with NaN dropped)
@@ -1151,11 +1176,11 @@ def match_scan(
         centre = coarse.origin + 0.5 * np.array([W, H]) * rc
         base = centre - (n_cells // 2) * rc
         step_c = (
-            float(np.arccos(1 - rc**2 / (2 * reach**2)))
+            float(np.arccos(max(1 - rc**2 / (2 * reach**2), -1.0)))  # a scan smaller than a cell
             if not s.angular_step_deg
             else step * factor
         )
-        n_th = int(np.ceil(2 * np.pi / step_c))
+        n_th = _heading_count(2 * np.pi, step_c, reach)
         thetas = np.asarray(-np.pi + np.arange(n_th) * (2 * np.pi / n_th), dtype=np.float64)
         step_c = 2 * np.pi / n_th
         Pc = _thin(P, rc) if rc > s.point_spacing else P
@@ -1178,7 +1203,7 @@ def match_scan(
         lin, ang = s.linear_window, np.radians(s.angular_window_deg)
         search, coarse_best, exact = None, None, True
     m = int(np.ceil(lin / r))
-    n_th = int(np.ceil(ang / step))
+    n_th = _heading_count(ang, step, reach)
     fine = _Search(fld, P, x0[2] + np.arange(-n_th, n_th + 1) * step, x0[:2] - m * r, 2 * m + 1)
     # A window around a prior (tracking, and the global search's fine stage) is small and its
     # optimum rarely near the top bound, so a shallower breadth stage, a narrower beam, smaller

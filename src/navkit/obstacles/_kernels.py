@@ -1675,18 +1675,20 @@ def _kth(values, k):  # type: ignore[no-untyped-def]
 
 @njit(cache=True)
 def refine_kernel(P, vlab, valid, grid, origin, cell_m, band_m, above_m):  # type: ignore[no-untyped-def]
-    """``ground.refine_by_ground_height`` (``envelope = 0``) per valid vertex."""
+    """``ground.refine_by_ground_height`` (``envelope = 0``) per valid vertex.
+
+    Any finite coordinates: the cell index is clamped to the grid as a float, before it becomes
+    an integer (a far point's ``(x - origin) / cell_m`` may not fit one), so every read of
+    ``grid`` is in range."""
     n = P.shape[0]
     out = vlab.copy()
     nx, ny = grid.shape
     for p in range(n):
         if not valid[p]:
             continue
-        ix = math.floor((P[p, 0] - origin[0]) / cell_m)
-        iy = math.floor((P[p, 1] - origin[1]) / cell_m)
-        ix = min(max(ix, 0), nx - 1)
-        iy = min(max(iy, 0), ny - 1)
-        h = P[p, 2] - grid[ix, iy]
+        fx = min(max(np.floor((P[p, 0] - origin[0]) / cell_m), 0.0), nx - 1.0)
+        fy = min(max(np.floor((P[p, 1] - origin[1]) / cell_m), 0.0), ny - 1.0)
+        h = P[p, 2] - grid[int(fx), int(fy)]
         lab = out[p]
         if abs(h) <= band_m:
             lab = 0
@@ -1825,23 +1827,29 @@ def cloud_prep_kernel(P):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True, error_model="numpy")
-def points_kernel(P, out, valid):  # type: ignore[no-untyped-def]
+def points_kernel(P, out, valid, limit):  # type: ignore[no-untyped-def]
     """Stage 1's validity codes C_d: ``valid`` = all three coordinates finite, and the points
     with NaN rows where not valid (``detector.detect_obstacles_grid``), written into ``out
-    (n_az, n_el, 3) float64`` and ``valid (n_az, n_el) bool``. Returns whether any is valid."""
+    (n_az, n_el, 3) float64`` and ``valid (n_az, n_el) bool``. Returns ``(number of valid
+    points, number of valid points with a coordinate beyond limit in magnitude)``: the caller
+    refuses the input when the second is not 0 (the bound that keeps the later stages' grid
+    indices in range, ``geometry._validate.MAX_COORDINATE_M``); the pass reads every point
+    anyway, so the check costs nothing here."""
     n_az, n_el = P.shape[0], P.shape[1]
     inf = np.inf
     count = 0
+    far = 0
     for i in range(n_az):
         for j in range(n_el):  # branch-free (selects): the loop vectorises
             x, y, z = P[i, j, 0], P[i, j, 1], P[i, j, 2]
             ok = (abs(x) < inf) & (abs(y) < inf) & (abs(z) < inf)  # finite; NaN fails
             valid[i, j] = ok
             count += 1 if ok else 0
+            far += 1 if (ok & ((abs(x) > limit) | (abs(y) > limit) | (abs(z) > limit))) else 0
             out[i, j, 0] = x if ok else np.nan
             out[i, j, 1] = y if ok else np.nan
             out[i, j, 2] = z if ok else np.nan
-    return count > 0
+    return count, far
 
 
 @njit(cache=True)
@@ -1877,10 +1885,11 @@ def phase_sin_cos_kernel(az, step, n_columns, s, c):  # type: ignore[no-untyped-
 
 
 @njit(cache=True, error_model="numpy")
-def body_points_kernel(S, R, h, out, valid):  # type: ignore[no-untyped-def]
+def body_points_kernel(S, R, h, out, valid, limit):  # type: ignore[no-untyped-def]
     """Stage 1 from sensor-frame points: ``Mounting.to_body`` (``S @ R.T``, then ``z += h``)
     and :func:`points_kernel` in one pass, into ``out (n_az, n_el, 3) float64`` and ``valid
-    (n_az, n_el) bool``. Returns whether any point is valid.
+    (n_az, n_el) bool``. Returns ``(number of valid points, number of valid body points with a
+    coordinate beyond limit in magnitude)``, as :func:`points_kernel`.
 
     Only for a rotation ``R`` whose rows each hold one entry +-1 and two +-0 (the identity of a
     level mounting, axis swaps): every product is then exact and the sum of one value and two
@@ -1898,6 +1907,7 @@ def body_points_kernel(S, R, h, out, valid):  # type: ignore[no-untyped-def]
     r20, r21, r22 = R[2, 0], R[2, 1], R[2, 2]
     inf = np.inf
     count = 0
+    far = 0
     # branch-free (finite = |v| < inf, NaN fails; selects, not ifs): the loop vectorises, ~3x
     # faster than with branches
     for p in range(n):
@@ -1910,7 +1920,8 @@ def body_points_kernel(S, R, h, out, valid):  # type: ignore[no-untyped-def]
         ok = (abs(x) < inf) & (abs(y) < inf) & (abs(z) < inf)
         v[p] = ok
         count += 1 if ok else 0
+        far += 1 if (ok & ((abs(x) > limit) | (abs(y) > limit) | (abs(z) > limit))) else 0
         o[3 * p] = x if ok else np.nan
         o[3 * p + 1] = y if ok else np.nan
         o[3 * p + 2] = z if ok else np.nan
-    return count > 0
+    return count, far

@@ -728,13 +728,19 @@ def _kth_select(v, k):  # type: ignore[no-untyped-def]
 
 
 @njit(cache=True)
-def ground_cells_kernel(P, sel, cell_m, quantile, work_f, work_i):  # type: ignore[no-untyped-def]
+def ground_cells_kernel(P, sel, cell_m, quantile, work_f, work_i, max_cells):  # type: ignore[no-untyped-def]
     """``ground.ground_height_map`` before its hole filling, on the reference points ``sel``
     (flat indices in raster order, from :func:`vertex_kernel`): the ``quantile`` of their z
     per horizontal cell ``(nx, ny)`` (NaN: no point), the grid's origin, and whether a cell is
     empty. The arithmetic of ``_kernels.ground_cells_kernel``, without its two passes over
     every vertex to find the reference points. ``work_f (4, >= m) float64`` and ``work_i (2,
-    >= m) int64`` are work arrays (any content; kept between calls by the caller)."""
+    >= m) int64`` are work arrays (any content; kept between calls by the caller).
+
+    Precondition: the points of ``sel`` are finite (valid vertices). Only the kernel knows
+    which points are the reference, so it checks the grid's size itself, in floats, before any
+    index is formed: when ``nx * ny`` would exceed ``max_cells`` it allocates nothing and
+    returns a ``(0, 0)`` grid with ``(nx, ny)`` (as floats) in place of the origin, which the
+    caller turns into an error. Every index below is then in ``[0, nx) x [0, ny)``."""
     m = len(sel)
     if m == 0:
         return np.zeros((1, 1)), np.zeros(2), False
@@ -744,6 +750,8 @@ def ground_cells_kernel(P, sel, cell_m, quantile, work_f, work_i):  # type: igno
     zz = work_f[2, :m]
     gx_min = np.inf
     gy_min = np.inf
+    gx_max = -np.inf
+    gy_max = -np.inf
     for k in range(m):
         p = sel[k]
         x, y = P[p, 0], P[p, 1]
@@ -752,6 +760,15 @@ def ground_cells_kernel(P, sel, cell_m, quantile, work_f, work_i):  # type: igno
         zz[k] = P[p, 2]
         gx_min = min(gx_min, x)
         gy_min = min(gy_min, y)
+        gx_max = max(gx_max, x)
+        gy_max = max(gy_max, y)
+    fnx = np.floor((gx_max - gx_min) / cell_m) + 1.0
+    fny = np.floor((gy_max - gy_min) / cell_m) + 1.0
+    if not (fnx * fny <= max_cells):  # also refuses a NaN size
+        dims = np.empty(2)
+        dims[0] = fnx
+        dims[1] = fny
+        return np.zeros((0, 0)), dims, False
     ix = work_i[0, :m]
     iy = work_i[1, :m]
     nx = 0

@@ -13,6 +13,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
+from navkit.geometry._validate import (
+    MAX_COORDINATE_M,
+    check_coordinates,
+    check_grid_size,
+    max_grid_cells,
+)
 from navkit.geometry.shapes import compute_shapes, hull_points, hulls_csr, shapes_csr
 from navkit.obstacles.grids import ScanGrid
 from navkit.obstacles.ground import refine_by_ground_height
@@ -260,8 +266,12 @@ def detect_obstacles_grid(
 
         P_in = P
         P, valid = arena([(P_in.shape, np.float64), (P_in.shape[:2], np.bool_)])
-        any_valid = _kernels.points_kernel(P_in, P, valid)
+        n_valid, n_far = _kernels.points_kernel(P_in, P, valid, MAX_COORDINATE_M)
+        if n_far:
+            check_coordinates(P_in, field="points", source=source)
+        any_valid = n_valid > 0
     else:
+        check_coordinates(P, field="points", source=source)
         valid = np.isfinite(P[..., 0]) & np.isfinite(P[..., 1]) & np.isfinite(P[..., 2])
         any_valid = bool(valid.any())
     if not any_valid:
@@ -501,8 +511,10 @@ def _compiled_vertices(
     if settings.ground_refine:
         flat = P.reshape(-1, 3)
         grid, origin, missing = _kernels_map.ground_cells_kernel(
-            flat, ref, float(settings.ground_cell_m), 0.25, work_f, work_i
+            flat, ref, float(settings.ground_cell_m), 0.25, work_f, work_i, max_grid_cells()
         )
+        if grid.size == 0:  # refused by the kernel: (nx, ny) in place of the origin
+            check_grid_size(tuple(origin), setting="ground_cell_m", source="ground height map")
         if missing:
             grid = fill_missing_cells(grid)
         vlab = _kernels.refine_kernel(
@@ -844,10 +856,13 @@ def detect_obstacles_in_grid(
         from navkit.obstacles._buffers import arena
 
         P, valid = arena([(S.shape, np.float64), (S.shape[:2], np.bool_)])
-        any_valid = _kernels.body_points_kernel(
-            np.ascontiguousarray(S, dtype=np.float64), R, float(mounting.height_m), P, valid
+        S64 = np.ascontiguousarray(S, dtype=np.float64)
+        n_valid, n_far = _kernels.body_points_kernel(
+            S64, R, float(mounting.height_m), P, valid, MAX_COORDINATE_M
         )
-        if any_valid:
+        if n_far:  # the body points of a permuting mounting: the sensor's coordinates + height
+            check_coordinates(P, field="points", source=source)
+        if n_valid:
             clock.lap("points")
             res = _detect_from_stage_1(
                 P, valid, mounting.T_body_sensor[:3, 3], settings, None, clock

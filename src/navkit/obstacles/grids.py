@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
 from navkit.geometry import R_BODY_FROM_OPTICAL
+from navkit.geometry._validate import MAX_COORDINATE_M, check_grid_size, max_grid_cells
 from navkit.geometry.angles import atan2
 from navkit.obstacles.settings import check_backend
 from navkit.sensors import PinholeCamera
@@ -171,7 +172,24 @@ def _rings_by_elevation(el: NDArray[np.float64], n_rings: int | None) -> NDArray
     return ring
 
 
-_FAR = 1e9  # metres
+_FAR = MAX_COORDINATE_M  # metres: a "return" beyond it is a corrupt value, a no-return
+
+
+def _check_count(value: int | None, name: str, low: int) -> None:
+    """An optional size argument: an integer from ``low`` to the grid-size bound (checked before
+    anything is allocated from it)."""
+    if value is None:
+        return
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise InputError(f"= {value!r}", field=name, expected=f"an integer >= {low}")
+    limit = max_grid_cells()
+    if not low <= value <= limit:
+        raise InputError(
+            f"= {value}",
+            field=name,
+            expected=f"an integer from {low} to {limit} (the grid-size bound; the environment "
+            "variable NAVKIT_MAX_GRID_CELLS raises it)",
+        )
 
 
 def cloud_to_grid(
@@ -219,6 +237,8 @@ def cloud_to_grid(
         raise InputError(
             f"= {ring_method!r}", field="ring_method", expected="'auto', 'order' or 'elevation'"
         )
+    _check_count(n_columns, "n_columns", 2)
+    _check_count(n_rings, "n_rings", 1)
     P = _as_cloud(points, source, convert=not compiled)
     if compiled and ring_method in ("auto", "order") and n_columns is None:
         fast = _grid_by_order_compiled(P, source)
@@ -289,6 +309,7 @@ def cloud_to_grid(
         frac = 2 * np.pi * (xs % 1.0)
         phase = float(np.arctan2(np.sin(frac).mean(), np.cos(frac).mean()) / (2 * np.pi))
         cell, n_el = _kernels.grid_cells_kernel(Q, rh, az, ring, n_columns, phase)
+        check_grid_size((n_columns, n_el), setting="n_columns", source=source)
         grid = _kernels.grid_fill_kernel(Q, rh, cell, n_columns * n_el)
         return _finish_grid(grid, idx, cell, N, n_columns, n_el, phase, method)
     keep = ring >= 0
@@ -317,6 +338,7 @@ def cloud_to_grid(
         n_columns = max(3, round(2 * np.pi / step))
     if n_columns < 2:
         raise InputError(f"= {n_columns}", field="n_columns", expected="an integer >= 2")
+    check_grid_size((n_columns, n_el), setting="n_columns", source=source)
     # columns centred on the sensor's firing azimuths: their phase is the circular mean of the
     # fractional column positions (a sensor fires at a fixed lattice of azimuths)
     x = (az + np.pi) / (2 * np.pi) * n_columns
@@ -402,6 +424,7 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
     lut, n_el = _ring_lut(
         qx[:m], qy[:m], qz[:m], ring[:m], lo, sums[:n_r], abs_sums[:n_r], counts[:n_r]
     )
+    check_grid_size((n_columns, n_el), setting="n_columns", source=source)
     n_cells = n_columns * n_el
     (win, best) = cached_work(
         ("cloud_to_grid cells", n_cells, N < 2**31),

@@ -15,12 +15,14 @@ changed.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from navkit.geometry._validate import check_grid_size
 from navkit.obstacles.rules import GROUND, OBSTACLE
 
 __all__ = ["fill_missing_cells", "ground_height_map", "refine_by_ground_height"]
@@ -47,6 +49,15 @@ def ground_height_map(
     if len(z) == 0:
         return np.zeros((1, 1)), np.zeros(2), cell_m
     lo = np.array([gx.min(), gy.min()])
+    # the grid's size before any index is computed: huge extents are refused, not allocated
+    check_grid_size(
+        (
+            math.floor((gx.max() - lo[0]) / cell_m) + 1.0,
+            math.floor((gy.max() - lo[1]) / cell_m) + 1.0,
+        ),
+        setting="ground_cell_m",
+        source="ground height map",
+    )
     ix = np.floor((gx - lo[0]) / cell_m).astype(np.int64)
     iy = np.floor((gy - lo[1]) / cell_m).astype(np.int64)
     nx, ny = int(ix.max()) + 1, int(iy.max()) + 1
@@ -110,8 +121,9 @@ def refine_by_ground_height(
     P = points.reshape(-1, 3)
     ok = np.flatnonzero(valid.reshape(-1))
     px, py, pz = (P[ok, k] for k in range(3))
-    ix = np.clip(np.floor((px - lo[0]) / cell).astype(np.int64), 0, grid.shape[0] - 1)
-    iy = np.clip(np.floor((py - lo[1]) / cell).astype(np.int64), 0, grid.shape[1] - 1)
+    # clipped as floats, then converted: a far point's cell index may not fit an integer
+    ix = np.clip(np.floor((px - lo[0]) / cell), 0, grid.shape[0] - 1).astype(np.int64)
+    iy = np.clip(np.floor((py - lo[1]) / cell), 0, grid.shape[1] - 1).astype(np.int64)
     flat = ix * grid.shape[1] + iy
     h = pz - grid.ravel()[flat]
     low = (

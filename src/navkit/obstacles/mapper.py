@@ -34,6 +34,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from navkit.errors import ConfigError, InputError
+from navkit.geometry._validate import check_grid_size
 from navkit.obstacles.detector import ObstacleDetection
 from navkit.obstacles.rules import OBSTACLE
 
@@ -201,12 +202,15 @@ class ObstacleMapper:
         self.settings = st = settings or MapperSettings()
         self.origin = np.asarray(lo, dtype=np.float64)
         self.resolution = float(st.resolution)
-        size = (
-            np.ceil((np.asarray(hi, dtype=np.float64) - self.origin) / self.resolution).astype(int)
-            + 1
-        )
-        if size.shape != (2,) or (size < 1).any():
-            raise InputError(f"lo={lo!r}, hi={hi!r}", field="lo/hi", expected="hi >= lo, (2,) each")
+        with np.errstate(invalid="ignore", over="ignore"):
+            fsize = np.ceil((np.asarray(hi, dtype=np.float64) - self.origin) / self.resolution) + 1
+        if fsize.shape != (2,) or not (fsize >= 1).all() or not np.isfinite(fsize).all():
+            raise InputError(
+                f"lo={lo!r}, hi={hi!r}", field="lo/hi", expected="finite, hi >= lo, (2,) each"
+            )
+        # the grid's size before it is allocated (a clear error, not a MemoryError)
+        check_grid_size((fsize[1], fsize[0]), setting="resolution", source="ObstacleMapper lo/hi")
+        size = fsize.astype(int)
         self.shape = (int(size[1]), int(size[0]))  # rows = y, columns = x
         self.hits = np.zeros(self.shape, dtype=np.int32)
         self.seen = np.zeros(self.shape, dtype=np.int32)
@@ -256,13 +260,17 @@ class ObstacleMapper:
         self, xy: NDArray[np.float64]
     ) -> tuple[NDArray[np.intp], NDArray[np.intp], NDArray[np.bool_]]:
         """Row, column and in-grid flag of points ``(N, 2)``."""
-        ij = np.floor((xy - self.origin) / self.resolution).astype(np.intp)
-        ok = (
-            (ij[:, 0] >= 0)
-            & (ij[:, 1] >= 0)
-            & (ij[:, 0] < self.shape[1])
-            & (ij[:, 1] < self.shape[0])
-        )
+        with np.errstate(invalid="ignore", over="ignore"):
+            f = np.floor((xy - self.origin) / self.resolution)
+            # decided on the floats (NaN fails), converted once in range: a far point's index
+            # may not fit an integer
+            ok = (
+                (f[:, 0] >= 0)
+                & (f[:, 1] >= 0)
+                & (f[:, 0] < self.shape[1])
+                & (f[:, 1] < self.shape[0])
+            )
+        ij = np.where(ok[:, None], f, 0.0).astype(np.intp)
         return ij[:, 1], ij[:, 0], ok
 
     def centres(self, rows: ArrayLike, cols: ArrayLike) -> NDArray[np.float64]:

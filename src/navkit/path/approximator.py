@@ -37,7 +37,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
-from navkit.geometry._validate import check_settings
+from navkit.geometry._validate import MAX_COORDINATE_M, check_coordinates, check_settings
 from navkit.jit import kernels_enabled
 from navkit.path.fitting import (
     CubicFit,
@@ -317,14 +317,24 @@ class OnlineApproximator:
 
     # ------------------------------------------------------------------ adding points (steps 1.2 - 1.5)
     def add(self, point: ArrayLike) -> bool:
-        """Offer the next point ``(2,)``; returns False if it was skipped (NaN or a repeat)."""
-        self.n_input += 1
+        """Offer the next point ``(2,)``; returns False if it was skipped (NaN or a repeat).
+
+        Raises
+        ------
+        InputError
+            For a finite coordinate beyond ``MAX_COORDINATE_M`` (1e9 m): the loop search's
+            ``loop_precision`` (1e-4 m) is below float64's spacing there, and its box tree
+            would not end. Nothing is recorded for such a point.
+        """
         p = np.asarray(point, dtype=np.float64).reshape(-1)
         if p.shape != (2,):
             raise InputError(
                 f"has shape {np.shape(point)}", field="point", expected="(2,) x, y in metres"
             )
         x, y = float(p[0]), float(p[1])
+        if abs(x) > MAX_COORDINATE_M or abs(y) > MAX_COORDINATE_M:  # NaN compares False
+            check_coordinates(p, field="point")  # refuses a finite one; inf is a no-return
+        self.n_input += 1
         if not (math.isfinite(x) and math.isfinite(y)):
             self.n_nonfinite += 1
             return False

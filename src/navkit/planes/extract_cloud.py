@@ -38,7 +38,7 @@ from scipy.spatial import cKDTree
 
 from navkit.errors import InputError
 from navkit.geometry import Plane, canonical_plane
-from navkit.geometry._validate import check_settings
+from navkit.geometry._validate import check_coordinates, check_grid_size, check_settings
 from navkit.geometry.linalg import rows_matmul
 from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points, plane_frame
 
@@ -237,6 +237,7 @@ def extract_planes_cloud(
     P = np.asarray(points, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
         raise InputError(f"has shape {P.shape}", field="points", expected="(N, 3) array")
+    check_coordinates(P, field="points")
     fin = np.flatnonzero(np.all(np.isfinite(P), axis=1))
     if len(fin) < max(3, s.min_points):
         return ExtractionResult((), -np.ones(len(P), np.int64))
@@ -360,7 +361,10 @@ def _largest_connected(X, n, d, cell, idx):
     nn, rho = canonical_plane(n, d)
     axes = Plane(normal=nn, rho=rho, centroid=X.mean(0)).basis()
     uv = rows_matmul(X, axes.T)
-    ij = np.floor((uv - uv.min(axis=0)) / cell).astype(np.int64)
+    f = np.floor((uv - uv.min(axis=0)) / cell)
+    # the raster's size before it is allocated (points spread over kilometres at a fine cell)
+    check_grid_size(tuple(f.max(axis=0) + 1), setting="connect_cell", source="plane raster")
+    ij = f.astype(np.int64)
     shape = tuple(ij.max(axis=0) + 1)
     grid = np.zeros(shape, bool)
     grid[ij[:, 0], ij[:, 1]] = True
