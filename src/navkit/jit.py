@@ -1,7 +1,7 @@
 """Which implementation runs navkit's per-frame hot paths: the compiled kernels or their NumPy twins.
 
-Every hot path has two implementations that give the same answers (labels and ids identical,
-floats within 1e-9 relative; ``docs/kernels.md``): Numba kernels (``_kernels.py`` of each
+Every hot path has two implementations that give the same answers, bit for bit
+(``docs/kernels.md``, "The equivalence contract"): Numba kernels (``_kernels.py`` of each
 capability) and their NumPy twins. The kernels are 2-7x faster per frame, but the first call on a
 machine compiles them: about a minute of CPU for all of them on a 2-core machine, once, after
 which they load from Numba's on-disk cache in under a second.
@@ -11,26 +11,25 @@ The policy, ``NAVKIT_JIT`` (environment variable; :func:`mode`):
 ``"auto"`` (default)
     A process whose kernels are already compiled for this machine (a **stamp** left by a
     complete warm-up, :func:`stamp_path`) uses the compiled kernels. A process that finds no
-    stamp runs the NumPy twins **for its whole life** and starts one background process
-    (``python -m navkit.runtime.warmup``, detached, at the idle CPU priority) that compiles every kernel into the
-    cache and then writes the stamp: the first run on a fresh machine costs what it cost before
-    the kernels existed, and every later run is fast. A process never switches implementation
-    half-way, so its results do not depend on when a compilation finished.
+    stamp runs the NumPy twins **for its whole life**; what else it does is the application's
+    choice (:func:`on_missing_kernels`): the command line starts one detached background
+    compilation at idle priority (:func:`navkit.runtime.warmup.start_background`) that writes the
+    stamp for the next runs; a library user's process starts nothing. A process never switches
+    implementation half-way, so its results do not depend on when a compilation finished.
 ``"eager"``
     Always the compiled kernels; a kernel missing from the cache is compiled in this process on
     first use (the test suite and the benchmarks use this).
 ``"numpy"``
     Never the kernels (no Numba import, no compilation, nothing started).
 
+:func:`use` overrides the policy in code, for the rest of the process or for a ``with`` block:
+the one switch between kernels and twins.
+
 ``navkit compile`` (:func:`navkit.runtime.warmup.warm_up`) compiles everything in the foreground
 and writes the stamp: the step for a robot's image or a container build.
 
-Decisions (written down here because nobody can be asked):
+Decisions:
 
-- The two implementations agree to 1e-9 relative per call, not bit for bit everywhere: a long
-  closed loop (the mission) can amplify such differences, so the first run on a fresh machine
-  and later runs may differ in the last digits of their figures, never in what the tests pin
-  for a single frame.
 - The stamp is keyed by what invalidates Numba's cache (each kernel module's modification time
   and size, Numba's and Python's versions, the machine and CPU model, ``NUMBA_CACHE_DIR``).
   A stale or missing cache entry behind a valid stamp costs an in-process compilation of that
@@ -47,9 +46,9 @@ import hashlib
 import logging
 import os
 import platform
-import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
@@ -64,11 +63,15 @@ __all__ = [
     "failed_path",
     "implementation",
     "kernels_enabled",
+    "lock_is_fresh",
+    "lock_path",
     "mode",
+    "on_missing_kernels",
     "resolve",
     "resolve_backend",
     "stamp_path",
     "status",
+    "use",
     "write_stamp",
 ]
 
@@ -91,7 +94,6 @@ KERNEL_MODULES = (
 _PKG = Path(__file__).resolve().parent
 _STALE_LOCK_S = 1800.0  # a warm-up lock older than this is from a process that died
 _decision: bool | None = None
-_background: subprocess.Popen[bytes] | None = None  # the warm-up this process started
 
 
 def mode() -> str:
@@ -171,11 +173,13 @@ class JitStatus:
     enabled: bool | None  # this process's decision, None until made
 
 
-def _lock_path() -> Path:
+def lock_path() -> Path:
+    """The lock file a warm-up holds while it compiles (its pid inside; stale after 30 min)."""
     return stamp_path().with_suffix(".lock")
 
 
-def _lock_is_fresh(lock: Path) -> bool:
+def lock_is_fresh(lock: Path) -> bool:
+    """Whether a warm-up lock was written less than 30 min ago (older: its process died)."""
     try:
         return time.time() - lock.stat().st_mtime < _STALE_LOCK_S
     except OSError:
@@ -194,86 +198,107 @@ def status() -> JitStatus:
         mode(),
         stamp,
         stamp.is_file(),
-        _lock_is_fresh(_lock_path()),
+        lock_is_fresh(lock_path()),
         failed_path().exists(),
         _decision,
     )
 
 
-def _start_warmup() -> None:
-    """Start one detached ``python -m navkit.runtime.warmup --stamp`` (idle CPU priority) unless
-    one runs."""
-    global _background
-    lock = _lock_path()
-    lock.parent.mkdir(parents=True, exist_ok=True)
-    if failed_path().exists():
-        log.warning(
-            "the background compilation of navkit's kernels failed (%s): this run uses their "
-            "NumPy twins; `navkit compile` shows the error",
-            failed_path(),
+MissingKernelsHook = Callable[[], bool]
+"""What a process under ``auto`` does when it finds no stamp: start the compilation elsewhere and
+return True (this process then runs the twins), or return False (compile in this process)."""
+
+_on_missing: MissingKernelsHook | None = None
+
+
+def on_missing_kernels(hook: MissingKernelsHook | None) -> None:
+    """Register what happens under ``auto`` when the kernels are not compiled on this machine.
+
+    The library itself starts nothing: with no hook such a process runs the NumPy twins and logs
+    once how to compile them. The command line registers
+    :func:`navkit.runtime.warmup.start_background` (one detached compilation at idle priority,
+    for the next runs); an application may register its own, or ``None`` to clear it.
+    """
+    global _on_missing
+    _on_missing = hook
+
+
+def _policy_decision() -> bool:
+    m = mode()
+    if m == "eager":
+        return True
+    if m == "numpy":
+        return False
+    try:
+        if stamp_path().is_file():
+            return True
+    except OSError as exc:  # unwritable folders: behave as if no policy existed (compile here)
+        log.info("no kernel stamp (%s): compiling in this process", exc)
+        return True
+    if _on_missing is None:
+        log.info(
+            "navkit's compiled kernels are not built on this machine: this process runs their "
+            "NumPy twins (the same results, slower); `navkit compile` builds them"
         )
-        return
-    if lock.exists() and not _lock_is_fresh(lock):
-        lock.unlink(missing_ok=True)
+        return False
     try:
-        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-    except FileExistsError:
-        log.info("navkit's kernels are being compiled by another process; NumPy twins run here")
-        return
-    env = dict(os.environ, **{ENV: "eager"})
-    logfile = lock.with_suffix(".log")
-    try:
-        with open(logfile, "wb") as out:
-            proc = subprocess.Popen(
-                [sys.executable, "-m", "navkit.runtime.warmup", "--stamp", "--lock", str(lock)],
-                env=env,
-                stdin=subprocess.DEVNULL,
-                stdout=out,
-                stderr=subprocess.STDOUT,
-                start_new_session=True,
-            )
-    except OSError:  # no process could be started: leave no lock behind (the caller compiles)
-        os.close(fd)
-        lock.unlink(missing_ok=True)
-        raise
-    _background = proc  # kept: it outlives this call (and may outlive the process)
-    os.write(fd, f"{proc.pid}\n".encode())
-    os.close(fd)
-    log.info(
-        "navkit's compiled kernels are not built on this machine yet: this run uses their NumPy "
-        "twins (same results, slower) while process %d compiles them for the next runs "
-        "(`navkit compile` does it in the foreground; NAVKIT_JIT=eager|numpy to choose)",
-        proc.pid,
-    )
+        return not _on_missing()
+    except OSError as exc:  # no new process could be started: compile in this process
+        log.info("the kernels' background compilation could not start (%s): compiling here", exc)
+        return True
 
 
 def kernels_enabled() -> bool:
-    """Whether this process runs the compiled kernels (decided once, on the first call)."""
+    """Whether the compiled kernels run here: the innermost :func:`use` in force, else the
+    process's policy (decided once, on the first call, and kept)."""
     global _decision
+    if _override:
+        return _override[-1]
     if _decision is None:
-        m = mode()
-        if m == "eager":
-            _decision = True
-        elif m == "numpy":
-            _decision = False
-        else:
-            try:
-                _decision = stamp_path().is_file()
-                if not _decision:
-                    _start_warmup()
-            except OSError as exc:  # unwritable folders, no new process: behave as before
-                log.info("no kernel stamp (%s): compiling in this process", exc)
-                _decision = True
+        _decision = _policy_decision()
     return _decision
+
+
+_override: list[bool] = []
+
+
+class use:
+    """Choose the implementation: ``"eager"`` (the compiled kernels, compiled on first use),
+    ``"numpy"`` (their NumPy twins) or ``"auto"`` (the process's policy, ``NAVKIT_JIT``).
+
+    ``jit.use("numpy")`` holds for the rest of the process; ``with jit.use("numpy"): ...`` for the
+    block only. The one switch of the whole package: every default (``backend="auto"``,
+    ``compiled=None``, the ``compiled`` an online object takes when it is built) follows it, and
+    an explicit ``backend="compiled"`` / ``compiled=True`` argument still wins. An online object
+    keeps the implementation it was built with (build it inside the block).
+    """
+
+    def __init__(self, implementation: str) -> None:
+        if implementation not in MODES:
+            raise ConfigError(
+                f"= {implementation!r}", field="implementation", expected=f"one of {MODES}"
+            )
+        if implementation == "auto":
+            _override.append(_policy_decision() if _decision is None else _decision)
+        else:
+            _override.append(implementation == "eager")
+        self._depth = len(_override)
+
+    def __enter__(self) -> use:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        del _override[self._depth - 1 :]
 
 
 def implementation() -> str:
     """What this process ran so far: ``"compiled kernels"``, ``"NumPy twins"``, or ``"no
     kernel needed"`` (nothing asked yet) - written into every run's ``summary.json`` so that
     its timings can be read (a first run on a fresh machine runs the twins)."""
-    if _decision is None:
+    decided = _override[-1] if _override else _decision
+    if decided is None:
         return "no kernel needed"
-    return "compiled kernels" if _decision else "NumPy twins"
+    return "compiled kernels" if decided else "NumPy twins"
 
 
 def resolve(compiled: bool | None) -> bool:

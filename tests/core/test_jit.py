@@ -1,5 +1,6 @@
-"""The kernel policy (navkit.jit): which implementation a process runs, the stamp, the one
-background warm-up. The warm-up's own coverage is tested in tests/runtime/test_warmup.py."""
+"""The kernel policy (navkit.jit): which implementation a process runs, the one switch
+(``jit.use``), the stamp, the one background warm-up the command line starts. The warm-up's own
+coverage is tested in tests/runtime/test_warmup.py."""
 
 from __future__ import annotations
 
@@ -24,6 +25,9 @@ _PROBE = """
 import json, os, sys
 import numpy as np
 from navkit import jit
+if os.environ.get("PROBE_HOOK") == "cli":  # what the command line registers
+    from navkit.runtime.warmup import start_background
+    jit.on_missing_kernels(start_background)
 from navkit.obstacles import detect_obstacles
 from navkit.sim import Box, Ground, Scene, SpinningLidar, render_scan
 T = np.eye(4)
@@ -40,8 +44,14 @@ print(json.dumps({
 """
 
 
-def _probe(cache: Path, policy: str = "auto") -> dict:
-    env = dict(os.environ, NUMBA_CACHE_DIR=str(cache), NAVKIT_JIT=policy, PYTHONPATH=str(SRC))
+def _probe(cache: Path, policy: str = "auto", hook: str = "cli") -> dict:
+    env = dict(
+        os.environ,
+        NUMBA_CACHE_DIR=str(cache),
+        NAVKIT_JIT=policy,
+        PYTHONPATH=str(SRC),
+        PROBE_HOOK=hook,
+    )
     out = subprocess.run(
         [sys.executable, "-c", _PROBE], env=env, capture_output=True, text=True, check=True
     )
@@ -58,9 +68,14 @@ def _stop(pid: int) -> None:
 
 @pytest.fixture
 def fresh(monkeypatch, tmp_path):
-    """This process's decision undone, the cache (and so the stamp) in an empty folder."""
+    """This process's decision undone, the cache (and so the stamp) in an empty folder, and the
+    command line's hook registered (it starts the background warm-up)."""
+    from navkit.runtime.warmup import start_background
+
     monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(jit, "_decision", None)
+    monkeypatch.setattr(jit, "_override", [])
+    monkeypatch.setattr(jit, "_on_missing", start_background)
     return tmp_path
 
 
@@ -122,6 +137,31 @@ def test_auto_without_a_stamp_runs_numpy_and_one_background_warmup(tmp_path):
         _stop(pid)
 
 
+def test_a_library_process_without_a_stamp_runs_the_twins_and_starts_nothing(tmp_path):
+    """Only an application (the command line) starts a background compilation; a library call
+    never does."""
+    got = _probe(tmp_path, hook="none")
+    assert got["enabled"] is False and got["numba"] is False and got["obstacles"] == 1
+    assert got["lock"] is None and not list(tmp_path.glob("navkit-jit-*"))
+
+
+def test_use_switches_for_a_block_or_the_process(fresh, monkeypatch):
+    monkeypatch.setenv("NAVKIT_JIT", "eager")
+    assert jit.kernels_enabled() is True
+    with jit.use("numpy"):
+        assert jit.kernels_enabled() is False
+        assert jit.resolve(None) is False and jit.resolve_backend("auto") == "numpy"
+        assert jit.resolve(True) is True  # an explicit request still wins
+        with jit.use("eager"):
+            assert jit.kernels_enabled() is True and jit.implementation() == "compiled kernels"
+        assert jit.kernels_enabled() is False and jit.implementation() == "NumPy twins"
+    assert jit.kernels_enabled() is True
+    jit.use("numpy")  # for the rest of the process (here: the test; the fixture restores it)
+    assert jit.kernels_enabled() is False
+    with pytest.raises(ConfigError, match="implementation"):
+        jit.use("gpu")
+
+
 def test_a_stale_lock_is_replaced(fresh, monkeypatch):
     monkeypatch.setenv("NAVKIT_JIT", "auto")
     lock = jit.stamp_path().with_suffix(".lock")
@@ -135,8 +175,10 @@ def test_a_stale_lock_is_replaced(fresh, monkeypatch):
         assert pid != 999999999
     finally:
         _stop(int(lock.read_text()))
-        if jit._background is not None:
-            jit._background.wait()
+        from navkit.runtime import warmup
+
+        if warmup._background is not None:
+            warmup._background.wait()
 
 
 def test_the_stamp_covers_every_module_with_kernels():
@@ -161,7 +203,9 @@ def test_a_warmup_that_cannot_start_leaves_no_lock_and_compiles_here(fresh, monk
     def no_process(*args, **kwargs):
         raise PermissionError("no new processes here")
 
-    monkeypatch.setattr(jit.subprocess, "Popen", no_process)
+    from navkit.runtime import warmup
+
+    monkeypatch.setattr(warmup.subprocess, "Popen", no_process)
     assert jit.kernels_enabled() is True  # as before the policy: compile in this process
     assert not jit.stamp_path().with_suffix(".lock").exists()
 

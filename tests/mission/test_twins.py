@@ -53,6 +53,8 @@ def _run(mode: str) -> dict:
 def test_the_mission_on_twins_equals_the_mission_on_kernels():
     twins, kernels = _run("numpy"), _run("eager")
     est_t, est_k = twins["estimate"], kernels["estimate"]
-    first = next((i // 3 for i, (a, b) in enumerate(zip(est_t, est_k)) if a != b), None)
+    first = next(
+        (i // 3 for i, (a, b) in enumerate(zip(est_t, est_k, strict=True)) if a != b), None
+    )
     assert first is None, f"the estimates part at control step {first}"
     assert twins["metrics"] == kernels["metrics"]

@@ -16,7 +16,7 @@ import typer
 from typer.core import TyperGroup
 
 import navkit.cli
-from navkit import __version__
+from navkit import __version__, jit
 from navkit.cli.common import STATE, configure_logging
 
 GLOBAL_FLAGS = ("-q", "--quiet", "--debug")
@@ -67,6 +67,15 @@ def main(
     STATE.debug, STATE.quiet = debug, quiet
     level = logging.DEBUG if debug else (logging.WARNING if quiet else logging.INFO)
     configure_logging(level)
+    # a command on a machine whose kernels were never compiled runs their NumPy twins and starts
+    # their compilation in the background for the next runs (navkit.jit, "auto")
+    jit.on_missing_kernels(_start_background_warmup)
+
+
+def _start_background_warmup() -> bool:
+    from navkit.runtime.warmup import start_background
+
+    return start_background()
 
 
 def _register_commands() -> None:

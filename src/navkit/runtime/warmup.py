@@ -17,6 +17,8 @@ from __future__ import annotations
 import argparse
 import logging
 import os
+import subprocess
+import sys
 import time
 import traceback
 from collections.abc import Callable, Iterator
@@ -193,6 +195,62 @@ def warm_up(*, stamp: bool = True, progress: ProgressFn | None = None) -> WarmUp
         sum(h for _, _, h in kernels.values()),
         jit.write_stamp() if stamp else None,
     )
+
+
+_background: subprocess.Popen[bytes] | None = None  # the warm-up this process started
+
+
+def start_background() -> bool:
+    """Start one detached ``python -m navkit.runtime.warmup --stamp`` at idle CPU priority unless
+    one runs or an earlier one failed; True when the compilation is (being) done elsewhere.
+
+    The command line registers it with :func:`navkit.jit.on_missing_kernels`; an ``OSError``
+    (no process could be started) leaves no lock behind and reaches the caller, which then
+    compiles in its own process.
+    """
+    global _background
+    lock = jit.lock_path()
+    lock.parent.mkdir(parents=True, exist_ok=True)
+    if jit.failed_path().exists():
+        log.warning(
+            "the background compilation of navkit's kernels failed (%s): this run uses their "
+            "NumPy twins; `navkit compile` shows the error",
+            jit.failed_path(),
+        )
+        return True
+    if lock.exists() and not jit.lock_is_fresh(lock):
+        lock.unlink(missing_ok=True)
+    try:
+        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+    except FileExistsError:
+        log.info("navkit's kernels are being compiled by another process; NumPy twins run here")
+        return True
+    env = dict(os.environ, **{jit.ENV: "eager"})
+    logfile = lock.with_suffix(".log")
+    try:
+        with open(logfile, "wb") as out:
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "navkit.runtime.warmup", "--stamp", "--lock", str(lock)],
+                env=env,
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                start_new_session=True,
+            )
+    except OSError:
+        os.close(fd)
+        lock.unlink(missing_ok=True)
+        raise
+    _background = proc  # kept: it outlives this call (and may outlive the process)
+    os.write(fd, f"{proc.pid}\n".encode())
+    os.close(fd)
+    log.info(
+        "navkit's compiled kernels are not built on this machine yet: this run uses their NumPy "
+        "twins (same results, slower) while process %d compiles them for the next runs "
+        "(`navkit compile` does it in the foreground; NAVKIT_JIT=eager|numpy to choose)",
+        proc.pid,
+    )
+    return True
 
 
 def main(argv: list[str] | None = None) -> int:
