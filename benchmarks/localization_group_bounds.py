@@ -3,7 +3,7 @@ search, and what could a tighter bound cut?
 
 For global fixes on the CARMEN logs (the maps and scans of
 ``benchmarks/localization_before_after.py``) the coarse branch-and-bound runs on the NumPy oracle
-(``_Search.compiled = False``: the same nodes as the compiled search) and every batch of rotation
+(``navkit.jit.use("numpy")``: the same nodes as the compiled search) and every batch of rotation
 -group nodes it expands is recorded with the pruning threshold of that moment. Per pyramid level
 it prints:
 
@@ -39,6 +39,7 @@ import argparse
 
 import numpy as np
 
+from navkit import jit
 from navkit.localization import build_map_from_scans
 from navkit.localization import matcher as M
 
@@ -70,12 +71,12 @@ def _record(fld, pts):  # type: ignore[no-untyped-def]
             rec.append((self, h, k.copy(), ix.copy(), iy.copy(), threshold))
         return orig(self, h, k, ix, iy, exclude, threshold)
 
-    old = M._Search.compiled
-    M._Search.compiled, M._Search._expand = False, wrapped  # type: ignore[method-assign]
+    M._Search._expand = wrapped  # type: ignore[method-assign]
     try:
-        M.match_scan(fld, pts, None)
+        with jit.use("numpy"):
+            M.match_scan(fld, pts, None)
     finally:
-        M._Search.compiled, M._Search._expand = old, orig  # type: ignore[method-assign]
+        M._Search._expand = orig  # type: ignore[method-assign]
     return rec
 
 

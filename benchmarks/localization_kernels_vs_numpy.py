@@ -16,8 +16,8 @@ import time
 import numpy as np
 
 from benchmarks.bench_localization import LOGS
+from navkit import jit
 from navkit.localization import build_map_from_scans, match_scan
-from navkit.localization import matcher as M
 
 
 def main() -> None:
@@ -41,22 +41,21 @@ def main() -> None:
         cases = [(int(k), p, "track") for k, p in zip(idx, prior, strict=True)]
         cases += [(int(k), None, "global") for k in gidx]
         for compiled in (True, False):  # the per-map caches and the kernels' first call
-            M._Search.compiled = compiled
-            match_scan(fld, lg.points(int(idx[0]), 30.0), prior[0])
-            match_scan(fld, lg.points(int(idx[0]), 30.0), None)
+            with jit.use("eager" if compiled else "numpy"):
+                match_scan(fld, lg.points(int(idx[0]), 30.0), prior[0])
+                match_scan(fld, lg.points(int(idx[0]), 30.0), None)
         t: dict[tuple[str, bool], list[float]] = {}
         same = True
         for k, p, kind in cases:
             pts = lg.points(k, 30.0)
             fixes = {}
             for compiled in (False, True):
-                M._Search.compiled = compiled
-                c0 = time.process_time()
-                fixes[compiled] = match_scan(fld, pts, p)
-                t.setdefault((kind, compiled), []).append(time.process_time() - c0)
+                with jit.use("eager" if compiled else "numpy"):
+                    c0 = time.process_time()
+                    fixes[compiled] = match_scan(fld, pts, p)
+                    t.setdefault((kind, compiled), []).append(time.process_time() - c0)
             a, b = fixes[True], fixes[False]
             same &= bool(np.array_equal(a.pose, b.pose) and a.score == b.score and a.ok == b.ok)
-        M._Search.compiled = True
         med = {key: 1e3 * float(np.median(v)) for key, v in t.items()}
         print(
             f"{name} | {same} | {med['track', False]:.2f} -> {med['track', True]:.2f} | "

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from navkit import jit
 from navkit.localization import build_map_from_scans, match_scan
 from navkit.localization import matcher as M
 
@@ -21,24 +22,15 @@ LOGS = ("intel", "aces")
 
 
 def _both(fld, pts, prior):  # type: ignore[no-untyped-def]
-    out = []
-    for compiled in (True, False):
-        M._Search.compiled = compiled
-        try:
-            out.append(match_scan(fld, pts, prior))
-        finally:
-            M._Search.compiled = True
-    return out
+    return _modes(lambda: match_scan(fld, pts, prior))
 
 
 def _modes(f):  # type: ignore[no-untyped-def]
+    """``f()`` on the compiled kernels, then on their NumPy twins (navkit.jit.use)."""
     out = []
-    for compiled in (True, False):
-        M._Search.compiled = compiled
-        try:
+    for implementation in ("eager", "numpy"):
+        with jit.use(implementation):
             out.append(f())
-        finally:
-            M._Search.compiled = True
     return out
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from navkit import jit
 from navkit.localization import (
     LikelihoodField,
     MatcherSettings,
@@ -230,9 +231,7 @@ def test_equal_best_scores_resolve_to_the_lowest_rotation_and_translation(compil
     pts = _thin((pattern - [1.0, 0.6]) @ R.T, 0.1)  # the pattern seen from (1.0, 0.6, 0.3)
     K = 96
     thetas = -np.pi + np.arange(K) * (2 * np.pi / K)
-    old = _Search.compiled
-    _Search.compiled = compiled
-    try:
+    with jit.use("eager" if compiled else "numpy"):
         k = ix = iy = leaf = want = None
         for optimism in (0.03, 0.0, 0.3):  # a first pass that finds the optimum / falls short
             search = _Search(
@@ -247,8 +246,6 @@ def test_equal_best_scores_resolve_to_the_lowest_rotation_and_translation(compil
             best, exact = search.run(levels=7, lower=-1.0, cap=10**9, keep=0.9)
             assert exact and best[0] == leaf.max()
             assert best[1:] == want[:3]
-    finally:
-        _Search.compiled = old
 
 
 def test_global_fix_on_two_equally_good_poses_is_the_documented_one():
@@ -261,13 +258,9 @@ def test_global_fix_on_two_equally_good_poses_is_the_documented_one():
     pts = (pattern - [1.0, 0.6]) @ R.T
     s = MatcherSettings(global_resolution=0.25)
     fixes = []
-    for compiled in (True, False):
-        old = _Search.compiled
-        _Search.compiled = compiled
-        try:
+    for implementation in ("eager", "numpy"):
+        with jit.use(implementation):
             fixes.append(match_scan(fld, pts, None, s))
-        finally:
-            _Search.compiled = old
     a, b = fixes
     assert np.array_equal(a.pose, b.pose) and a.score == b.score
     assert np.allclose(a.pose, [1.0, 0.6, th], atol=0.05)

@@ -33,7 +33,7 @@ within ``peak_tolerance`` of the best, not the whole window scored).
 
 The inner loops - the search tables, the expansion and scoring of nodes, the depth-first
 search, the sub-cell scores - are compiled (Numba, :mod:`navkit.localization._kernels`,
-``docs/kernels.md``); ``_Search.compiled = False`` runs their NumPy versions, the test oracles
+``docs/kernels.md``); under ``navkit.jit.use("numpy")`` their NumPy twins run, the test oracles
 (identical fixes).
 
 The score of a pose is the mean field value at the scan's points, in ``[0, 1]``.
@@ -51,7 +51,7 @@ from numpy.typing import ArrayLike, NDArray
 from navkit.errors import ConfigError, InputError
 from navkit.geometry import wrap_angle
 from navkit.geometry._validate import as_points, as_vectors, check_coordinates, check_settings
-from navkit.jit import resolve
+from navkit.jit import kernels_enabled
 from navkit.localization.field import LikelihoodField, _pyramid
 
 __all__ = ["Ambiguity", "Fix", "MatcherSettings", "analyse_peak", "match_scan", "score_poses"]
@@ -311,9 +311,6 @@ class _Search:
     """
 
     batch = 2048  # nodes expanded per vectorised step of the depth-first search
-    # scores by navkit.localization._kernels (False: NumPy, the oracle; None: the process's policy,
-    # navkit.jit - each search resolves it into its own ``compiled`` when it is built)
-    compiled: bool | None = None
     beam = 64  # width of the beam search that seeds the lower bound (see run)
     breadth = 4096  # nodes: levels are expanded whole while they stay this small (see run)
     optimism = 0.03  # the first pass assumes a leaf within this fraction of the top bound
@@ -330,7 +327,8 @@ class _Search:
         levels: int | None = None,
         rot_groups: int = 0,
     ) -> None:
-        self.compiled = resolve(type(self).compiled)
+        # the kernels or their NumPy twins (navkit.jit), decided when the search is built
+        self.compiled = kernels_enabled()
         self.f = fld
         self.thetas = thetas
         self.base = base
@@ -890,14 +888,14 @@ def _fine_scores(
     """Mean sub-cell (bicubic, :meth:`LikelihoodField.interpolate_cubic`) field values of the
     scan at poses ``(M, 3)``.
 
-    Compiled (``_Search.compiled``): :func:`navkit.localization._kernels.cubic_pose_scores`,
+    Compiled (:func:`navkit.jit.kernels_enabled`): :func:`navkit.localization._kernels.cubic_pose_scores`,
     one loop over poses and points. The NumPy version below is its oracle: the same operations
     in the same order (the stencil summed row by row, the points in order - ``cumsum``, not
     NumPy's pairwise sum), so the scores are identical.
     """
     V = fld.cubic_grid()
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    if resolve(_Search.compiled):
+    if kernels_enabled():
         from navkit.localization import _kernels
 
         return _kernels.cubic_pose_scores(  # type: ignore[no-any-return]
@@ -945,7 +943,7 @@ def _bilinear_scores(
     ``(M, 3)``; compiled: :func:`navkit.localization._kernels.bilinear_pose_scores`, the NumPy
     version below its oracle (the same operations in the same order: identical scores)."""
     c, s = np.cos(poses[:, 2]), np.sin(poses[:, 2])
-    if resolve(_Search.compiled):
+    if kernels_enabled():
         from navkit.localization import _kernels
 
         return _kernels.bilinear_pose_scores(  # type: ignore[no-any-return]
