@@ -19,6 +19,7 @@ from functools import partial
 import numpy as np
 
 import navkit.stereo.disparity as D
+from navkit import jit
 
 
 def main() -> None:
@@ -39,16 +40,10 @@ def main() -> None:
     g0, g1 = cv2.cvtColor(L, cv2.COLOR_RGB2GRAY), cv2.cvtColor(R, cv2.COLOR_RGB2GRAY)
     s = D.DisparitySettings(num_disparities=80, block_size=3, fill="background")
     sgbm = cv2.StereoSGBM_create(0, 80, 5)
-    fill, lr, warp = D.fill_background, D.lr_consistency, D.warp_right_disparity
 
     def navkit(compiled: bool, settings: D.DisparitySettings) -> D.DisparityResult:
-        D.fill_background = partial(fill, compiled=compiled)  # type: ignore[assignment]
-        D.lr_consistency = partial(lr, compiled=compiled)  # type: ignore[assignment]
-        D.warp_right_disparity = partial(warp, compiled=compiled)  # type: ignore[assignment]
-        try:
+        with jit.use("eager" if compiled else "numpy"):
             return D.compute_disparity(L, R, settings)
-        finally:
-            D.fill_background, D.lr_consistency, D.warp_right_disparity = fill, lr, warp
 
     runs = {
         "rematch": partial(navkit, True, replace(s, lr_method="rematch")),

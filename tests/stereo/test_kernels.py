@@ -5,7 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from navkit import jit
 from navkit.stereo.disparity import fill_background, lr_consistency, warp_right_disparity
+
+
+def _twin(f, *args):  # type: ignore[no-untyped-def]
+    """``f(*args)`` on the NumPy twins (navkit.jit.use)."""
+    with jit.use("numpy"):
+        return f(*args)
 
 
 def _same(a: np.ndarray, b: np.ndarray) -> bool:
@@ -21,22 +28,20 @@ def test_random_maps(rng):
         d_inf[5, :10] = np.inf  # not finite: filled like NaN
         dr = rng.uniform(0, 60, d.shape)
         dr[rng.random(d.shape) < 0.3] = np.nan
-        assert _same(fill_background(d), fill_background(d, compiled=False))
-        assert _same(fill_background(d_inf), fill_background(d_inf, compiled=False))
-        assert _same(warp_right_disparity(d), warp_right_disparity(d, compiled=False))
-        assert _same(warp_right_disparity(d_inf), warp_right_disparity(d_inf, compiled=False))
+        assert _same(fill_background(d), _twin(fill_background, d))
+        assert _same(fill_background(d_inf), _twin(fill_background, d_inf))
+        assert _same(warp_right_disparity(d), _twin(warp_right_disparity, d))
+        assert _same(warp_right_disparity(d_inf), _twin(warp_right_disparity, d_inf))
         for m in (0.5, 1.0, 3.0):
-            assert np.array_equal(
-                lr_consistency(d, dr, m), lr_consistency(d, dr, m, compiled=False)
-            )
+            assert np.array_equal(lr_consistency(d, dr, m), _twin(lr_consistency, d, dr, m))
     # exact halves: rint rounds half to even in both
     d = np.tile(np.arange(20) + 0.5, (4, 1))
     dr = np.tile(np.arange(20, dtype=float), (4, 1))
-    assert np.array_equal(lr_consistency(d, dr, 0.5), lr_consistency(d, dr, 0.5, compiled=False))
-    assert _same(warp_right_disparity(d), warp_right_disparity(d, compiled=False))
+    assert np.array_equal(lr_consistency(d, dr, 0.5), _twin(lr_consistency, d, dr, 0.5))
+    assert _same(warp_right_disparity(d), _twin(warp_right_disparity, d))
     # collisions: many left pixels on one right pixel, the largest wins in both
     d = np.tile(np.array([1.0, 2.0, 3.0, 2.5, 4.0, np.nan, 6.0, 7.0]), (3, 1))
-    assert _same(warp_right_disparity(d), warp_right_disparity(d, compiled=False))
+    assert _same(warp_right_disparity(d), _twin(warp_right_disparity, d))
 
 
 def test_middlebury_pair(data_path):
@@ -55,8 +60,8 @@ def test_middlebury_pair(data_path):
     # the right view's disparity as compute_disparity gets it: the mirrored pair
     dr = _run(m, np.ascontiguousarray(g1[:, ::-1]), np.ascontiguousarray(g0[:, ::-1]), s)[:, ::-1]
     assert np.isnan(dl).mean() > 0.05
-    assert np.array_equal(lr_consistency(dl, dr), lr_consistency(dl, dr, compiled=False))
-    assert _same(fill_background(dl), fill_background(dl, compiled=False))
+    assert np.array_equal(lr_consistency(dl, dr), _twin(lr_consistency, dl, dr))
+    assert _same(fill_background(dl), _twin(fill_background, dl))
     warped = warp_right_disparity(dl)
-    assert _same(warped, warp_right_disparity(dl, compiled=False))
-    assert np.array_equal(lr_consistency(dl, warped), lr_consistency(dl, warped, compiled=False))
+    assert _same(warped, _twin(warp_right_disparity, dl))
+    assert np.array_equal(lr_consistency(dl, warped), _twin(lr_consistency, dl, warped))

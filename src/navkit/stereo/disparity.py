@@ -42,7 +42,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
 from navkit.geometry._validate import check_settings
-from navkit.jit import resolve
+from navkit.jit import kernels_enabled
 
 __all__ = [
     "DisparityResult",
@@ -260,8 +260,6 @@ def lr_consistency(
     disp_left: ArrayLike,
     disp_right: ArrayLike,
     max_diff: float = 1.0,
-    *,
-    compiled: bool | None = None,
 ) -> NDArray[np.bool_]:
     """Pixels whose left disparity agrees with the right disparity at ``x - d`` (within ``max_diff``).
 
@@ -271,14 +269,13 @@ def lr_consistency(
         Left disparity, pixels (NaN invalid).
     disp_right : (H, W) array
         Right disparity, pixels, positive, ``x_right + d = x_left`` (NaN invalid).
-    compiled : bool, optional
-        One compiled pass (:func:`navkit.stereo._kernels.lr_consistency`, the same mask); False:
-        the NumPy passes below (the oracle). Default: as the process's policy
-        (:mod:`navkit.jit`).
+
+    One compiled pass (:func:`navkit.stereo._kernels.lr_consistency`, the same mask) when the
+    process runs the kernels (:mod:`navkit.jit`); else the NumPy passes below (the oracle).
     """
     dl = np.asarray(disp_left, dtype=np.float64)
     dr = np.asarray(disp_right, dtype=np.float64)
-    if resolve(compiled) and dl.ndim == 2 and dl.shape == dr.shape:
+    if kernels_enabled() and dl.ndim == 2 and dl.shape == dr.shape:
         from navkit.stereo import _kernels
 
         return _kernels.lr_consistency(  # type: ignore[no-any-return]
@@ -294,9 +291,7 @@ def lr_consistency(
     return inside & (np.abs(other - dl) <= max_diff)
 
 
-def warp_right_disparity(
-    disp_left: ArrayLike, *, compiled: bool | None = None
-) -> NDArray[np.float64]:
+def warp_right_disparity(disp_left: ArrayLike) -> NDArray[np.float64]:
     """The right view's disparity from the left one by forward warping (uniqueness by z-buffer).
 
     Every finite left disparity ``d`` at pixel ``x`` lands on the right pixel ``rint(x - d)``
@@ -306,13 +301,13 @@ def warp_right_disparity(
     :func:`lr_consistency` this rejects left pixels that lose their right pixel to a nearer
     surface (occlusions, colliding mismatches) without running the matcher a second time.
 
+    One compiled pass (:func:`navkit.stereo._kernels.warp_right`, the same map) when the process
+    runs the kernels (:mod:`navkit.jit`); else the NumPy passes below (the oracle).
+
     Parameters
     ----------
     disp_left : (H, W) array
         Left disparity, pixels (NaN / inf invalid).
-    compiled : bool, optional
-        One compiled pass (:func:`navkit.stereo._kernels.warp_right`, the same map); False: the
-        NumPy passes below (the oracle).
 
     Returns
     -------
@@ -322,7 +317,7 @@ def warp_right_disparity(
     dl = np.asarray(disp_left, dtype=np.float64)
     if dl.ndim != 2:
         raise InputError(f"has shape {dl.shape}", field="disp_left", expected="an (H, W) map")
-    if resolve(compiled):
+    if kernels_enabled():
         from navkit.stereo import _kernels
 
         return _kernels.warp_right(np.ascontiguousarray(dl))  # type: ignore[no-any-return]
@@ -432,16 +427,16 @@ def refine_subpixel(
     return np.where(valid, d0 - bias, np.nan)
 
 
-def fill_background(disparity: ArrayLike, *, compiled: bool | None = None) -> NDArray[np.float64]:
+def fill_background(disparity: ArrayLike) -> NDArray[np.float64]:
     """Fill NaN pixels with the smaller of the nearest valid disparities left and right in the row.
 
-    Rows without any valid pixel stay NaN. ``compiled``: one pass per row
-    (:func:`navkit.stereo._kernels.fill_background`, the same result); False: vectorised with
-    running maxima of valid indices (the oracle); None (default): as the process's policy
-    (:mod:`navkit.jit`).
+    Rows without any valid pixel stay NaN. One pass per row
+    (:func:`navkit.stereo._kernels.fill_background`, the same result) when the process runs the
+    kernels (:mod:`navkit.jit`); else vectorised with running maxima of valid indices (the
+    oracle).
     """
     d = np.asarray(disparity, dtype=np.float64)
-    if resolve(compiled) and d.ndim == 2:
+    if kernels_enabled() and d.ndim == 2:
         from navkit.stereo import _kernels
 
         return _kernels.fill_background(np.ascontiguousarray(d))  # type: ignore[no-any-return]
