@@ -15,7 +15,8 @@ from navkit.localization import (
     match_scan,
     score_poses,
 )
-from navkit.localization.matcher import _Search, _thin
+from navkit.localization.matcher import _thin
+from navkit.localization.search import _Search
 from tests.localization.helpers import LSHAPE, RECT, sample_walls, scan_points
 
 
