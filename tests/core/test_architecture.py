@@ -17,13 +17,14 @@ CORE = {
     "timing",
     "datasets",
     "jit",
+    "domains",  # the declared domains of options, settings and file fields
     "_intrinsics",  # Numba intrinsics shared by the capabilities' kernels
     "_version",
     "__init__",
 }
 CAPABILITIES = {"obstacles", "planes", "stereo", "localization", "path"}
 ALLOWED = {
-    "geometry": {"errors", "jit"},
+    "geometry": {"errors", "jit", "domains"},
     "sensors": {"errors", "geometry"},
     **{c: CORE for c in CAPABILITIES},  # and no other capability
     "io": CORE | CAPABILITIES,

@@ -29,6 +29,7 @@ from navkit.localization.correlation import (
     locate_known_heading,
     robot_position,
 )
+from navkit.localization.evaluate import evaluate_map
 from navkit.localization.evaluation import evaluate_fixes, pose_errors, reported_poses
 from navkit.localization.field import LikelihoodField
 from navkit.localization.localizer import (
@@ -44,12 +45,9 @@ from navkit.localization.mapping import (
     WallMap,
     build_map,
     build_map_from_scans,
-    evaluate_map,
     find_corners,
     find_outline,
     merge_segments,
-    rasterize,
-    sample_segments,
 )
 from navkit.localization.matcher import (
     Ambiguity,
@@ -59,6 +57,7 @@ from navkit.localization.matcher import (
     score_poses,
 )
 from navkit.localization.matcher import Fix as ScanMatch
+from navkit.localization.raster import rasterize, sample_segments
 from navkit.localization.refine import (
     PoseRefinement,
     RefineSettings,

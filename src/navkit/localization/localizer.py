@@ -63,9 +63,10 @@ from navkit.localization.correlation import (
     locate_known_heading,
 )
 from navkit.localization.field import LikelihoodField
-from navkit.localization.mapping import MapSettings, WallMap, build_map, sample_segments
+from navkit.localization.mapping import MapSettings, WallMap, build_map
 from navkit.localization.matcher import Fix as ScanMatch
 from navkit.localization.matcher import MatcherSettings, match_scan
+from navkit.localization.raster import sample_segments
 from navkit.localization.refine import PoseRefinement, RefineSettings, refine_pose
 from navkit.localization.visibility import ViewModel
 from navkit.localization.walls import WallSegment

@@ -33,8 +33,9 @@ from scipy.sparse.csgraph import connected_components
 
 from navkit.errors import ConfigError, FormatError, InputError
 from navkit.geometry import polygon_area, se2_apply, se2_from_xytheta, signed_area
-from navkit.geometry._validate import as_points, check_grid_size, check_settings
+from navkit.geometry._validate import as_points, check_settings
 from navkit.localization.field import LikelihoodField
+from navkit.localization.raster import rasterize, sample_segments
 from navkit.localization.walls import (
     SegmentationSettings,
     WallSegment,
@@ -52,13 +53,10 @@ __all__ = [
     "build_map_from_scans",
     "drop_corner_stubs",
     "drop_wall_shadows",
-    "evaluate_map",
     "find_corners",
     "find_outline",
     "merge_segments",
-    "rasterize",
     "refit_walls_weighted",
-    "sample_segments",
 ]
 
 log = logging.getLogger(__name__)
@@ -537,124 +535,6 @@ def find_outline(
 
 
 # --------------------------------------------------------------------------- grid
-def sample_segments(walls: Sequence[WallSegment], spacing: float) -> NDArray[np.float64]:
-    """Points ``(K, 2)`` every ``spacing`` metres along the walls (both ends included)."""
-    if not walls:
-        return np.zeros((0, 2))
-    S = np.array([w.start for w in walls])
-    E = np.array([w.end for w in walls])
-    n = np.maximum(2, np.ceil(np.linalg.norm(E - S, axis=1) / spacing).astype(int) + 1)
-    owner = np.repeat(np.arange(len(walls)), n)
-    first = np.cumsum(n) - n
-    t = (np.arange(n.sum()) - first[owner]) / (n[owner] - 1)
-    return S[owner] + t[:, None] * (E - S)[owner]
-
-
-def rasterize(
-    walls: Sequence[WallSegment],
-    resolution: float,
-    *,
-    free_polygon: ArrayLike | None = None,
-    rays: tuple[ArrayLike, ArrayLike] | None = None,
-    occupied_points: ArrayLike | None = None,
-    margin: float = 1.0,
-) -> tuple[NDArray[np.int8], NDArray[np.float64]]:
-    """Occupancy grid of a wall map.
-
-    Parameters
-    ----------
-    walls : list of WallSegment
-        Occupied cells (sampled at half a cell).
-    resolution : float
-        Cell size, metres.
-    free_polygon : (K, 2) array, optional
-        Cells whose centres are inside are free (the room outline).
-    rays : ((R, 2) origins, (R, 2) ends), optional
-        Cells crossed by these rays (sensor beams) are free.
-    occupied_points : (P, 2) array, optional
-        Further occupied places (laser end points: clutter that is not a straight wall).
-    margin : float
-        Metres of border around the walls.
-
-    Returns
-    -------
-    grid : (H, W) int8
-        -1 unknown, 0 free, 100 occupied; row 0 at ``origin[1]`` (min y).
-    origin : (2,) array
-        World ``(x, y)`` of the lower-left corner of cell ``[0, 0]``.
-    """
-    if not (np.isfinite(resolution) and resolution > 0):
-        raise InputError(f"is {resolution}", field="resolution", expected="positive metres")
-    occ = sample_segments(walls, resolution / 2)
-    if occupied_points is not None:
-        extra = as_points(occupied_points, 2, "occupied_points")
-        occ = np.concatenate([occ, extra[np.all(np.isfinite(extra), axis=1)]])
-    occ = occ[np.all(np.isfinite(occ), axis=1)]
-    extent = [occ] if len(occ) else []
-    if rays is not None:
-        o, e = as_points(rays[0], 2, "ray origins"), as_points(rays[1], 2, "ray ends")
-        if len(o) != len(e):
-            raise InputError(
-                f"{len(o)} origins for {len(e)} ends", field="rays", expected="one origin per end"
-            )
-        ok = np.all(np.isfinite(o), axis=1) & np.all(np.isfinite(e), axis=1)
-        o, e = o[ok], e[ok]  # beams without a return carry no free space
-        extent += [o, e]
-    if free_polygon is not None:
-        poly = as_points(free_polygon, 2, "free_polygon")
-        if not np.isfinite(poly).all():
-            raise InputError("has NaN or inf corners", field="free_polygon", expected="finite")
-        extent.append(poly)
-    extent = [x for x in extent if len(x)]
-    if not extent:
-        log.warning("rasterize: no wall, no valid beam and no outline: the grid is empty")
-        return np.full((1, 1), -1, dtype=np.int8), np.zeros(2)
-    if not (np.isfinite(margin) and margin >= 0):
-        raise InputError(f"is {margin}", field="margin", expected="metres >= 0")
-    allp = np.concatenate(extent)
-    lo = np.floor((allp.min(axis=0) - margin) / resolution) * resolution
-    hi = allp.max(axis=0) + margin
-    size = np.ceil((hi - lo) / resolution) + 1
-    check_grid_size((size[1], size[0]), setting="resolution")
-    W, H = size.astype(int).tolist()
-    grid = np.full((H, W), -1, dtype=np.int8)
-
-    def cells(p: NDArray[np.float64]) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-        ij = np.floor((p - lo) / resolution).astype(np.intp)
-        ij[:, 0] = np.clip(ij[:, 0], 0, W - 1)
-        ij[:, 1] = np.clip(ij[:, 1], 0, H - 1)
-        return ij[:, 1], ij[:, 0]
-
-    if free_polygon is not None:
-        from navkit.geometry import points_in_polygon
-
-        yy, xx = np.mgrid[0:H, 0:W]
-        centres = np.stack([xx.ravel() + 0.5, yy.ravel() + 0.5], axis=1) * resolution + lo
-        inside = points_in_polygon(centres, as_points(free_polygon, 2)).reshape(H, W)
-        grid[inside] = 0
-    if rays is not None:
-        length = np.linalg.norm(e - o, axis=1)
-        n = np.maximum(1, np.ceil(length / (resolution / 2)).astype(int))
-        chunk = 2_000_000
-        start = 0
-        cum = np.cumsum(n)
-        while start < len(n):
-            stop = int(np.searchsorted(cum, (cum[start - 1] if start else 0) + chunk, side="right"))
-            stop = max(stop, start + 1)
-            nn = n[start:stop]
-            owner = np.repeat(np.arange(start, stop), nn)
-            first = np.cumsum(nn) - nn
-            t = (np.arange(nn.sum()) - first[owner - start]) / nn[owner - start]  # [0, 1)
-            r, c = cells(o[owner] + t[:, None] * (e - o)[owner])
-            grid[r, c] = 0
-            start = stop
-    if len(occ):
-        r, c = cells(occ)
-        grid[r, c] = 100
-    return grid, lo
-
-
-# --------------------------------------------------------------------------- building
 def drop_corner_stubs(
     walls: Sequence[WallSegment], settings: MapSettings | None = None
 ) -> list[WallSegment]:
@@ -1001,75 +881,3 @@ def _transform(w: WallSegment, T: NDArray[np.float64]) -> WallSegment:
 
 
 # --------------------------------------------------------------------------- evaluation
-def evaluate_map(
-    wall_map: WallMap,
-    true_walls: ArrayLike,
-    true_corners: ArrayLike,
-    *,
-    max_distance: float = 0.5,
-    max_angle_deg: float = 10.0,
-) -> dict[str, object]:
-    """Map accuracy against a known floor plan.
-
-    Each true wall is matched to the map wall of nearly the same direction (within
-    ``max_angle_deg``) whose line passes nearest the true wall's midpoint (within
-    ``max_distance``), preferring the longest overlap; each true corner to the nearest map corner
-    within ``max_distance``.
-
-    Returns
-    -------
-    dict
-        ``walls_found`` / ``walls_true``, ``wall_angle_error_deg`` (list; NaN = not found),
-        ``wall_offset_error`` (metres, mean distance of the true end points' projections... the
-        true midpoint to the map line), ``corners_found`` / ``corners_true``,
-        ``corner_error`` (metres, list; NaN = not found), and their medians / maxima.
-    """
-    TW = np.asarray(true_walls, dtype=np.float64).reshape(-1, 2, 2)
-    TC = np.asarray(true_corners, dtype=np.float64).reshape(-1, 2)
-    ang_err, off_err = [], []
-    for a, b in TW:
-        d = (b - a) / np.linalg.norm(b - a)
-        mid = 0.5 * (a + b)
-        best, best_key = None, None
-        for w in wall_map.walls:
-            ang = np.degrees(np.arccos(min(1.0, abs(float(d @ w.direction)))))
-            off = abs(float(w.distance(mid)[0]))
-            if ang > max_angle_deg or off > max_distance:
-                continue
-            ts = sorted(float((p - a) @ d) for p in (w.start, w.end))
-            overlap = min(ts[1], float(np.linalg.norm(b - a))) - max(ts[0], 0.0)
-            if overlap <= 0:
-                continue
-            key = -overlap
-            if best_key is None or key < best_key:
-                best, best_key = (ang, off), key
-        ang_err.append(np.nan if best is None else best[0])
-        off_err.append(np.nan if best is None else best[1])
-    C = np.array([c.point for c in wall_map.corners]).reshape(-1, 2)
-    corner_err = []
-    for c in TC:
-        dist = np.linalg.norm(C - c, axis=1) if len(C) else np.array([np.inf])
-        corner_err.append(float(dist.min()) if dist.min() <= max_distance else np.nan)
-    ae, oe, ce = np.array(ang_err), np.array(off_err), np.array(corner_err)
-
-    def stat(x: NDArray[np.float64], f) -> float:  # type: ignore[no-untyped-def]
-        x = x[np.isfinite(x)]
-        return float(f(x)) if len(x) else float("nan")
-
-    return {
-        "walls_true": len(TW),
-        "walls_found": int(np.isfinite(ae).sum()),
-        "walls_in_map": len(wall_map.walls),
-        "wall_angle_error_deg": ae.tolist(),
-        "wall_offset_error_m": oe.tolist(),
-        "wall_angle_error_deg_median": stat(ae, np.median),
-        "wall_angle_error_deg_max": stat(ae, np.max),
-        "wall_offset_error_m_median": stat(oe, np.median),
-        "corners_true": len(TC),
-        "corners_found": int(np.isfinite(ce).sum()),
-        "corners_in_map": len(wall_map.corners),
-        "corner_error_m": ce.tolist(),
-        "corner_error_m_median": stat(ce, np.median),
-        "corner_error_m_max": stat(ce, np.max),
-        "outline_found": wall_map.outline is not None,
-    }

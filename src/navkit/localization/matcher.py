@@ -434,7 +434,7 @@ def match_scan(
     ----------
     fld : LikelihoodField
         The map (see :meth:`LikelihoodField.from_points`; from a wall map use
-        :func:`navkit.localization.mapping.sample_segments`).
+        :func:`navkit.localization.raster.sample_segments`).
     points : (N, 2) array
         The scan's points in its own frame (x forward, y left), metres; NaN rows dropped.
     prior : (3,) array, optional
