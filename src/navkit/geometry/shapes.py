@@ -40,7 +40,9 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
 from navkit.errors import InputError
+from navkit.geometry import fixedmath
 from navkit.geometry._validate import as_points
+from navkit.geometry.angles import atan2 as fixed_atan2
 from navkit.jit import resolve_backend
 
 __all__ = [
@@ -290,6 +292,23 @@ def rect_a1(points: ArrayLike) -> Rectangle:
     return _rect_a1(hull_points(points))
 
 
+def _norm(dx: float, dy: float) -> float:
+    """``sqrt(dx^2 + dy^2)`` as three IEEE operations and a square root (the kernels' ``_norm``:
+    the same bits; ``math.hypot`` is CPython's own algorithm, the kernels' the C library's)."""
+    return math.sqrt(dx * dx + dy * dy)
+
+
+def _angle(y: float, x: float) -> float:
+    """``atan2(y, x)`` with the fixed arithmetic of :mod:`navkit.geometry.angles`."""
+    return float(fixed_atan2(y, x))
+
+
+def _sincos(x: float) -> tuple[float, float]:
+    """``(sin x, cos x)`` with the fixed arithmetic of :mod:`navkit.geometry.fixedmath`."""
+    s, c = fixedmath.sincos(x)
+    return float(s), float(c)
+
+
 def _rect_a1(H: NDArray[np.float64]) -> Rectangle:
     lo, hi = H.min(axis=0), H.max(axis=0)
     return Rectangle(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
@@ -305,7 +324,7 @@ def _circle_a2(H: NDArray[np.float64]) -> Circle:
     return Circle(
         0.5 * (r.xmin + r.xmax),
         0.5 * (r.ymin + r.ymax),
-        0.5 * math.hypot(r.xmax - r.xmin, r.ymax - r.ymin),
+        0.5 * _norm(r.xmax - r.xmin, r.ymax - r.ymin),
         kind="circle",
     )
 
@@ -329,9 +348,9 @@ def _circle_a3(H: NDArray[np.float64]) -> Circle:
     i0, i1 = int(np.argmin(H[:, axis])), int(np.argmax(H[:, axis]))
     (x0, y0), (x1, y1) = H[i0], H[i1]
     cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
-    r = 0.5 * math.hypot(x1 - x0, y1 - y0)
+    r = 0.5 * _norm(x1 - x0, y1 - y0)
     for px, py in H.tolist():  # hull vertices only (tens), sequential by construction
-        d = math.hypot(px - cx, py - cy)
+        d = _norm(px - cx, py - cy)
         if d <= r * (1 + 1e-12) + 1e-12:
             continue
         new_r = 0.5 * (d + r)
@@ -368,9 +387,9 @@ def ellipse_a4(points: ArrayLike, gamma: float | None = None) -> Ellipse:
 def _ellipse_a4(H: NDArray[np.float64], gamma: float | None = None) -> Ellipse:
     r = _rect_a1(H)
     dx, dy = r.xmax - r.xmin, r.ymax - r.ymin
-    rho = 0.5 * math.hypot(dx, dy)
+    rho = 0.5 * _norm(dx, dy)
     cx, cy = 0.5 * (r.xmin + r.xmax), 0.5 * (r.ymin + r.ymax)
-    angle = math.atan2(dy, dx)
+    angle = _angle(dy, dx)
     # the other diagonal is at angle atan2(dy, -dx); phi is the angle between the diagonals
     cos_phi = (dx * -dx + dy * dy) / max(dx * dx + dy * dy, 1e-300)
     if gamma is None:
@@ -378,8 +397,8 @@ def _ellipse_a4(H: NDArray[np.float64], gamma: float | None = None) -> Ellipse:
     if not gamma >= 1.0:
         raise InputError(f"gamma = {gamma}", field="gamma", expected="a number >= 1")
     a = gamma * rho
-    sin2 = 1.0 - cos_phi**2
-    denom = 1.0 - cos_phi**2 / gamma**2
+    sin2 = 1.0 - cos_phi * cos_phi
+    denom = 1.0 - cos_phi * cos_phi / (gamma * gamma)
     b = rho * math.sqrt(sin2 / denom) if denom > 0 else rho
     return _ellipse(cx, cy, a, b, angle)
 
@@ -403,8 +422,8 @@ def _ellipse_a5(H: NDArray[np.float64]) -> Ellipse:
     r = c2.radius
     best: Ellipse | None = None
     for sign in (1.0, -1.0):
-        ang = math.atan2(sign * (rect.ymax - rect.ymin), rect.xmax - rect.xmin)
-        c, s = math.cos(ang), math.sin(ang)
+        ang = _angle(sign * (rect.ymax - rect.ymin), rect.xmax - rect.xmin)
+        s, c = _sincos(ang)
         dx, dy = H[:, 0] - c2.x, H[:, 1] - c2.y
         u = c * dx + s * dy
         v = -s * dx + c * dy
@@ -430,8 +449,9 @@ def _a6_area(
     ``a = max_i sqrt(u_i^2 + v_i^2 / k^2)``.
     """
     x, y, phi, logk = (params[..., i] for i in range(4))
-    k = np.exp(logk)
-    c, s = np.cos(phi)[..., None], np.sin(phi)[..., None]
+    k = fixedmath.exp(logk)
+    s, c = fixedmath.sincos(phi)
+    c, s = c[..., None], s[..., None]
     dx = P[:, None, :, 0] - x[..., None]
     dy = P[:, None, :, 1] - y[..., None]
     u = c * dx + s * dy
@@ -501,9 +521,9 @@ def _a6_batch(
     for i, h in enumerate(hulls):
         P[i, : len(h)] = h
         mask[i, : len(h)] = True
-    x0 = np.array(
-        [[e.x, e.y, e.angle, math.log(max(e.b / e.a, 1e-6)) if e.a > 0 else 0.0] for e in starts]
-    )
+    ratio = np.array([max(e.b / e.a, 1e-6) if e.a > 0 else 1.0 for e in starts])
+    logk0 = fixedmath.log(ratio)  # log 1 = 0 exactly
+    x0 = np.array([[e.x, e.y, e.angle, lk] for e, lk in zip(starts, logk0.tolist(), strict=True)])
     size = np.array([max(e.a, 1e-6) for e in starts])
     step = np.column_stack([0.25 * size, 0.25 * size, np.full(n, 0.2), np.full(n, 0.2)])
     min_step = np.column_stack(
@@ -541,12 +561,13 @@ def _a6_batch(
         Pa = P[idx]
         dx = Pa[:, None, :, 0] - vals[:, :, 0, None]  # (k, 3x, m)
         dy = Pa[:, None, :, 1] - vals[:, :, 1, None]  # (k, 3y, m)
-        c = np.cos(vals[:, :, 2])[:, :, None, None, None]  # (k, 3phi, 1, 1, 1)
-        sn = np.sin(vals[:, :, 2])[:, :, None, None, None]
+        sn, c = fixedmath.sincos(vals[:, :, 2])
+        c = c[:, :, None, None, None]  # (k, 3phi, 1, 1, 1)
+        sn = sn[:, :, None, None, None]
         dxb, dyb = dx[:, None, :, None, :], dy[:, None, None, :, :]
         u = c * dxb + sn * dyb  # (k, 3phi, 3x, 3y, m)
         v = -sn * dxb + c * dyb
-        kk = np.exp(vals[:, :, 3])  # (k, 3k)
+        kk = fixedmath.exp(vals[:, :, 3])  # (k, 3k)
         a2 = (u * u)[..., None, :] + (v * v)[..., None, :] / (kk[:, None, None, None, :, None] ** 2)
         a2 = a2.max(axis=-1)  # (k, 3phi, 3x, 3y, 3k)
         f_all = (np.pi * a2 * kk[:, None, None, None, :]).transpose(0, 2, 3, 1, 4)
@@ -562,9 +583,10 @@ def _a6_batch(
         active[shrink] = np.any(step[shrink] > min_step[shrink], axis=1)
     _, a = _a6_area(cur[:, None, :], P, mask)
     a = a[:, 0] * (1 + 1e-12)
+    k = fixedmath.exp(cur[:, 3])
     out = []
     for i in range(n):
-        cand = _ellipse(cur[i, 0], cur[i, 1], a[i], a[i] * math.exp(cur[i, 3]), cur[i, 2])
+        cand = _ellipse(cur[i, 0], cur[i, 1], a[i], a[i] * k[i], cur[i, 2])
         out.append(cand if cand.area <= starts[i].area else starts[i])
     return out
 
@@ -581,7 +603,7 @@ def ellipse_a6(points: ArrayLike, start: Ellipse | None = None) -> Ellipse:
 
 def _circle2(ax: float, ay: float, bx: float, by: float) -> tuple[float, float, float]:
     cx, cy = 0.5 * (ax + bx), 0.5 * (ay + by)
-    return cx, cy, math.hypot(ax - cx, ay - cy)
+    return cx, cy, _norm(ax - cx, ay - cy)
 
 
 def _circle3(
@@ -593,7 +615,7 @@ def _circle3(
     a2, b2, c2 = ax * ax + ay * ay, bx * bx + by * by, cx * cx + cy * cy
     ux = (a2 * (by - cy) + b2 * (cy - ay) + c2 * (ay - by)) / d
     uy = (a2 * (cx - bx) + b2 * (ax - cx) + c2 * (bx - ax)) / d
-    return ux, uy, math.hypot(ax - ux, ay - uy)
+    return ux, uy, _norm(ax - ux, ay - uy)
 
 
 def min_circle_welzl(points: ArrayLike, seed: int = 0) -> Circle:
@@ -606,12 +628,18 @@ def min_circle_welzl(points: ArrayLike, seed: int = 0) -> Circle:
 
 
 def _min_circle_welzl(H: NDArray[np.float64], seed: int = 0) -> Circle:
-    origin = H.mean(axis=0)
-    pts = [tuple(p) for p in (H - origin).tolist()]
+    # the mean summed in index order (the kernel's order; a NumPy reduction may pair terms)
+    ox = oy = 0.0
+    for x, y in H.tolist():
+        ox += x
+        oy += y
+    ox /= len(H)
+    oy /= len(H)
+    pts = [(x - ox, y - oy) for x, y in H.tolist()]
     random.Random(seed).shuffle(pts)
 
     def inside(c: tuple[float, float, float], p: tuple[float, float]) -> bool:
-        return math.hypot(p[0] - c[0], p[1] - c[1]) <= c[2] * (1 + 1e-12) + 1e-12
+        return _norm(p[0] - c[0], p[1] - c[1]) <= c[2] * (1 + 1e-12) + 1e-12
 
     c = (pts[0][0], pts[0][1], 0.0)
     for i in range(1, len(pts)):
@@ -631,9 +659,7 @@ def _min_circle_welzl(H: NDArray[np.float64], seed: int = 0) -> Circle:
                 c3 = _circle3(*p, *q, *s)
                 if c3 is not None:
                     c = c3
-    return Circle(
-        c[0] + float(origin[0]), c[1] + float(origin[1]), c[2] * (1 + 1e-12), kind="circle"
-    )
+    return Circle(c[0] + ox, c[1] + oy, c[2] * (1 + 1e-12), kind="circle")
 
 
 def mvee_batch(
