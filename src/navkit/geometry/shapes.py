@@ -680,9 +680,10 @@ def mvee_batch(
     encloses the set and its area is within ``(1 + tol)`` (about) of the optimum.
 
     ``backend="compiled"`` runs the iterations set by set in a Numba kernel
-    (:func:`navkit.geometry._kernels.mvee_weights_kernel`; no per-iteration NumPy overhead, the
-    same steps; the weights' moments are summed in index order, so results agree with
-    ``backend="numpy"`` to rounding); ``"numpy"``: the batched loop below.
+    (:func:`navkit.geometry._kernels.mvee_weights_kernel`; no per-iteration NumPy overhead);
+    ``"numpy"``: the batched loop below. Both make the same IEEE operations in the same order
+    (every sum over the points in index order, :func:`_sum_in_order`; the 2 x 2 inverse and
+    eigen-decomposition written out, :func:`_mvee_axes`), so they give the same bits.
     """
     backend = resolve_backend(backend)
     n = len(hulls)
@@ -690,7 +691,7 @@ def mvee_batch(
         return []
     d = 2
     m = max(len(h) for h in hulls)
-    origin = np.array([h.mean(axis=0) for h in hulls])
+    origin = np.array([_mean_in_order(h) for h in hulls])
     # pad each set to m points by repeating its first point with weight 0: a padded copy never
     # wins argmax (ties go to the first index) and, weightless, never argmin over the support
     P = np.empty((n, m, 2))
@@ -719,7 +720,7 @@ def mvee_batch(
         for _ in range(max_iter):
             if len(idx) == 0:
                 break
-            mom = np.einsum("kfm,km->kf", Fa, ua)
+            mom = _sum_in_order(Fa * ua[:, None, :])
             cx, cy = mom[:, 0:1], mom[:, 1:2]
             sxx, sxy, syy = mom[:, 2:3] - cx * cx, mom[:, 3:4] - cx * cy, mom[:, 4:5] - cy * cy
             det = np.maximum(sxx * syy - sxy * sxy, 1e-300)
@@ -752,21 +753,63 @@ def mvee_batch(
                 r = np.arange(len(idx))
     if len(idx):
         u[idx] = ua
-    c = np.einsum("nm,nmi->ni", u, P)
-    S = np.einsum("nmi,nm,nmj->nij", P, u, P) - np.einsum("ni,nj->nij", c, c)
-    A = np.linalg.inv(S) / d
-    diff = P - c[:, None, :]
-    val = np.einsum("nmi,nij,nmj->nm", diff, A, diff)
-    worst = np.where(mask, val, 0.0).max(axis=1)
-    A = A / np.maximum(worst, 1e-300)[:, None, None] / (1 + 1e-12)
-    out = []
-    for i in range(n):
-        w, V = np.linalg.eigh(A[i])  # ascending: w[0] smallest -> major axis
-        a, b = 1 / math.sqrt(w[0]), 1 / math.sqrt(w[1])
-        angle = math.atan2(V[1, 0], V[0, 0])
-        cx, cy = c[i] * scale[i] + origin[i]
-        out.append(_ellipse(cx, cy, a * scale[i], b * scale[i], angle))
-    return out
+    # the centre c = P u and A = (P diag(u) P^T - c c^T)^-1 / d in closed form (the kernel's
+    # ``mvee_csr_kernel`` operations), scaled so that the farthest point is on the ellipse
+    x, y = P[..., 0], P[..., 1]
+    cx, cy = _sum_in_order(u * x), _sum_in_order(u * y)
+    sxx = _sum_in_order(x * u * x) - cx * cx
+    sxy = _sum_in_order(x * u * y) - cx * cy
+    syy = _sum_in_order(y * u * y) - cy * cy
+    det = sxx * syy - sxy * sxy
+    a00, a01, a11 = syy / det / d, -sxy / det / d, sxx / det / d
+    dx, dy = x - cx[:, None], y - cy[:, None]
+    val = dx * (a00[:, None] * dx + a01[:, None] * dy) + dy * (
+        a01[:, None] * dx + a11[:, None] * dy
+    )
+    f = np.maximum(np.where(mask, val, 0.0).max(axis=1), 1e-300) * (1 + 1e-12)
+    a, b, angle = _mvee_axes(a00 / f, a01 / f, a11 / f)
+    ex, ey = cx * scale + origin[:, 0], cy * scale + origin[:, 1]
+    return [
+        _ellipse(*row)
+        for row in zip(ex.tolist(), ey.tolist(), (a * scale).tolist(), (b * scale).tolist(), angle)
+    ]
+
+
+def _mean_in_order(H: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The mean of the rows of ``H (m, 2)``, summed in index order (the kernels' order)."""
+    return (_sum_in_order(H.T) / len(H)).astype(np.float64)
+
+
+def _sum_in_order(t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Sums over the last axis in index order, ``((0 + t0) + t1) + ...``, as a kernel's loop.
+
+    The last element of a cumulative sum: ``add.accumulate`` adds each term to the running sum
+    (its result at every index is defined by that order), where a reduction (``sum``,
+    ``einsum``, ``dot``) may pair terms differently per CPU (SIMD width, BLAS); ``+ 0.0``
+    gives the loop's ``+0`` for a sum of ``-0`` terms."""
+    if t.shape[-1] == 0:
+        return np.zeros(t.shape[:-1])
+    return np.cumsum(t, axis=-1)[..., -1] + 0.0
+
+
+def _mvee_axes(
+    p: NDArray[np.float64], q: NDArray[np.float64], r: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], list[float]]:
+    """Semi-axes ``a >= b`` and major-axis angle of the ellipses ``[[p, q], [q, r]]``
+    (positive definite), the 2 x 2 eigen-decomposition written out (elementwise IEEE
+    operations and the fixed :func:`~navkit.geometry.angles.atan2`: the same bits on any CPU,
+    where LAPACK's ``eigh`` depends on the build and the machine).
+
+    The eigenvalues are ``w1 = (p + r) / 2 + h`` and ``w0 = det / w1`` (``h = sqrt(((p - r)
+    / 2)^2 + q^2)``; ``w0`` as a quotient, not ``(p + r) / 2 - h``, which cancels for elongated
+    ellipses); the axes ``1 / sqrt(w)``. The eigenvector of ``w1`` is at
+    ``atan2(2 q, p - r) / 2``, the major axis (of ``w0``) a quarter turn further."""
+    hd = 0.5 * (p - r)
+    h = np.sqrt(hd * hd + q * q)
+    w1 = 0.5 * (p + r) + h
+    w0 = (p * r - q * q) / w1
+    angle = 0.5 * fixed_atan2(2.0 * q, p - r) + 0.5 * math.pi
+    return 1.0 / np.sqrt(w0), 1.0 / np.sqrt(w1), angle.tolist()
 
 
 def mvee_khachiyan(points: ArrayLike, tol: float = 1e-3) -> Ellipse:
@@ -946,15 +989,13 @@ def _normalised(
 
 
 def _mvee_rows(H: NDArray[np.float64], hoff: NDArray[np.int64]) -> NDArray[np.float64]:
-    """:func:`mvee_batch` on CSR hulls (compiled weights and shape matrix, NumPy's ``eigh``)."""
+    """:func:`mvee_batch` on CSR hulls (compiled weights and shape matrix, :func:`_mvee_axes`)."""
     from navkit.geometry import _kernels
 
     origin, scale, c, A = _kernels.mvee_csr_kernel(H, hoff, 1e-3, 2000)
-    w, V = np.linalg.eigh(A)  # ascending: w[:, 0] smallest -> major axis
-    a, b = 1 / np.sqrt(w[:, 0]), 1 / np.sqrt(w[:, 1])
-    angle = np.arctan2(V[:, 1, 0], V[:, 0, 0])
+    a, b, angle = _mvee_axes(A[:, 0, 0], A[:, 0, 1], A[:, 1, 1])
     centre = c * scale[:, None] + origin
-    return _normalised(centre[:, 0], centre[:, 1], a * scale, b * scale, angle)
+    return _normalised(centre[:, 0], centre[:, 1], a * scale, b * scale, np.array(angle))
 
 
 # The records of a frame's shapes (hundreds) are built without the dataclasses' ``__init__``,
