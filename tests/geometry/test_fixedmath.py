@@ -17,9 +17,11 @@ from navkit.geometry.fixedmath import SINCOS_MAX, exp, log, sincos
 pytest.importorskip("numba")
 
 SPECIAL = np.array(
-    [0.0, -0.0, np.inf, -np.inf, np.nan, 1.0, -1.0, 5e-324, -5e-324, 2.2e-308, 1e-300, 0.5, 2.0]
-    + [709.78, 709.79, -745.13, -745.14, 1e300, -1e300, SINCOS_MAX, -SINCOS_MAX]
-    + [np.nextafter(SINCOS_MAX, 0), math.pi, math.pi / 2, math.pi / 4, 3 * math.pi / 4]
+    [
+        *(0.0, -0.0, np.inf, -np.inf, np.nan, 1.0, -1.0, 5e-324, -5e-324, 2.2e-308, 1e-300),
+        *(0.5, 2.0, 709.78, 709.79, -745.13, -745.14, 1e300, -1e300, SINCOS_MAX, -SINCOS_MAX),
+        *(np.nextafter(SINCOS_MAX, 0), math.pi, math.pi / 2, math.pi / 4, 3 * math.pi / 4),
+    ]
 )
 FINER = np.finfo(np.longdouble).eps < np.finfo(np.float64).eps
 

@@ -1,7 +1,13 @@
 """Compiled (Numba) kernels of the bounding shapes (:mod:`navkit.geometry.shapes`).
 
-Each kernel repeats its NumPy twin's arithmetic set by set; see ``docs/kernels.md``
-("Obstacles"). Selected by the ``backend`` keyword of :func:`~navkit.geometry.shapes.mvee_batch`
+Each kernel repeats its NumPy twin's IEEE operations in the same order, set by set, so both
+give the same bits on any CPU: no fused multiply-add (Numba without ``fastmath``), every sum in
+index order, ``sqrt(x^2 + y^2)`` for ``hypot`` and ``atan2``, ``sin``, ``cos``, ``exp``, ``log``
+with one fixed arithmetic (the scalar functions below; :mod:`navkit.geometry.fixedmath`,
+:mod:`navkit.geometry.angles`); see ``docs/kernels.md`` ("Equivalence contract: geometry").
+The kernels read the constants of those two modules when they compile: Numba's cache is keyed
+by this file, so a change to those constants needs this file touched (or the cache cleared).
+Selected by the ``backend`` keyword of :func:`~navkit.geometry.shapes.mvee_batch`
 and :func:`~navkit.geometry.shapes.compute_shapes` (``"compiled"`` by default).
 """
 
@@ -290,8 +296,7 @@ def mvee_weights_kernel(P, mask, tol, max_iter):  # type: ignore[no-untyped-def]
     ``P (n, m, 2)`` are the centred, scaled, padded sets and ``mask (n, m)`` their real points
     (a prefix of each row: the padding repeats the first point with weight 0, which changes
     no step, so each set is iterated on its real points alone). The moments are summed in
-    index order (the twin's ``einsum`` may group them differently: the weights agree to
-    rounding).
+    index order, as the twin's ``_sum_in_order``: the same weights, bit for bit.
     """
     n, m = mask.shape
     u = np.zeros((n, m))
@@ -316,7 +321,8 @@ def _a6_search(P0, x0, step0, min_step, max_iter):  # type: ignore[no-untyped-de
     (x, y, phi, log k) with steps ``step0 (4,)`` down to ``min_step (4,)``: the final parameters.
 
     The 81 trials are evaluated as in the twin (u, v on the 27 (phi, x, y) combinations, a^2 on
-    81) in the twin's order; ``cos``, ``sin`` and ``exp`` are libm's. A group of three trials
+    81) in the twin's order; ``cos``, ``sin`` and ``exp`` with the fixed arithmetic of
+    :func:`_sincos` and :func:`_exp` (the twin's ``fixedmath``). A group of three trials
     stops early once none of them can be chosen (its running maximum already gives an area at
     least the current one or an earlier trial's): the chosen trial and its area are unchanged.
 
@@ -1029,7 +1035,7 @@ def mvee_csr_kernel(H, hoff, tol, max_iter):  # type: ignore[no-untyped-def]
     the centre ``c``, ``A = S^-1 / 2`` scaled so that the farthest point is on the ellipse.
 
     Returns ``origin (n, 2)``, ``scale (n,)``, ``c (n, 2)`` and ``A (n, 2, 2)``
-    (``np.linalg.inv``'s result to rounding: the 2 x 2 inverse in closed form).
+    (the 2 x 2 inverse in closed form, as the twin; the axes from ``shapes._mvee_axes``).
     """
     n = len(hoff) - 1
     origin = np.empty((n, 2))

@@ -482,9 +482,10 @@ def ellipses_a6_batch(
     random elongated sets it lands within 0.6 % (median), 3 % (90th percentile) of the MVEE.
 
     ``backend="compiled"`` runs the search set by set in a Numba kernel
-    (:func:`navkit.geometry._kernels.a6_search_kernel`: the same trials in the same order;
-    ``cos``, ``sin`` and ``exp`` from libm instead of NumPy's SIMD versions, which differ by an
-    ulp - tested to give the same ellipses to 1e-9); ``"numpy"``: the batched search below.
+    (:func:`navkit.geometry._kernels.a6_search_kernel`: the same trials in the same order);
+    ``"numpy"``: the batched search below. Both take ``cos``, ``sin``, ``exp`` and ``log`` from
+    :mod:`navkit.geometry.fixedmath` (NumPy's SIMD versions and the C library's, which a kernel
+    would call, differ in the last bit and per CPU), so they give the same ellipses bit for bit.
     """
     backend = resolve_backend(backend)
     n = len(hulls)
@@ -769,10 +770,8 @@ def mvee_batch(
     f = np.maximum(np.where(mask, val, 0.0).max(axis=1), 1e-300) * (1 + 1e-12)
     a, b, angle = _mvee_axes(a00 / f, a01 / f, a11 / f)
     ex, ey = cx * scale + origin[:, 0], cy * scale + origin[:, 1]
-    return [
-        _ellipse(*row)
-        for row in zip(ex.tolist(), ey.tolist(), (a * scale).tolist(), (b * scale).tolist(), angle)
-    ]
+    cols = (ex.tolist(), ey.tolist(), (a * scale).tolist(), (b * scale).tolist(), angle)
+    return [_ellipse(*row) for row in zip(*cols, strict=True)]
 
 
 def _mean_in_order(H: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -1058,7 +1057,7 @@ def shapes_csr(
     The shipped methods run in kernels over all hulls at once
     (:func:`navkit.geometry._kernels.basic_shapes_kernel`: A1-A5 and Welzl's circle;
     ``a6_csr_kernel``; ``mvee_csr_kernel``) with their twins' arithmetic, so the shapes equal
-    :func:`compute_shapes` with ``backend="numpy"`` (floats to 1e-9 relative). A method
+    :func:`compute_shapes` with ``backend="numpy"`` bit for bit, on any CPU. A method
     replaced or added with :func:`register_shape` is called hull by hull.
     """
     from navkit.geometry import _kernels
