@@ -184,3 +184,109 @@ def test_registry_is_extensible():
             compute_shapes([P], ("NOPE",))
     finally:
         SHAPES.pop("TEST_SQUARE_CIRCLE", None)
+
+
+# ----------------------------------------------------------------------------------------------
+# the compiled shapes (geometry._kernels) against their NumPy twins: the same bits
+
+
+def _bits(shapes: dict) -> dict[str, np.ndarray]:
+    """Every float parameter of every shape, as the int64 view of its bits (signed zeros and
+    NaN payloads count)."""
+    return {
+        name: np.array([v for v in s.params().values() if not isinstance(v, str)]).view(np.int64)
+        for name, s in shapes.items()
+    }
+
+
+def assert_same_shapes_bits(point_sets, *, are_hulls=False):  # type: ignore[no-untyped-def]
+    """``compute_shapes`` with every built-in shape on both backends: equal bit for bit.
+
+    This holds on any CPU, not only on the machine that runs the test: the kernels and the
+    twins make the same IEEE-754 operations in the same order (no fused multiply-add, no
+    reassociation), every sum over points in index order (the twins' ``_sum_in_order``, never a
+    NumPy reduction, ``einsum`` or BLAS, whose grouping depends on the SIMD width and the
+    library), the 2 x 2 algebra of MVEE written out instead of LAPACK's ``inv`` / ``eigh``,
+    ``sqrt(x^2 + y^2)`` instead of ``hypot``, and ``atan2``, ``sin``, ``cos``, ``exp``, ``log``
+    from one fixed arithmetic (``geometry.angles``, ``geometry.fixedmath``) instead of NumPy's
+    SIMD or the C library's versions, which differ per CPU. Square roots and the basic
+    operations are correctly rounded by IEEE-754, so equal inputs give equal bits everywhere.
+    """
+    sets = list(point_sets)
+    a = compute_shapes(sets, ALL, are_hulls=are_hulls, backend="numpy")
+    b = compute_shapes(sets, ALL, are_hulls=are_hulls, backend="compiled")
+    assert len(a) == len(b) == len(sets)
+    for k, (sa, sb) in enumerate(zip(a, b, strict=True)):
+        ba, bb = _bits(sa), _bits(sb)
+        for name in ALL:
+            assert np.array_equal(ba[name], bb[name]), f"set {k} {name}: {sa[name]} {sb[name]}"
+
+
+def test_compiled_shapes_equal_numpy_bit_for_bit_on_random_sets(rng):
+    pytest.importorskip("numba")
+    sets = []
+    for _ in range(150):
+        k = int(rng.integers(3, 300))
+        scale = rng.uniform(0.02, 5.0, size=2)
+        P = rng.normal(size=(k, 2)) * scale + rng.uniform(-40, 40, 2)
+        ang = rng.uniform(-math.pi, math.pi)
+        R = np.array([[math.cos(ang), -math.sin(ang)], [math.sin(ang), math.cos(ang)]])
+        sets.append(P @ R.T)
+    sets += [
+        np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]),  # a triangle
+        np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0]]),  # collinear: the 1 mm dilation
+        np.array([[1.0, 2.0]]),  # one point
+        np.array([[-3.0, -3.0], [3.0, -3.0], [3.0, 3.0], [-3.0, 3.0]]),  # a square: A5 = A2
+    ]
+    assert_same_shapes_bits(sets)
+    assert_same_shapes_bits([hull_points(P) for P in sets], are_hulls=True)
+
+
+def _stage_8_inputs(detection):  # type: ignore[no-untyped-def]
+    """Stage 8's two inputs per obstacle: the boundary vertices (the shapes) and the vertices
+    with the shadows' (A7)."""
+    return [o.boundary_xy for o in detection.obstacles], [o.shadow_xy for o in detection.obstacles]
+
+
+@pytest.mark.parametrize(("scene", "scanner"), [("four", "tilting"), ("four", "spinning64")])
+def test_compiled_shapes_equal_numpy_bit_for_bit_on_simulated_scans(scene, scanner):
+    pytest.importorskip("numba")
+    from navkit.experiments.obstacles import paper_scenes, scanners
+    from navkit.geometry import se3_from_rt
+    from navkit.obstacles import ObstacleSettings, detect_obstacles
+    from navkit.sim import RangeNoise, render_scan
+
+    sc, height = scanners()[scanner]
+    T = se3_from_rt(np.eye(3), [0.0, 0.0, height])
+    sim = render_scan(
+        paper_scenes()[scene], sc, T, noise=RangeNoise(relative_sigma=0.01), rng=3, max_range=60.0
+    )
+    det = detect_obstacles(sim.scan, ObstacleSettings(backend="compiled"))
+    boundary, a7 = _stage_8_inputs(det)
+    assert len(boundary) > 0
+    assert_same_shapes_bits(boundary)
+    assert_same_shapes_bits(a7)
+
+
+def test_compiled_shapes_equal_numpy_bit_for_bit_on_kitti(data_path):
+    """Every obstacle of the recorded SemanticKITTI frames (hundreds of sets from 3 to
+    hundreds of vertices): its boundary and its A7 set (with the shadows)."""
+    pytest.importorskip("numba")
+    from navkit.io.pointcloud import read_kitti_bin
+    from navkit.obstacles import (
+        Mounting,
+        ObstacleSettings,
+        cloud_to_grid,
+        detect_obstacles_in_grid,
+    )
+
+    folder = data_path("lidar/semantickitti-seq00")
+    files = sorted(folder.glob("*.bin"))
+    assert files
+    for f in files:
+        grid = cloud_to_grid(read_kitti_bin(f))
+        det = detect_obstacles_in_grid(grid, Mounting(1.73), ObstacleSettings(backend="compiled"))
+        boundary, a7 = _stage_8_inputs(det)
+        assert len(boundary) > 20
+        assert_same_shapes_bits(boundary)
+        assert_same_shapes_bits(a7)

@@ -1,7 +1,13 @@
 """Compiled (Numba) kernels of the bounding shapes (:mod:`navkit.geometry.shapes`).
 
-Each kernel repeats its NumPy twin's arithmetic set by set; see ``docs/kernels.md``
-("Obstacles"). Selected by the ``backend`` keyword of :func:`~navkit.geometry.shapes.mvee_batch`
+Each kernel repeats its NumPy twin's IEEE operations in the same order, set by set, so both
+give the same bits on any CPU: no fused multiply-add (Numba without ``fastmath``), every sum in
+index order, ``sqrt(x^2 + y^2)`` for ``hypot`` and ``atan2``, ``sin``, ``cos``, ``exp``, ``log``
+with one fixed arithmetic (the scalar functions below; :mod:`navkit.geometry.fixedmath`,
+:mod:`navkit.geometry.angles`); see ``docs/kernels.md`` ("Equivalence contract: geometry").
+The kernels read the constants of those two modules when they compile: Numba's cache is keyed
+by this file, so a change to those constants needs this file touched (or the cache cleared).
+Selected by the ``backend`` keyword of :func:`~navkit.geometry.shapes.mvee_batch`
 and :func:`~navkit.geometry.shapes.compute_shapes` (``"compiled"`` by default).
 """
 
@@ -12,6 +18,7 @@ import math
 import numpy as np
 from numba import njit
 
+from navkit.geometry import fixedmath as _fm
 from navkit.geometry.angles import ATAN_P, ATAN_Q, MID_FROM, MOREBITS, PI_2, PI_4, TAN_3PI_8
 
 __all__ = [
@@ -19,10 +26,181 @@ __all__ = [
     "a6_search_kernel",
     "atan2_kernel",
     "basic_shapes_kernel",
+    "exp_kernel",
     "hulls_csr_kernel",
+    "log_kernel",
     "mvee_csr_kernel",
     "mvee_weights_kernel",
+    "sincos_kernel",
 ]
+
+# ------------------------------------------------------------------------------------------
+# sin, cos, exp, log and atan2 with one fixed arithmetic: the scalar twins of
+# navkit.geometry.fixedmath and navkit.geometry.angles (the same operations in the same order,
+# so the same bits on every machine; see those modules for the algorithms and their errors)
+
+_P0, _P1, _P2, _P3, _P4 = ATAN_P
+_Q0, _Q1, _Q2, _Q3, _Q4 = ATAN_Q
+_S0, _S1, _S2, _S3, _S4, _S5 = _fm.SIN_C
+_C0, _C1, _C2, _C3, _C4, _C5 = _fm.COS_C
+_PI4A, _PI4B, _PI4C, _FOUR_OVER_PI, _SINCOS_MAX = (
+    _fm.PI4A,
+    _fm.PI4B,
+    _fm.PI4C,
+    _fm.FOUR_OVER_PI,
+    _fm.SINCOS_MAX,
+)
+_EP0, _EP1, _EP2 = _fm.EXP_P
+_EQ0, _EQ1, _EQ2, _EQ3 = _fm.EXP_Q
+_LN2_HI, _LN2_LO, _LOG2E, _EXP_MAX, _EXP_MIN = (
+    _fm.LN2_HI,
+    _fm.LN2_LO,
+    _fm.LOG2E,
+    _fm.EXP_MAX,
+    _fm.EXP_MIN,
+)
+_LP0, _LP1, _LP2, _LP3, _LP4, _LP5 = _fm.LOG_P
+_LQ0, _LQ1, _LQ2, _LQ3, _LQ4 = _fm.LOG_Q
+_LR0, _LR1, _LR2 = _fm.LOG_R
+_LS0, _LS1, _LS2 = _fm.LOG_S
+_LOG_HI, _LOG_LO, _SQRTH = _fm.LOG_LN2_HI, _fm.LOG_LN2_LO, _fm.SQRTH
+
+
+@njit(cache=True, error_model="numpy")
+def _sincos(x):  # type: ignore[no-untyped-def]
+    """``(sin x, cos x)``: :func:`navkit.geometry.fixedmath.sincos` on one value."""
+    ax = abs(x)
+    if not ax < _SINCOS_MAX:
+        return np.nan, np.nan
+    j = np.int64(ax * _FOUR_OVER_PI)
+    y = np.float64(j)
+    if j & 1:
+        j += 1
+        y = y + 1.0
+    j &= 7
+    z = ((ax - y * _PI4A) - y * _PI4B) - y * _PI4C
+    zz = z * z
+    ps = (((((zz * _S0 + _S1) * zz + _S2) * zz + _S3) * zz + _S4) * zz + _S5) * zz
+    s = z + z * ps
+    pc = (((((zz * _C0 + _C1) * zz + _C2) * zz + _C3) * zz + _C4) * zz + _C5) * zz
+    c = (1.0 - 0.5 * zz) + zz * pc
+    upper = j > 3
+    if upper:
+        j -= 4
+    swap = j == 2
+    sv = c if swap else s
+    cv = s if swap else c
+    if upper != (math.copysign(1.0, x) < 0.0):
+        sv = -sv
+    if upper != swap:
+        cv = -cv
+    return sv, cv
+
+
+@njit(cache=True, error_model="numpy")
+def _exp(x):  # type: ignore[no-untyped-def]
+    """``e^x``: :func:`navkit.geometry.fixedmath.exp` on one value."""
+    if x != x:
+        return x
+    if x > _EXP_MAX:
+        return np.inf
+    if x < _EXP_MIN:
+        return 0.0
+    px = np.floor(_LOG2E * x + 0.5)
+    n = np.int64(px)
+    r = x - px * _LN2_HI
+    r = r - px * _LN2_LO
+    rr = r * r
+    p = r * ((_EP0 * rr + _EP1) * rr + _EP2)
+    q = ((_EQ0 * rr + _EQ1) * rr + _EQ2) * rr + _EQ3
+    e = p / (q - p)
+    e = 1.0 + 2.0 * e
+    return math.ldexp(e, n)
+
+
+@njit(cache=True, error_model="numpy")
+def _log(x):  # type: ignore[no-untyped-def]
+    """``ln x``: :func:`navkit.geometry.fixedmath.log` on one value."""
+    if not (x > 0.0 and x < np.inf):
+        if x == np.inf:
+            return np.inf
+        if x == 0.0:
+            return -np.inf
+        return np.nan
+    f, e = math.frexp(x)
+    ef = np.float64(e)
+    low = f < _SQRTH
+    if low:
+        ef = ef - 1.0
+    if e > 2 or e < -2:
+        zn = f - 0.5
+        if low:
+            zd = 0.5 * zn + 0.5
+        else:
+            zn = zn - 0.5
+            zd = 0.5 * f + 0.5
+        w = zn / zd
+        w2 = w * w
+        rr = (_LR0 * w2 + _LR1) * w2 + _LR2
+        ss = ((w2 + _LS0) * w2 + _LS1) * w2 + _LS2
+        z = w * (w2 * rr / ss)
+        z = z + ef * _LOG_LO
+        z = z + w
+        return z + ef * _LOG_HI
+    t = (f + f) - 1.0 if low else f - 1.0
+    t2 = t * t
+    pp = ((((_LP0 * t + _LP1) * t + _LP2) * t + _LP3) * t + _LP4) * t + _LP5
+    qq = ((((t + _LQ0) * t + _LQ1) * t + _LQ2) * t + _LQ3) * t + _LQ4
+    y = t * (t2 * pp / qq)
+    y = y + ef * _LOG_LO
+    y = y - 0.5 * t2
+    z = t + y
+    return z + ef * _LOG_HI
+
+
+@njit(cache=True, error_model="numpy")
+def _atan2(yk, xk):  # type: ignore[no-untyped-def]
+    """``atan2(y, x)``: :func:`navkit.geometry.angles.atan2` on one pair (the loop body of
+    :func:`atan2_kernel`)."""
+    t = yk / xk
+    a = abs(t)
+    big = a > TAN_3PI_8
+    mid = a > MID_FROM
+    r = -1.0 / a if big else ((a - 1.0) / (a + 1.0) if mid else a)
+    z = r * r
+    num = ((((z * _P0 + _P1) * z + _P2) * z + _P3) * z + _P4) * z
+    den = (((z + _Q0) * z + _Q1) * z + _Q2) * z + _Q3
+    den = den * z + _Q4
+    v = r * (num / den) + r
+    v = v + (MOREBITS if big else (0.5 * MOREBITS if mid else 0.0))
+    v = v + (PI_2 if big else (PI_4 if mid else 0.0))
+    v = math.copysign(v, t)
+    v = v + math.copysign(math.pi, yk) if xk < 0 else v
+    on_axis = (math.pi if math.copysign(1.0, xk) < 0 else 0.0) if yk == 0 else PI_2
+    return math.copysign(on_axis, yk) if xk == 0 else v
+
+
+@njit(cache=True, error_model="numpy")
+def sincos_kernel(x, s, c):  # type: ignore[no-untyped-def]
+    """``s[k], c[k] = sin x[k], cos x[k]`` (:func:`_sincos`)."""
+    for k in range(len(x)):
+        s[k], c[k] = _sincos(x[k])
+
+
+@njit(cache=True, error_model="numpy")
+def exp_kernel(x, out):  # type: ignore[no-untyped-def]
+    """``out[k] = e^x[k]`` (:func:`_exp`)."""
+    for k in range(len(x)):
+        out[k] = _exp(x[k])
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def log_kernel(x, out):  # type: ignore[no-untyped-def]
+    """``out[k] = ln x[k]`` (:func:`_log`)."""
+    for k in range(len(x)):
+        out[k] = _log(x[k])
+    return out
 
 
 @njit(cache=True, error_model="numpy")
@@ -118,8 +296,7 @@ def mvee_weights_kernel(P, mask, tol, max_iter):  # type: ignore[no-untyped-def]
     ``P (n, m, 2)`` are the centred, scaled, padded sets and ``mask (n, m)`` their real points
     (a prefix of each row: the padding repeats the first point with weight 0, which changes
     no step, so each set is iterated on its real points alone). The moments are summed in
-    index order (the twin's ``einsum`` may group them differently: the weights agree to
-    rounding).
+    index order, as the twin's ``_sum_in_order``: the same weights, bit for bit.
     """
     n, m = mask.shape
     u = np.zeros((n, m))
@@ -144,7 +321,8 @@ def _a6_search(P0, x0, step0, min_step, max_iter):  # type: ignore[no-untyped-de
     (x, y, phi, log k) with steps ``step0 (4,)`` down to ``min_step (4,)``: the final parameters.
 
     The 81 trials are evaluated as in the twin (u, v on the 27 (phi, x, y) combinations, a^2 on
-    81) in the twin's order; ``cos``, ``sin`` and ``exp`` are libm's. A group of three trials
+    81) in the twin's order; ``cos``, ``sin`` and ``exp`` with the fixed arithmetic of
+    :func:`_sincos` and :func:`_exp` (the twin's ``fixedmath``). A group of three trials
     stops early once none of them can be chosen (its running maximum already gives an area at
     least the current one or an earlier trial's): the chosen trial and its area are unchanged.
 
@@ -170,8 +348,8 @@ def _a6_search(P0, x0, step0, min_step, max_iter):  # type: ignore[no-untyped-de
     cur = x0.copy()
     step = step0.copy()
     # f at the start (``_a6_area``)
-    k0 = np.exp(cur[3])
-    c0, s0 = np.cos(cur[2]), np.sin(cur[2])
+    k0 = _exp(cur[3])
+    s0, c0 = _sincos(cur[2])
     a2 = 0.0
     for q in range(mh):
         dx = P[q, 0] - cur[0]
@@ -187,8 +365,8 @@ def _a6_search(P0, x0, step0, min_step, max_iter):  # type: ignore[no-untyped-de
     for it in range(max_iter):
         if moved:  # the points of the largest a^2 at the current parameters first
             if it > 0:
-                k0 = np.exp(cur[3])
-                c0, s0 = np.cos(cur[2]), np.sin(cur[2])
+                k0 = _exp(cur[3])
+                s0, c0 = _sincos(cur[2])
                 for q in range(mh):
                     dx = P[q, 0] - cur[0]
                     dy = P[q, 1] - cur[1]
@@ -210,11 +388,10 @@ def _a6_search(P0, x0, step0, min_step, max_iter):  # type: ignore[no-untyped-de
                 vals[t, p] = cur[p] + three[t] * step[p]
             if vals[t, 2] != ph[t]:
                 ph[t] = vals[t, 2]
-                cs[t] = np.cos(ph[t])
-                sn[t] = np.sin(ph[t])
+                sn[t], cs[t] = _sincos(ph[t])
             if vals[t, 3] != lk[t]:
                 lk[t] = vals[t, 3]
-                kk[t] = np.exp(lk[t])
+                kk[t] = _exp(lk[t])
         # a trial whose running maximum already gives an area >= thr (the current area, or the
         # best earlier trial's) can be neither the first best trial nor an improvement: once
         # all three trials of a group are there, the group stops (f = inf); the chosen trial
@@ -680,7 +857,14 @@ def _ellipse_norm(out, c, x, y, a, b, angle):  # type: ignore[no-untyped-def]
 
 @njit(cache=True, error_model="numpy")
 def _inside(px, py, cx, cy, r):  # type: ignore[no-untyped-def]
-    return math.hypot(px - cx, py - cy) <= r * (1 + 1e-12) + 1e-12
+    return _norm(px - cx, py - cy) <= r * (1 + 1e-12) + 1e-12
+
+
+@njit(cache=True, error_model="numpy")
+def _norm(dx, dy):  # type: ignore[no-untyped-def]
+    """``sqrt(dx^2 + dy^2)``: ``shapes._norm`` (not ``hypot``, whose algorithm is the C
+    library's here and CPython's own in the twin)."""
+    return math.sqrt(dx * dx + dy * dy)
 
 
 @njit(cache=True, error_model="numpy")
@@ -709,7 +893,7 @@ def _welzl(hx, hy, perm, out, c):  # type: ignore[no-untyped-def]
             if _inside(px[j], py[j], cx, cy, r):
                 continue
             cx, cy = 0.5 * (px[i] + px[j]), 0.5 * (py[i] + py[j])
-            r = math.hypot(px[i] - cx, py[i] - cy)
+            r = _norm(px[i] - cx, py[i] - cy)
             for k in range(j):
                 if _inside(px[k], py[k], cx, cy, r):
                     continue
@@ -720,7 +904,7 @@ def _welzl(hx, hy, perm, out, c):  # type: ignore[no-untyped-def]
                 a2, b2, c2 = ax * ax + ay * ay, bx * bx + by * by, qx * qx + qy * qy
                 cx = (a2 * (by - qy) + b2 * (qy - ay) + c2 * (ay - by)) / d
                 cy = (a2 * (qx - bx) + b2 * (ax - qx) + c2 * (bx - ax)) / d
-                r = math.hypot(ax - cx, ay - cy)
+                r = _norm(ax - cx, ay - cy)
     out[c] = cx + ox
     out[c + 1] = cy + oy
     out[c + 2] = r * (1 + 1e-12)
@@ -751,7 +935,7 @@ def basic_shapes_kernel(H, hoff, perm):  # type: ignore[no-untyped-def]
             ymax = max(ymax, hy[k])
         o[0], o[1], o[2], o[3] = xmin, xmax, ymin, ymax
         # A2
-        r2 = 0.5 * math.hypot(xmax - xmin, ymax - ymin)
+        r2 = 0.5 * _norm(xmax - xmin, ymax - ymin)
         c2x, c2y = 0.5 * (xmin + xmax), 0.5 * (ymin + ymax)
         o[4], o[5], o[6] = c2x, c2y, r2
         # A3
@@ -761,10 +945,10 @@ def basic_shapes_kernel(H, hoff, perm):  # type: ignore[no-untyped-def]
             i0, i1 = np.argmin(hy), np.argmax(hy)
         x0, y0, x1, y1 = hx[i0], hy[i0], hx[i1], hy[i1]
         cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
-        r = 0.5 * math.hypot(x1 - x0, y1 - y0)
+        r = 0.5 * _norm(x1 - x0, y1 - y0)
         for k in range(b - a):
             px, py = hx[k], hy[k]
-            d = math.hypot(px - cx, py - cy)
+            d = _norm(px - cx, py - cy)
             if d <= r * (1 + 1e-12) + 1e-12:
                 continue
             new_r = 0.5 * (d + r)
@@ -773,19 +957,19 @@ def basic_shapes_kernel(H, hoff, perm):  # type: ignore[no-untyped-def]
         o[7], o[8], o[9] = cx, cy, r
         # A4 (gamma minimising the area)
         dx, dy = xmax - xmin, ymax - ymin
-        rho = 0.5 * math.hypot(dx, dy)
-        angle = math.atan2(dy, dx)
+        rho = 0.5 * _norm(dx, dy)
+        angle = _atan2(dy, dx)
         cos_phi = (dx * -dx + dy * dy) / max(dx * dx + dy * dy, 1e-300)
         gamma = max(1.0, math.sqrt(2.0) * abs(cos_phi))
-        sin2 = 1.0 - cos_phi**2
-        denom = 1.0 - cos_phi**2 / gamma**2
+        sin2 = 1.0 - cos_phi * cos_phi
+        denom = 1.0 - cos_phi * cos_phi / (gamma * gamma)
         b4 = rho * math.sqrt(sin2 / denom) if denom > 0 else rho
         _ellipse_norm(o, 10, c2x, c2y, gamma * rho, b4, angle)
         # A5: both diagonals, the smaller ellipse
         best = np.inf
         for sign in (1.0, -1.0):
-            ang = math.atan2(sign * (ymax - ymin), xmax - xmin)
-            c, sn = math.cos(ang), math.sin(ang)
+            ang = _atan2(sign * (ymax - ymin), xmax - xmin)
+            sn, c = _sincos(ang)
             kmax = -np.inf
             for k in range(b - a):
                 ddx, ddy = hx[k] - c2x, hy[k] - c2y
@@ -823,13 +1007,13 @@ def a6_csr_kernel(H, hoff, start, rel_tol, max_iter):  # type: ignore[no-untyped
         x, y, ea, eb, ang = start[s, 0], start[s, 1], start[s, 2], start[s, 3], start[s, 4]
         cur = np.empty(4)
         cur[0], cur[1], cur[2] = x, y, ang
-        cur[3] = math.log(max(eb / ea, 1e-6)) if ea > 0 else 0.0
+        cur[3] = _log(max(eb / ea, 1e-6)) if ea > 0 else 0.0
         size = max(ea, 1e-6)
         step = np.array([0.25 * size, 0.25 * size, 0.2, 0.2])
         min_step = np.array([rel_tol * size, rel_tol * size, rel_tol, rel_tol])
         cur = _a6_search(P, cur, step, min_step, max_iter)
-        k = np.exp(cur[3])
-        c, sn = np.cos(cur[2]), np.sin(cur[2])
+        k = _exp(cur[3])
+        sn, c = _sincos(cur[2])
         a2 = 0.0
         for q in range(b - a):
             dx = P[q, 0] - cur[0]
@@ -838,7 +1022,7 @@ def a6_csr_kernel(H, hoff, start, rel_tol, max_iter):  # type: ignore[no-untyped
             v = -sn * dx + c * dy
             a2 = max(a2, u * u + (v * v) / (k * k))
         am = np.sqrt(a2) * (1 + 1e-12)
-        _ellipse_norm(out[s], 0, cur[0], cur[1], am, am * math.exp(cur[3]), cur[2])
+        _ellipse_norm(out[s], 0, cur[0], cur[1], am, am * k, cur[2])
         if math.pi * out[s, 2] * out[s, 3] > math.pi * ea * eb:
             out[s, 0], out[s, 1], out[s, 2], out[s, 3], out[s, 4] = x, y, ea, eb, ang
     return out
@@ -851,7 +1035,7 @@ def mvee_csr_kernel(H, hoff, tol, max_iter):  # type: ignore[no-untyped-def]
     the centre ``c``, ``A = S^-1 / 2`` scaled so that the farthest point is on the ellipse.
 
     Returns ``origin (n, 2)``, ``scale (n,)``, ``c (n, 2)`` and ``A (n, 2, 2)``
-    (``np.linalg.inv``'s result to rounding: the 2 x 2 inverse in closed form).
+    (the 2 x 2 inverse in closed form, as the twin; the axes from ``shapes._mvee_axes``).
     """
     n = len(hoff) - 1
     origin = np.empty((n, 2))
@@ -905,10 +1089,6 @@ def mvee_csr_kernel(H, hoff, tol, max_iter):  # type: ignore[no-untyped-def]
         cen[s, 0], cen[s, 1] = cx, cy
         A[s, 0, 0], A[s, 0, 1], A[s, 1, 0], A[s, 1, 1] = a00 / f, a01 / f, a01 / f, a11 / f
     return origin, scale, cen, A
-
-
-_P0, _P1, _P2, _P3, _P4 = ATAN_P
-_Q0, _Q1, _Q2, _Q3, _Q4 = ATAN_Q
 
 
 @njit(cache=True, error_model="numpy")

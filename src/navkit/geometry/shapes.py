@@ -40,7 +40,9 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import ConvexHull, QhullError
 
 from navkit.errors import InputError
+from navkit.geometry import fixedmath
 from navkit.geometry._validate import as_points, check_coordinates
+from navkit.geometry.angles import atan2 as fixed_atan2
 from navkit.jit import resolve_backend
 
 __all__ = [
@@ -291,6 +293,23 @@ def rect_a1(points: ArrayLike) -> Rectangle:
     return _rect_a1(hull_points(points))
 
 
+def _norm(dx: float, dy: float) -> float:
+    """``sqrt(dx^2 + dy^2)`` as three IEEE operations and a square root (the kernels' ``_norm``:
+    the same bits; ``math.hypot`` is CPython's own algorithm, the kernels' the C library's)."""
+    return math.sqrt(dx * dx + dy * dy)
+
+
+def _angle(y: float, x: float) -> float:
+    """``atan2(y, x)`` with the fixed arithmetic of :mod:`navkit.geometry.angles`."""
+    return float(fixed_atan2(y, x))
+
+
+def _sincos(x: float) -> tuple[float, float]:
+    """``(sin x, cos x)`` with the fixed arithmetic of :mod:`navkit.geometry.fixedmath`."""
+    s, c = fixedmath.sincos(x)
+    return float(s), float(c)
+
+
 def _rect_a1(H: NDArray[np.float64]) -> Rectangle:
     lo, hi = H.min(axis=0), H.max(axis=0)
     return Rectangle(float(lo[0]), float(hi[0]), float(lo[1]), float(hi[1]))
@@ -306,7 +325,7 @@ def _circle_a2(H: NDArray[np.float64]) -> Circle:
     return Circle(
         0.5 * (r.xmin + r.xmax),
         0.5 * (r.ymin + r.ymax),
-        0.5 * math.hypot(r.xmax - r.xmin, r.ymax - r.ymin),
+        0.5 * _norm(r.xmax - r.xmin, r.ymax - r.ymin),
         kind="circle",
     )
 
@@ -330,9 +349,9 @@ def _circle_a3(H: NDArray[np.float64]) -> Circle:
     i0, i1 = int(np.argmin(H[:, axis])), int(np.argmax(H[:, axis]))
     (x0, y0), (x1, y1) = H[i0], H[i1]
     cx, cy = 0.5 * (x0 + x1), 0.5 * (y0 + y1)
-    r = 0.5 * math.hypot(x1 - x0, y1 - y0)
+    r = 0.5 * _norm(x1 - x0, y1 - y0)
     for px, py in H.tolist():  # hull vertices only (tens), sequential by construction
-        d = math.hypot(px - cx, py - cy)
+        d = _norm(px - cx, py - cy)
         if d <= r * (1 + 1e-12) + 1e-12:
             continue
         new_r = 0.5 * (d + r)
@@ -369,9 +388,9 @@ def ellipse_a4(points: ArrayLike, gamma: float | None = None) -> Ellipse:
 def _ellipse_a4(H: NDArray[np.float64], gamma: float | None = None) -> Ellipse:
     r = _rect_a1(H)
     dx, dy = r.xmax - r.xmin, r.ymax - r.ymin
-    rho = 0.5 * math.hypot(dx, dy)
+    rho = 0.5 * _norm(dx, dy)
     cx, cy = 0.5 * (r.xmin + r.xmax), 0.5 * (r.ymin + r.ymax)
-    angle = math.atan2(dy, dx)
+    angle = _angle(dy, dx)
     # the other diagonal is at angle atan2(dy, -dx); phi is the angle between the diagonals
     cos_phi = (dx * -dx + dy * dy) / max(dx * dx + dy * dy, 1e-300)
     if gamma is None:
@@ -379,8 +398,8 @@ def _ellipse_a4(H: NDArray[np.float64], gamma: float | None = None) -> Ellipse:
     if not gamma >= 1.0:
         raise InputError(f"gamma = {gamma}", field="gamma", expected="a number >= 1")
     a = gamma * rho
-    sin2 = 1.0 - cos_phi**2
-    denom = 1.0 - cos_phi**2 / gamma**2
+    sin2 = 1.0 - cos_phi * cos_phi
+    denom = 1.0 - cos_phi * cos_phi / (gamma * gamma)
     b = rho * math.sqrt(sin2 / denom) if denom > 0 else rho
     return _ellipse(cx, cy, a, b, angle)
 
@@ -404,8 +423,8 @@ def _ellipse_a5(H: NDArray[np.float64]) -> Ellipse:
     r = c2.radius
     best: Ellipse | None = None
     for sign in (1.0, -1.0):
-        ang = math.atan2(sign * (rect.ymax - rect.ymin), rect.xmax - rect.xmin)
-        c, s = math.cos(ang), math.sin(ang)
+        ang = _angle(sign * (rect.ymax - rect.ymin), rect.xmax - rect.xmin)
+        s, c = _sincos(ang)
         dx, dy = H[:, 0] - c2.x, H[:, 1] - c2.y
         u = c * dx + s * dy
         v = -s * dx + c * dy
@@ -431,8 +450,9 @@ def _a6_area(
     ``a = max_i sqrt(u_i^2 + v_i^2 / k^2)``.
     """
     x, y, phi, logk = (params[..., i] for i in range(4))
-    k = np.exp(logk)
-    c, s = np.cos(phi)[..., None], np.sin(phi)[..., None]
+    k = fixedmath.exp(logk)
+    s, c = fixedmath.sincos(phi)
+    c, s = c[..., None], s[..., None]
     dx = P[:, None, :, 0] - x[..., None]
     dy = P[:, None, :, 1] - y[..., None]
     u = c * dx + s * dy
@@ -463,9 +483,10 @@ def ellipses_a6_batch(
     random elongated sets it lands within 0.6 % (median), 3 % (90th percentile) of the MVEE.
 
     ``backend="compiled"`` runs the search set by set in a Numba kernel
-    (:func:`navkit.geometry._kernels.a6_search_kernel`: the same trials in the same order;
-    ``cos``, ``sin`` and ``exp`` from libm instead of NumPy's SIMD versions, which differ by an
-    ulp - tested to give the same ellipses to 1e-9); ``"numpy"``: the batched search below.
+    (:func:`navkit.geometry._kernels.a6_search_kernel`: the same trials in the same order);
+    ``"numpy"``: the batched search below. Both take ``cos``, ``sin``, ``exp`` and ``log`` from
+    :mod:`navkit.geometry.fixedmath` (NumPy's SIMD versions and the C library's, which a kernel
+    would call, differ in the last bit and per CPU), so they give the same ellipses bit for bit.
     """
     backend = resolve_backend(backend)
     n = len(hulls)
@@ -502,9 +523,9 @@ def _a6_batch(
     for i, h in enumerate(hulls):
         P[i, : len(h)] = h
         mask[i, : len(h)] = True
-    x0 = np.array(
-        [[e.x, e.y, e.angle, math.log(max(e.b / e.a, 1e-6)) if e.a > 0 else 0.0] for e in starts]
-    )
+    ratio = np.array([max(e.b / e.a, 1e-6) if e.a > 0 else 1.0 for e in starts])
+    logk0 = fixedmath.log(ratio)  # log 1 = 0 exactly
+    x0 = np.array([[e.x, e.y, e.angle, lk] for e, lk in zip(starts, logk0.tolist(), strict=True)])
     size = np.array([max(e.a, 1e-6) for e in starts])
     step = np.column_stack([0.25 * size, 0.25 * size, np.full(n, 0.2), np.full(n, 0.2)])
     min_step = np.column_stack(
@@ -542,12 +563,13 @@ def _a6_batch(
         Pa = P[idx]
         dx = Pa[:, None, :, 0] - vals[:, :, 0, None]  # (k, 3x, m)
         dy = Pa[:, None, :, 1] - vals[:, :, 1, None]  # (k, 3y, m)
-        c = np.cos(vals[:, :, 2])[:, :, None, None, None]  # (k, 3phi, 1, 1, 1)
-        sn = np.sin(vals[:, :, 2])[:, :, None, None, None]
+        sn, c = fixedmath.sincos(vals[:, :, 2])
+        c = c[:, :, None, None, None]  # (k, 3phi, 1, 1, 1)
+        sn = sn[:, :, None, None, None]
         dxb, dyb = dx[:, None, :, None, :], dy[:, None, None, :, :]
         u = c * dxb + sn * dyb  # (k, 3phi, 3x, 3y, m)
         v = -sn * dxb + c * dyb
-        kk = np.exp(vals[:, :, 3])  # (k, 3k)
+        kk = fixedmath.exp(vals[:, :, 3])  # (k, 3k)
         a2 = (u * u)[..., None, :] + (v * v)[..., None, :] / (kk[:, None, None, None, :, None] ** 2)
         a2 = a2.max(axis=-1)  # (k, 3phi, 3x, 3y, 3k)
         f_all = (np.pi * a2 * kk[:, None, None, None, :]).transpose(0, 2, 3, 1, 4)
@@ -563,9 +585,10 @@ def _a6_batch(
         active[shrink] = np.any(step[shrink] > min_step[shrink], axis=1)
     _, a = _a6_area(cur[:, None, :], P, mask)
     a = a[:, 0] * (1 + 1e-12)
+    k = fixedmath.exp(cur[:, 3])
     out = []
     for i in range(n):
-        cand = _ellipse(cur[i, 0], cur[i, 1], a[i], a[i] * math.exp(cur[i, 3]), cur[i, 2])
+        cand = _ellipse(cur[i, 0], cur[i, 1], a[i], a[i] * k[i], cur[i, 2])
         out.append(cand if cand.area <= starts[i].area else starts[i])
     return out
 
@@ -582,7 +605,7 @@ def ellipse_a6(points: ArrayLike, start: Ellipse | None = None) -> Ellipse:
 
 def _circle2(ax: float, ay: float, bx: float, by: float) -> tuple[float, float, float]:
     cx, cy = 0.5 * (ax + bx), 0.5 * (ay + by)
-    return cx, cy, math.hypot(ax - cx, ay - cy)
+    return cx, cy, _norm(ax - cx, ay - cy)
 
 
 def _circle3(
@@ -594,7 +617,7 @@ def _circle3(
     a2, b2, c2 = ax * ax + ay * ay, bx * bx + by * by, cx * cx + cy * cy
     ux = (a2 * (by - cy) + b2 * (cy - ay) + c2 * (ay - by)) / d
     uy = (a2 * (cx - bx) + b2 * (ax - cx) + c2 * (bx - ax)) / d
-    return ux, uy, math.hypot(ax - ux, ay - uy)
+    return ux, uy, _norm(ax - ux, ay - uy)
 
 
 def min_circle_welzl(points: ArrayLike, seed: int = 0) -> Circle:
@@ -607,12 +630,18 @@ def min_circle_welzl(points: ArrayLike, seed: int = 0) -> Circle:
 
 
 def _min_circle_welzl(H: NDArray[np.float64], seed: int = 0) -> Circle:
-    origin = H.mean(axis=0)
-    pts = [tuple(p) for p in (H - origin).tolist()]
+    # the mean summed in index order (the kernel's order; a NumPy reduction may pair terms)
+    ox = oy = 0.0
+    for x, y in H.tolist():
+        ox += x
+        oy += y
+    ox /= len(H)
+    oy /= len(H)
+    pts = [(x - ox, y - oy) for x, y in H.tolist()]
     random.Random(seed).shuffle(pts)
 
     def inside(c: tuple[float, float, float], p: tuple[float, float]) -> bool:
-        return math.hypot(p[0] - c[0], p[1] - c[1]) <= c[2] * (1 + 1e-12) + 1e-12
+        return _norm(p[0] - c[0], p[1] - c[1]) <= c[2] * (1 + 1e-12) + 1e-12
 
     c = (pts[0][0], pts[0][1], 0.0)
     for i in range(1, len(pts)):
@@ -632,9 +661,7 @@ def _min_circle_welzl(H: NDArray[np.float64], seed: int = 0) -> Circle:
                 c3 = _circle3(*p, *q, *s)
                 if c3 is not None:
                     c = c3
-    return Circle(
-        c[0] + float(origin[0]), c[1] + float(origin[1]), c[2] * (1 + 1e-12), kind="circle"
-    )
+    return Circle(c[0] + ox, c[1] + oy, c[2] * (1 + 1e-12), kind="circle")
 
 
 def mvee_batch(
@@ -655,9 +682,10 @@ def mvee_batch(
     encloses the set and its area is within ``(1 + tol)`` (about) of the optimum.
 
     ``backend="compiled"`` runs the iterations set by set in a Numba kernel
-    (:func:`navkit.geometry._kernels.mvee_weights_kernel`; no per-iteration NumPy overhead, the
-    same steps; the weights' moments are summed in index order, so results agree with
-    ``backend="numpy"`` to rounding); ``"numpy"``: the batched loop below.
+    (:func:`navkit.geometry._kernels.mvee_weights_kernel`; no per-iteration NumPy overhead);
+    ``"numpy"``: the batched loop below. Both make the same IEEE operations in the same order
+    (every sum over the points in index order, :func:`_sum_in_order`; the 2 x 2 inverse and
+    eigen-decomposition written out, :func:`_mvee_axes`), so they give the same bits.
     """
     backend = resolve_backend(backend)
     n = len(hulls)
@@ -665,7 +693,7 @@ def mvee_batch(
         return []
     d = 2
     m = max(len(h) for h in hulls)
-    origin = np.array([h.mean(axis=0) for h in hulls])
+    origin = np.array([_mean_in_order(h) for h in hulls])
     # pad each set to m points by repeating its first point with weight 0: a padded copy never
     # wins argmax (ties go to the first index) and, weightless, never argmin over the support
     P = np.empty((n, m, 2))
@@ -694,7 +722,7 @@ def mvee_batch(
         for _ in range(max_iter):
             if len(idx) == 0:
                 break
-            mom = np.einsum("kfm,km->kf", Fa, ua)
+            mom = _sum_in_order(Fa * ua[:, None, :])
             cx, cy = mom[:, 0:1], mom[:, 1:2]
             sxx, sxy, syy = mom[:, 2:3] - cx * cx, mom[:, 3:4] - cx * cy, mom[:, 4:5] - cy * cy
             det = np.maximum(sxx * syy - sxy * sxy, 1e-300)
@@ -727,21 +755,61 @@ def mvee_batch(
                 r = np.arange(len(idx))
     if len(idx):
         u[idx] = ua
-    c = np.einsum("nm,nmi->ni", u, P)
-    S = np.einsum("nmi,nm,nmj->nij", P, u, P) - np.einsum("ni,nj->nij", c, c)
-    A = np.linalg.inv(S) / d
-    diff = P - c[:, None, :]
-    val = np.einsum("nmi,nij,nmj->nm", diff, A, diff)
-    worst = np.where(mask, val, 0.0).max(axis=1)
-    A = A / np.maximum(worst, 1e-300)[:, None, None] / (1 + 1e-12)
-    out = []
-    for i in range(n):
-        w, V = np.linalg.eigh(A[i])  # ascending: w[0] smallest -> major axis
-        a, b = 1 / math.sqrt(w[0]), 1 / math.sqrt(w[1])
-        angle = math.atan2(V[1, 0], V[0, 0])
-        cx, cy = c[i] * scale[i] + origin[i]
-        out.append(_ellipse(cx, cy, a * scale[i], b * scale[i], angle))
-    return out
+    # the centre c = P u and A = (P diag(u) P^T - c c^T)^-1 / d in closed form (the kernel's
+    # ``mvee_csr_kernel`` operations), scaled so that the farthest point is on the ellipse
+    x, y = P[..., 0], P[..., 1]
+    cx, cy = _sum_in_order(u * x), _sum_in_order(u * y)
+    sxx = _sum_in_order(x * u * x) - cx * cx
+    sxy = _sum_in_order(x * u * y) - cx * cy
+    syy = _sum_in_order(y * u * y) - cy * cy
+    det = sxx * syy - sxy * sxy
+    a00, a01, a11 = syy / det / d, -sxy / det / d, sxx / det / d
+    dx, dy = x - cx[:, None], y - cy[:, None]
+    val = dx * (a00[:, None] * dx + a01[:, None] * dy) + dy * (
+        a01[:, None] * dx + a11[:, None] * dy
+    )
+    f = np.maximum(np.where(mask, val, 0.0).max(axis=1), 1e-300) * (1 + 1e-12)
+    a, b, angle = _mvee_axes(a00 / f, a01 / f, a11 / f)
+    ex, ey = cx * scale + origin[:, 0], cy * scale + origin[:, 1]
+    cols = (ex.tolist(), ey.tolist(), (a * scale).tolist(), (b * scale).tolist(), angle)
+    return [_ellipse(*row) for row in zip(*cols, strict=True)]
+
+
+def _mean_in_order(H: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The mean of the rows of ``H (m, 2)``, summed in index order (the kernels' order)."""
+    return (_sum_in_order(H.T) / len(H)).astype(np.float64)
+
+
+def _sum_in_order(t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Sums over the last axis in index order, ``((0 + t0) + t1) + ...``, as a kernel's loop.
+
+    The last element of a cumulative sum: ``add.accumulate`` adds each term to the running sum
+    (its result at every index is defined by that order), where a reduction (``sum``,
+    ``einsum``, ``dot``) may pair terms differently per CPU (SIMD width, BLAS); ``+ 0.0``
+    gives the loop's ``+0`` for a sum of ``-0`` terms."""
+    if t.shape[-1] == 0:
+        return np.zeros(t.shape[:-1])
+    return np.cumsum(t, axis=-1)[..., -1] + 0.0
+
+
+def _mvee_axes(
+    p: NDArray[np.float64], q: NDArray[np.float64], r: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], list[float]]:
+    """Semi-axes ``a >= b`` and major-axis angle of the ellipses ``[[p, q], [q, r]]``
+    (positive definite), the 2 x 2 eigen-decomposition written out (elementwise IEEE
+    operations and the fixed :func:`~navkit.geometry.angles.atan2`: the same bits on any CPU,
+    where LAPACK's ``eigh`` depends on the build and the machine).
+
+    The eigenvalues are ``w1 = (p + r) / 2 + h`` and ``w0 = det / w1`` (``h = sqrt(((p - r)
+    / 2)^2 + q^2)``; ``w0`` as a quotient, not ``(p + r) / 2 - h``, which cancels for elongated
+    ellipses); the axes ``1 / sqrt(w)``. The eigenvector of ``w1`` is at
+    ``atan2(2 q, p - r) / 2``, the major axis (of ``w0``) a quarter turn further."""
+    hd = 0.5 * (p - r)
+    h = np.sqrt(hd * hd + q * q)
+    w1 = 0.5 * (p + r) + h
+    w0 = (p * r - q * q) / w1
+    angle = 0.5 * fixed_atan2(2.0 * q, p - r) + 0.5 * math.pi
+    return 1.0 / np.sqrt(w0), 1.0 / np.sqrt(w1), angle.tolist()
 
 
 def mvee_khachiyan(points: ArrayLike, tol: float = 1e-3) -> Ellipse:
@@ -925,15 +993,13 @@ def _normalised(
 
 
 def _mvee_rows(H: NDArray[np.float64], hoff: NDArray[np.int64]) -> NDArray[np.float64]:
-    """:func:`mvee_batch` on CSR hulls (compiled weights and shape matrix, NumPy's ``eigh``)."""
+    """:func:`mvee_batch` on CSR hulls (compiled weights and shape matrix, :func:`_mvee_axes`)."""
     from navkit.geometry import _kernels
 
     origin, scale, c, A = _kernels.mvee_csr_kernel(H, hoff, 1e-3, 2000)
-    w, V = np.linalg.eigh(A)  # ascending: w[:, 0] smallest -> major axis
-    a, b = 1 / np.sqrt(w[:, 0]), 1 / np.sqrt(w[:, 1])
-    angle = np.arctan2(V[:, 1, 0], V[:, 0, 0])
+    a, b, angle = _mvee_axes(A[:, 0, 0], A[:, 0, 1], A[:, 1, 1])
     centre = c * scale[:, None] + origin
-    return _normalised(centre[:, 0], centre[:, 1], a * scale, b * scale, angle)
+    return _normalised(centre[:, 0], centre[:, 1], a * scale, b * scale, np.array(angle))
 
 
 # The records of a frame's shapes (hundreds) are built without the dataclasses' ``__init__``,
@@ -996,7 +1062,7 @@ def shapes_csr(
     The shipped methods run in kernels over all hulls at once
     (:func:`navkit.geometry._kernels.basic_shapes_kernel`: A1-A5 and Welzl's circle;
     ``a6_csr_kernel``; ``mvee_csr_kernel``) with their twins' arithmetic, so the shapes equal
-    :func:`compute_shapes` with ``backend="numpy"`` (floats to 1e-9 relative). A method
+    :func:`compute_shapes` with ``backend="numpy"`` bit for bit, on any CPU. A method
     replaced or added with :func:`register_shape` is called hull by hull.
     """
     from navkit.geometry import _kernels
