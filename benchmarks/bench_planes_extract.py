@@ -4,8 +4,7 @@ without the motion comparisons, so they can be rerun in a minute.
 
 Run: ``python -m benchmarks planes_extract`` (``--quick``: 5 repeats instead of 15).
 
-Also the compiled kernels against their NumPy oracles in the same run (the before / after of
-issue 12) and the kernels' first-call cost on an empty Numba cache.
+Also the compiled kernels against their NumPy oracles in the same run and the kernels' first-call cost on an empty Numba cache.
 """
 
 from __future__ import annotations

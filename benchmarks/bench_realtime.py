@@ -1,4 +1,4 @@
-"""Real-time table (issue 12): each capability's CPU time per frame on recorded data against
+"""Real-time table: each capability's CPU time per frame on recorded data against
 its sensor's frame period, on one core.
 
 | capability | work per frame | sensor, period |

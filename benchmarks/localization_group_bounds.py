@@ -1,8 +1,8 @@
-"""Localization (issue 12, session 7): how loose are the rotation groups' bounds of the global
-search, and what could a tighter bound cut?
+"""Localization: how loose are the rotation groups' bounds of the global search, and what could a
+tighter bound cut?
 
-For global fixes on the CARMEN logs (the maps and scans of
-``benchmarks/localization_before_after.py``) the coarse branch-and-bound runs on the NumPy oracle
+For global fixes on the CARMEN logs (the maps of ``benchmarks.bench_localization``, 20 scans spread
+over each log) the coarse branch-and-bound runs on the NumPy oracle
 (``navkit.jit.use("numpy")``: the same nodes as the compiled search) and every batch of rotation
 -group nodes it expands is recorded with the pruning threshold of that moment. Per pyramid level
 it prints:
@@ -14,7 +14,7 @@ it prints:
 - how many of those nodes each candidate bound would have pruned (bound <= threshold), all
   admissible (never below the best leaf under the node):
 
-  - ``now``: this revision's bound (``_Search._group_tables``);
+  - ``now``: the search's bound (``_Search._group_tables``);
   - ``ideal``: per point the exact maximum over the union of its blocks at the group's rotations
     (``sum_i max_r L_h(q_ri + t)``) - the tightest bound of one value per point;
   - ``split``: the best of the group's single rotations' level bounds (``max_r sum_i``), what
@@ -160,7 +160,7 @@ def main() -> None:
         every = max(2, len(lg) // 1200)
         m = build_map_from_scans(lg.ranges[::every], lg.bearings, lg.poses[::every], max_range=30.0)
         fld = m.likelihood_field(0.1)
-        idx = np.linspace(0, len(lg) - 1, 20).astype(int)  # the scans of before_after
+        idx = np.linspace(0, len(lg) - 1, 20).astype(int)  # 20 scans spread over the log
         gidx = idx[:: max(1, len(idx) // args.global_scans)][: args.global_scans]
         total: dict[int, dict[str, int]] = {}
         for k in gidx:

@@ -1,19 +1,17 @@
 """Obstacles, stages 6-8 (split, boundaries, map with the default shapes): CPU time and page
-faults per stage, this tree against an earlier revision, Patchwork++ timed in the same processes.
+faults per stage, Patchwork++ timed in the same processes.
 
-``python -m benchmarks.obstacles_map_stages [--base REV] [--rounds N] [--repeats N]`` extracts
-``src/`` of ``REV`` (default ``4b98332``, round 1 of stages 6-8) with ``git archive`` and runs
-the two trees in turn, ``N`` rounds of one fresh process each, on the SemanticKITTI frames:
-median CPU time (``time.process_time``) and minor page faults (``getrusage``'s ``ru_minflt``)
-per stage over the repeats after a warm-up. Prints a Markdown table. Not a ``bench_`` module:
-``make bench`` does not run it.
+``python -m benchmarks.obstacles_map_stages [--rounds N] [--repeats N]`` runs ``N`` rounds of one
+fresh process each on the SemanticKITTI frames: median CPU time (``time.process_time``) and minor
+page faults (``getrusage``'s ``ru_minflt``) per stage over the repeats after a warm-up. Prints a
+Markdown table. Not a ``bench_`` module: ``make bench`` does not run it.
 """
 
 from __future__ import annotations
 
 import argparse
 
-from benchmarks.obstacles_stages import ab_medians
+from benchmarks.obstacles_stages import round_medians
 
 _CHILD = r"""
 import json, resource, sys, time
@@ -37,10 +35,7 @@ def counted(stage, fn):
 
 detector._compiled_split = counted("split", detector._compiled_split)
 detector._compiled_vertices = counted("boundaries", detector._compiled_vertices)
-if hasattr(detector, "_build_compiled"):
-    detector._build_compiled = counted("map", detector._build_compiled)
-else:
-    detector._build_obstacles = counted("map", detector._build_obstacles)
+detector._build_compiled = counted("map", detector._build_compiled)
 
 reps = int(sys.argv[1])
 params = pwpp.Parameters(); params.verbose = False; params.sensor_height = 1.73
@@ -68,30 +63,24 @@ print(json.dumps(out))
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--base", default="4b98332")
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=15)
     args = ap.parse_args()
-    meds = ab_medians(args.base, args.rounds, args.repeats, _CHILD)
+    meds = round_medians(args.rounds, args.repeats, _CHILD)
     stages = ["split", "boundaries", "map"]
-    print(f"before = {args.base}, after = this tree; CPU ms, median over {args.rounds} rounds")
+    print(f"CPU ms, median over {args.rounds} rounds of the medians of {args.repeats}")
     print(
-        "| frame | tree | "
+        "| frame | "
         + " | ".join(stages)
         + " | stages 6-8 | faults split / boundaries / map | Patchwork++ | 6-8 / PW++ |"
     )
-    print("|---" * (len(stages) + 6) + "|")
-    for frame in meds["after"]:
-        for tree in ("before", "after"):
-            med = meds[tree][frame]
-            total = sum(med[s] for s in stages)
-            pw = med["Patchwork++"]
-            cells = " | ".join(f"{med[s]:.2f}" for s in stages)
-            faults = " / ".join(f"{med['faults ' + s]:.0f}" for s in stages)
-            print(
-                f"| {frame} | {tree} | {cells} | {total:.2f} | {faults} | {pw:.2f} "
-                f"| {total / pw:.2f}x |"
-            )
+    print("|---" * (len(stages) + 5) + "|")
+    for frame, med in meds.items():
+        total = sum(med[s] for s in stages)
+        pw = med["Patchwork++"]
+        cells = " | ".join(f"{med[s]:.2f}" for s in stages)
+        faults = " / ".join(f"{med['faults ' + s]:.0f}" for s in stages)
+        print(f"| {frame} | {cells} | {total:.2f} | {faults} | {pw:.2f} | {total / pw:.2f}x |")
 
 
 if __name__ == "__main__":

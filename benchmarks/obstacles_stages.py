@@ -1,12 +1,10 @@
-"""Obstacles, stages 1-5 (grid recovery, points, mesh, classes): CPU time per stage, this tree
-against an earlier revision, with Patchwork++ timed in the same processes.
+"""Obstacles, stages 1-7 (grid recovery, points, mesh, classes, split, boundaries): CPU time per
+stage, with Patchwork++ timed in the same processes.
 
-``python -m benchmarks.obstacles_stages [--base REV] [--rounds N] [--repeats N]`` extracts
-``src/`` of ``REV`` (default ``cf36993``, before the fused stage 2-5 kernel) with ``git archive``
-and runs the two trees in turn, ``N`` rounds of one fresh process each (so that both see the
-same machine load), on the SemanticKITTI frames: median CPU time (``time.process_time``) per
-stage over the repeats after a warm-up, and Patchwork++'s ground segmentation on the same
-frames in the same process. Prints a Markdown table with the ratios to Patchwork++. Not a
+``python -m benchmarks.obstacles_stages [--rounds N] [--repeats N]`` runs ``N`` rounds of one
+fresh process each on the SemanticKITTI frames: median CPU time (``time.process_time``) per stage
+over the repeats after a warm-up, and Patchwork++'s ground segmentation on the same frames in the
+same process; the table gives the median over the rounds and the ratios to Patchwork++. Not a
 ``bench_`` module: ``make bench`` does not run it.
 """
 
@@ -17,8 +15,6 @@ import json
 import os
 import subprocess
 import sys
-import tarfile
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -59,17 +55,6 @@ print(json.dumps(out))
 """
 
 
-def _extract(rev: str, into: Path) -> Path:
-    data = subprocess.run(
-        ["git", "-C", str(ROOT), "archive", rev, "src"], capture_output=True, check=True
-    ).stdout
-    tar = into / "src.tar"
-    tar.write_bytes(data)
-    with tarfile.open(tar) as t:
-        t.extractall(into, filter="data")
-    return into / "src"
-
-
 def _run(src: Path, repeats: int, child: str = _CHILD) -> dict[str, dict[str, float]]:
     """Run ``child`` (a timing script printing JSON last) on the navkit under ``src``."""
     env = {**os.environ, "PYTHONPATH": str(src)}
@@ -83,51 +68,37 @@ def _run(src: Path, repeats: int, child: str = _CHILD) -> dict[str, dict[str, fl
     return json.loads(res.stdout.strip().splitlines()[-1])  # type: ignore[no-any-return]
 
 
-def ab_medians(
-    base: str, rounds: int, repeats: int, child: str = _CHILD
-) -> dict[str, dict[str, dict[str, float]]]:
-    """``child`` on the tree of git revision ``base`` ("before") and on this tree ("after"),
-    alternating fresh processes for ``rounds`` rounds: ``{tree: {frame: {figure: median over
-    the rounds}}}``."""
-    with tempfile.TemporaryDirectory(prefix="navkit-base-") as tmp:
-        base_src = _extract(base, Path(tmp))
-        runs: dict[str, list[dict[str, dict[str, float]]]] = {"before": [], "after": []}
-        for _ in range(rounds):
-            runs["before"].append(_run(base_src, repeats, child))
-            runs["after"].append(_run(ROOT / "src", repeats, child))
+def round_medians(rounds: int, repeats: int, child: str = _CHILD) -> dict[str, dict[str, float]]:
+    """``child`` in ``rounds`` fresh processes on this tree: ``{frame: {figure: median over the
+    rounds}}``."""
+    runs = [_run(ROOT / "src", repeats, child) for _ in range(rounds)]
     return {
-        tree: {
-            frame: {k: float(np.median([r[frame][k] for r in rs])) for k in rs[0][frame]}
-            for frame in rs[0]
-        }
-        for tree, rs in runs.items()
+        frame: {k: float(np.median([r[frame][k] for r in runs])) for k in runs[0][frame]}
+        for frame in runs[0]
     }
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--base", default="cf36993")
     ap.add_argument("--rounds", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=15)
     args = ap.parse_args()
-    meds = ab_medians(args.base, args.rounds, args.repeats)
+    meds = round_medians(args.rounds, args.repeats)
     stages = ["cloud_to_grid", "points", "mesh", "classes", "split", "boundaries"]
-    print(f"before = {args.base}, after = this tree; CPU ms, median over {args.rounds} rounds")
+    print(f"CPU ms, median over {args.rounds} rounds of the medians of {args.repeats}")
     print(
-        "| frame | tree | " + " | ".join(stages) + " | grid..classes | stages 1-7 "
+        "| frame | " + " | ".join(stages) + " | grid..classes | stages 1-7 "
         "| Patchwork++ | grid..classes / PW++ | 1-7 / PW++ |"
     )
-    print("|---" * (len(stages) + 7) + "|")
-    for frame in meds["after"]:
-        for tree in ("before", "after"):
-            med = meds[tree][frame]
-            part = sum(med[s] for s in ("cloud_to_grid", "points", "mesh", "classes"))
-            pw = med["Patchwork++"]
-            cells = " | ".join(f"{med[s]:.2f}" for s in stages)
-            print(
-                f"| {frame} | {tree} | {cells} | {part:.2f} | {med['stages 1-7']:.2f} | {pw:.2f} "
-                f"| {part / pw:.2f}x | {med['stages 1-7'] / pw:.2f}x |"
-            )
+    print("|---" * (len(stages) + 6) + "|")
+    for frame, med in meds.items():
+        part = sum(med[s] for s in ("cloud_to_grid", "points", "mesh", "classes"))
+        pw = med["Patchwork++"]
+        cells = " | ".join(f"{med[s]:.2f}" for s in stages)
+        print(
+            f"| {frame} | {cells} | {part:.2f} | {med['stages 1-7']:.2f} | {pw:.2f} "
+            f"| {part / pw:.2f}x | {med['stages 1-7'] / pw:.2f}x |"
+        )
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 """Path memory (paper 4): worst and mean CPU time per point with the compiled kernels against
-the same code with their NumPy oracles (issue 12's before / after), interleaved in one process.
+the same code with their NumPy oracles, interleaved in one process.
 
 For every recorded trajectory of ``benchmarks.bench_path`` and every tolerance, the approximator
 runs ``--runs`` times in each mode, alternating; each point's time is the median over the runs

@@ -1,4 +1,4 @@
-"""Stereo (paper 3): the left-right check options of issue 12 on the Middlebury Q pair - accuracy
+"""Stereo (paper 3): the left-right check options on the Middlebury Q pair - accuracy
 of each (bad-2.0 / bad-4.0 of the background-filled map; without the fill: share of the scored
 pixels kept and share of those off by more than 2 px), one SGBM run (80 disparities, 3 px
 window), the texture mask as ``compute_disparity`` applies it.

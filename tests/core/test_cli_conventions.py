@@ -1,4 +1,4 @@
-"""The conventions of issue 17: -q / --debug anywhere, help that reads at 80 columns with units
+"""The CLI conventions: -q / --debug anywhere, help that reads at 80 columns with units
 and an example, progress as log lines off a terminal, outputs never replaced silently."""
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from navkit.cli.common import STATE, check_out_dir, configure_logging, progress
 from navkit.cli.main import app
 from navkit.errors import InputError
 
-# commands whose owner follows the conventions in this round (the others are being rewritten)
+# commands whose help carries an example (the others gain theirs as they are rewritten)
 WITH_EXAMPLES = (
     ("obstacles", "detect"),
     ("path", "record"),

@@ -283,7 +283,7 @@ def test_every_case_is_counted() -> None:
 
 
 def test_second_input_bad_leaves_nothing(inputs: Inputs, runner: Any, tmp_path: Path) -> None:
-    """Issue 13 family 4: the first input's outputs are written, then the second is bad."""
+    """Several inputs: the first input's outputs are written, then the second is bad."""
     if inputs.range_image is None:
         pytest.skip("recorded data absent")
     bad = tmp_path / "bad.npy"

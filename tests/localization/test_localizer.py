@@ -182,8 +182,8 @@ def test_stack_views_brings_views_into_one_frame():
     np.testing.assert_allclose(frag, expect, atol=1e-12)
 
 
-# ``navkit map locate`` on aces-corrected (map from every 4th scan) before the Localizer existed
-# (commit 4f29c21): fixes.csv rows (index, x, y, theta, ok) of every 20th scan.
+# ``navkit map locate`` on aces-corrected (map from every 4th scan), recorded with the
+# implementation that preceded the Localizer (2026-11-22): fixes.csv rows (index, x, y, theta, ok) of every 20th scan.
 PRE_LOCALIZER = {
     "odometry": [
         (0, 0.9024, -0.1895, -0.45299, True),

@@ -13,8 +13,8 @@ from navkit.sim import RangeNoise, SpinningLidar, load_scene, render_scan, true_
 
 # The first 12 m of the yard's built-in route (navkit/data/mission_yard.toml), a scan every 1.5 m.
 WAYPOINTS = np.array([[0.0, 0.0], [4.0, -0.4], [8.0, -0.6], [12.0, -1.0]])
-# Computed with the mission's fusion before it moved here (navkit.mission.obstacle_map
-# .ObstacleGrid at commit 4f29c21, fed exactly as run_mission fed it) on the same scans:
+# Computed with the mission's own fusion that this mapper replaces (navkit.mission.obstacle_map
+# .ObstacleGrid as of 2026-11-22, fed exactly as run_mission fed it) on the same scans:
 BEFORE = {"hits": 1959, "seen": 36804, "occupied": 489, "components": 10}
 BEFORE_CENTROID = (8.7927, -2.4972)
 

@@ -1,6 +1,6 @@
 """The compiled loop search (navkit.path._kernels) against its NumPy oracle (loops.py).
 
-Same answers (issue 12): the loop search finds the same crossings bit for bit (the kernel does
+Same answers: the loop search finds the same crossings bit for bit (the kernel does
 the NumPy version's arithmetic pair by pair in the same order); the freeze's power sums,
 arc lengths and projections add in point order instead of NumPy's pairwise / BLAS order, so
 the whole approximator gives the same segments (the same points in each, the same loop cuts)

@@ -1,6 +1,6 @@
 """The compiled kernels of the organised extraction against their NumPy oracles.
 
-Same answers (issue 12): labels and inlier lists identical, planes within 1e-9 relative, on the
+Same answers: labels and inlier lists identical, planes within 1e-9 relative, on the
 simulator and on every real organised frame in the shared data (slambook, CAPE tunnel,
 pcl-kinect, the 100 7-Scenes frames). The patch moments and the border labels are bit for bit
 the same (the kernels reproduce NumPy's float32 summation order); the mixed patches' float64
@@ -104,7 +104,7 @@ def test_real_7scenes(data_path):
 
 
 def test_backproject_same_bits(data_path):
-    """``PinholeCamera.backproject`` (broadcast rays, issue 12) gives ``pixel_rays() * depth``
+    """``PinholeCamera.backproject`` (broadcast rays) gives ``pixel_rays() * depth``
     bit for bit, NaN where the depth is missing: the extraction's input is unchanged."""
     from navkit.io.rgbd import read_simple_rgbd
 

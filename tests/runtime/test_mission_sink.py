@@ -1,4 +1,4 @@
-"""The mission through the runtime's sinks (issue 14 item 6): the small test world's mission with
+"""The mission through the runtime's sinks: the small test world's mission with
 :class:`navkit.runtime.mission_sink.MissionSink` writes ``results.mcap`` (read back with
 ``mcap``) and an ``.rrd`` (verified with ``rerun rrd verify``); both against the mission's own
 log, and the mission's figures are the ones of a run without a sink."""

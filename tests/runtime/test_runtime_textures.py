@@ -1,4 +1,4 @@
-"""Planes with their textures for the viewer (issue 14 item 4): each plane of an RGB-D frame as a
+"""Planes with their textures for the viewer: each plane of an RGB-D frame as a
 mesh on its fit, textured with the colour pixels of its region."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The TF tree in the runtime (issue 14): ``/tf_static`` + time-interpolated ``/tf`` carry a pose
+"""The TF tree in the runtime: ``/tf_static`` + time-interpolated ``/tf`` carry a pose
 topic's child frame to the sensor frame, so a ``PointCloud2`` in ``velodyne`` with odometry of
 the base is placed where the obstacles are.
 

@@ -9,8 +9,8 @@ Numba, ``cache=True``; imported on first use.
 Data-dependent look-ups index with ``np.uint64`` offsets: Numba wraps a negative signed index
 around (a compare and a select per look-up, which also keeps LLVM from scheduling the loads
 freely); every such offset here is non-negative by construction, so the unsigned index reads the
-same element without that code. Measured (issue 12, sixth pass): ``depth_first`` of a global fix
-on Acapulco 23.0 -> 13.6 ms CPU per fix on the same nodes (``expand_sums``' loop).
+same element without that code: 0.54 instead of 0.91 ns per look-up in ``expand_sums``' loop
+(``depth_first`` of a global fix on Acapulco, the same nodes).
 """
 
 from __future__ import annotations

@@ -78,7 +78,7 @@ class PinholeCamera:
                 expected=f"({self.height}, {self.width}) image",
             )
         # pixel_rays() * depth by coordinate, the rays as a row / column broadcast: the same
-        # products bit for bit, ~20x faster than multiplying a (H, W, 3) ray image (issue 12)
+        # products bit for bit, ~20x faster than multiplying a (H, W, 3) ray image
         out = np.empty((self.height, self.width, 3))
         np.multiply(((np.arange(self.width) - self.cx) / self.fx)[None, :], d, out=out[..., 0])
         np.multiply(((np.arange(self.height) - self.cy) / self.fy)[:, None], d, out=out[..., 1])

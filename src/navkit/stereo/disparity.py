@@ -12,7 +12,7 @@ at ``x - d`` is an occlusion or a mismatch and becomes NaN; (5) optionally (``su
 the matcher's sub-pixel bias ("pixel locking") is estimated by a Lucas-Kanade refinement on the
 images and removed (:func:`refine_subpixel`).
 
-Why warping is the default (issue 12, measured on Middlebury 2014 motorcycle Q, 80 disparities,
+Why warping is the default (measured on Middlebury 2014 motorcycle Q, 80 disparities,
 3 px window; ``benchmarks/stereo_check_options.py``, ``benchmarks/stereo_kernels_vs_numpy.py``):
 the re-matched check costs a second SGBM run (2.2x one plain SGBM run in all); the warped one
 costs one pass over the image (1.2x in all). A warped check rejects occluded pixels (a farther
