@@ -5,6 +5,8 @@ the online capabilities; results as ``results.mcap`` (ROS 2 messages), per-capab
 from __future__ import annotations
 
 import logging
+import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -110,10 +112,35 @@ def run_cmd(
 
 
 class _Progress:
-    """A progress bar over the recording's time (seconds), on stderr when it is a terminal."""
+    """Progress over the recording's time (seconds), on stderr.
+
+    In a terminal: a rich bar on the console the log handler shares (log lines print above it).
+    Otherwise (a pipe, a log file, CI): an ``INFO`` line ``run: a / b s of recording (p %), t s
+    elapsed, about r s left`` every ``log_every_s`` seconds from a heartbeat thread, so a slow
+    frame (a first compilation, a large cloud) never leaves the log silent, and one line at the
+    end. Nothing with ``-q``.
+    """
+
+    def __init__(self, log_every_s: float = 5.0) -> None:
+        self.log_every_s = log_every_s
+        self.done_s = 0.0
+        self.total_s: float | None = None
+        self.bar: Any = None
+        self.thread: threading.Thread | None = None
+        self.stop = threading.Event()
 
     def __enter__(self) -> _Progress:
-        from rich.console import Console
+        from navkit.cli.common import _console
+
+        self.t0 = time.perf_counter()
+        if STATE.quiet:
+            return self
+        console = _console()
+        if not console.is_terminal:
+            self.thread = threading.Thread(target=self._heartbeat, name="navkit-run-progress")
+            self.thread.daemon = True
+            self.thread.start()
+            return self
         from rich.progress import (
             BarColumn,
             Progress,
@@ -122,22 +149,52 @@ class _Progress:
             TimeRemainingColumn,
         )
 
-        console = Console(stderr=True)
         self.bar = Progress(
             TextColumn("[bold]run"),
             BarColumn(),
-            TextColumn("{task.completed:.1f} / {task.total:.1f} s of recording"),
+            TextColumn("{task.fields[text]}"),
             TimeElapsedColumn(),
             TimeRemainingColumn(),
             console=console,
-            disable=STATE.quiet or not console.is_terminal,
         )
         self.bar.__enter__()
-        self.task = self.bar.add_task("run", total=None)
+        # the duration is known once the recording is open: until then the bar pulses
+        self.task = self.bar.add_task("run", total=None, text=self.line_text())
         return self
 
+    def line_text(self) -> str:
+        """``a / b s of recording`` (``a s of recording`` before the duration is known)."""
+        if self.total_s is None:
+            return f"{self.done_s:.1f} s of recording"
+        return f"{self.done_s:.1f} / {self.total_s:.1f} s of recording"
+
+    def log_line(self) -> str:
+        """The line logged when stderr is not a terminal."""
+        elapsed = time.perf_counter() - self.t0
+        text = f"run: {self.line_text()}"
+        if self.total_s:
+            frac = min(self.done_s / self.total_s, 1.0)
+            text += f" ({100.0 * frac:.0f} %)"
+            text += f", {elapsed:.0f} s elapsed"
+            if frac > 0:
+                text += f", about {elapsed * (1.0 - frac) / frac:.0f} s left"
+            return text
+        return f"{text}, {elapsed:.0f} s elapsed"
+
+    def _heartbeat(self) -> None:
+        while not self.stop.wait(self.log_every_s):
+            log.info("%s", self.log_line())
+
     def update(self, done_s: float, total_s: float) -> None:
-        self.bar.update(self.task, completed=done_s, total=total_s)
+        self.done_s, self.total_s = done_s, total_s
+        if self.bar is not None:
+            self.bar.update(self.task, completed=done_s, total=total_s, text=self.line_text())
 
     def __exit__(self, *exc: object) -> None:
-        self.bar.__exit__(None, None, None)
+        if self.bar is not None:
+            self.bar.__exit__(None, None, None)
+        if self.thread is not None:
+            self.stop.set()
+            self.thread.join()
+            if exc[0] is None:
+                log.info("%s", self.log_line())
