@@ -104,11 +104,21 @@ def run_cmd(
                 depth_scale=depth_scale,
                 config_source=str(config or "--config"),
             )
-        caps = ", ".join(
-            f"{k} {v['ms_per_message']:.1f} ms/msg (x{v['real_time_factor'] or 0:.2f} real time)"
-            for k, v in summary["capabilities"].items()
-        )
+        caps = ", ".join(_rate(k, v) for k, v in summary["capabilities"].items())
         typer.echo(f"{summary['messages']} messages: {caps} -> {out}")
+
+
+def _rate(name: str, figures: dict[str, Any]) -> str:
+    """``obstacles 62.0 ms/frame at 10.0 Hz (x1.61 real time)``: the work per frame of the
+    capability against its sensor's rate."""
+    ms, period, rtf = (
+        figures.get(k) for k in ("ms_per_frame", "sensor_period_s", "real_time_factor")
+    )
+    if ms is None:
+        return f"{name} no frames"
+    if not period or rtf is None:
+        return f"{name} {ms:.1f} ms/frame"
+    return f"{name} {ms:.1f} ms/frame at {1.0 / period:.1f} Hz (x{rtf:.2f} real time)"
 
 
 class _Progress:

@@ -9,8 +9,8 @@ Outputs of a run in ``out``:
   run they go to crash-safe segments in ``.navkit-run/`` that are merged at the end;
 - the per-capability files of today's commands (``obstacles/``, ``wall_map/``, ``path/``,
   ``planes/``);
-- ``summary.json``: per capability the messages, seconds per message and real-time factor
-  (recording duration / that capability's processing time), and the whole run's.
+- ``summary.json``: per capability the messages, frames, work per frame and real-time factor
+  (its sensor's period from the frames' stamps / its work per frame), and the whole run's.
 
 Checkpoints (``.navkit-run/checkpoint.pkl``, written atomically every ``run.checkpoint_every``
 source items): the stages' state (pickled as is: the online objects are plain Python/NumPy),
@@ -47,8 +47,8 @@ __all__ = ["STATE_DIR", "NullLogger", "run_recording"]
 log = logging.getLogger(__name__)
 
 STATE_DIR = ".navkit-run"
-# 2: the pose buffer holds the TF tree, the planes stage streams its trajectory
-CHECKPOINT_VERSION = 2
+# 3: per-capability frame counts and stamps in the statistics
+CHECKPOINT_VERSION = 3
 
 
 class NullLogger:
@@ -67,10 +67,47 @@ class NullLogger:
         """Finish (flush a recording)."""
 
 
+# the message kind that is one frame of each capability's sensor: a colour image and a
+# CameraInfo are part of an RGB-D frame, its depth image is the frame
+FRAME_KINDS = frozenset({"cloud", "scan", "depth", "pose"})
+
+
 @dataclasses.dataclass
 class _Stats:
+    """One capability's work: messages handled, frames among them, seconds of work (handling
+    and finishing), first and last frame stamp."""
+
     n: int = 0
     seconds: float = 0.0
+    frames: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
+
+    def add_frame(self, stamp_ns: int) -> None:
+        self.frames += 1
+        self.first_ns = stamp_ns if self.first_ns is None else min(self.first_ns, stamp_ns)
+        self.last_ns = stamp_ns if self.last_ns is None else max(self.last_ns, stamp_ns)
+
+    def figures(self) -> dict[str, Any]:
+        """``messages``, ``frames``, ``seconds``, ``ms_per_message``, ``ms_per_frame``,
+        ``sensor_period_s`` (mean spacing of the frames' stamps) and ``real_time_factor`` =
+        sensor period / work per frame (above 1: the capability keeps up with its sensor; None
+        with fewer than two frames or no measurable work)."""
+        period = (
+            (self.last_ns - self.first_ns) * 1e-9 / (self.frames - 1)
+            if self.frames > 1 and self.first_ns is not None and self.last_ns is not None
+            else None
+        )
+        per_frame = self.seconds / self.frames if self.frames else None
+        return {
+            "messages": self.n,
+            "frames": self.frames,
+            "seconds": self.seconds,
+            "ms_per_message": 1e3 * self.seconds / max(self.n, 1),
+            "ms_per_frame": None if per_frame is None else 1e3 * per_frame,
+            "sensor_period_s": period,
+            "real_time_factor": period / per_frame if period and per_frame else None,
+        }
 
 
 @dataclasses.dataclass
@@ -136,6 +173,8 @@ class _Run:
             st = self.s.stats.setdefault(stage.name, _Stats())
             st.n += 1
             st.seconds += dt
+            if msg.kind in FRAME_KINDS:
+                st.add_frame(msg.stamp_ns)
             self.emit(res, stage.name, msg, item)
 
     def ready(self, msg: Message) -> bool:
@@ -355,13 +394,7 @@ def run_recording(
     span = span * n_items / (n_items - 1) if n_items > 1 else span
     caps: dict[str, Any] = {}
     for name, st in state.stats.items():
-        caps[name] = {
-            "messages": st.n,
-            "seconds": st.seconds,
-            "ms_per_message": 1e3 * st.seconds / max(st.n, 1),
-            "real_time_factor": span / st.seconds if st.seconds > 0 else None,
-            **finals.get(name, {}),
-        }
+        caps[name] = {**st.figures(), **finals.get(name, {})}
     summary = {
         "recording": source.name,
         "capabilities": caps,
