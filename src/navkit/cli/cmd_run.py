@@ -82,7 +82,7 @@ def run_cmd(
     Example: navkit run "$NAVKIT_DATA/lidar/semantickitti-seq00" --out out/run-kitti
     """
     with cli_errors():
-        from navkit.runtime import run_recording
+        from navkit.runtime.run import RunInterrupted, run_recording
 
         if not resume:
             check_out_dir(out, overwrite)
@@ -91,21 +91,73 @@ def run_cmd(
             from navkit.viz.rerun_logger import RerunLogger
 
             logger = RerunLogger(spawn=rerun, save=rerun_save)
-        with _Progress() as bar:
-            summary = run_recording(
-                recording,
-                out,
-                _read_config(config),
-                map_path=map_json,
-                resume=resume,
-                logger=logger,
-                on_progress=bar.update,
-                intrinsics=_intrinsics(intrinsics),
-                depth_scale=depth_scale,
-                config_source=str(config or "--config"),
+        try:
+            with _Progress() as bar:
+                summary = run_recording(
+                    recording,
+                    out,
+                    _read_config(config),
+                    map_path=map_json,
+                    resume=resume,
+                    logger=logger,
+                    on_progress=bar.update,
+                    intrinsics=_intrinsics(intrinsics),
+                    depth_scale=depth_scale,
+                    config_source=str(config or "--config"),
+                )
+        except RunInterrupted as exc:
+            of = f" of {exc.n_items}" if exc.n_items else ""
+            typer.echo(
+                f"interrupted after item {exc.item}{of}: the run in {out} is saved; "
+                f"continue it with: {_resume_command()}",
+                err=True,
             )
+            raise typer.Exit(code=130) from None
+        except KeyboardInterrupt:  # a second Ctrl-C, or one outside the item loop
+            _hard_interrupt(out)
         caps = ", ".join(_rate(k, v) for k, v in summary["capabilities"].items())
         typer.echo(f"{summary['messages']} messages: {caps} -> {out}")
+
+
+def _resume_command() -> str:
+    """This command line with ``--resume`` (and without ``--overwrite``)."""
+    import shlex
+    import sys
+
+    args = [a for a in sys.argv[1:] if a != "--overwrite"]
+    if "--resume" not in args:
+        args.append("--resume")
+    return shlex.join(["navkit", *args])
+
+
+def _hard_interrupt(out: Path) -> None:
+    """Ctrl-C that stopped the run at once: keep a run ``--resume`` can continue (its last
+    checkpoint, and the outputs of the items before it), or undo the run when it has none."""
+    from navkit.io.atomic import current_transaction
+    from navkit.runtime.run import STATE_DIR, interrupted_state
+
+    item = interrupted_state(out)
+    if item is not None:
+        typer.echo(
+            f"interrupted: the run in {out} continues from its last checkpoint (item {item}) "
+            f"with: {_resume_command()}",
+            err=True,
+        )
+        raise typer.Exit(code=130)  # the command's own decision: its outputs are kept
+    import shutil
+
+    if (out / STATE_DIR).is_dir():  # the loop had started: its partial lines and segments
+        shutil.rmtree(out / STATE_DIR, ignore_errors=True)
+        (out / "frames.jsonl").unlink(missing_ok=True)
+    txn = current_transaction()
+    if txn is not None:
+        txn.rollback()
+    typer.echo(
+        f"interrupted before the first checkpoint: nothing to resume; the run's outputs in "
+        f"{out} were removed",
+        err=True,
+    )
+    raise typer.Exit(code=130)
 
 
 def _rate(name: str, figures: dict[str, Any]) -> str:

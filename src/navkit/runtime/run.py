@@ -42,13 +42,67 @@ from navkit.runtime.messages import Message, Output
 from navkit.runtime.pipeline import Pipeline, resolve_pipeline
 from navkit.runtime.sources import Source, open_source
 
-__all__ = ["STATE_DIR", "NullLogger", "run_recording"]
+__all__ = ["STATE_DIR", "NullLogger", "RunInterrupted", "interrupted_state", "run_recording"]
 
 log = logging.getLogger(__name__)
 
 STATE_DIR = ".navkit-run"
 # 3: per-capability frame counts and stamps in the statistics
 CHECKPOINT_VERSION = 3
+
+
+class RunInterrupted(Exception):
+    """Ctrl-C (SIGINT) stopped a run between two source items, after a checkpoint: ``resume=True``
+    continues it. ``item``: source items done; ``n_items``: the source's items (0 = unknown)."""
+
+    def __init__(self, out: Path, item: int, n_items: int) -> None:
+        self.out, self.item, self.n_items = out, item, n_items
+        of = f" of {n_items}" if n_items else ""
+        super().__init__(f"interrupted after {item}{of} source items; the run in {out} is saved")
+
+
+class _StopOnSigint:
+    """While open (in the main thread): a first SIGINT asks the loop to stop after the current
+    item (:attr:`requested`); a second one interrupts at once (``KeyboardInterrupt``, the last
+    periodic checkpoint stays)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.previous: Any = None
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        log.warning("Ctrl-C: stopping after the current item (Ctrl-C again to stop now)")
+
+    def __enter__(self) -> _StopOnSigint:
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        import signal
+
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+
+
+def interrupted_state(out: str | os.PathLike[str]) -> int | None:
+    """The next source item of the checkpoint a killed or interrupted run left in ``out`` (what
+    ``--resume`` continues from), or None when there is none."""
+    f = Path(out) / STATE_DIR / "checkpoint.pkl"
+    if not f.is_file():
+        return None
+    try:
+        with open(f, "rb") as fh:
+            data = pickle.load(fh)
+        return int(data["state"].next_item)
+    except Exception:  # an unreadable checkpoint: --resume will say why
+        return None
 
 
 class NullLogger:
@@ -223,7 +277,6 @@ class _Run:
 
     def checkpoint(self) -> None:
         """Close the current segment, make everything durable, save the state, start a segment."""
-        from navkit.io.atomic import atomic_path
         from navkit.io.results_mcap import ResultsWriter
 
         self.writer.close()
@@ -231,11 +284,18 @@ class _Run:
         os.fsync(self.frames.fileno())
         self.s.segments += 1
         self.s.frames_bytes = self.frames.tell()
-        with atomic_path(self.state_dir / "checkpoint.pkl") as tmp, open(tmp, "wb") as fh:
+        # not through navkit.io.atomic: the checkpoint is the run's own state, kept when the
+        # command is interrupted (an output transaction would roll it back)
+        target = self.state_dir / "checkpoint.pkl"
+        tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as fh:
             pickle.dump(
                 {"version": CHECKPOINT_VERSION, "pipeline": _pipe_dict(self.pipe), "state": self.s},
                 fh,
             )
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
         self.writer = ResultsWriter(self._segment(self.s.segments), chunked=False)
 
     def close(self) -> None:
@@ -360,17 +420,21 @@ def run_recording(
     every = max(pipe.run.checkpoint_every, 1)
     item = state.next_item - 1
     try:
-        for item, msgs in source.messages(skip=state.next_item):
-            if pipe.run.max_items and item >= pipe.run.max_items:
-                item -= 1
-                break
-            for msg in msgs:
-                run.feed(msg, item)
-            run.end_item(item)
-            if on_progress is not None and state.last_ns is not None:
-                on_progress((state.last_ns - source.start_ns) * 1e-9, duration)
-            if (item + 1) % every == 0:
-                run.checkpoint()
+        with _StopOnSigint() as stop:
+            for item, msgs in source.messages(skip=state.next_item):
+                if pipe.run.max_items and item >= pipe.run.max_items:
+                    item -= 1
+                    break
+                for msg in msgs:
+                    run.feed(msg, item)
+                run.end_item(item)
+                if on_progress is not None and state.last_ns is not None:
+                    on_progress((state.last_ns - source.start_ns) * 1e-9, duration)
+                if stop.requested:
+                    run.checkpoint()
+                    raise RunInterrupted(out, item + 1, source.n_items)
+                if (item + 1) % every == 0:
+                    run.checkpoint()
         run.drain(item, force=True)
         end_ns = state.last_ns or 0
         finals = {}
