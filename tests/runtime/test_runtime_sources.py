@@ -52,6 +52,12 @@ def test_cli_refuses_to_overwrite_and_bad_input(cli, tmp_path):
         open_source(tmp_path / "junk.bin")
     r = cli("run", traj, "--out", tmp_path / "o3", "--resume")
     assert r.exit_code == 2 and "checkpoint" in r.output
+    # --map needs laser scans: a recording without any is refused before anything is written
+    (tmp_path / "map.json").write_text("{}")
+    r = cli("run", traj, "--out", tmp_path / "o4", "--map", tmp_path / "map.json")
+    assert r.exit_code == 2 and r.output.count("\n") == 1, r.output
+    assert r.output.startswith("error:") and "--map" in r.output and "no laser scans" in r.output
+    assert not (tmp_path / "o4").exists() or not any((tmp_path / "o4").iterdir())
 
 
 def test_trajectory_file_path_memory(data_path, tmp_path):
