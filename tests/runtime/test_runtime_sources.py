@@ -157,3 +157,24 @@ def test_real_time_factor_is_the_sensor_period_over_the_work_per_frame(tmp_path)
     per_frame = path["seconds"] / path["frames"]
     assert path["ms_per_frame"] == pytest.approx(1e3 * per_frame, rel=1e-12)
     assert path["real_time_factor"] == pytest.approx(0.1 / per_frame, rel=1e-12)
+
+
+@pytest.mark.realdata
+def test_a_bag_cut_at_60_percent_streams_up_to_the_cut(data_path, tmp_path):
+    """A ROS 1 bag cut at 60 % of its bytes (a crash): the run reads every whole message before
+    the cut, and its wall map uses every scan among them."""
+    from navkit.io.rosbag import bag_info
+    from tests.runtime.bags import write_carmen_bag
+
+    log_gz = data_path("laser2d/freiburg-101-corrected.log.gz")
+    whole = tmp_path / "whole.bag"
+    n = write_carmen_bag(log_gz, whole, ros1=True, every=4)
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: int(0.6 * len(data))])
+    info = bag_info(cut)
+    scans = info.topics["/scan"][1]
+    assert 0.5 * n < scans < n  # 3 messages per scan time, evenly spread over the bytes
+    s = run_recording(cut, tmp_path / "o")
+    assert s["messages"] == info.n_messages
+    assert s["capabilities"]["wall_map"]["frames"] == scans
