@@ -129,11 +129,13 @@ class _PosesAt10Hz:
     an hour into the recording: the recording's span is an hour, the sensor's period 0.1 s."""
 
     name = "poses at 10 Hz"
-    topics = {"/tf_static": "tf", "/odom": "pose"}
     n_frames = 30
     start_ns = 0
     end_ns = 3600 * 10**9 + (n_frames - 1) * 10**8
     n_items = n_frames + 1
+
+    def __init__(self) -> None:
+        self.topics = {"/tf_static": "tf", "/odom": "pose"}
 
     def messages(self, skip=0):
         from navkit.runtime.messages import Message
