@@ -145,3 +145,101 @@ def test_not_a_bag(tmp_path):
     p.write_bytes(b"nothing here")
     with pytest.raises(FormatError, match=r"junk\.bag.*cannot open"):
         list_topics(p)
+
+
+# --------------------------------------------------------------------------- bags as robots leave them
+def _all(path):
+    """``(topic, bag time, stamp ns)`` of every message of a bag, in the order it is read."""
+    from navkit.io.rosbag import iter_raw_messages, stamp_ns
+
+    return [(t, ns, stamp_ns(m, ns)) for t, _typ, ns, m in iter_raw_messages(path)]
+
+
+def test_ccny_2010_bag_is_read_by_scanning(data_path, caplog):
+    """The real 2010 ROS 1 bag whose index rosbags rejects: all 278 LaserScans over 27.6 s
+    (its SOURCE.txt), with one warning saying how many messages were recovered."""
+    import logging
+
+    from navkit.io.rosbag import bag_info, iter_raw_messages, laserscan_from_msg
+
+    bag = data_path("bags/ccny-laser-2010.bag")
+    caplog.set_level(logging.WARNING, logger="navkit.io.rosbag")
+    info = bag_info(bag)
+    assert info.topics == {"/scan": ("sensor_msgs/msg/LaserScan", 278)}
+    assert abs((info.end_ns - info.start_ns) * 1e-9 - 27.6) < 0.05
+    scans = [laserscan_from_msg(m) for _t, _typ, _ns, m in iter_raw_messages(bag)]
+    assert len(scans) == 278
+    assert all(np.isfinite(r).sum() > len(r) // 2 for r, _b, _rmax in scans)
+    warnings = [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING]
+    assert len(warnings) == 1 and "278 messages recovered" in warnings[0], warnings
+    stamps = [s for _t, _ns, s in _all(bag)]
+    assert stamps == sorted(stamps)
+
+
+@pytest.fixture(scope="module")
+def whole_bags(tmp_path_factory):
+    """CARMEN scans + odometry as a ROS 1 bag and a ROS 2 (mcap storage) bag."""
+    from navkit import datasets
+    from navkit.errors import DataNotFoundError
+    from tests.runtime.bags import write_carmen_bag
+
+    try:
+        log_gz = datasets.find("laser2d/freiburg-101-corrected.log.gz")
+    except DataNotFoundError as exc:
+        pytest.skip(f"recorded data absent: {exc}")
+    d = tmp_path_factory.mktemp("cut")
+    write_carmen_bag(log_gz, d / "whole.bag", ros1=True, every=4)
+    write_carmen_bag(log_gz, d / "whole_ros2", ros1=False, every=4)
+    return d
+
+
+def _cut(src, dest, fraction):
+    data = src.read_bytes()
+    dest.write_bytes(data[: int(len(data) * fraction)])
+    return len(data)
+
+
+@pytest.mark.realdata
+@pytest.mark.parametrize("ros1", [True, False])
+def test_bags_cut_short_are_read_up_to_the_last_whole_message(whole_bags, tmp_path, ros1):
+    """A bag cut at 30, 60 and 90 % of its bytes (as a crash leaves it): the messages read are
+    exactly the first ones of the whole bag, and all of them whose bytes lie before the cut
+    but for the records in flight."""
+    from navkit.io.rosbag import bag_info
+
+    d = whole_bags
+    if ros1:
+        src = d / "whole.bag"
+    else:
+        (src,) = sorted((d / "whole_ros2").glob("*.mcap"))
+    full = _all(d / "whole.bag" if ros1 else d / "whole_ros2")
+    raw_sizes = []
+    counts = []
+    for fraction in (0.3, 0.6, 0.9):
+        if ros1:
+            cut = tmp_path / f"cut{fraction}.bag"
+        else:
+            folder = tmp_path / f"cut{fraction}"
+            folder.mkdir()
+            (folder / "metadata.yaml").write_bytes(
+                (d / "whole_ros2" / "metadata.yaml").read_bytes()
+            )
+            cut = folder
+        size = _cut(src, cut if ros1 else cut / src.name, fraction)
+        got = _all(cut)
+        assert got == full[: len(got)]
+        info = bag_info(cut)
+        assert info.n_messages == len(got)
+        counts.append(len(got))
+        if not raw_sizes:  # the serialised sizes, read from the whole bag by rosbags itself
+            from rosbags.highlevel import AnyReader
+
+            whole = d / "whole.bag" if ros1 else d / "whole_ros2"
+            with AnyReader([whole], default_typestore=get_typestore(Stores.LATEST)) as r:
+                raw_sizes = [len(raw) for _c, _t, raw in r.messages()]
+        # every message ending before the cut is read: the messages are at most `per` bytes
+        # apart with their record headers (< 128 bytes), after the file's header region
+        # (ROS 1: 4 KiB bag header; MCAP: header, schemas, channels)
+        per = 2 * (max(raw_sizes) + 128)  # one scan and one odometry record per scan time
+        assert len(got) >= 2 * ((int(size * fraction) - 8192) // per) - 2, (fraction, len(got))
+    assert counts == sorted(counts) and counts[-1] < len(full)

@@ -206,17 +206,22 @@ def test_geojson_needs_an_origin_and_presets_fill_the_layout(cli, data_path, tmp
     assert res.exit_code == 2 and "vlp16" in res.output
 
 
-def test_a_failed_frame_is_reported_and_the_sequence_goes_on(cli, tmp_path, four_npz):
+@pytest.mark.parametrize("batch", [(), ("--resume",)])
+def test_a_failed_frame_is_reported_and_the_sequence_goes_on(cli, tmp_path, four_npz, batch):
+    """One bad frame of three: the others are done, the bad one has no folder, exit code 3
+    (the same with ``--resume``, which runs the frames as a batch)."""
     src = tmp_path / "seq"
     src.mkdir()
     (src / "a.npz").write_bytes(four_npz[0].read_bytes())
     np.savez(src / "b.npz", ranges=np.ones((3, 4)), azimuth=np.zeros(2), elevation=np.zeros(4))
     (src / "c.npz").write_bytes(four_npz[0].read_bytes())
     out = tmp_path / "out"
-    res = cli("obstacles", "detect", src, "-o", out)
-    assert res.exit_code == 0, res.output
+    res = cli("obstacles", "detect", src, "-o", out, *batch)
+    assert res.exit_code == 3, res.output
     assert "1 failed" in res.stdout
     assert sorted(p.name for p in out.iterdir() if p.is_dir()) == ["a", "c"]  # nothing for b
+    if batch:
+        return
     rows = (out / "frames.csv").read_text().splitlines()
     assert rows[0] == "frame,input,status,n_obstacles,reason"
     assert rows[1].startswith("a,") and rows[1].split(",")[2:4] == ["ok", "4"]

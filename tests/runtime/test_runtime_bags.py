@@ -396,3 +396,61 @@ def test_kill_and_resume(carmen, tmp_path):
     assert a == b
     s = json.loads((out / "summary.json").read_text())
     assert s["resumed"] and s["capabilities"]["localization"]["fixes"] == n
+
+
+def test_ctrl_c_and_resume(carmen, tmp_path):
+    """SIGINT halfway: the run stops after the current item with a checkpoint, exits 130 and
+    says how to continue; --resume then gives the records and poses of the uninterrupted run."""
+    d, n = carmen
+    out = tmp_path / "interrupted"
+    args = [
+        sys.executable,
+        "-m",
+        "navkit",
+        "run",
+        str(d / "second.bag"),
+        "--map",
+        str(d / "map" / "map.json"),
+        "--config",
+        str(d / "cfg.toml"),
+        "--out",
+        str(out),
+    ]
+    env = {**os.environ, "PYTHONPATH": str(REPO / "src")}
+    proc = subprocess.Popen(
+        args, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True
+    )
+    frames = out / "frames.jsonl"
+    t0 = time.monotonic()
+    try:
+        while time.monotonic() - t0 < 120:
+            if frames.exists() and frames.read_text().count('"localization"') >= n // 2:
+                break
+            if proc.poll() is not None:
+                pytest.fail("the run ended before it could be interrupted")
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert "--resume" in err and "no output was changed" not in err, err
+    assert (out / ".navkit-run" / "checkpoint.pkl").is_file()
+    assert not (out / "results.mcap").exists() and not (out / "summary.json").exists()
+    done = [json.loads(x) for x in frames.read_text().splitlines()]
+    assert n // 2 <= len([r for r in done if r["capability"] == "localization"]) < n
+    r = subprocess.run([*args, "--resume"], env=env, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    full = _records(d / "run", "localization")
+    assert [_strip(x) for x in _records(out, "localization")] == [_strip(x) for x in full]
+
+    def poses(folder: Path) -> list[tuple[int, float, float]]:
+        return [
+            (m.log_time_ns, m.message.pose.position.x, m.message.pose.position.y)
+            for m in read_messages(folder / "results.mcap")
+            if m.topic == "/navkit/localization/pose"
+        ]
+
+    assert poses(out) == poses(d / "run")
+    assert not (out / ".navkit-run").exists()

@@ -52,6 +52,12 @@ def test_cli_refuses_to_overwrite_and_bad_input(cli, tmp_path):
         open_source(tmp_path / "junk.bin")
     r = cli("run", traj, "--out", tmp_path / "o3", "--resume")
     assert r.exit_code == 2 and "checkpoint" in r.output
+    # --map needs laser scans: a recording without any is refused before anything is written
+    (tmp_path / "map.json").write_text("{}")
+    r = cli("run", traj, "--out", tmp_path / "o4", "--map", tmp_path / "map.json")
+    assert r.exit_code == 2 and r.output.count("\n") == 1, r.output
+    assert r.output.startswith("error:") and "--map" in r.output and "no laser scans" in r.output
+    assert not (tmp_path / "o4").exists() or not any((tmp_path / "o4").iterdir())
 
 
 def test_trajectory_file_path_memory(data_path, tmp_path):
@@ -96,7 +102,12 @@ def test_rgbd_folder_plane_odometry(data_path, tmp_path):
     folder = data_path("rgbd/slambook-ch5")
     cam = {"fx": 518.0, "fy": 519.0, "cx": 325.5, "cy": 253.5, "depth_scale": 1000.0}
     s = run_recording(folder, tmp_path / "o", intrinsics=(518.0, 519.0, 325.5, 253.5))
-    assert s["capabilities"]["planes"]["frames"] == 3
+    planes = s["capabilities"]["planes"]
+    # one frame per RGB-D pair: 3 depth + 3 colour images and one CameraInfo are 3 frames
+    assert planes["frames"] == 3 and planes["messages"] == 7
+    assert planes["real_time_factor"] == pytest.approx(
+        planes["sensor_period_s"] / (planes["seconds"] / 3), rel=1e-12
+    )
     seq = open_rgbd_sequence(folder, cam)
     odo = PlaneOdometry(OdometrySettings())
     want = np.stack(
@@ -111,3 +122,61 @@ def test_rgbd_folder_plane_odometry(data_path, tmp_path):
     np.testing.assert_allclose(got, want, atol=1e-6)
     recs = [json.loads(x) for x in (tmp_path / "o" / "frames.jsonl").read_text().splitlines()]
     assert next(r["status"].split(" ")[0] for r in recs if r["capability"] == "planes") == "first"
+
+
+class _PosesAt10Hz:
+    """A source of one TF at stamp 0 (as a ``/tf_static`` often is) then poses every 0.1 s from
+    an hour into the recording: the recording's span is an hour, the sensor's period 0.1 s."""
+
+    name = "poses at 10 Hz"
+    n_frames = 30
+    start_ns = 0
+    end_ns = 3600 * 10**9 + (n_frames - 1) * 10**8
+    n_items = n_frames + 1
+
+    def __init__(self) -> None:
+        self.topics = {"/tf_static": "tf", "/odom": "pose"}
+
+    def messages(self, skip=0):
+        from navkit.runtime.messages import Message
+
+        items = [[Message("/tf_static", "tf", 0, "base_link", np.eye(4), "laser")]]
+        for k in range(self.n_frames):
+            T = np.eye(4)
+            T[0, 3] = 0.05 * k
+            items.append([Message("/odom", "pose", 3600 * 10**9 + k * 10**8, "odom", T, "laser")])
+        yield from list(enumerate(items))[skip:]
+
+
+def test_real_time_factor_is_the_sensor_period_over_the_work_per_frame(tmp_path):
+    """Real-time factor = the frames' stamp spacing / the work per frame, not the recording's
+    span (an hour here, because of a static transform at stamp 0) / the work."""
+    src = _PosesAt10Hz()
+    s = run_recording(src, tmp_path / "o")
+    path = s["capabilities"]["path"]
+    assert path["frames"] == path["messages"] == src.n_frames
+    assert path["sensor_period_s"] == pytest.approx(0.1, abs=1e-12)
+    per_frame = path["seconds"] / path["frames"]
+    assert path["ms_per_frame"] == pytest.approx(1e3 * per_frame, rel=1e-12)
+    assert path["real_time_factor"] == pytest.approx(0.1 / per_frame, rel=1e-12)
+
+
+@pytest.mark.realdata
+def test_a_bag_cut_at_60_percent_streams_up_to_the_cut(data_path, tmp_path):
+    """A ROS 1 bag cut at 60 % of its bytes (a crash): the run reads every whole message before
+    the cut, and its wall map uses every scan among them."""
+    from navkit.io.rosbag import bag_info
+    from tests.runtime.bags import write_carmen_bag
+
+    log_gz = data_path("laser2d/freiburg-101-corrected.log.gz")
+    whole = tmp_path / "whole.bag"
+    n = write_carmen_bag(log_gz, whole, ros1=True, every=4)
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: int(0.6 * len(data))])
+    info = bag_info(cut)
+    scans = info.topics["/scan"][1]
+    assert 0.5 * n < scans < n  # 3 messages per scan time, evenly spread over the bytes
+    s = run_recording(cut, tmp_path / "o")
+    assert s["messages"] == info.n_messages
+    assert s["capabilities"]["wall_map"]["frames"] == scans

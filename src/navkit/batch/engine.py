@@ -29,6 +29,7 @@ import hashlib
 import json
 import logging
 import os
+import shutil
 import socket
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -215,6 +216,7 @@ def execute_task(task: BatchTask, out: str) -> dict[str, Any]:
     out_dir = Path(out) / task.key
     t0 = time.perf_counter()
     row: dict[str, Any] = {"key": task.key, "worker": _worker_name()}
+    new_dir = not out_dir.exists()
     try:
         out_dir.mkdir(parents=True, exist_ok=True)
         figures = dict(task.fn(out_dir, **dict(task.kwargs)) or {})
@@ -235,6 +237,10 @@ def execute_task(task: BatchTask, out: str) -> dict[str, Any]:
                 "files": _files_of(out_dir),
             },
         )
+    if row["status"] == "failed" and new_dir:
+        # a failed input leaves no folder (its partial files are not results): the manifest
+        # row says why it failed
+        shutil.rmtree(out_dir, ignore_errors=True)
     row["seconds"] = round(time.perf_counter() - t0, 6)
     return row
 

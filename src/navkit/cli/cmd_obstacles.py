@@ -265,8 +265,7 @@ def detect(
             + (f", {len(failed)} failed (see frames.csv)" if failed else "")
             + f" -> {out}"
         )
-    if failed and (workers or scheduler or resume):
-        exit_if_failed({"failed": len(failed)})
+    exit_if_failed({"failed": len(failed)})  # 3 with any failed frame, batch or not
 
 
 def _resolve_settings(ctx: typer.Context, config: Path | None) -> tuple[Any, Any, Any]:

@@ -326,6 +326,8 @@ def configure_logging(level: int) -> None:
     setattr(handler, _HANDLER_TAG, True)
     root.addHandler(handler)
     root.setLevel(level)
+    # numexpr (imported by pandas) announces its thread count at INFO on every import
+    logging.getLogger("numexpr.utils").setLevel(max(level, logging.WARNING))
 
 
 def progress(

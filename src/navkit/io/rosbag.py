@@ -221,16 +221,42 @@ def _open_reader(path: PathLike) -> Iterator[Any]:
     try:
         reader.open()
     except Exception as exc:  # rosbags raises its own error types for unreadable bags
-        raise FormatError(
-            f"cannot open as a ROS bag: {exc}",
-            source=p,
-            field="bag",
-            expected="a ROS1 .bag file or a ROS2 bag folder",
-        ) from None
+        reader = _scan_instead(p, exc)
     try:
         yield reader
     finally:
         reader.close()
+
+
+def _scan_instead(p: Path, exc: Exception) -> Any:
+    """A bag rosbags cannot open (index missing, damaged or in a layout it rejects): its records
+    scanned up to the last whole message (:mod:`navkit.io.bag_recovery`), with one warning."""
+    from navkit.io.bag_recovery import scan_bag
+
+    reason = " ".join(str(exc).split()) or type(exc).__name__
+    try:
+        bag = scan_bag(p)
+    except (FormatError, OSError) as scan_exc:
+        raise FormatError(
+            f"cannot open as a ROS bag ({reason}), and scanning its records found none: {scan_exc}",
+            source=p,
+            field="bag",
+            expected="a ROS 1 .bag file, a ROS 2 bag folder or an .mcap file",
+        ) from None
+    key = (str(p.resolve()), bag.n_messages)
+    if key not in _WARNED:  # one warning per bag, however often it is opened
+        _WARNED.add(key)
+        log.warning(
+            "%s: the index is missing or unreadable (%s); read by scanning its records: "
+            "%d messages recovered, up to the last whole one",
+            p,
+            reason,
+            bag.n_messages,
+        )
+    return bag
+
+
+_WARNED: set[tuple[str, int]] = set()
 
 
 def list_topics(path: PathLike) -> dict[str, tuple[str, int]]:

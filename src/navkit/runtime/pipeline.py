@@ -325,6 +325,14 @@ def resolve_pipeline(
                     field=f"topics.{role}",
                     expected=f"a {kind} topic of the recording: {have}",
                 )
+    if map_path and not chosen.scans:
+        have = ", ".join(f"{k} ({v})" for k, v in sorted(topics.items())) or "no topics"
+        raise ConfigError(
+            f"the recording has no laser scans to localize in {map_path} (topics: {have})",
+            source=recording,
+            field="--map",
+            expected="a recording with a LaserScan topic, or no --map",
+        )
     possible = []
     if chosen.clouds:
         possible.append("obstacles")

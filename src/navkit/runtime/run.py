@@ -9,8 +9,8 @@ Outputs of a run in ``out``:
   run they go to crash-safe segments in ``.navkit-run/`` that are merged at the end;
 - the per-capability files of today's commands (``obstacles/``, ``wall_map/``, ``path/``,
   ``planes/``);
-- ``summary.json``: per capability the messages, seconds per message and real-time factor
-  (recording duration / that capability's processing time), and the whole run's.
+- ``summary.json``: per capability the messages, frames, work per frame and real-time factor
+  (its sensor's period from the frames' stamps / its work per frame), and the whole run's.
 
 Checkpoints (``.navkit-run/checkpoint.pkl``, written atomically every ``run.checkpoint_every``
 source items): the stages' state (pickled as is: the online objects are plain Python/NumPy),
@@ -42,13 +42,67 @@ from navkit.runtime.messages import Message, Output
 from navkit.runtime.pipeline import Pipeline, resolve_pipeline
 from navkit.runtime.sources import Source, open_source
 
-__all__ = ["STATE_DIR", "NullLogger", "run_recording"]
+__all__ = ["STATE_DIR", "NullLogger", "RunInterrupted", "interrupted_state", "run_recording"]
 
 log = logging.getLogger(__name__)
 
 STATE_DIR = ".navkit-run"
-# 2: the pose buffer holds the TF tree, the planes stage streams its trajectory
-CHECKPOINT_VERSION = 2
+# 3: per-capability frame counts and stamps in the statistics
+CHECKPOINT_VERSION = 3
+
+
+class RunInterrupted(Exception):
+    """Ctrl-C (SIGINT) stopped a run between two source items, after a checkpoint: ``resume=True``
+    continues it. ``item``: source items done; ``n_items``: the source's items (0 = unknown)."""
+
+    def __init__(self, out: Path, item: int, n_items: int) -> None:
+        self.out, self.item, self.n_items = out, item, n_items
+        of = f" of {n_items}" if n_items else ""
+        super().__init__(f"interrupted after {item}{of} source items; the run in {out} is saved")
+
+
+class _StopOnSigint:
+    """While open (in the main thread): a first SIGINT asks the loop to stop after the current
+    item (:attr:`requested`); a second one interrupts at once (``KeyboardInterrupt``, the last
+    periodic checkpoint stays)."""
+
+    def __init__(self) -> None:
+        self.requested = False
+        self.previous: Any = None
+
+    def _handle(self, signum: int, frame: Any) -> None:
+        if self.requested:
+            raise KeyboardInterrupt
+        self.requested = True
+        log.warning("Ctrl-C: stopping after the current item (Ctrl-C again to stop now)")
+
+    def __enter__(self) -> _StopOnSigint:
+        import signal
+        import threading
+
+        if threading.current_thread() is threading.main_thread():
+            self.previous = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        import signal
+
+        if self.previous is not None:
+            signal.signal(signal.SIGINT, self.previous)
+
+
+def interrupted_state(out: str | os.PathLike[str]) -> int | None:
+    """The next source item of the checkpoint a killed or interrupted run left in ``out`` (what
+    ``--resume`` continues from), or None when there is none."""
+    f = Path(out) / STATE_DIR / "checkpoint.pkl"
+    if not f.is_file():
+        return None
+    try:
+        with open(f, "rb") as fh:
+            data = pickle.load(fh)
+        return int(data["state"].next_item)
+    except Exception:  # an unreadable checkpoint: --resume will say why
+        return None
 
 
 class NullLogger:
@@ -67,10 +121,47 @@ class NullLogger:
         """Finish (flush a recording)."""
 
 
+# the message kind that is one frame of each capability's sensor: a colour image and a
+# CameraInfo are part of an RGB-D frame, its depth image is the frame
+FRAME_KINDS = frozenset({"cloud", "scan", "depth", "pose"})
+
+
 @dataclasses.dataclass
 class _Stats:
+    """One capability's work: messages handled, frames among them, seconds of work (handling
+    and finishing), first and last frame stamp."""
+
     n: int = 0
     seconds: float = 0.0
+    frames: int = 0
+    first_ns: int | None = None
+    last_ns: int | None = None
+
+    def add_frame(self, stamp_ns: int) -> None:
+        self.frames += 1
+        self.first_ns = stamp_ns if self.first_ns is None else min(self.first_ns, stamp_ns)
+        self.last_ns = stamp_ns if self.last_ns is None else max(self.last_ns, stamp_ns)
+
+    def figures(self) -> dict[str, Any]:
+        """``messages``, ``frames``, ``seconds``, ``ms_per_message``, ``ms_per_frame``,
+        ``sensor_period_s`` (mean spacing of the frames' stamps) and ``real_time_factor`` =
+        sensor period / work per frame (above 1: the capability keeps up with its sensor; None
+        with fewer than two frames or no measurable work)."""
+        period = (
+            (self.last_ns - self.first_ns) * 1e-9 / (self.frames - 1)
+            if self.frames > 1 and self.first_ns is not None and self.last_ns is not None
+            else None
+        )
+        per_frame = self.seconds / self.frames if self.frames else None
+        return {
+            "messages": self.n,
+            "frames": self.frames,
+            "seconds": self.seconds,
+            "ms_per_message": 1e3 * self.seconds / max(self.n, 1),
+            "ms_per_frame": None if per_frame is None else 1e3 * per_frame,
+            "sensor_period_s": period,
+            "real_time_factor": period / per_frame if period and per_frame else None,
+        }
 
 
 @dataclasses.dataclass
@@ -136,6 +227,8 @@ class _Run:
             st = self.s.stats.setdefault(stage.name, _Stats())
             st.n += 1
             st.seconds += dt
+            if msg.kind in FRAME_KINDS:
+                st.add_frame(msg.stamp_ns)
             self.emit(res, stage.name, msg, item)
 
     def ready(self, msg: Message) -> bool:
@@ -184,7 +277,6 @@ class _Run:
 
     def checkpoint(self) -> None:
         """Close the current segment, make everything durable, save the state, start a segment."""
-        from navkit.io.atomic import atomic_path
         from navkit.io.results_mcap import ResultsWriter
 
         self.writer.close()
@@ -192,11 +284,18 @@ class _Run:
         os.fsync(self.frames.fileno())
         self.s.segments += 1
         self.s.frames_bytes = self.frames.tell()
-        with atomic_path(self.state_dir / "checkpoint.pkl") as tmp, open(tmp, "wb") as fh:
+        # not through navkit.io.atomic: the checkpoint is the run's own state, kept when the
+        # command is interrupted (an output transaction would roll it back)
+        target = self.state_dir / "checkpoint.pkl"
+        tmp = target.with_name(f".{target.name}.{os.getpid()}.tmp")
+        with open(tmp, "wb") as fh:
             pickle.dump(
                 {"version": CHECKPOINT_VERSION, "pipeline": _pipe_dict(self.pipe), "state": self.s},
                 fh,
             )
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, target)
         self.writer = ResultsWriter(self._segment(self.s.segments), chunked=False)
 
     def close(self) -> None:
@@ -321,17 +420,21 @@ def run_recording(
     every = max(pipe.run.checkpoint_every, 1)
     item = state.next_item - 1
     try:
-        for item, msgs in source.messages(skip=state.next_item):
-            if pipe.run.max_items and item >= pipe.run.max_items:
-                item -= 1
-                break
-            for msg in msgs:
-                run.feed(msg, item)
-            run.end_item(item)
-            if on_progress is not None and state.last_ns is not None:
-                on_progress((state.last_ns - source.start_ns) * 1e-9, duration)
-            if (item + 1) % every == 0:
-                run.checkpoint()
+        with _StopOnSigint() as stop:
+            for item, msgs in source.messages(skip=state.next_item):
+                if pipe.run.max_items and item >= pipe.run.max_items:
+                    item -= 1
+                    break
+                for msg in msgs:
+                    run.feed(msg, item)
+                run.end_item(item)
+                if on_progress is not None and state.last_ns is not None:
+                    on_progress((state.last_ns - source.start_ns) * 1e-9, duration)
+                if stop.requested:
+                    run.checkpoint()
+                    raise RunInterrupted(out, item + 1, source.n_items)
+                if (item + 1) % every == 0:
+                    run.checkpoint()
         run.drain(item, force=True)
         end_ns = state.last_ns or 0
         finals = {}
@@ -355,13 +458,7 @@ def run_recording(
     span = span * n_items / (n_items - 1) if n_items > 1 else span
     caps: dict[str, Any] = {}
     for name, st in state.stats.items():
-        caps[name] = {
-            "messages": st.n,
-            "seconds": st.seconds,
-            "ms_per_message": 1e3 * st.seconds / max(st.n, 1),
-            "real_time_factor": span / st.seconds if st.seconds > 0 else None,
-            **finals.get(name, {}),
-        }
+        caps[name] = {**st.figures(), **finals.get(name, {})}
     summary = {
         "recording": source.name,
         "capabilities": caps,
