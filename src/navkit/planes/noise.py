@@ -29,7 +29,16 @@ from numpy.typing import ArrayLike, NDArray
 from navkit.domains import POSITIVE, domain_field
 from navkit.geometry._validate import check_settings
 
-__all__ = ["KINECT_V1_K", "DepthNoise", "brightness_sigma"]
+__all__ = [
+    "DOF_NAMES",
+    "KINECT_V1_K",
+    "DepthNoise",
+    "PlaneFit",
+    "brightness_sigma",
+    "fit_plane",
+    "free_directions",
+    "plane_pair_information",
+]
 
 KINECT_V1_K = 1.6e-3
 """``k`` of ``sigma_z = k z^2`` for a Kinect v1, 1/m (Khoshelham and Elberink 2012: 4 cm at
@@ -83,3 +92,113 @@ def brightness_sigma(gray: ArrayLike, floor: float = 1.0 / 255.0) -> float:
         return float(floor)
     s = float(np.sqrt(np.pi / 2.0) / 6.0 * np.mean(np.abs(r)))
     return max(s, float(floor))
+
+
+@dataclass(frozen=True)
+class PlaneFit:
+    """A plane fitted to points weighted by their depth noise, with its covariance.
+
+    ``normal . x = rho``; the covariance is of ``(a, b, d)``: the normal turned by ``a`` towards
+    ``axes[0]`` and ``b`` towards ``axes[1]`` (radians), and the plane moved by ``d`` metres
+    along the normal at ``centroid`` (where the offset is measured: no lever arm)."""
+
+    normal: NDArray[np.float64]
+    rho: float
+    centroid: NDArray[np.float64]
+    axes: NDArray[np.float64]  # (2, 3) in-plane directions (largest spread first)
+    cov: NDArray[np.float64]  # (3, 3) of (a, b, d)
+    count: int
+
+
+def fit_plane(points: ArrayLike, noise: DepthNoise | None = None) -> PlaneFit:
+    """Weighted total-least-squares plane of ``(N, 3)`` sensor-frame points (N >= 3).
+
+    Each point weighs ``1 / sigma_z(z)^2`` (:class:`DepthNoise`: the depth error is taken along
+    the normal, exact for a plane seen head-on, optimistic by ``1 / cos`` of the incidence
+    angle otherwise). With the weighted centroid ``c`` and the weighted scatter's eigenpairs
+    ``(lambda_k, e_k)``, the normal's tilt towards ``e_k`` has variance ``1 / lambda_k`` and the
+    offset at ``c`` ``1 / sum w`` (the Fisher information of the fit; Pathak et al., "Fast
+    Registration Based on Noisy Planes with Unknown Correspondences", IEEE T-RO 26(3), 2010).
+    """
+    X = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    X = X[np.all(np.isfinite(X), axis=1)]
+    if len(X) < 3:
+        from navkit.errors import InputError
+
+        raise InputError(f"{len(X)} finite points", field="points", expected="at least 3")
+    nz = noise or DepthNoise()
+    w = 1.0 / np.maximum(nz.sigma(X[:, 2]), 1e-6) ** 2
+    c = (w[:, None] * X).sum(0) / w.sum()
+    D = X - c
+    S = (D * w[:, None]).T @ D
+    lam, V = np.linalg.eigh(S)
+    n = V[:, 0]
+    rho = float(n @ c)
+    if rho < 0:
+        n, rho = -n, -rho
+    axes = np.stack([V[:, 2], V[:, 1]])
+    cov = np.diag([1.0 / max(lam[2], 1e-300), 1.0 / max(lam[1], 1e-300), 1.0 / w.sum()])
+    return PlaneFit(n, rho, c, axes, cov, len(X))
+
+
+def plane_pair_information(
+    f1: PlaneFit, f2: PlaneFit, R: NDArray[np.float64], t: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``(6, 6)`` information (inverse covariance) that one matched plane pair gives about the
+    motion ``T_1_2 = (R, t)``, perturbed as ``(dt, w)``: ``X1 = exp(w) R X2 + t + dt``.
+
+    Three constraints: the normals agree across their two tilt directions (``e_k . (R n2) = 0``
+    for frame 1's in-plane axes ``e_k``; variance: both fits' tilts) and frame 2's centroid,
+    moved, lies on frame 1's plane (``n1 . (R c2 + t - c1) = 0``; variance: both offsets plus the
+    normal tilt times the distance between the centroids)."""
+    n1, Rn2 = f1.normal, R @ f2.normal
+    if n1 @ Rn2 < 0:
+        Rn2 = -Rn2
+    rows, var = [], []
+    tilt2 = R @ (f2.axes.T @ f2.cov[:2, :2] @ f2.axes) @ R.T  # frame 2's tilt covariance
+    for k in range(2):
+        e = f1.axes[k]
+        rows.append(np.concatenate([np.zeros(3), np.cross(Rn2, e)]))
+        var.append(f1.cov[k, k] + float(e @ tilt2 @ e))
+    y = R @ f2.centroid + t
+    lever = y - f1.centroid
+    tilt1 = f1.axes.T @ f1.cov[:2, :2] @ f1.axes
+    rows.append(np.concatenate([n1, np.cross(y, n1)]))
+    var.append(f1.cov[2, 2] + f2.cov[2, 2] + float(lever @ (tilt1 + tilt2) @ lever))
+    J = np.array(rows)
+    return J.T @ (J / np.maximum(np.array(var), 1e-300)[:, None])
+
+
+DOF_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+
+def free_directions(
+    H: NDArray[np.float64], max_translation: float, max_rotation_deg: float
+) -> tuple[tuple[str, ...], NDArray[np.float64], NDArray[np.float64]]:
+    """Degrees of freedom a ``(6, 6)`` information matrix leaves free.
+
+    The translation block's marginal covariance (``(H^-1)[:3, :3]``, the rotation not assumed
+    known) and the rotation block's are eigen-decomposed; a direction whose 3-sigma exceeds
+    ``max_translation`` metres (``max_rotation_deg`` degrees) is free. Returns the names of the
+    frame axes each free direction leans on most (``tx`` ... ``rz``), the translation and the
+    rotation 1-sigma along each eigen-direction (metres, degrees)."""
+    Hs = H + 1e-12 * max(np.trace(H), 1e-300) * np.eye(6)
+    try:
+        C = np.linalg.inv(Hs)
+    except np.linalg.LinAlgError:
+        return DOF_NAMES, np.full(3, np.inf), np.full(3, np.inf)
+    free: list[str] = []
+    sig_t, sig_r = np.zeros(3), np.zeros(3)
+    for blk, limit, out, scale in (
+        (slice(0, 3), max_translation, sig_t, 1.0),
+        (slice(3, 6), np.radians(max_rotation_deg), sig_r, np.degrees(1.0)),
+    ):
+        lam, V = np.linalg.eigh(C[blk, blk])
+        s = np.sqrt(np.maximum(lam, 0.0))
+        out[:] = s * scale
+        for k in range(3):
+            if 3 * s[k] > limit:
+                name = DOF_NAMES[blk.start + int(np.argmax(np.abs(V[:, k])))]
+                if name not in free:
+                    free.append(name)
+    return tuple(free), sig_t, sig_r
