@@ -4,6 +4,13 @@ Data: the 100 consecutive 7-Scenes frames of ``rgbd/7scenes-tsdf`` (30 Hz, hand-
 0.1-1.4 cm between frames; reference = the dataset's KinectFusion poses), taken every 1, 5, 10
 and 20 frames, and the slambook-ch5 pairs 1 -> 2 and 2 -> 3 (large motions).
 
+**Transfer table** (issue 26): both shared sequences, every frame, with ONE default
+``OdometrySettings`` - 7-Scenes and ``rgbd/tum-fr3-structure-notexture-far`` (100 real Kinect
+frames of large untextured planes; reference = motion capture, ``groundtruth.txt``
+interpolated at the frame times by :func:`navkit.planes.metrics.poses_at`; frames before the
+motion capture starts are tracked but not scored): tracked share, frames tracked but more than
+5 cm / 2 deg off, RPE median, ATE, CPU per frame and its ratio to Open3D hybrid, same run.
+
 Methods, each tracking frame k against the frames before it and chaining:
 
 - **navkit**: :class:`navkit.planes.PlaneOdometry` with its defaults (planes frame-to-map,
@@ -34,6 +41,7 @@ from benchmarks.common import Row
 
 AREA = "planes_seq"
 SEQ = "rgbd/7scenes-tsdf"
+TUM = "rgbd/tum-fr3-structure-notexture-far"
 SLAMBOOK = "rgbd/slambook-ch5"
 SLAMBOOK_CAMERA = {"fx": 518.0, "fy": 519.0, "cx": 325.5, "cy": 253.5, "depth_scale": 1000.0}
 
@@ -45,8 +53,9 @@ def _rel_errors(P: np.ndarray, G: np.ndarray, ok: np.ndarray) -> tuple[np.ndarra
     from navkit.geometry import se3_inverse
 
     et, er = [], []
+    scored = ok & np.isfinite(G).all(axis=(1, 2))
     for k in range(1, len(P)):
-        if not (ok[k] and ok[k - 1]):
+        if not (scored[k] and scored[k - 1]):
             continue
         E = se3_inverse(se3_inverse(G[k - 1]) @ G[k]) @ (se3_inverse(P[k - 1]) @ P[k])
         et.append(np.linalg.norm(E[:3, 3]))
@@ -158,6 +167,7 @@ def _stats(P, G, ok, cpu) -> dict[str, float]:
 
     et, er = _rel_errors(P, G, ok)
     silent = int(np.sum((et > 0.05) | (er > 2.0)))
+    scored = ok & np.isfinite(G).all(axis=(1, 2))
     return {
         "rpe_t_med": 100 * float(np.median(et)) if len(et) else np.nan,
         "rpe_t_p95": 100 * float(np.percentile(et, 95)) if len(et) else np.nan,
@@ -165,7 +175,8 @@ def _stats(P, G, ok, cpu) -> dict[str, float]:
         "rpe_r_med": float(np.median(er)) if len(er) else np.nan,
         "rpe_r_p95": float(np.percentile(er, 95)) if len(er) else np.nan,
         "rpe_r_max": float(er.max()) if len(er) else np.nan,
-        "ate": 100 * ate(P[ok], G[ok]) if ok.sum() >= 3 else np.nan,
+        "ate": 100 * ate(P[scored], G[scored]) if scored.sum() >= 3 else np.nan,
+        "tracked": float(ok.mean()),
         "failures": int(len(ok) - ok.sum()),
         "silent": silent,
         "cpu_ms": float(np.median(cpu)) if cpu else np.nan,
@@ -222,6 +233,80 @@ def sequence_rows(quick: bool) -> tuple[list[Row], list[str]]:
                     "Open3D hybrid RGB-D odometry",
                     ratio,
                     note=f"Open3D colored ICP {ci[key]:.3g}",
+                )
+            )
+    return rows, table
+
+
+def load_sequence(name: str, n: int | None = None) -> tuple[list, np.ndarray]:
+    """The first ``n`` frames of a shared sequence and their reference poses ``T_world_camera``
+    (7-Scenes: its own poses; TUM: ``groundtruth.txt`` interpolated at the frame times, NaN
+    where it does not cover them)."""
+    from navkit import datasets
+    from navkit.io.rgbd import open_rgbd_sequence
+    from navkit.io.trajectory import read_tum
+    from navkit.planes.metrics import poses_at
+
+    root = datasets.find(name)
+    seq = open_rgbd_sequence(root)
+    n = len(seq) if n is None else min(n, len(seq))
+    if seq.reference is not None:
+        G = seq.reference[:n]
+    else:
+        tr = read_tum(root / "groundtruth.txt")
+        G = poses_at(seq.timestamps[:n], tr.timestamps, tr.poses)
+    return [seq.frame(i) for i in range(n)], G
+
+
+def transfer_rows(quick: bool) -> tuple[list[Row], list[str]]:
+    """Issue 26's table: both shared sequences, one default settings object, navkit and Open3D
+    hybrid (single-threaded: ``OMP_NUM_THREADS=1`` is the caller's) in the same run."""
+    from navkit.errors import DataNotFoundError
+    from navkit.geometry import se3_inverse
+
+    rows, table = [], []
+    for label, name in (("7-Scenes", SEQ), ("TUM fr3 structure_notexture_far", TUM)):
+        try:
+            frames, G = load_sequence(name, 30 if quick else None)
+        except DataNotFoundError as exc:
+            rows.append(Row(AREA, f"{label}: transfer", "-", None, note=f"skipped: {exc}"))
+            continue
+        first = int(np.argmax(np.isfinite(G).all(axis=(1, 2))))
+        Gr = se3_inverse(G[first]) @ G
+        res = {}
+        P, ok, cpu, _ = _navkit(frames, None)
+        res["navkit"] = _stats(se3_inverse(P[first]) @ P, Gr, ok, cpu[1:])
+        try:
+            P, ok, cpu = _open3d_hybrid(frames)
+            res["Open3D hybrid"] = _stats(se3_inverse(P[first]) @ P, Gr, ok, cpu)
+        except Exception as exc:  # the peer is optional (bench extra)
+            print(f"Open3D hybrid skipped: {exc}")
+        nk = res["navkit"]
+        hy = res.get("Open3D hybrid")
+        for who, st in res.items():
+            ratio = st["cpu_ms"] / hy["cpu_ms"] if hy else np.nan
+            table.append(
+                f"| {label} ({len(frames)}) | {who} | {100 * st['tracked']:.0f} % | "
+                f"{st['silent']} | {st['rpe_t_med']:.2f} cm / {st['rpe_r_med']:.2f} deg | "
+                f"{st['ate']:.2f} | {st['cpu_ms']:.0f} | {ratio:.2f}x |"
+            )
+            print(table[-1], flush=True)
+        for key, unit, what in (
+            ("tracked", "share", "tracked share"),
+            ("silent", "frames", "tracked but > 5 cm / 2 deg off"),
+            ("rpe_t_med", "cm", "RPE translation median"),
+            ("ate", "cm", "ATE"),
+            ("cpu_ms", "ms", "CPU per frame"),
+        ):
+            rows.append(
+                Row(
+                    AREA,
+                    f"{label} ({len(frames)} frames, one settings object): {what}",
+                    unit,
+                    nk[key],
+                    hy[key] if hy else None,
+                    "Open3D hybrid RGB-D odometry",
+                    (hy[key] / nk[key] if hy and key == "cpu_ms" and nk[key] > 0 else None),
                 )
             )
     return rows, table
@@ -298,6 +383,14 @@ def run(quick: bool = False) -> list[Row]:
     from navkit.errors import DataNotFoundError
 
     rows: list[Row] = []
+    r, table = transfer_rows(quick)
+    rows += r
+    print(
+        "| sequence (frames) | method | tracked | tracked but > 5 cm / 2 deg off | RPE median "
+        "| ATE cm | CPU ms/frame | CPU vs Open3D |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    print("\n".join(table))
     try:
         r, table = sequence_rows(quick)
         rows += r

@@ -22,8 +22,13 @@ Decisions
   ``python -m benchmarks planes_seq``).
 - Depth is resampled by nearest neighbour (no mixing of foreground and background depth at
   edges), brightness by ``cv2.pyrDown``.
-- Correspondences whose depth disagrees by more than ``max_depth_diff`` (scaled with the level)
-  are outliers of both terms (occlusions, moving objects).
+- Every threshold is in the sensor's noise units (:mod:`navkit.planes.noise`): the geometric
+  residual of a point at depth ``z`` is divided by ``sqrt(2) sigma_z(z)`` (``sigma_z = k z^2``,
+  Kinect-type depth), the brightness residual by the images' own brightness noise
+  (:func:`~navkit.planes.noise.brightness_sigma`). No depth window: far points count less
+  (``1 / sigma_z^2``), they are not cut, so a scene at 6 m is aligned like one at 1.5 m.
+- Correspondences whose depths disagree by more than ``max_depth_diff_sigmas`` sigma_z
+  (doubled per level) are outliers of both terms (occlusions, moving objects).
 - Which degree of freedom each term fixed is reported (:attr:`DenseResult.dof_sources`): the
   marginal information ``1 / (H^-1)_kk`` of each term alone about each axis of ``xi``.
 """
@@ -37,6 +42,9 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from navkit.errors import ConfigError
+from navkit.geometry._validate import check_settings
+from navkit.planes.noise import DepthNoise, brightness_sigma
 from navkit.sensors import PinholeCamera
 
 __all__ = ["DENSE_DOF", "DenseFrame", "DenseResult", "DenseSettings", "dense_align", "rigid"]
@@ -63,12 +71,17 @@ class DenseSettings:
         median at steps 1 / 5 / 10 / 20): 0.204 / 0.37 / 0.65 / 0.63 cm; weight 1: 0.214 /
         0.48 / 0.54 / 0.65 cm; weight 2: 0.245 cm at step 1. The colour is not registered with
         the depth in that dataset (docs/planes.md), which argues for the lower weight.
-    max_depth_diff : float
-        Largest depth difference (metres, at level 0; doubled per level) for a correspondence.
+    noise : DepthNoise
+        The depth sensor's noise model (``sigma_z = k z^2``).
+    max_depth_diff_sigmas : float
+        Largest depth difference for a correspondence, in ``sigma_z`` of its depth (at level
+        0; doubled per level: a coarse pixel spans ``2**l`` fine ones). 12 sigma_z is 4.3 cm at
+        1.5 m for a Kinect v1 (the middle of its range).
     huber : float
         Huber threshold on normalised residuals.
     min_depth, max_depth : float
-        Depth range used, metres.
+        Depth range used, metres: the sensor's range (default: every valid depth; the noise
+        model already weighs far points down).
     finest_stride : int
         Source points of the finest level taken every ``finest_stride`` rows and columns
         (the target images stay whole).
@@ -77,11 +90,22 @@ class DenseSettings:
     levels: tuple[int, ...] = (3, 2, 1)
     iterations: tuple[int, ...] = (10, 8, 5)
     photometric_weight: float = 0.5
-    max_depth_diff: float = 0.04
+    noise: DepthNoise = field(default_factory=DepthNoise)
+    max_depth_diff_sigmas: float = 12.0
     huber: float = 1.345
-    min_depth: float = 0.3
-    max_depth: float = 4.0
+    min_depth: float = 0.0
+    max_depth: float = float("inf")
     finest_stride: int = 2
+
+    def __post_init__(self) -> None:
+        check_settings(self, allow_inf=("max_depth",))
+        if len(self.levels) != len(self.iterations) or not self.levels:
+            raise ConfigError(
+                f"{len(self.levels)} levels and {len(self.iterations)} iteration counts",
+                source="DenseSettings",
+                field="iterations",
+                expected="one iteration count per level",
+            )
 
 
 @dataclass(frozen=True)
@@ -99,9 +123,13 @@ class _Level:
 
 @dataclass(frozen=True)
 class DenseFrame:
-    """The image pyramid of one RGB-D frame (built once, used as target and as source)."""
+    """The image pyramid of one RGB-D frame (built once, used as target and as source).
+
+    ``brightness_sigma``: the image's brightness noise (:func:`~navkit.planes.noise.
+    brightness_sigma`, brightness in [0, 1]), the unit of the photometric residuals."""
 
     levels: dict[int, _Level] = field(default_factory=dict)
+    brightness_sigma: float = 1.0 / 255.0
 
     @classmethod
     def build(
@@ -118,6 +146,7 @@ class DenseFrame:
         d = np.where((d >= s.min_depth) & (d <= s.max_depth), d, np.nan).astype(np.float32)
         fx, fy, cx, cy = camera.fx, camera.fy, camera.cx, camera.cy
         out: dict[int, _Level] = {}
+        sigma_b = brightness_sigma(g)
         for lev in range(max(s.levels) + 1):
             if lev > 0:
                 g = np.asarray(cv2.pyrDown(g), dtype=np.float32)
@@ -128,7 +157,7 @@ class DenseFrame:
                 continue
             stride = s.finest_stride if lev == min(s.levels) else 1
             out[lev] = _make_level(g, d, (fx, fy, cx, cy), stride)
-        return cls(out)
+        return cls(out, sigma_b)
 
 
 def _make_level(g, d, K, stride: int = 1) -> _Level:
@@ -171,7 +200,8 @@ class DenseResult:
         Fraction of frame 2's points (finest level) that land on a valid pixel of frame 1 with
         agreeing depth.
     inliers : float
-        Fraction of those whose geometric residual is within 3 robust sigmas.
+        Fraction of those whose geometric residual is within 3 robust sigmas (never fewer
+        than 3 sigmas of the depth noise).
     rms_geometric : float
         RMS of the inliers' point-to-plane residuals, metres.
     rms_photometric : float
@@ -182,6 +212,13 @@ class DenseResult:
     dof_sources : dict
         For each of :data:`DENSE_DOF`: ``"depth"``, ``"image"`` or ``"depth+image"`` - the
         term that carries at least 80 % of the information about that axis (else both).
+    geometric_sigmas : float
+        RMS of the inliers' point-to-plane residuals in sigmas of the depth noise at their
+        depth (``sqrt(2) sigma_z(z)``, :class:`~navkit.planes.noise.DepthNoise`).
+    photometric_sigmas : float
+        RMS of the inliers' brightness residuals in sigmas of the images' brightness noise.
+    brightness_sigma : float
+        That brightness noise (both images combined), brightness in [0, 1].
     """
 
     T: NDArray[np.float64]
@@ -192,6 +229,9 @@ class DenseResult:
     iterations: int
     converged: bool
     dof_sources: dict[str, str]
+    geometric_sigmas: float = float("nan")
+    photometric_sigmas: float = float("nan")
+    brightness_sigma: float = float("nan")
 
 
 def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -247,8 +287,10 @@ def _robust_scale(r: NDArray[np.float64], floor: float) -> float:
     return max(1.4826 * float(np.median(np.abs(r - np.median(r)))), floor)
 
 
-def _terms(tgt: _Level, src: _Level, T, s: DenseSettings, lev: int):
-    """Residuals and Jacobians of both terms at one level for the current ``T``."""
+def _terms(tgt: _Level, src: _Level, T, s: DenseSettings, lev: int, sigma_b: float):
+    """Residuals and Jacobians of both terms at one level for the current ``T``, each in
+    sigmas of its noise (depth: ``sqrt(2) sigma_z``, also returned in metres per point;
+    brightness: ``sigma_b``)."""
     fx, fy, cx, cy = tgt.K
     H, W = tgt.gray.shape
     Y = src.src @ T[:3, :3].T + T[:3, 3]
@@ -263,17 +305,20 @@ def _terms(tgt: _Level, src: _Level, T, s: DenseSettings, lev: int):
     V1 = tgt.V[vi, ui].astype(np.float64)
     N1 = tgt.N[vi, ui].astype(np.float64)
     good = np.isfinite(V1[:, 2]) & np.isfinite(N1[:, 0])
-    good &= np.abs(V1[:, 2] - z) < s.max_depth_diff * (2**lev)
+    with np.errstate(invalid="ignore"):
+        good &= np.abs(V1[:, 2] - z) < s.max_depth_diff_sigmas * s.noise.sigma(z) * (2**lev)
     Y, u, v, z, V1, N1, idx = Y[good], u[good], v[good], z[good], V1[good], N1[good], idx[good]
-    rG = np.einsum("ij,ij->i", N1, Y - V1)
-    JG = np.hstack([N1, _cross(Y, N1)])
+    # point-to-plane residual in sigmas of the depth noise at the target's depth
+    isg = 1.0 / s.noise.point_to_plane(V1[:, 2])
+    rG = np.einsum("ij,ij->i", N1, Y - V1) * isg
+    JG = np.hstack([N1, _cross(Y, N1)]) * isg[:, None]
     S = _bilinear(tgt.G3, u, v)
     gxs, gys = S[:, 1] * fx, S[:, 2] * fy
-    rI = S[:, 0] - src.src_gray[idx]
+    rI = (S[:, 0] - src.src_gray[idx]) / sigma_b
     iz = 1.0 / z
     Jy = np.stack([gxs * iz, gys * iz, -(gxs * Y[:, 0] + gys * Y[:, 1]) * iz * iz], axis=1)
-    JI = np.hstack([Jy, _cross(Y, Jy)])
-    return rG, JG, rI, JI, len(src.src)
+    JI = np.hstack([Jy, _cross(Y, Jy)]) / sigma_b
+    return rG, JG, rI, JI, len(src.src), 1.0 / isg
 
 
 def _huber(r: NDArray[np.float64], k: float) -> NDArray[np.float64]:
@@ -307,16 +352,20 @@ def dense_align(
     T = rigid(T_init)
     its = 0
     converged = False
+    # the photometric residual's unit: both images' brightness noise
+    sigma_b = float(np.hypot(frame1.brightness_sigma, frame2.brightness_sigma))
     H_G = H_I = np.zeros((6, 6))
     for lev, n_it in zip(s.levels, s.iterations, strict=True):
         tgt, src = frame1.levels[lev], frame2.levels[lev]
         for _ in range(n_it):
             its += 1
-            rG, JG, rI, JI, _ = _terms(tgt, src, T, s, lev)
+            rG, JG, rI, JI, _, _ = _terms(tgt, src, T, s, lev, sigma_b)
             if len(rG) < 50:
                 break
-            sG = _robust_scale(rG, 1e-4)
-            sI = _robust_scale(rI, 1e-3)
+            # residuals are in noise sigmas; the robust scale (never below one sigma) absorbs
+            # what the noise model misses (misalignment at coarse levels, model error)
+            sG = _robust_scale(rG, 1.0)
+            sI = _robust_scale(rI, 1.0)
             wG = _huber(rG / sG, s.huber) / sG**2
             wI = s.photometric_weight * _huber(rI / sI, s.huber) / sI**2
             H_G = (JG * wG[:, None]).T @ JG
@@ -333,19 +382,23 @@ def dense_align(
                 break
     # quality at the finest level
     lev = s.levels[-1]
-    rG, JG, rI, JI, n_src = _terms(frame1.levels[lev], frame2.levels[lev], T, s, lev)
+    rG, JG, rI, JI, n_src, sig = _terms(frame1.levels[lev], frame2.levels[lev], T, s, lev, sigma_b)
     overlap = len(rG) / max(n_src, 1)
-    sG = _robust_scale(rG, 1e-4)
+    sG = _robust_scale(rG, 1.0)
     inl = np.abs(rG) < 3 * sG
+    nan = float("nan")
     return DenseResult(
         T=T,
         overlap=float(overlap),
         inliers=float(inl.mean()) if len(rG) else 0.0,
-        rms_geometric=float(np.sqrt(np.mean(rG[inl] ** 2))) if inl.any() else float("nan"),
-        rms_photometric=float(np.sqrt(np.mean(rI[inl] ** 2))) if inl.any() else float("nan"),
+        rms_geometric=float(np.sqrt(np.mean((rG[inl] * sig[inl]) ** 2))) if inl.any() else nan,
+        rms_photometric=float(sigma_b * np.sqrt(np.mean(rI[inl] ** 2))) if inl.any() else nan,
         iterations=its,
         converged=converged,
         dof_sources=_dof_sources(H_G, H_I),
+        geometric_sigmas=float(np.sqrt(np.mean(rG[inl] ** 2))) if inl.any() else nan,
+        photometric_sigmas=float(np.sqrt(np.mean(rI[inl] ** 2))) if inl.any() else nan,
+        brightness_sigma=sigma_b,
     )
 
 

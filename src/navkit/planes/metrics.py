@@ -16,7 +16,7 @@ from numpy.typing import ArrayLike, NDArray
 from navkit.errors import InputError
 from navkit.geometry import rotation_angle, se3_inverse
 
-__all__ = ["ate", "rpe", "umeyama_alignment"]
+__all__ = ["ate", "poses_at", "rpe", "umeyama_alignment"]
 
 
 def umeyama_alignment(src: NDArray[np.float64], dst: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -63,3 +63,42 @@ def rpe(est: ArrayLike, ref: ArrayLike, delta: int = 1) -> tuple[float, float]:
     t = np.linalg.norm(E[:, :3, 3], axis=1)
     a = np.degrees(rotation_angle(E[:, :3, :3]))
     return float(np.sqrt(np.mean(t**2))), float(np.sqrt(np.mean(a**2)))
+
+
+def poses_at(
+    times: ArrayLike, ref_times: ArrayLike, ref_poses: ArrayLike, max_gap: float = 0.02
+) -> NDArray[np.float64]:
+    """Reference poses ``(N, 4, 4)`` at the frame times ``times`` (seconds).
+
+    Interpolated between the two reference samples around each time (linear position,
+    spherical-linear rotation) when they are at most ``max_gap`` seconds apart (TUM's
+    ``associate.py`` default, 0.02 s); NaN where the reference does not cover the time (a
+    motion-capture recording often starts after the camera). Taking the first ``N`` rows of a
+    100 Hz ground truth instead pairs a 30 Hz frame with the wrong pose."""
+    from scipy.spatial.transform import Rotation, Slerp
+
+    t = np.asarray(times, dtype=np.float64).reshape(-1)
+    rt = np.asarray(ref_times, dtype=np.float64).reshape(-1)
+    Q = np.asarray(ref_poses, dtype=np.float64)
+    if Q.ndim != 3 or Q.shape[1:] != (4, 4) or len(Q) != len(rt) or len(rt) < 2:
+        raise InputError(
+            f"{len(rt)} times and poses of shape {Q.shape}",
+            field="ref_poses",
+            expected="(M, 4, 4) poses, one per reference time, M >= 2",
+        )
+    out = np.full((len(t), 4, 4), np.nan)
+    k = np.searchsorted(rt, t, side="right")
+    for i, (ti, ki) in enumerate(zip(t, k, strict=True)):
+        if ki == 0 or ki == len(rt):
+            if ki == len(rt) and ti == rt[-1]:
+                out[i] = Q[-1]
+            continue
+        a, b = ki - 1, ki
+        if rt[b] - rt[a] > max_gap:
+            continue
+        w = (ti - rt[a]) / (rt[b] - rt[a])
+        R = Slerp([0.0, 1.0], Rotation.from_matrix(Q[[a, b], :3, :3]))([w]).as_matrix()[0]
+        out[i] = np.eye(4)
+        out[i, :3, :3] = R
+        out[i, :3, 3] = (1 - w) * Q[a, :3, 3] + w * Q[b, :3, 3]
+    return out
