@@ -169,3 +169,37 @@ def test_odometry_on_7scenes_writes_only_tracked_poses(cli, data_path, tmp_path)
     assert len(read_tum(out / "trajectory.tum").poses) == len(tracked)
     assert summary["ate_m"] < 0.01  # measured 0.1-0.2 cm over 6 frames
     assert "7scenes-tsdf" in (out / "settings.toml").read_text()
+
+
+def test_odometry_on_a_tum_folder_uses_its_truth_at_the_frame_times(cli, data_path, tmp_path):
+    """A TUM RGB-D folder is read at its format's depth scale (5000) with the intrinsics of the
+    Kinect its name names (fr3), and its ``groundtruth.txt`` (100 Hz motion capture, starting
+    after the camera) is interpolated at the frames' times: frames it does not cover are left out
+    of the figures, never paired with another frame's pose.
+
+    Bounds: the Kinect's depth noise sigma_z = 1.6e-3 z^2 (Khoshelham & Elberink 2012) is 1.0 cm
+    at the structure's mean depth (~2.5 m) and 3.0 cm at its far end (~4.3 m); a frame-to-frame
+    motion within the former and a trajectory within the latter is right at the sensor's own
+    noise."""
+    folder = data_path("rgbd/tum-fr3-structure-notexture-far")
+    out = tmp_path / "tum"
+    res = cli("planes", "odometry", folder, "-o", out, "--max-frames", "12")
+    assert res.exit_code == 0, res.output
+    s = json.loads((out / "summary.json").read_text())
+    assert s["tracked"] == s["frames"] == 12
+    # the reference starts after the camera: some, not all, frames are covered
+    assert 2 <= s["reference_frames"] < 12
+    assert s["rpe_trans_m"] <= 1.6e-3 * 2.5**2
+    assert s["ate_m"] <= 1.6e-3 * 4.3**2
+    settings = (out / "settings.toml").read_text()
+    assert "groundtruth.txt" in settings
+
+
+def test_tum_folders_get_their_kinects_intrinsics(tmp_path):
+    from navkit.io.rgbd import TUM_CAMERAS, TUM_DEFAULT, tum_camera
+
+    assert tum_camera(tmp_path / "rgbd_dataset_freiburg3_long_office") == TUM_CAMERAS["fr3"]
+    assert tum_camera(tmp_path / "tum-fr1-xyz") == TUM_CAMERAS["fr1"]
+    assert tum_camera(tmp_path / "rgbd_dataset_freiburg2_desk") == TUM_CAMERAS["fr2"]
+    assert tum_camera(tmp_path / "my_frames") == TUM_DEFAULT
+    assert tum_camera(tmp_path / "fr30") == TUM_DEFAULT

@@ -216,12 +216,16 @@ def _extract_batch(
     )
 
 
-def _reference_poses(path: Path, n: int):
-    """Reference poses: TUM (8 columns) or 'tx ty tz qx qy qz qw' lines (slambook pose.txt)."""
+def _reference_poses(path: Path, n: int, stamps=None):  # type: ignore[no-untyped-def]
+    """Reference poses ``(n, 4, 4)``: a TUM trajectory (8 columns: time, position, quaternion)
+    interpolated at the frames' ``stamps`` (NaN where it does not cover a frame:
+    :func:`navkit.planes.metrics.poses_at`), or 'tx ty tz qx qy qz qw' lines, one per frame
+    (slambook pose.txt)."""
     import numpy as np
 
     from navkit.errors import FormatError
     from navkit.geometry import se3_from_xyz_quat
+    from navkit.planes.metrics import poses_at
 
     try:
         tab = np.loadtxt(path, comments="#", ndmin=2)
@@ -231,6 +235,10 @@ def _reference_poses(path: Path, n: int):
             source=path,
             expected="TUM or 'tx ty tz qx qy qz qw' lines",
         ) from None
+    if tab.shape[1] == 8 and stamps is not None and len(tab) >= 2:
+        order = np.argsort(tab[:, 0], kind="stable")
+        tab = tab[order]
+        return poses_at(stamps[:n], tab[:, 0], se3_from_xyz_quat(tab[:, 1:4], tab[:, 4:]))
     if tab.shape[1] == 8:
         tab = tab[:, 1:]
     if tab.shape[1] != 7 or len(tab) < n:
@@ -381,11 +389,14 @@ def odometry_cmd(
             obs = observe(i)
             t_extract = 1000 * (time.perf_counter() - t0)
             frames.append(_frame_row(i, float(stamps[i]), odo.register_frame(obs), t_extract))
+        if reference is None and len(sequence) == 1:  # a TUM folder carries its truth
+            gt = Path(sequence[0]) / "groundtruth.txt"
+            reference = gt if gt.is_file() else None
         if reference is not None:
             ref = (
                 _reference_folder(reference, n)
                 if reference.is_dir()
-                else _reference_poses(reference, n)
+                else _reference_poses(reference, n, stamps)
             )
             settings = replace(settings, reference=str(reference))
         elif ref is not None:
@@ -433,16 +444,26 @@ def _write_odometry(out: Path, odo, stamps, frames: list[dict[str, Any]], ref) -
         "per_frame": frames,
     }
     truth = None
-    if ref is not None:
-        truth = se3_inverse(ref[0]) @ ref  # reference relative to the first frame
-        t_rmse, r_rmse = rpe(poses[ok], truth[ok])
+    covered = None if ref is None else np.isfinite(ref).all(axis=(1, 2))
+    if ref is not None and covered is not None and (ok & covered).sum() >= 2:
+        # the reference relative to the first frame it covers (a motion-capture recording may
+        # start after the camera), the estimate likewise; frames it does not cover are left out
+        j0 = int(np.flatnonzero(covered)[0])
+        truth = se3_inverse(ref[j0]) @ ref
+        est = se3_inverse(poses[j0]) @ poses
+        m = ok & covered
+        t_rmse, r_rmse = rpe(est[m], truth[m])
         summary.update(
-            metrics_over="tracked frames (RPE between consecutive tracked frames)",
-            ate_m=ate(poses[ok], truth[ok]),
+            metrics_over="tracked frames the reference covers (RPE between consecutive ones)",
+            reference_frames=int(covered.sum()),
+            ate_m=ate(est[m], truth[m]),
             rpe_trans_m=t_rmse,
             rpe_rot_deg=r_rmse,
         )
-    plot_map(out / "map.png", mp["planes"], poses[ok], truth=truth)
+    if truth is None:
+        plot_map(out / "map.png", mp["planes"], poses[ok])
+    else:  # the map in the first frame's coordinates; the reference where it covers a frame
+        plot_map(out / "map.png", mp["planes"], poses[ok], truth=poses[j0] @ truth[ok & covered])
     return summary
 
 

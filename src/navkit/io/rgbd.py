@@ -6,8 +6,11 @@ TUM RGB-D (https://cvg.cit.tum.de/data/datasets/rgbd-dataset/file_formats)
     ``rgb.txt`` and ``depth.txt`` (lines ``timestamp path``, ``#`` comments); colour and depth
     are associated by nearest timestamp (at most ``max_dt`` = 0.02 s apart, as TUM's
     ``associate.py``); depth PNG 16-bit with ``depth_scale`` 5000 (metres = raw / 5000). Intrinsics
-    from ``camera.yaml`` in the folder if present, else the TUM ROS defaults
-    (fx = fy = 525, cx = 319.5, cy = 239.5).
+    from ``camera.yaml`` in the folder if present; else, when the folder's name says which
+    Kinect recorded it (``freiburg1`` / ``fr1``, ``freiburg2`` / ``fr2``, ``freiburg3`` /
+    ``fr3``), that camera's published calibration (TUM's "file formats" page; fr1 and fr2 lens
+    distortion is not modelled); else the TUM ROS defaults (fx = fy = 525, cx = 319.5,
+    cy = 239.5).
 Simple layout
     ``color/`` and ``depth/`` with images paired by sorted file name (PNG or PGM, equal counts),
     and ``camera.yaml`` with ``fx``, ``fy``, ``cx``, ``cy``, ``depth_scale`` (metres =
@@ -60,6 +63,25 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 TUM_DEFAULT = {"fx": 525.0, "fy": 525.0, "cx": 319.5, "cy": 239.5}
+TUM_CAMERAS = {
+    "fr1": {"fx": 517.3, "fy": 516.5, "cx": 318.6, "cy": 255.3},
+    "fr2": {"fx": 520.9, "fy": 521.0, "cx": 325.1, "cy": 249.7},
+    "fr3": {"fx": 535.4, "fy": 539.2, "cx": 320.1, "cy": 247.6},
+}
+"""The TUM RGB-D Kinects' published colour intrinsics (freiburg1/2/3), pixels at 640 x 480."""
+
+
+def tum_camera(folder: Path) -> dict[str, float]:
+    """The intrinsics of the Kinect a TUM folder's name names (``rgbd_dataset_freiburg3_...``,
+    ``tum-fr3-...``), else the TUM ROS defaults."""
+    name = folder.resolve().name.lower()
+    for key, values in TUM_CAMERAS.items():
+        n = key[-1]
+        if re.search(rf"(freiburg{n}|(^|[^a-z0-9])fr{n})([^0-9]|$)", name):
+            return dict(values)
+    return dict(TUM_DEFAULT)
+
+
 _IMAGE_SUFFIXES = (".png", ".pgm")
 
 
@@ -248,7 +270,7 @@ def read_tum_rgbd(
             source=root / "rgb.txt",
             expected="matching timestamps in rgb.txt and depth.txt",
         )
-    values = dict(TUM_DEFAULT, depth_scale=depth_scale)
+    values = dict(tum_camera(root), depth_scale=depth_scale)
     if (root / "camera.yaml").is_file():
         values.update(read_camera_yaml(root / "camera.yaml"))
     values.update(camera or {})
