@@ -555,7 +555,7 @@ class LoopFreeChain:
     def _append_compiled(
         self, ax: NDArray[np.float64], ay: NDArray[np.float64], length: float, remove_loops: bool
     ) -> list[LoopCut]:
-        """``append`` in one kernel call per step (session 6): the push of the segment with its
+        """``append`` in one kernel call per step: the push of the segment with its
         first crossing search (``_kernels.append_search``), then per loop the cut with the next
         search (``_kernels.cut_search``) - the same segments, pieces, boxes and crossings as
         ``_push_segment`` / ``find_crossings`` / ``_cut`` (the NumPy oracle, ``compiled``
