@@ -162,7 +162,7 @@ def refine_crossings(
                 aloy = min(Pa[i, 1], Pa[i + 1, 1])
                 ahiy = max(Pa[i, 1], Pa[i + 1, 1])
                 ext_a = max(ahix - alox, ahiy - aloy)
-                delta_a = dua**2 / 8.0 * max(acc_a[i], acc_a[i + 1])
+                delta_a = dua * dua / 8.0 * max(acc_a[i], acc_a[i + 1])
                 for j in range(K):
                     blox = min(Pb[j, 0], Pb[j + 1, 0])
                     bhix = max(Pb[j, 0], Pb[j + 1, 0])
@@ -176,7 +176,7 @@ def refine_crossings(
                         Pa[i, 0], Pa[i, 1], Pa[i + 1, 0], Pa[i + 1, 1],
                         Pb[j, 0], Pb[j, 1], Pb[j + 1, 0], Pb[j + 1, 1],
                     )  # fmt: skip
-                    delta_b = dub**2 / 8.0 * max(acc_b[j], acc_b[j + 1])
+                    delta_b = dub * dub / 8.0 * max(acc_b[j], acc_b[j + 1])
                     if not gap <= delta_a + delta_b + 1e-12:
                         continue
                     ext_b = max(bhix - blox, bhiy - bloy)
@@ -731,9 +731,9 @@ def fit_endpoints(
     rr = (
         Q
         - 2.0 * (k1x * D[0, 1] + k1y * D[1, 1] + k2x * D[0, 2] + k2y * D[1, 2])
-        + (k1x**2 + k1y**2) * S2
+        + (k1x * k1x + k1y * k1y) * S2
         + 2.0 * (k1x * k2x + k1y * k2y) * S3
-        + (k2x**2 + k2y**2) * S4
+        + (k2x * k2x + k2y * k2y) * S4
     )
     Rx1 = D[0, 1] - k1x * S2 - k2x * S3
     Rx2 = D[0, 2] - k1x * S3 - k2x * S4
