@@ -1,11 +1,18 @@
-"""The compiled loop search (navkit.path._kernels) against its NumPy oracle (loops.py).
+"""The compiled path kernels (navkit.path._kernels) against their NumPy twins, bit for bit.
 
-Same answers: the loop search finds the same crossings bit for bit (the kernel does
-the NumPy version's arithmetic pair by pair in the same order); the freeze's power sums,
-arc lengths and projections add in point order instead of NumPy's pairwise / BLAS order, so
-the whole approximator gives the same segments (the same points in each, the same loop cuts)
-and coefficients within 1e-9 relative - on synthetic loops and on every recorded trajectory
-in the shared data.
+Why bit for bit, on any CPU: every kernel and its twin do the same IEEE-754 operations on the
+same numbers in the same order, and use only operations the standard requires to be correctly
+rounded (``+ - * /`` and ``sqrt``), so each intermediate has exactly one possible result
+whatever the vector width, instruction set or thread count. Nothing on either side depends on
+the CPU: no libm or SIMD-library functions (``hypot``, ``pow``, ``sin``, ``exp``: their last
+bit is the library's), no BLAS products or solves (their summation order depends on the
+library, the CPU and the threads), no pairwise ``np.sum`` (the twins sum from 0 in point order
+with ``np.cumsum`` or in-place adds, as the kernels' loops do), and Numba compiles without
+``fastmath``, so LLVM neither reassociates nor fuses ``a * b + c`` into an FMA. The online
+approximator and the loop-free chain, compiled or not, therefore store the same path: the same
+segment coefficients, loop cuts, accepted points, arc lengths and deviations - compared with
+``np.array_equal`` below, on synthetic loops, random trajectories of every variant and every
+recorded trajectory in the shared data.
 """
 
 from __future__ import annotations
@@ -14,36 +21,41 @@ import numpy as np
 import pytest
 
 from navkit.path import ApproximatorSettings, OnlineApproximator
+from navkit.path.fitting import VARIANTS
 
-REL = 1e-9
 
-
-def _run(xy: np.ndarray, eps: float, compiled: bool) -> OnlineApproximator:
-    a = OnlineApproximator(ApproximatorSettings(tolerance=eps))
+def _run(xy: np.ndarray, settings: ApproximatorSettings, compiled: bool) -> OnlineApproximator:
+    a = OnlineApproximator(settings)
     a.compiled = a._chain.compiled = compiled
     for p in xy:
         a.add(p)
     return a
 
 
-def _assert_same(xy: np.ndarray, eps: float) -> int:
-    a, b = _run(xy, eps, True), _run(xy, eps, False)
+def _assert_same(xy: np.ndarray, eps: float, **kw: object) -> int:
+    """The recorder on kernels and on twins: every stored number identical; returns the cuts."""
+    settings = ApproximatorSettings(tolerance=eps, **kw)  # type: ignore[arg-type]
+    a, b = _run(xy, settings, True), _run(xy, settings, False)
     ca, cb = a._chain.cuts, b._chain.cuts
     assert len(ca) == len(cb)
     for x, y in zip(ca, cb, strict=True):
-        assert np.allclose((x.s_start, x.s_end), (y.s_start, y.s_end), rtol=REL, atol=0)
-        assert np.allclose(x.point, y.point, rtol=REL, atol=1e-12)
+        assert (x.s_start, x.s_end) == (y.s_start, y.s_end)
+        assert np.array_equal(x.point, y.point)
+        for u, v in zip(x.segments, y.segments, strict=True):
+            assert np.array_equal(u, v)
     n = a._chain.n_seg
     assert n == b._chain.n_seg
-    assert len(a._raw) == len(b._raw)  # the same segments (same points in each)
-    for name in ("_ax", "_ay", "_len"):
-        x, y = getattr(a._chain, name)[:n], getattr(b._chain, name)[:n]
-        assert np.abs(x - y).max(initial=0) <= REL * np.abs(y).max(initial=1e-300)
+    for name in ("_ax", "_ay", "_len", "_s0"):
+        assert np.array_equal(getattr(a._chain, name)[:n], getattr(b._chain, name)[:n])
+    assert len(a._raw) == len(b._raw)
+    for x, y in zip(a._raw, b._raw, strict=True):
+        assert np.array_equal(x[0], y[0]) and np.array_equal(x[1], y[1]) and x[2] == y[2]
     ra, rb = a.finish(), b.finish()
-    assert np.array_equal(ra.points, rb.points)
-    assert ra.n_refit_fallbacks == rb.n_refit_fallbacks
-    assert np.abs(ra.point_s - rb.point_s).max(initial=0) <= REL * ra.point_s.max(initial=1)
-    assert np.abs(ra.deviation - rb.deviation).max(initial=0) <= 1e-9  # metres (1 nm)
+    for name in ("points", "point_s", "deviation"):
+        assert np.array_equal(getattr(ra, name), getattr(rb, name)), name
+    assert (ra.n_cheap, ra.n_refit_fallbacks) == (rb.n_cheap, rb.n_refit_fallbacks)
+    for name in ("s0", "length", "ax", "ay"):
+        assert np.array_equal(getattr(ra.spline, name), getattr(rb.spline, name))
     # the loop-free chains have no crossing left, by either search
     assert a._chain.find_crossings(0) == [] and b._chain.find_crossings(0) == []
     return len(ca)
@@ -121,25 +133,34 @@ def test_within_is_the_numpy_test(rng):
 
 
 def test_freeze_kernels_match_numpy(rng):
-    """The vectorised arc lengths and projection of the freeze against the NumPy versions."""
+    """The freeze's passes - power sums, Gauss-Legendre arc lengths, Newton projection - give
+    their NumPy twins' bits, on random cubics and noisy points (1 to 2000 of them, parameters
+    outside [0, 1] included), and ``fit_endpoints`` gives ``fitting._fit_endpoints``' bits."""
     from navkit.path import _kernels as K
-    from navkit.path.fitting import CubicFit, project
+    from navkit.path.fitting import CubicFit, _fit_endpoints, power_sums, project
     from navkit.path.spline import _GL_W, _GL_X, gauss_legendre_length
 
-    for _ in range(50):
-        n = int(rng.integers(2, 2000))
-        coef = rng.normal(0, 5, (2, 4))
+    for trial in range(60):
+        n = int(rng.integers(1, 2000)) if trial else 1
+        coef = rng.normal(0, 5, (2, 4)) * 10.0 ** rng.uniform(-3, 3)
         u = np.sort(rng.random(n))
         s = K.gauss_legendre_length(coef[0], coef[1], u, _GL_X, _GL_W)
-        ref = gauss_legendre_length(coef[0], coef[1], u)
-        assert np.abs(s - ref).max() <= 1e-12 * max(ref[-1], 1e-300)
+        assert np.array_equal(s, gauss_legendre_length(coef[0], coef[1], u))
         d = np.c_[np.polyval(coef[0, ::-1], u), np.polyval(coef[1, ::-1], u)]
         d += rng.normal(0, 0.05, d.shape)
         u0 = np.clip(u + rng.normal(0, 0.02, n), -0.1, 1.1)
         uk, dk = K.project(coef, u0, d, 3)
         un, dn = project(CubicFit(coef=coef, T=1.0, ssr=0.0), u0, d)
-        assert np.abs(dk - dn).max() <= 1e-12 * max(dn.max(), 1.0)
-        assert np.abs(uk - un).max() <= 1e-9
+        assert np.array_equal(uk, un) and np.array_equal(dk, dn)
+        Sk, Dk, Qk = K.power_sums(u, d)
+        Sn, Dn, Qn = power_sums(u, d)
+        assert np.array_equal(Sk, Sn) and np.array_equal(Dk, Dn) and Qk == Qn
+        if n >= 4:
+            ok, c, ssr = K.fit_endpoints(Sn, Dn, Qn, float(d[-1, 0]), float(d[-1, 1]))
+            ref = _fit_endpoints(
+                Sn.tolist(), Dn.tolist(), Qn, 1.0, float(d[-1, 0]), float(d[-1, 1])
+            )
+            assert ok and np.array_equal(c, ref.coef) and ssr == ref.ssr
 
 
 def test_monotone_breaks_kernel_is_the_python_one(rng):
@@ -225,12 +246,39 @@ def test_natural_fit_kernel_matches_numpy(rng):
             a._buf, a._tau, n, _GL_X, _GL_W, eps, W, speed
         )
         assert ok and far == bool(dev.max() > eps)
-        assert abs(T_s - fit.T) <= 1e-12 * fit.T
-        assert np.abs(c_s - fit.coef).max() <= 1e-9 * np.abs(fit.coef).max()
-        assert np.abs(W[K.W_UP, :n] * T_s - s).max() <= 1e-9 * fit.T
-        assert np.abs(W[K.W_DIST, :n] - dev).max() <= 1e-9
+        assert T_s == fit.T and np.array_equal(c_s, fit.coef)
+        assert np.array_equal(W[K.W_UP, :n] * T_s, s)
+        assert np.array_equal(W[K.W_DIST, :n], dev)
         if far:
             fit_f, s_f, dev_f = a._scaled_t_fit("endpoints", a._buf[0].copy(), n)
-            assert np.abs(c_t - fit_f.coef).max() <= 1e-9 * np.abs(fit_f.coef).max()
-            assert np.abs(W[K.W_UP2, :n] * W[K.W_S, n - 1] - s_f).max() <= 1e-9 * fit_f.T
-            assert np.abs(W[K.W_DIST2, :n] - dev_f).max() <= 1e-9
+            assert np.array_equal(c_t, fit_f.coef) and W[K.W_S, n - 1] == fit_f.T
+            assert np.array_equal(W[K.W_UP2, :n] * W[K.W_S, n - 1], s_f)
+            assert np.array_equal(W[K.W_DIST2, :n], dev_f)
+
+
+def _random_track(rng: np.random.Generator, n: int) -> np.ndarray:
+    """A vehicle-like random track: speed and turn rate as smoothed random walks (loops, tight
+    turns, straights, stops), position noise, a few repeated points and NaN rows."""
+    turn = np.cumsum(rng.normal(0, 0.02, n))
+    turn = np.convolve(turn - turn.mean(), np.ones(25) / 25, mode="same") * rng.uniform(0.5, 3)
+    speed = np.abs(np.convolve(rng.normal(1, 0.6, n), np.ones(15) / 15, mode="same"))
+    speed[rng.random(n) < 0.02] = 0.0  # repeats
+    heading = np.cumsum(turn)
+    xy = np.cumsum(np.c_[np.cos(heading), np.sin(heading)] * speed[:, None] * 0.1, axis=0)
+    xy += rng.normal(0, 0.005, xy.shape) * (rng.random((n, 1)) < 0.5)
+    xy[rng.random(n) < 0.005] = np.nan
+    return xy * 10.0 ** rng.uniform(-1, 1)
+
+
+@pytest.mark.parametrize("variant", VARIANTS)
+def test_random_trajectories_every_variant(variant):
+    """Random tracks (loops at every angle, noise, repeats, NaN rows), every fitting variant,
+    with and without the geometric test, tolerances from 1 mm to 0.5 m: the kernels' path is
+    the twins' path, bit for bit."""
+    rng = np.random.default_rng(VARIANTS.index(variant))
+    cuts = 0
+    for trial in range(6):
+        xy = _random_track(rng, int(rng.integers(300, 2500)))
+        eps = float(10.0 ** rng.uniform(-3, np.log10(0.5)))
+        cuts += _assert_same(xy, eps, variant=variant, geometric_test=trial % 2 == 0)
+    assert cuts >= 1  # the loop search and the cuts were exercised

@@ -1,10 +1,21 @@
-"""Compiled kernel of the loop search (:meth:`navkit.path.loops.LoopFreeChain.find_crossings`).
+"""Compiled kernels of the path recorder: the loop search, the chain's updates and the freeze.
 
 The refinement passes that close a segment are the approximator's worst case per point (issue
 12): ~30 NumPy calls per pass on a few dozen pairs. :func:`refine_crossings` runs all passes in
 one compiled loop with the same arithmetic, pair by pair in the order NumPy's ``nonzero`` gives
-them, so it finds the same crossings in the same order (the NumPy version stays in ``loops.py``
-as the oracle, ``tests/path/test_kernels.py``). Numba, ``cache=True``; imported on first use.
+them, so it finds the same crossings in the same order. The freeze's passes (power sums,
+Gauss-Legendre arc lengths, Newton projection) and the exact deviation test are loops over the
+points.
+
+Equivalence contract (``docs/kernels.md``): every kernel gives its NumPy twin's results bit for
+bit, on any CPU. Both sides use only IEEE-754 operations that are correctly rounded (``+ - * /``
+and ``sqrt``; no ``hypot``, ``pow``, ``sin`` or other libm / SIMD-library calls, no BLAS
+products), in the same order: sums run from 0 in point order (``np.cumsum`` / in-place adds on
+the NumPy side, never pairwise ``sum`` or ``@``), powers are running products, and expressions
+are written with the same association. Numba compiles without ``fastmath``, so LLVM neither
+reassociates nor contracts ``a * b + c`` into an FMA. The twins stay in ``fitting.py``,
+``spline.py``, ``approximator.py`` and ``loops.py`` as the oracles (``tests/path/test_kernels.py``).
+Numba, ``cache=True``; imported on first use.
 """
 
 from __future__ import annotations
@@ -151,7 +162,7 @@ def refine_crossings(
                 aloy = min(Pa[i, 1], Pa[i + 1, 1])
                 ahiy = max(Pa[i, 1], Pa[i + 1, 1])
                 ext_a = max(ahix - alox, ahiy - aloy)
-                delta_a = dua**2 / 8.0 * max(acc_a[i], acc_a[i + 1])
+                delta_a = dua * dua / 8.0 * max(acc_a[i], acc_a[i + 1])
                 for j in range(K):
                     blox = min(Pb[j, 0], Pb[j + 1, 0])
                     bhix = max(Pb[j, 0], Pb[j + 1, 0])
@@ -165,7 +176,7 @@ def refine_crossings(
                         Pa[i, 0], Pa[i, 1], Pa[i + 1, 0], Pa[i + 1, 1],
                         Pb[j, 0], Pb[j, 1], Pb[j + 1, 0], Pb[j + 1, 1],
                     )  # fmt: skip
-                    delta_b = dub**2 / 8.0 * max(acc_b[j], acc_b[j + 1])
+                    delta_b = dub * dub / 8.0 * max(acc_b[j], acc_b[j + 1])
                     if not gap <= delta_a + delta_b + 1e-12:
                         continue
                     ext_b = max(bhix - blox, bhiy - bloy)
@@ -207,8 +218,8 @@ def power_sums(
     u: np.ndarray, d: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, float]:  # pragma: no cover
     """``fitting.power_sums`` in one pass: ``S (7,)`` = sums of ``u^p``, ``D (2, 4)`` = sums of
-    ``d u^p``, ``Q`` = sum of ``|d|^2`` (powers by products, sums in point order: equal to the
-    NumPy version to rounding)."""
+    ``d u^p``, ``Q`` = sum of ``|d|^2`` (powers by running products, sums from 0 in point order:
+    the NumPy version's bits)."""
     return _power_sums_xy(u, d[:, 0], d[:, 1], len(u))
 
 
@@ -217,9 +228,8 @@ def gauss_legendre_length(
     ax: np.ndarray, ay: np.ndarray, u: np.ndarray, gx: np.ndarray, gw: np.ndarray
 ) -> np.ndarray:  # pragma: no cover - compiled
     """``spline.gauss_legendre_length`` (nodes ``gx``, weights ``gw`` on [0, 1]): the speeds at
-    all nodes first (``sqrt(x'^2 + y'^2)``, a loop LLVM vectorises; ``np.hypot`` is a libm call
-    per node, 12x slower here and equal to within 1e-16 relative for speeds far from the
-    float64 range's ends), then the running sum in point order."""
+    all nodes first (``sqrt(x'^2 + y'^2)``, a loop LLVM vectorises), each interval's weighted
+    sum node by node from 0, then the running sum in point order: the NumPy version's bits."""
     n = len(u)
     speed = np.empty(n * len(gx))
     out = np.zeros(n)
@@ -245,12 +255,12 @@ def _project_one(
         H = dx * dx + dy * dy + rx * ddx + ry * ddy
         step = g / H if H > 1e-300 else 0.0
         u = min(max(u - step, 0.0), 1.0)
-    cx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3]))
-    cy = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3]))
-    r_new = np.hypot(cx - px, cy - py)
-    cx = c[0, 0] + ui * (c[0, 1] + ui * (c[0, 2] + ui * c[0, 3]))
-    cy = c[1, 0] + ui * (c[1, 1] + ui * (c[1, 2] + ui * c[1, 3]))
-    r_old = np.hypot(cx - px, cy - py)
+    ex = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3])) - px
+    ey = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3])) - py
+    r_new = np.sqrt(ex * ex + ey * ey)
+    ex = c[0, 0] + ui * (c[0, 1] + ui * (c[0, 2] + ui * c[0, 3])) - px
+    ey = c[1, 0] + ui * (c[1, 1] + ui * (c[1, 2] + ui * c[1, 3])) - py
+    r_old = np.sqrt(ex * ex + ey * ey)
     if r_new <= r_old:
         return u, r_new
     return ui, r_old
@@ -261,8 +271,8 @@ def project(
     c: np.ndarray, u0: np.ndarray, d: np.ndarray, iterations: int
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """``fitting.project`` (the same Newton steps and formulas), one Newton step over all points
-    at a time in branch-free loops LLVM vectorises; distances as ``sqrt(dx^2 + dy^2)`` instead
-    of ``np.hypot`` (within 1e-16 relative, see :func:`gauss_legendre_length`)."""
+    at a time in branch-free loops LLVM vectorises; distances as ``sqrt(dx^2 + dy^2)``, as
+    ``fitting.residuals`` computes them: the NumPy version's bits)."""
     n = len(u0)
     X = np.empty(n)  # the points' coordinates as two contiguous arrays: the loops vectorise
     Y = np.empty(n)  # (4x faster than reading the (n, 2) rows)
@@ -286,25 +296,19 @@ def within(
     within ``limit`` of the curve (``fitting.project``, 3 Newton steps). The same formulas
     point by point; stops at the first point that fails (only the verdict is used).
 
-    Session 6: the points are visited from the last one back (each point's verdict does not
-    depend on the others, so neither does the answer): the point that ends a segment is
-    usually the new one or close to it, and the ~2000 points before it were all visited
-    before. A residual clearly inside the limit (``dx^2 + dy^2 <= (limit (1 - 1e-12))^2``,
-    a few roundings from ``hypot``'s exact result) passes without the libm ``hypot`` call;
-    the others take the exact test."""
+    The points are visited from the last one back (each point's verdict does not depend on the
+    others, so neither does the answer): the point that ends a segment is usually the new one
+    or close to it, and the points before it passed the test before. The residual is
+    ``sqrt(ex^2 + ey^2)``, the NumPy twin's arithmetic, so both reach the same verdict on every
+    CPU."""
     T = tau[n - 1]
     x0, y0 = buf[0, 0], buf[0, 1]
-    inner = limit * (1.0 - 1e-12)
-    inner2 = inner * inner if limit > 1e-100 else -1.0  # (squares of tiny limits underflow)
     for i in range(n - 1, -1, -1):
         u = tau[i] / T
         px, py = buf[i, 0] - x0, buf[i, 1] - y0
-        cx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3]))
-        cy = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3]))
-        ex, ey = cx - px, cy - py
-        if ex * ex + ey * ey <= inner2:
-            continue
-        r = np.hypot(ex, ey)
+        ex = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3])) - px
+        ey = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3])) - py
+        r = np.sqrt(ex * ex + ey * ey)
         if r <= limit:
             continue
         if not geometric or not r > limit:  # (NaN: not from finite points) rejected
@@ -455,7 +459,7 @@ def find_crossings(
     )  # fmt: skip
 
 
-# ---------------------------------------------------------------------- the chain's updates (session 6)
+# ---------------------------------------------------------------------- the chain's updates
 @njit(cache=True)
 def _quadratic_roots(
     a: float, b: float, c: float, out: np.ndarray, n: int
@@ -714,7 +718,7 @@ def cut_search(
     return kb, n_seg, n_piece, found, sa, sb, x, y, tr
 
 
-# ---------------------------------------------------------------------- the freeze (session 6)
+# ---------------------------------------------------------------------- the freeze
 @njit(cache=True)
 def fit_endpoints(
     S: np.ndarray, D: np.ndarray, Q: float, ex: float, ey: float
@@ -727,9 +731,9 @@ def fit_endpoints(
     rr = (
         Q
         - 2.0 * (k1x * D[0, 1] + k1y * D[1, 1] + k2x * D[0, 2] + k2y * D[1, 2])
-        + (k1x**2 + k1y**2) * S2
+        + (k1x * k1x + k1y * k1y) * S2
         + 2.0 * (k1x * k2x + k1y * k2y) * S3
-        + (k2x**2 + k2y**2) * S4
+        + (k2x * k2x + k2y * k2y) * S4
     )
     Rx1 = D[0, 1] - k1x * S2 - k2x * S3
     Rx2 = D[0, 2] - k1x * S3 - k2x * S4
@@ -796,10 +800,10 @@ def _gauss_legendre_into(
     out: np.ndarray,
 ) -> None:  # pragma: no cover - compiled
     """:func:`gauss_legendre_length` of ``u[:n]`` into ``out[:n]`` (``speed``: scratch of
-    ``len(gx) n``). Session 6: node by node over all intervals (a contiguous loop over
-    the intervals LLVM vectorises; interval by interval the 5 nodes were a short loop it did
-    not: 63 -> 15 us for 2000 points); each interval's weighted sum still adds its nodes in
-    order, then the running sum in point order: the same numbers."""
+    ``len(gx) n``): node by node over all intervals (a contiguous loop over the intervals
+    LLVM vectorises; interval by interval the 5 nodes would be a short loop it does not);
+    each interval's weighted sum adds its nodes in order from 0, then the running sum in point
+    order: the same numbers."""
     m = len(gx)
     for k in range(m):
         g = gx[k]
@@ -889,7 +893,7 @@ def natural_fit_endpoints(
     :func:`project` in the same order, without the Python steps and 5 kernel calls between
     them, and in the caller's workspace ``W`` (rows ``W_*``, ``n`` columns used; ``speed``:
     ``5 n``, the Gauss-Legendre nodes) instead of ~25 fresh arrays of up to ``5 n`` numbers
-    (session 6: their page faults were a good part of the freeze on the 2-core VM). When a distance exceeds ``eps``
+    (their page faults would be a good part of the freeze's cost). When a distance exceeds ``eps``
     the fallback's projection (``OnlineApproximator._scaled_t_fit``: the fit over ``t`` at
     its own ``u``) is computed too (rows ``W_UP2``, ``W_DIST2``). Returns (solved, fallback
     computed, T_t, ssr_t, coef_t, T_s, ssr_s, coef_s); not solved (a degenerate grid): the

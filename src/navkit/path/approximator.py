@@ -55,7 +55,6 @@ __all__ = ["ApproximationResult", "ApproximatorSettings", "OnlineApproximator", 
 
 log = logging.getLogger(__name__)
 
-_POW7 = np.arange(7.0)
 _KERNELS: Any = None
 
 # The loop search resolves the stored path down to these fractions of the tolerance (or the
@@ -414,13 +413,14 @@ class OnlineApproximator:
         u = self._tau[: n + 1] / tau
         d = self._buf[: n + 1] - self._buf[0]
         r = residuals(fit, u, d)
-        ok = bool(r.max() <= self._eps_fit)
-        if not ok and self.settings.geometric_test:
+        inside = r <= self._eps_fit
+        ok = bool(inside.all())
+        if not ok and self.settings.geometric_test and not np.isnan(r).any():
             # the residual at a point's own parameter includes along-track misfit; the
             # distance to the curve (Newton projection) is what the guarantee is about
-            far = r > self._eps_fit
+            far = ~inside
             _, dist = project(fit, u[far], d[far])
-            ok = bool(dist.max() <= self._eps_fit)
+            ok = bool((dist <= self._eps_fit).all())
         return ok
 
     # ------------------------------------------------------------------ freezing (steps 1.5 - 1.7)
@@ -473,9 +473,9 @@ class OnlineApproximator:
 
         With ``compiled`` (the default) the O(n) passes - power sums, Gauss-Legendre arc
         lengths, Newton projection - run as compiled loops (:mod:`navkit.path._kernels`; the
-        same formulas, sums in point order: equal to the NumPy passes to rounding)."""
+        same operations in the same order: the NumPy passes' bits)."""
         if self.compiled and variant == "endpoints" and n_use >= 4:
-            # the whole step in one call (session 6; a degenerate grid takes the route below)
+            # the whole step in one call (a degenerate grid takes the route below)
             K = _kernels()
             W, speed = self._workspace(n_use)
             ok, far, T_t, ssr_t, c_t, T_s, ssr_s, c_s = K.natural_fit_endpoints(
@@ -515,7 +515,7 @@ class OnlineApproximator:
     def _workspace(self, n: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The freeze's scratch arrays (``_kernels.natural_fit_endpoints``), kept between
         freezes: fresh arrays of up to 10,000 numbers per freeze cost page faults on every
-        freeze (session 6)."""
+        freeze."""
         if self._work is None or self._work[0].shape[1] < n:
             size = max(n, len(self._tau))
             self._work = (np.zeros((_kernels().W_ROWS, size)), np.zeros(5 * size))

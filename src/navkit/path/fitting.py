@@ -63,7 +63,6 @@ _BASIS: dict[str, NDArray[np.float64]] = {
 # points (besides the anchor) that the constraints use up: the fixed end point
 _FIXED_POINTS = {"start": 0, "start_tangent": 0, "endpoints": 1, "endpoints_tangent": 1}
 _HANKEL = np.add.outer(np.arange(4), np.arange(4))  # H[p, q] = S[p + q]
-_POW7 = np.arange(7.0)
 
 
 def check_variant(variant: str) -> None:
@@ -113,9 +112,29 @@ class CubicFit:
 def power_sums(
     u: NDArray[np.float64], d: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], float]:
-    """``S (7,)``, ``D (2, 4)`` and ``Q`` of points ``d (n, 2)`` at scaled parameters ``u (n,)``."""
-    P = u[:, None] ** _POW7[None, :]
-    return P.sum(0), d.T @ P[:, :4], float((d * d).sum())
+    """``S (7,)``, ``D (2, 4)`` and ``Q`` of points ``d (n, 2)`` at scaled parameters ``u (n,)``.
+
+    The arithmetic of ``_kernels.power_sums``, so both give the same bits on every CPU: the
+    powers as running products ``u^p = u^(p-1) u``, every sum from 0 in point order
+    (``np.cumsum``, a sequential accumulation; ``sum`` would add pairwise and ``@`` in the BLAS
+    library's order)."""
+    u = np.asarray(u, dtype=np.float64)
+    d = np.asarray(d, dtype=np.float64)
+    n = len(u)
+    P = np.empty((n + 1, 7))
+    P[0] = 0.0  # the sums start from 0, as the kernel's do
+    P[1:, 0] = 1.0
+    for p in range(1, 7):
+        np.multiply(P[1:, p - 1], u, out=P[1:, p])
+    S = np.cumsum(P, axis=0)[-1]
+    D = np.empty((2, 4))
+    for c in range(2):
+        terms = np.zeros((n + 1, 4))
+        np.multiply(d[:, c, None], P[1:, :4], out=terms[1:])
+        D[c] = np.cumsum(terms, axis=0)[-1]
+    q = np.zeros(n + 1)
+    q[1:] = d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1]
+    return S, D, float(np.cumsum(q)[-1])
 
 
 def _det(G: list[list[float]]) -> float:
@@ -209,9 +228,9 @@ def _fit_general(
     rr = (
         Q
         - 2.0 * (k1[0] * Dx[1] + k1[1] * Dy[1] + k2[0] * Dx[2] + k2[1] * Dy[2])
-        + (k1[0] ** 2 + k1[1] ** 2) * S[2]
+        + (k1[0] * k1[0] + k1[1] * k1[1]) * S[2]
         + 2.0 * (k1[0] * k2[0] + k1[1] * k2[1]) * S[3]
-        + (k2[0] ** 2 + k2[1] ** 2) * S[4]
+        + (k2[0] * k2[0] + k2[1] * k2[1]) * S[4]
     )
     # sum r u^p, p = 0..3
     Rx = [Dx[p] - k1[0] * S[p + 1] - k2[0] * S[p + 2] for p in range(4)]
@@ -283,9 +302,9 @@ def _fit_endpoints(
     rr = (
         Q
         - 2.0 * (k1x * Dx[1] + k1y * Dy[1] + k2x * Dx[2] + k2y * Dy[2])
-        + (k1x**2 + k1y**2) * S2
+        + (k1x * k1x + k1y * k1y) * S2
         + 2.0 * (k1x * k2x + k1y * k2y) * S3
-        + (k2x**2 + k2y**2) * S4
+        + (k2x * k2x + k2y * k2y) * S4
     )
     Rx1 = Dx[1] - k1x * S2 - k2x * S3
     Rx2 = Dx[2] - k1x * S3 - k2x * S4
@@ -317,11 +336,13 @@ def _fit_endpoints(
 
 
 def residuals(fit: CubicFit, u: NDArray[np.float64], d: NDArray[np.float64]) -> NDArray[np.float64]:
-    """``(n,)`` distances ``|C(u_i) - d_i|`` (an upper bound of the point-to-curve distance)."""
+    """``(n,)`` distances ``|C(u_i) - d_i|`` (an upper bound of the point-to-curve distance),
+    as ``sqrt(ex^2 + ey^2)``: IEEE operations only, the kernels' bits on every CPU
+    (``np.hypot`` is a libm call whose last bit is the library's)."""
     c = fit.coef
-    cx = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3]))
-    cy = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3]))
-    return np.hypot(cx - d[:, 0], cy - d[:, 1])
+    ex = c[0, 0] + u * (c[0, 1] + u * (c[0, 2] + u * c[0, 3])) - d[:, 0]
+    ey = c[1, 0] + u * (c[1, 1] + u * (c[1, 2] + u * c[1, 3])) - d[:, 1]
+    return np.sqrt(ex * ex + ey * ey)
 
 
 def project(

@@ -119,6 +119,11 @@ def _quadratic_roots(a: float, b: float, c: float) -> list[float]:
     return roots
 
 
+def _dot2(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a_x b_x + a_y b_y`` over the last axis (written out: the kernels' order on any NumPy)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1]
+
+
 def _segment_distance(
     p1: NDArray[np.float64],
     q1: NDArray[np.float64],
@@ -128,11 +133,11 @@ def _segment_distance(
     """Distances between segments ``p1 q1`` and ``p2 q2`` (rows ``(N, 2)``), vectorised
     (closest points of two segments, Ericson, Real-Time Collision Detection, 5.1.9)."""
     d1, d2, r = q1 - p1, q2 - p2, p1 - p2
-    a = (d1 * d1).sum(-1)
-    e = (d2 * d2).sum(-1)
-    f = (d2 * r).sum(-1)
-    c = (d1 * r).sum(-1)
-    b = (d1 * d2).sum(-1)
+    a = _dot2(d1, d1)
+    e = _dot2(d2, d2)
+    f = _dot2(d2, r)
+    c = _dot2(d1, r)
+    b = _dot2(d1, d2)
     tiny = 1e-300
     a_ok, e_ok = a > tiny, e > tiny
     safe_a = np.where(a_ok, a, 1.0)
@@ -151,7 +156,8 @@ def _segment_distance(
     s = np.where(e_ok, s, np.clip(-c / safe_a, 0.0, 1.0))  # B is a point: project it on A
     s = np.where(a_ok, s, 0.0)
     t = np.where(e_ok, np.clip(t, 0.0, 1.0), 0.0)
-    return np.linalg.norm(p1 + d1 * s[:, None] - p2 - d2 * t[:, None], axis=-1)
+    v = p1 + d1 * s[:, None] - p2 - d2 * t[:, None]
+    return np.sqrt(_dot2(v, v))
 
 
 def monotone_breaks(
@@ -465,11 +471,10 @@ class LoopFreeChain:
             # chord (interpolation error bound; C'' is linear in u, so its max norm is at an end),
             # so two sub-pieces can only meet if their chords are within delta_a + delta_b.
             # Near-parallel curves (a road driven twice) then stop spawning box pairs early.
-            acc = np.linalg.norm(
-                cubic_eval(coef[:, :, None], U[..., None], 2), axis=-1
-            )  # (2, P, K+1)
+            c2 = cubic_eval(coef[:, :, None], U[..., None], 2)
+            acc = np.sqrt(_dot2(c2, c2))  # (2, P, K+1)
             du = U[:, :, 1] - U[:, :, 0]  # (2, P), equal steps
-            delta = (du**2 / 8.0)[:, :, None] * np.maximum(
+            delta = (du * du / 8.0)[:, :, None] * np.maximum(
                 acc[:, :, :-1], acc[:, :, 1:]
             )  # (2, P, K)
             gap = _segment_distance(pa[p, i], pa[p, i + 1], pb[p, j], pb[p, j + 1])
@@ -555,7 +560,7 @@ class LoopFreeChain:
     def _append_compiled(
         self, ax: NDArray[np.float64], ay: NDArray[np.float64], length: float, remove_loops: bool
     ) -> list[LoopCut]:
-        """``append`` in one kernel call per step (session 6): the push of the segment with its
+        """``append`` in one kernel call per step: the push of the segment with its
         first crossing search (``_kernels.append_search``), then per loop the cut with the next
         search (``_kernels.cut_search``) - the same segments, pieces, boxes and crossings as
         ``_push_segment`` / ``find_crossings`` / ``_cut`` (the NumPy oracle, ``compiled``

@@ -72,6 +72,9 @@ def gauss_legendre_length(
 
     The integral of the speed ``sqrt(x'^2 + y'^2)`` has no closed form; each interval
     ``[u[i-1], u[i]]`` is integrated with 5-point Gauss-Legendre, vectorised over the intervals.
+    The arithmetic is ``_kernels.gauss_legendre_length``'s, so both give the same bits on every
+    CPU: the speed as ``sqrt`` of the sum of squares (not the libm ``hypot``), each interval's
+    weighted sum from 0 node by node (not a BLAS product), the running sum in point order.
 
     Parameters
     ----------
@@ -87,10 +90,13 @@ def gauss_legendre_length(
     """
     u = np.asarray(u, dtype=np.float64)
     h = np.diff(u)
-    nodes = u[:-1, None] + h[:, None] * _GL_X[None, :]
-    speed = np.hypot(cubic_eval(ax, nodes, 1), cubic_eval(ay, nodes, 1))
+    weighted = np.zeros(len(h))
+    for g, w in zip(_GL_X.tolist(), _GL_W.tolist(), strict=True):
+        t = u[:-1] + h * g
+        dx, dy = cubic_eval(ax, t, 1), cubic_eval(ay, t, 1)
+        weighted += np.sqrt(dx * dx + dy * dy) * w
     out = np.zeros(len(u))
-    out[1:] = np.cumsum(h * (speed @ _GL_W))
+    out[1:] = np.cumsum(h * weighted)
     return out
 
 
