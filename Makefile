@@ -58,6 +58,7 @@ fuzz: $(STAMP)
 	cd out/fuzz && MPLBACKEND=Agg ../../$(BIN)/python ../../fuzz/fuzz_readers.py -max_total_time=$(FUZZ_SECONDS) -rss_limit_mb=2048 corpus
 
 lint: $(STAMP)
+	$(BIN)/vulture src vulture_whitelist.py --min-confidence 80
 	$(BIN)/ruff check src tests benchmarks fuzz
 	$(BIN)/ruff format --check src tests benchmarks fuzz
 	$(BIN)/mypy

@@ -25,7 +25,7 @@ _PREFETCH_NAME = (
 
 
 @intrinsic
-def prefetch(typingctx, arr, idx):  # type: ignore[no-untyped-def]  # pragma: no cover
+def prefetch(_typingctx, arr, idx):  # type: ignore[no-untyped-def]  # pragma: no cover
     """``prefetch(a, q)``: load the cache line of ``a.reshape(-1)[q]`` (``a`` C-contiguous,
     ``q`` an integer) ahead of its use. No effect on any result."""
     sig = types.void(arr, idx)

@@ -570,7 +570,7 @@ class PlaneOdometry:
             plane, failure = self._planes(obs, T_prev, T_pred, step_pred, mprior)  # 3-4
             if dframe is not None and self._keyframe is not None:  # dense: refine and verify
                 T_plane = None if plane is None else plane[2]
-                d = self._dense(dframe, T_plane, T_pred, plane is not None)
+                d = self._dense(dframe, T_plane, T_pred)
                 if d is not None:
                     src, dense_res, T, ref_idx = d
                     source = ("prediction" if src == "prediction" else plane[0]) + "+dense"  # type: ignore[index]
@@ -787,7 +787,6 @@ class PlaneOdometry:
         dframe: DenseFrame,
         T_plane: NDArray[np.float64] | None,
         T_pred: NDArray[np.float64],
-        planes_found: bool,
     ) -> tuple[str, DenseResult, NDArray[np.float64], int] | None:
         """Dense refinement against the keyframe (then the last tracked frame), started from
         the plane solution and - when it is missing or disagrees with the prediction by more

@@ -70,7 +70,7 @@ class _StopOnSigint:
         self.requested = False
         self.previous: Any = None
 
-    def _handle(self, signum: int, frame: Any) -> None:
+    def _handle(self, _signum: int, _frame: Any) -> None:
         if self.requested:
             raise KeyboardInterrupt
         self.requested = True
@@ -111,7 +111,7 @@ class NullLogger:
     def set_time(self, stamp_ns: int) -> None:
         """Move the viewer's timeline to ``stamp_ns``."""
 
-    def log_output(self, output: Output) -> None:
+    def log_output(self, _output: Output) -> None:
         """Show one output."""
 
     def log_message(self, msg: Message) -> None:
