@@ -19,7 +19,7 @@ Stages, usable apart from NumPy arrays:
 - :mod:`~navkit.localization.evaluation` - a localized sequence scored against reference poses.
 
 ``Fix`` is the Localizer's result; the matcher's own result is
-:class:`navkit.localization.matcher.Fix`, exported here as ``ScanMatch``.
+:class:`navkit.localization.matcher.ScanMatch`.
 """
 
 from navkit.localization.correlation import (
@@ -52,11 +52,11 @@ from navkit.localization.mapping import (
 from navkit.localization.matcher import (
     Ambiguity,
     MatcherSettings,
+    ScanMatch,
     analyse_peak,
     match_scan,
     score_poses,
 )
-from navkit.localization.matcher import Fix as ScanMatch
 from navkit.localization.raster import rasterize, sample_segments
 from navkit.localization.refine import (
     PoseRefinement,

@@ -64,8 +64,7 @@ from navkit.localization.correlation import (
 )
 from navkit.localization.field import LikelihoodField
 from navkit.localization.mapping import MapSettings, WallMap, build_map
-from navkit.localization.matcher import Fix as ScanMatch
-from navkit.localization.matcher import MatcherSettings, match_scan
+from navkit.localization.matcher import MatcherSettings, ScanMatch, match_scan
 from navkit.localization.raster import sample_segments
 from navkit.localization.refine import PoseRefinement, RefineSettings, refine_pose
 from navkit.localization.visibility import ViewModel
@@ -218,7 +217,7 @@ class Fix:
     seconds : float
         Wall time of :meth:`Localizer.register`.
     match : ScanMatch or KnownHeadingFix
-        The matcher's own result (:class:`navkit.localization.matcher.Fix` or
+        The matcher's own result (:class:`navkit.localization.matcher.ScanMatch` or
         :class:`~navkit.localization.correlation.KnownHeadingFix`: the ambiguity report, the
         correlation surface, the correlation-only position ...).
     """

@@ -63,7 +63,7 @@ from navkit.localization.search import (
     _Search,
 )
 
-__all__ = ["Ambiguity", "Fix", "MatcherSettings", "analyse_peak", "match_scan", "score_poses"]
+__all__ = ["Ambiguity", "MatcherSettings", "ScanMatch", "analyse_peak", "match_scan", "score_poses"]
 
 log = logging.getLogger(__name__)
 
@@ -173,7 +173,7 @@ class Ambiguity:
     second_score : float
         Score of the best distinct second peak (NaN if none reached ``second_peak_ratio`` of
         the best). After a global search it is the coarse-field score scaled by the ratio of
-        the fine to the coarse best score (so it compares with ``Fix.score``).
+        the fine to the coarse best score (so it compares with ``ScanMatch.score``).
     second_pose : (3,) array
         Its ``(x, y, theta)``, NaN if none.
     """
@@ -189,7 +189,7 @@ class Ambiguity:
 
 
 @dataclass(frozen=True)
-class Fix:
+class ScanMatch:
     """A localization result.
 
     Attributes
@@ -427,7 +427,7 @@ def match_scan(
     points: ArrayLike,
     prior: ArrayLike | None = None,
     settings: MatcherSettings | None = None,
-) -> Fix:
+) -> ScanMatch:
     """Locate a scan in the map by multi-resolution correlative matching.
 
     Parameters
@@ -444,7 +444,7 @@ def match_scan(
 
     Returns
     -------
-    Fix
+    ScanMatch
     """
     t0 = time.perf_counter()
     s = settings or _DEFAULT_SETTINGS
@@ -581,7 +581,7 @@ def match_scan(
         second_pose=second_pose,
     )
     final_score = float(_fine_scores(fld, P, pose[None])[0])
-    fix = Fix(
+    fix = ScanMatch(
         pose=pose,
         score=final_score,
         ok=bool(final_score >= s.min_score and not amb.ambiguous),
