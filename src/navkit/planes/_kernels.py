@@ -18,6 +18,23 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from navkit.geometry.angles import (
+    ASIN_P,
+    ASIN_Q,
+    ASIN_R,
+    ASIN_S,
+    ASIN_SPLIT,
+    ASIN_TINY,
+    COS_C,
+    FOUR_OVER_PI,
+    MOREBITS,
+    PI4A,
+    PI4B,
+    PI4C,
+    PI_4,
+    SIN_C,
+)
+
 MAX_CELL = 128  # NumPy's PW_BLOCKSIZE: a patch's row sums are one pairwise block up to it
 
 
@@ -514,6 +531,76 @@ def label_image(
     return labels, inl[: cuts[K]], cuts
 
 
+_AP0, _AP1, _AP2, _AP3, _AP4, _AP5 = ASIN_P
+_AQ0, _AQ1, _AQ2, _AQ3, _AQ4 = ASIN_Q
+_AR0, _AR1, _AR2, _AR3, _AR4 = ASIN_R
+_AS0, _AS1, _AS2, _AS3 = ASIN_S
+_SC0, _SC1, _SC2, _SC3, _SC4, _SC5 = SIN_C
+_CC0, _CC1, _CC2, _CC3, _CC4, _CC5 = COS_C
+
+
+@njit(cache=True, inline="always")
+def _asin_scalar(x: float) -> float:  # pragma: no cover - compiled
+    """Cephes' ``asin`` of ``x`` in ``[-1, 1]``: ``navkit.geometry.angles._asin``'s operations
+    in its order."""
+    a = abs(x)
+    if a > ASIN_SPLIT:
+        zz = 1.0 - a
+        p = zz * ((((_AR0 * zz + _AR1) * zz + _AR2) * zz + _AR3) * zz + _AR4)
+        p = p / ((((zz + _AS0) * zz + _AS1) * zz + _AS2) * zz + _AS3)
+        zz = np.sqrt(zz + zz)
+        z = PI_4 - zz
+        zz = zz * p - MOREBITS
+        z = (z - zz) + PI_4
+    elif a < ASIN_TINY:
+        z = a
+    else:
+        z2 = a * a
+        z = z2 * (((((_AP0 * z2 + _AP1) * z2 + _AP2) * z2 + _AP3) * z2 + _AP4) * z2 + _AP5)
+        z = z / (((((z2 + _AQ0) * z2 + _AQ1) * z2 + _AQ2) * z2 + _AQ3) * z2 + _AQ4)
+        z = a * z + a
+    return -z if x < 0 else z
+
+
+@njit(cache=True)
+def acos_scalar(x: float) -> float:  # pragma: no cover - compiled
+    """Cephes' ``acos`` of ``x`` in ``[-1, 1]`` (NaN beyond): the bits of
+    :func:`navkit.geometry.angles.acos` (the same operations in the same order)."""
+    if not abs(x) <= 1.0:
+        return np.nan
+    if x > 0.5:
+        return 2.0 * _asin_scalar(np.sqrt(0.5 - 0.5 * x))
+    return ((PI_4 - _asin_scalar(x)) + MOREBITS) + PI_4
+
+
+@njit(cache=True)
+def cos_scalar(x: float) -> float:  # pragma: no cover - compiled
+    """Cephes' ``cos`` of a finite ``|x| < 2^29``: the bits of
+    :func:`navkit.geometry.angles.cos` (the same operations in the same order)."""
+    x = abs(x)
+    y = np.floor(x * FOUR_OVER_PI)  # the octant
+    j = np.int64(y)
+    if j & 1:  # map zeros to the origin
+        j += 1
+        y += 1.0
+    j &= 7
+    z = ((x - y * PI4A) - y * PI4B) - y * PI4C
+    zz = z * z
+    flip = False
+    if j > 3:
+        j -= 4
+        flip = True
+    if j > 1:
+        flip = not flip
+    if j == 1 or j == 2:
+        poly = ((((_SC0 * zz + _SC1) * zz + _SC2) * zz + _SC3) * zz + _SC4) * zz + _SC5
+        v = z + z * zz * poly
+    else:
+        poly = ((((_CC0 * zz + _CC1) * zz + _CC2) * zz + _CC3) * zz + _CC4) * zz + _CC5
+        v = 1.0 - 0.5 * zz + zz * zz * poly
+    return -v if flip else v
+
+
 @njit(cache=True)
 def plane_rows(
     M: np.ndarray, rayleigh: bool = False
@@ -554,8 +641,8 @@ def plane_rows(
         )
         r = det / (2.0 * p * p2) if p > 0 else 0.0
         r = min(max(r, -1.0), 1.0)
-        phi = np.arccos(r) / 3.0
-        lam = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+        phi = acos_scalar(r) / 3.0
+        lam = q + 2.0 * p * cos_scalar(phi + 2.0 * np.pi / 3.0)
         m00 = a00 - lam
         m11 = a11 - lam
         m22 = a22 - lam
@@ -698,9 +785,9 @@ def outline_rasters(
 
 @njit(cache=True)
 def _dot3(a: np.ndarray, i: int, b: np.ndarray, j: int) -> float:  # pragma: no cover
-    """``a[i] . b[j]`` of two ``(., 3)`` arrays in ``numpy.einsum``'s order for three terms,
-    ``(a0 b0 + a2 b2) + a1 b1`` (its SIMD pairs; checked bit for bit by the tests)."""
-    return (a[i, 0] * b[j, 0] + a[i, 2] * b[j, 2]) + a[i, 1] * b[j, 1]
+    """``a[i] . b[j]`` of two ``(., 3)`` arrays, left to right: ``(a0 b0 + a1 b1) + a2 b2``
+    (``extract._dot3``'s order)."""
+    return a[i, 0] * b[j, 0] + a[i, 1] * b[j, 1] + a[i, 2] * b[j, 2]
 
 
 @njit(cache=True)
