@@ -6,7 +6,13 @@ with (``tests/planes/test_kernels.py``). The float32 block sums reproduce NumPy'
 exactly - rows of a patch added one after the other per column, then the ``c`` column sums by
 NumPy's pairwise summation (eight running sums, combined as ``((r0 + r1) + (r2 + r3)) + ((r4 +
 r5) + (r6 + r7))``, then the remainder) - so the patch moments, the planar test and the region
-growing get the same bits with either backend.
+growing get the same bits with either backend. The float64 arithmetic is the twins' too, term
+for term: sums one term after the other from +0 (:func:`sum_rows`, the mixed patches' pixel
+sums in :func:`refine_pixels`), three-term dot products left to right (:func:`_dot3`), the
+closed-form eigenvalue's ``acos`` / ``cos`` with Cephes' arithmetic (:func:`acos_scalar`,
+:func:`cos_scalar`; :mod:`navkit.geometry.angles` in the twins). No kernel uses ``fastmath``:
+LLVM then neither reassociates nor contracts a product and a sum into a fused multiply-add, so
+a whole extraction gives the twins' bits on any CPU (``tests/planes/test_kernels.py``).
 
 Compiled with Numba (``@njit(cache=True)``: machine code cached on disk beside this module, or
 in ``NUMBA_CACHE_DIR``); imported lazily by :mod:`navkit.planes.extract` on the first organised
@@ -293,8 +299,9 @@ def refine_pixels(
     Fills ``label (B, c, c)`` (closest candidate within the bound, -1 = none; ties keep the
     earlier slot). Returns ``complete (B,)``, the raw float64 moments ``(n_reg, 13)`` of the
     pixels of the incomplete patches per region (per (patch, candidate): the float64 sums of d
-    and d d^T converted by ``extract._moment_rows``' arithmetic, added in (patch, slot) order
-    as ``sum_rows`` adds them) and the outline samples of the incomplete
+    and d d^T, the pixels added one after the other in raster order as the twin's weighted
+    ``bincount`` adds them, converted by ``extract._moment_rows``' arithmetic and added in
+    (patch, slot) order as ``sum_rows`` adds them) and the outline samples of the incomplete
     patches: their labelled pixels on every ``stride[b]``-th row and column, ``float32(d + ref)``
     ``(3, K)``, and their regions ``(K,)`` (patch by patch, raster order within one).
 
@@ -607,8 +614,10 @@ def plane_rows(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
     """TLS planes of raw moment rows ``(G, 13)`` (see ``extract._planes_from_rows``): the
     smallest eigenpair of each covariance by the closed form of ``extract.smallest_eigenpairs``
-    row by row (``rayleigh``: the eigenvalue as the Rayleigh quotient of the unit vector, as
-    there). Returns normals ``(G, 3)`` away from the origin, rho, RMS, means ``(G, 3)`` and
+    row by row, its operations in its order - ``acos`` / ``cos`` by :func:`acos_scalar` /
+    :func:`cos_scalar` (its :mod:`navkit.geometry.angles`), the norm and ``n . mean`` left to
+    right -, so the same bits (``rayleigh``: the eigenvalue as the Rayleigh quotient of the unit
+    vector, as there). Returns normals ``(G, 3)`` away from the origin, rho, RMS, means ``(G, 3)`` and
     a flag per row whose smallest eigenvalue is repeated (the caller takes LAPACK's vector
     there)."""
     G = M.shape[0]
@@ -1135,8 +1144,8 @@ def outline_samples(
 @njit(cache=True)
 def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  # pragma: no cover
     """Sums of the rows of ``M (G, 13)`` per group ``groups (G,)`` (-1 = none): ``(n_groups,
-    13)``, rows added in their order (``extract._sum_rows`` adds them by a BLAS product: the
-    same sums up to the order of the float64 additions)."""
+    13)``, each group's rows added one after the other from +0 (``extract._sum_rows``'
+    ``numpy.add.at``: the same additions, the same bits)."""
     R = np.zeros((n_groups, M.shape[1]), np.float64)
     for g in range(len(groups)):
         k = groups[g]
@@ -1195,9 +1204,9 @@ def prune_merge(
     Returns a status (0 = done; 1 = a region's smallest eigenvalue is repeated: the caller
     takes the NumPy path, whose LAPACK vector the closed form does not reproduce), the number of
     regions, the region of each patch ``(G,)`` (-1 = none) and the regions' normals ``(n, 3)``
-    and rho ``(n,)``. The tests in the oracle's order: the dot products of ``numpy.einsum``'s
-    three terms ``(a0 b0 + a2 b2) + a1 b1`` (:func:`_dot3`); the merge's normal products (a
-    BLAS product there) left to right - a decision could differ only on an exact tie."""
+    and rho ``(n,)``. The tests in the oracle's order: every dot product of three terms left to
+    right (:func:`_dot3`, ``extract._dot3``), the region sums as :func:`sum_rows`, the planes as
+    :func:`plane_rows`: the same decisions and the same bits."""
     G = hc * wc
     empty = np.zeros((0, 3), np.float64)
     status, n_reg, comp, rn, rd, _ = _region_planes(planar, M, eh, ev, hc, wc, min_cells)

@@ -34,7 +34,14 @@ connected components (union-find instead of OpenCV on the cell-graph image; the 
 the border candidates, the border refinement with its outline samples, the label image with the
 inliers, the outline samples and rasters - run as compiled kernels (:mod:`navkit.planes._kernels`,
 Numba, issue 12); the NumPy versions here are their oracle (``_extract(..., compiled=False)``;
-``tests/planes/test_kernels.py``, ``docs/kernels.md``).
+``tests/planes/test_kernels.py``, ``docs/kernels.md``) and give the same result bit for bit on
+any CPU (issue 25): both run the same IEEE operations in the same order - float64 sums one term
+after the other (:func:`_sum_rows`, the weighted ``bincount`` of the mixed patches' pixels; no
+BLAS product), three-term dot products left to right (:func:`_dot3`; no ``einsum``), the
+closed-form eigenvalue's ``acos`` / ``cos`` with Cephes' arithmetic
+(:mod:`navkit.geometry.angles`; not NumPy's SIMD or libm's), no ``fastmath`` in the kernels.
+LAPACK runs only for a matrix with a repeated smallest eigenvalue, in both paths on the same
+matrix.
 
 Unorganised clouds: :mod:`navkit.planes.extract_cloud` (sequential RANSAC with vectorised
 hypotheses, a TLS refit, and the largest connected part of the inliers kept per plane); its names
@@ -164,6 +171,10 @@ def smallest_eigenpairs(
     (smallest eigenvalue well separated from the others); a matrix with a repeated smallest
     eigenvalue (no defined normal: a line or a blob of points) gets one eigenvector of its
     eigenspace, an all-zero matrix ``(0, 0, 1)``.
+
+    ``acos`` and ``cos`` are :mod:`navkit.geometry.angles`' fixed Cephes arithmetic (within 1-2
+    ulp of libm's), the operations of :func:`navkit.planes._kernels.plane_rows` in its order:
+    the same bits as the compiled path on any CPU.
 
     The closed-form eigenvalue loses accuracy when the spread is extreme: its absolute error is
     ~eps x the largest eigenvalue (a floor seen to 20 m: 1e3 m^2 against a thickness of 4e-6
@@ -321,8 +332,8 @@ def _planes_from_rows(
     """TLS planes of moment rows: normals ``(G, 3)`` pointing away from the origin, rho ``(G,)``,
     RMS orthogonal residual ``(G,)`` and means ``(G, 3)`` (metres), by the closed form of
     :func:`smallest_eigenpairs`. ``compiled``: row by row in one loop
-    (:func:`navkit.planes._kernels.plane_rows`; equal to the NumPy closed form up to the last
-    bits of ``arccos`` / ``cos``). ``rayleigh``: the RMS from the Rayleigh quotient of the
+    (:func:`navkit.planes._kernels.plane_rows`: the NumPy closed form's operations in its order,
+    the same bits). ``rayleigh``: the RMS from the Rayleigh quotient of the
     normal (:func:`smallest_eigenpairs`; accurate for the final planes' extreme spreads)."""
     if compiled:
         normal, rho, rms, mean, rank1 = _kernels().plane_rows(np.ascontiguousarray(M), rayleigh)
@@ -721,7 +732,9 @@ def _refine_border(
     (*mixed*) patches give per-pixel moments, grouped by (patch, plane), summed in float64 (the
     products of the float32 coordinates are exact in float64). ``compiled``: one loop over the
     border pixels (:func:`navkit.planes._kernels.refine_pixels`); else NumPy passes per
-    candidate slot (the oracle: same labels, moments within float64 rounding).
+    candidate slot (the oracle: the same labels, and the same moments bit for bit - per (patch,
+    candidate) the pixels' float64 terms added one after the other in raster order, then the
+    rows per region in (patch, candidate) order, as the kernel adds them).
     """
     B = len(cand)
     n32 = rn.astype(np.float32)
@@ -1120,7 +1133,7 @@ def _outlines(
     cr, cq = np.where(lat_ok, lat_r, own_r), np.where(lat_ok, lat_q, own_q)
     quads = project([pt.P[cr, cq, a] for a in range(3)], qseg[:, None])  # (Q, 4, 2)
     edge = np.diff(quads, axis=1, append=quads[:, :1])  # (Q, 4, 2) the four sides
-    longest = np.sqrt(np.max(np.einsum("qei,qei->qe", edge, edge), axis=1))
+    longest = np.sqrt(np.max(edge[..., 0] * edge[..., 0] + edge[..., 1] * edge[..., 1], axis=1))
     use = np.all(lat_ok | (labels[own_r, own_q] == qseg[:, None]), axis=1)
     use &= longest <= 2.0 * cell * c
     qcuts = np.searchsorted(qseg, np.arange(K + 1))
