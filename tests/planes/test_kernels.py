@@ -1,10 +1,19 @@
 """The compiled kernels of the organised extraction against their NumPy oracles.
 
-Same answers: labels and inlier lists identical, planes within 1e-9 relative, on the
-simulator and on every real organised frame in the shared data (slambook, CAPE tunnel,
-pcl-kinect, the 100 7-Scenes frames). The patch moments and the border labels are bit for bit
-the same (the kernels reproduce NumPy's float32 summation order); the mixed patches' float64
-moments differ only by the order of float64 additions.
+Same answers, bit for bit: labels, inlier lists, planes (normal, rho,
+centroid, RMS), outlines and areas identical on the simulator and on every real organised frame
+in the shared data (slambook, CAPE tunnel, pcl-kinect, the 100 7-Scenes frames). This holds on
+any CPU because both paths run the same IEEE-754 double / float operations in the same order
+and call nothing whose rounding depends on the machine: the float32 block sums in NumPy's
+pairwise order, every float64 sum (region rows, the mixed patches' pixels) added one term after
+the other from +0 (``numpy.add.at`` / ``numpy.bincount`` in the twins - no BLAS product, whose
+grouping depends on the CPU and the thread count), dot products of three terms left to right
+(no ``einsum``, whose grouping follows the SIMD width), and ``acos`` / ``cos`` of the
+closed-form eigenvalue with one fixed arithmetic (Cephes, :mod:`navkit.geometry.angles`; NumPy's
+``arccos`` / ``cos`` are SIMD code on some machines and libm's elsewhere). Numba compiles the
+kernels without ``fastmath``, so LLVM neither reassociates nor fuses a product into an addition.
+The only rows outside the closed form - a repeated smallest eigenvalue - take LAPACK's vector in
+both paths, from the same matrix.
 """
 
 from __future__ import annotations
@@ -14,17 +23,20 @@ import pytest
 
 from navkit.planes.extract import ExtractionSettings, _extract, _patch_moments
 
-REL = 1e-9
+
+def _bits(a: np.ndarray | float) -> np.ndarray:
+    """The float64 bit patterns (``-0.0 != 0.0``; NaNs by payload)."""
+    return np.ascontiguousarray(a, dtype=np.float64).view(np.uint64)
 
 
-def _rel(a: np.ndarray | float, b: np.ndarray | float) -> float:
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    scale = np.maximum(np.abs(b).max(initial=0.0), 1e-300)
-    return float(np.abs(a - b).max(initial=0.0) / scale)
+def _same_bits(a: np.ndarray | float, b: np.ndarray | float) -> bool:
+    x, y = _bits(a), _bits(b)
+    return x.shape == y.shape and np.array_equal(x, y)
 
 
 def assert_same(P: np.ndarray, s: ExtractionSettings | None = None) -> int:
-    """Compiled and NumPy extraction of one grid agree; returns the number of planes."""
+    """Compiled and NumPy extraction of one grid give the same result bit for bit (labels,
+    inliers, every float of every plane, outline and area); returns the number of planes."""
     a = _extract(P, s, compiled=True)
     b = _extract(P, s, compiled=False)
     assert np.array_equal(a.labels, b.labels)
@@ -32,13 +44,12 @@ def assert_same(P: np.ndarray, s: ExtractionSettings | None = None) -> int:
     for x, y in zip(a.segments, b.segments, strict=True):
         assert np.array_equal(x.inliers, y.inliers)
         assert x.plane.count == y.plane.count
-        assert _rel(x.plane.normal, y.plane.normal) <= REL
-        assert _rel(x.plane.rho, y.plane.rho) <= REL
-        assert _rel(x.plane.centroid, y.plane.centroid) <= REL
-        assert _rel(x.plane.rms, y.plane.rms) <= 1e-6  # sqrt of a ~1e-6 m^2 difference of sums
-        assert _rel(x.area, y.area) <= REL
-        assert x.outline.shape == y.outline.shape
-        assert _rel(x.outline, y.outline) <= REL
+        assert _same_bits(x.plane.normal, y.plane.normal)
+        assert _same_bits(x.plane.rho, y.plane.rho)
+        assert _same_bits(x.plane.centroid, y.plane.centroid)
+        assert _same_bits(x.plane.rms, y.plane.rms)
+        assert _same_bits(x.area, y.area)
+        assert _same_bits(x.outline, y.outline)
     return len(a.segments)
 
 
@@ -181,9 +192,12 @@ def test_cell_components_match_opencv(rng):
 
 def test_patch_graph_same_bits(pairs):
     """The compiled planar test and edge tests give the NumPy formulas' decisions (the bounds
-    bit for bit; the dot products in ``einsum``'s order of the three products)."""
+    bit for bit; the dot products of three terms left to right in both)."""
     from navkit.planes import _kernels
     from navkit.planes.extract import _planes_from_rows
+
+    def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return a[:, 0] * b[:, 0] + a[:, 1] * b[:, 1] + a[:, 2] * b[:, 2]
 
     P = pairs[3].f1.frame.points().copy()
     P[100:140, 200:260] = np.nan
@@ -197,7 +211,7 @@ def test_patch_graph_same_bits(pairs):
             normal, d, mean, M[:, 0].copy(), rms, hc, wc, s.min_fill * cell * cell,
             s.rms_base, s.rms_quadratic, float(cos_t), s.distance_factor,
         )  # fmt: skip
-        want = s.noise(np.einsum("gi,gi->g", mean, mean))
+        want = s.noise(dot(mean, mean))
         assert np.array_equal(bound, want)
         assert np.array_equal(planar, (M[:, 0] >= s.min_fill * cell * cell) & (rms < want))
         ids = np.arange(hc * wc).reshape(hc, wc)
@@ -205,9 +219,9 @@ def test_patch_graph_same_bits(pairs):
             pa, pb = a.ravel(), b.ravel()
             tol = s.distance_factor * np.maximum(want[pa], want[pb])
             ok = (
-                (np.einsum("ei,ei->e", normal[pa], normal[pb]) > cos_t)
-                & (np.abs(np.einsum("ei,ei->e", normal[pa], mean[pb]) - d[pa]) < tol)
-                & (np.abs(np.einsum("ei,ei->e", normal[pb], mean[pa]) - d[pb]) < tol)
+                (dot(normal[pa], normal[pb]) > cos_t)
+                & (np.abs(dot(normal[pa], mean[pb]) - d[pa]) < tol)
+                & (np.abs(dot(normal[pb], mean[pa]) - d[pb]) < tol)
             )
             assert np.array_equal(got.ravel(), ok)
         assert planar.sum() > 20 and eh.sum() > 20
@@ -317,3 +331,95 @@ def test_canonical_planes_are_canonical_plane_bit_for_bit(rng):
         for i in range(k):
             want_n, want_r = canonical_plane(n[i], float(rho[i]))
             assert np.array_equal(got_n[i], want_n) and got_r[i] == want_r
+
+
+def test_fixed_acos_cos_are_the_kernels_bits_and_libm_close(rng):
+    """The closed-form eigenvalue's ``acos`` and ``cos`` (Cephes, :mod:`navkit.geometry.angles`)
+    give the compiled scalar versions' bits - the same IEEE operations in the same order, so on
+    any CPU - over ``[-1, 1]`` (both ``asin`` branches, the ends, values within 1e-17 of +-1)
+    and the eigenvalue's angles ``[2 pi / 3, pi]`` (and a wider range). Against libm (``math``):
+    within Cephes' documented peak errors, 2.2e-16 relative for ``acos`` (2 ulp) and 2.2e-16
+    absolute for ``cos`` (2 ulp where ``|cos| >= 0.5``, as on the eigenvalue's angles)."""
+    import math
+
+    from navkit.geometry.angles import acos, cos
+    from navkit.planes._kernels import acos_scalar, cos_scalar
+
+    x = np.concatenate(
+        [
+            rng.uniform(-1.0, 1.0, 4000),
+            1.0 - 10.0 ** rng.uniform(-17, 0, 1000),
+            -1.0 + 10.0 ** rng.uniform(-17, 0, 1000),
+            10.0 ** rng.uniform(-20, 0, 500) * rng.choice([-1.0, 1.0], 500),
+            [-1.0, -0.625, -0.5, -0.0, 0.0, 0.5, 0.625, 1.0, 1e-8, np.nextafter(0.625, 1.0)],
+        ]
+    )
+    got = acos(x)
+    assert _same_bits(got, [acos_scalar(v) for v in x])
+    want = np.array([math.acos(v) for v in x])
+    assert np.all(np.abs(got - want) <= 2 * np.spacing(want))
+    assert np.isnan(acos(1.0 + 1e-15)) and np.isnan(acos_scalar(-1.0 - 1e-15))
+
+    t = np.concatenate(
+        [rng.uniform(2 * np.pi / 3, np.pi, 4000), rng.uniform(-40.0, 40.0, 4000), [0.0, np.pi]]
+    )
+    got = cos(t)
+    assert _same_bits(got, [cos_scalar(v) for v in t])
+    want = np.array([math.cos(v) for v in t])
+    assert np.all(np.abs(got - want) <= 2.3e-16)
+    big = np.abs(want) >= 0.5
+    assert np.all(np.abs(got - want)[big] <= 2 * np.spacing(np.abs(want[big])))
+
+
+def test_sum_rows_bit_for_bit(rng):
+    """The region sums of moment rows: ``extract._sum_rows`` (``numpy.add.at``) gives the
+    kernel's bits - each group's rows added one after the other from +0 in both - on rows whose
+    magnitudes span 1e-6 to 1e6 (where another order of the additions changes the last bits, as
+    the reversed order shows)."""
+    from navkit.planes import _kernels
+    from navkit.planes.extract import _sum_rows
+
+    G, n = 3000, 17
+    groups = rng.integers(-1, n, G)
+    M = rng.normal(size=(G, 13)) * 10.0 ** rng.uniform(-6, 6, (G, 1))
+    got = _sum_rows(groups, n, M)
+    assert _same_bits(got, _kernels.sum_rows(groups, n, M))
+    assert not _same_bits(got, _sum_rows(groups[::-1], n, M[::-1]))  # the order matters
+    assert _same_bits(_sum_rows(np.full(5, -1), 3, M[:5]), np.zeros((3, 13)))
+
+
+def test_plane_rows_bit_for_bit(rng):
+    """The TLS planes of moment rows, compiled (``plane_rows``) and NumPy
+    (``smallest_eigenpairs``), with and without the Rayleigh quotient: the same normals, rho,
+    RMS and means bit for bit, on patches of noisy planes from 0.3 to 20 m, rows of collinear
+    points, of one repeated point and empty rows (the last two: a repeated smallest eigenvalue,
+    LAPACK's vector in both)."""
+    from navkit.planes.extract import _NM, _planes_from_rows
+
+    rows = []
+    for _ in range(600):
+        n = rng.normal(size=3)
+        n /= np.linalg.norm(n)
+        u = np.cross(n, rng.normal(size=3))
+        u /= np.linalg.norm(u)
+        v = np.cross(n, u)
+        k = int(rng.integers(3, 400))
+        a, b = rng.uniform(-0.05, 0.05, (2, k)) * rng.uniform(0.2, 40.0)
+        X = rng.uniform(0.3, 20.0) * rng.normal(size=3) + np.outer(a, u) + np.outer(b, v)
+        X += rng.normal(scale=rng.uniform(0.0, 0.01), size=(k, 1)) * n
+        if len(rows) % 50 == 0:  # on the line y = 0, z = 2, x on a 1/1024 lattice (exact
+            # sums): the covariance is exactly diag(., 0, 0)
+            x = rng.integers(-500, 500, k) / 1024.0
+            X = np.stack([x, np.zeros(k), np.full(k, 2.0)], axis=1)
+        elif len(rows) % 50 == 25:  # one point k times (on the lattice): the zero covariance
+            X = np.repeat(rng.integers(-500, 500, (1, 3)) / 1024.0, k, axis=0)
+        rows.append(np.concatenate([[k], X.sum(axis=0), (X.T @ X).ravel()]))
+    M = np.vstack([np.array(rows), np.zeros((5, _NM))])
+    from navkit.planes import _kernels
+
+    assert _kernels.plane_rows(M)[4].sum() >= 12 + 5  # repeated eigenvalues: points, empty rows
+    for rayleigh in (False, True):
+        a = _planes_from_rows(M, True, rayleigh)
+        b = _planes_from_rows(M, False, rayleigh)
+        for x, y in zip(a, b, strict=True):
+            assert _same_bits(x, y)

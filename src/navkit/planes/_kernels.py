@@ -6,7 +6,13 @@ with (``tests/planes/test_kernels.py``). The float32 block sums reproduce NumPy'
 exactly - rows of a patch added one after the other per column, then the ``c`` column sums by
 NumPy's pairwise summation (eight running sums, combined as ``((r0 + r1) + (r2 + r3)) + ((r4 +
 r5) + (r6 + r7))``, then the remainder) - so the patch moments, the planar test and the region
-growing get the same bits with either backend.
+growing get the same bits with either backend. The float64 arithmetic is the twins' too, term
+for term: sums one term after the other from +0 (:func:`sum_rows`, the mixed patches' pixel
+sums in :func:`refine_pixels`), three-term dot products left to right (:func:`_dot3`), the
+closed-form eigenvalue's ``acos`` / ``cos`` with Cephes' arithmetic (:func:`acos_scalar`,
+:func:`cos_scalar`; :mod:`navkit.geometry.angles` in the twins). No kernel uses ``fastmath``:
+LLVM then neither reassociates nor contracts a product and a sum into a fused multiply-add, so
+a whole extraction gives the twins' bits on any CPU (``tests/planes/test_kernels.py``).
 
 Compiled with Numba (``@njit(cache=True)``: machine code cached on disk beside this module, or
 in ``NUMBA_CACHE_DIR``); imported lazily by :mod:`navkit.planes.extract` on the first organised
@@ -17,6 +23,23 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
+
+from navkit.geometry.angles import (
+    ASIN_P,
+    ASIN_Q,
+    ASIN_R,
+    ASIN_S,
+    ASIN_SPLIT,
+    ASIN_TINY,
+    COS_C,
+    FOUR_OVER_PI,
+    MOREBITS,
+    PI4A,
+    PI4B,
+    PI4C,
+    PI_4,
+    SIN_C,
+)
 
 MAX_CELL = 128  # NumPy's PW_BLOCKSIZE: a patch's row sums are one pairwise block up to it
 
@@ -276,8 +299,9 @@ def refine_pixels(
     Fills ``label (B, c, c)`` (closest candidate within the bound, -1 = none; ties keep the
     earlier slot). Returns ``complete (B,)``, the raw float64 moments ``(n_reg, 13)`` of the
     pixels of the incomplete patches per region (per (patch, candidate): the float64 sums of d
-    and d d^T converted by ``extract._moment_rows``' arithmetic, added in (patch, slot) order
-    as ``sum_rows`` adds them) and the outline samples of the incomplete
+    and d d^T, the pixels added one after the other in raster order as the twin's weighted
+    ``bincount`` adds them, converted by ``extract._moment_rows``' arithmetic and added in
+    (patch, slot) order as ``sum_rows`` adds them) and the outline samples of the incomplete
     patches: their labelled pixels on every ``stride[b]``-th row and column, ``float32(d + ref)``
     ``(3, K)``, and their regions ``(K,)`` (patch by patch, raster order within one).
 
@@ -514,14 +538,86 @@ def label_image(
     return labels, inl[: cuts[K]], cuts
 
 
+_AP0, _AP1, _AP2, _AP3, _AP4, _AP5 = ASIN_P
+_AQ0, _AQ1, _AQ2, _AQ3, _AQ4 = ASIN_Q
+_AR0, _AR1, _AR2, _AR3, _AR4 = ASIN_R
+_AS0, _AS1, _AS2, _AS3 = ASIN_S
+_SC0, _SC1, _SC2, _SC3, _SC4, _SC5 = SIN_C
+_CC0, _CC1, _CC2, _CC3, _CC4, _CC5 = COS_C
+
+
+@njit(cache=True, inline="always")
+def _asin_scalar(x: float) -> float:  # pragma: no cover - compiled
+    """Cephes' ``asin`` of ``x`` in ``[-1, 1]``: ``navkit.geometry.angles._asin``'s operations
+    in its order."""
+    a = abs(x)
+    if a > ASIN_SPLIT:
+        zz = 1.0 - a
+        p = zz * ((((_AR0 * zz + _AR1) * zz + _AR2) * zz + _AR3) * zz + _AR4)
+        p = p / ((((zz + _AS0) * zz + _AS1) * zz + _AS2) * zz + _AS3)
+        zz = np.sqrt(zz + zz)
+        z = PI_4 - zz
+        zz = zz * p - MOREBITS
+        z = (z - zz) + PI_4
+    elif a < ASIN_TINY:
+        z = a
+    else:
+        z2 = a * a
+        z = z2 * (((((_AP0 * z2 + _AP1) * z2 + _AP2) * z2 + _AP3) * z2 + _AP4) * z2 + _AP5)
+        z = z / (((((z2 + _AQ0) * z2 + _AQ1) * z2 + _AQ2) * z2 + _AQ3) * z2 + _AQ4)
+        z = a * z + a
+    return -z if x < 0 else z
+
+
+@njit(cache=True)
+def acos_scalar(x: float) -> float:  # pragma: no cover - compiled
+    """Cephes' ``acos`` of ``x`` in ``[-1, 1]`` (NaN beyond): the bits of
+    :func:`navkit.geometry.angles.acos` (the same operations in the same order)."""
+    if not abs(x) <= 1.0:
+        return np.nan
+    if x > 0.5:
+        return 2.0 * _asin_scalar(np.sqrt(0.5 - 0.5 * x))
+    return ((PI_4 - _asin_scalar(x)) + MOREBITS) + PI_4
+
+
+@njit(cache=True)
+def cos_scalar(x: float) -> float:  # pragma: no cover - compiled
+    """Cephes' ``cos`` of a finite ``|x| < 2^29``: the bits of
+    :func:`navkit.geometry.angles.cos` (the same operations in the same order)."""
+    x = abs(x)
+    y = np.floor(x * FOUR_OVER_PI)  # the octant
+    j = np.int64(y)
+    if j & 1:  # map zeros to the origin
+        j += 1
+        y += 1.0
+    j &= 7
+    z = ((x - y * PI4A) - y * PI4B) - y * PI4C
+    zz = z * z
+    flip = False
+    if j > 3:
+        j -= 4
+        flip = True
+    if j > 1:
+        flip = not flip
+    if j == 1 or j == 2:
+        poly = ((((_SC0 * zz + _SC1) * zz + _SC2) * zz + _SC3) * zz + _SC4) * zz + _SC5
+        v = z + z * zz * poly
+    else:
+        poly = ((((_CC0 * zz + _CC1) * zz + _CC2) * zz + _CC3) * zz + _CC4) * zz + _CC5
+        v = 1.0 - 0.5 * zz + zz * zz * poly
+    return -v if flip else v
+
+
 @njit(cache=True)
 def plane_rows(
     M: np.ndarray, rayleigh: bool = False
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover
     """TLS planes of raw moment rows ``(G, 13)`` (see ``extract._planes_from_rows``): the
     smallest eigenpair of each covariance by the closed form of ``extract.smallest_eigenpairs``
-    row by row (``rayleigh``: the eigenvalue as the Rayleigh quotient of the unit vector, as
-    there). Returns normals ``(G, 3)`` away from the origin, rho, RMS, means ``(G, 3)`` and
+    row by row, its operations in its order - ``acos`` / ``cos`` by :func:`acos_scalar` /
+    :func:`cos_scalar` (its :mod:`navkit.geometry.angles`), the norm and ``n . mean`` left to
+    right -, so the same bits (``rayleigh``: the eigenvalue as the Rayleigh quotient of the unit
+    vector, as there). Returns normals ``(G, 3)`` away from the origin, rho, RMS, means ``(G, 3)`` and
     a flag per row whose smallest eigenvalue is repeated (the caller takes LAPACK's vector
     there)."""
     G = M.shape[0]
@@ -554,8 +650,8 @@ def plane_rows(
         )
         r = det / (2.0 * p * p2) if p > 0 else 0.0
         r = min(max(r, -1.0), 1.0)
-        phi = np.arccos(r) / 3.0
-        lam = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+        phi = acos_scalar(r) / 3.0
+        lam = q + 2.0 * p * cos_scalar(phi + 2.0 * np.pi / 3.0)
         m00 = a00 - lam
         m11 = a11 - lam
         m22 = a22 - lam
@@ -698,9 +794,9 @@ def outline_rasters(
 
 @njit(cache=True)
 def _dot3(a: np.ndarray, i: int, b: np.ndarray, j: int) -> float:  # pragma: no cover
-    """``a[i] . b[j]`` of two ``(., 3)`` arrays in ``numpy.einsum``'s order for three terms,
-    ``(a0 b0 + a2 b2) + a1 b1`` (its SIMD pairs; checked bit for bit by the tests)."""
-    return (a[i, 0] * b[j, 0] + a[i, 2] * b[j, 2]) + a[i, 1] * b[j, 1]
+    """``a[i] . b[j]`` of two ``(., 3)`` arrays, left to right: ``(a0 b0 + a1 b1) + a2 b2``
+    (``extract._dot3``'s order)."""
+    return a[i, 0] * b[j, 0] + a[i, 1] * b[j, 1] + a[i, 2] * b[j, 2]
 
 
 @njit(cache=True)
@@ -1048,8 +1144,8 @@ def outline_samples(
 @njit(cache=True)
 def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  # pragma: no cover
     """Sums of the rows of ``M (G, 13)`` per group ``groups (G,)`` (-1 = none): ``(n_groups,
-    13)``, rows added in their order (``extract._sum_rows`` adds them by a BLAS product: the
-    same sums up to the order of the float64 additions)."""
+    13)``, each group's rows added one after the other from +0 (``extract._sum_rows``'
+    ``numpy.add.at``: the same additions, the same bits)."""
     R = np.zeros((n_groups, M.shape[1]), np.float64)
     for g in range(len(groups)):
         k = groups[g]
@@ -1108,9 +1204,9 @@ def prune_merge(
     Returns a status (0 = done; 1 = a region's smallest eigenvalue is repeated: the caller
     takes the NumPy path, whose LAPACK vector the closed form does not reproduce), the number of
     regions, the region of each patch ``(G,)`` (-1 = none) and the regions' normals ``(n, 3)``
-    and rho ``(n,)``. The tests in the oracle's order: the dot products of ``numpy.einsum``'s
-    three terms ``(a0 b0 + a2 b2) + a1 b1`` (:func:`_dot3`); the merge's normal products (a
-    BLAS product there) left to right - a decision could differ only on an exact tie."""
+    and rho ``(n,)``. The tests in the oracle's order: every dot product of three terms left to
+    right (:func:`_dot3`, ``extract._dot3``), the region sums as :func:`sum_rows`, the planes as
+    :func:`plane_rows`: the same decisions and the same bits."""
     G = hc * wc
     empty = np.zeros((0, 3), np.float64)
     status, n_reg, comp, rn, rd, _ = _region_planes(planar, M, eh, ev, hc, wc, min_cells)

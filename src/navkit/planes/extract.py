@@ -34,7 +34,14 @@ connected components (union-find instead of OpenCV on the cell-graph image; the 
 the border candidates, the border refinement with its outline samples, the label image with the
 inliers, the outline samples and rasters - run as compiled kernels (:mod:`navkit.planes._kernels`,
 Numba, issue 12); the NumPy versions here are their oracle (``_extract(..., compiled=False)``;
-``tests/planes/test_kernels.py``, ``docs/kernels.md``).
+``tests/planes/test_kernels.py``, ``docs/kernels.md``) and give the same result bit for bit on
+any CPU (issue 25): both run the same IEEE operations in the same order - float64 sums one term
+after the other (:func:`_sum_rows`, the weighted ``bincount`` of the mixed patches' pixels; no
+BLAS product), three-term dot products left to right (:func:`_dot3`; no ``einsum``), the
+closed-form eigenvalue's ``acos`` / ``cos`` with Cephes' arithmetic
+(:mod:`navkit.geometry.angles`; not NumPy's SIMD or libm's), no ``fastmath`` in the kernels.
+LAPACK runs only for a matrix with a repeated smallest eigenvalue, in both paths on the same
+matrix.
 
 Unorganised clouds: :mod:`navkit.planes.extract_cloud` (sequential RANSAC with vectorised
 hypotheses, a TLS refit, and the largest connected part of the inliers kept per plane); its names
@@ -56,6 +63,7 @@ from numpy.typing import ArrayLike, NDArray
 from navkit.errors import InputError
 from navkit.geometry import Plane, canonical_plane
 from navkit.geometry._validate import check_settings
+from navkit.geometry.angles import acos, cos
 from navkit.jit import kernels_enabled
 from navkit.planes.extract_cloud import CloudExtractionSettings, extract_planes_cloud
 from navkit.planes.segments import (
@@ -164,6 +172,10 @@ def smallest_eigenpairs(
     eigenvalue (no defined normal: a line or a blob of points) gets one eigenvector of its
     eigenspace, an all-zero matrix ``(0, 0, 1)``.
 
+    ``acos`` and ``cos`` are :mod:`navkit.geometry.angles`' fixed Cephes arithmetic (within 1-2
+    ulp of libm's), the operations of :func:`navkit.planes._kernels.plane_rows` in its order:
+    the same bits as the compiled path on any CPU.
+
     The closed-form eigenvalue loses accuracy when the spread is extreme: its absolute error is
     ~eps x the largest eigenvalue (a floor seen to 20 m: 1e3 m^2 against a thickness of 4e-6
     m^2, 1e-6 relative; LAPACK's ``eigh`` 1e-8). ``rayleigh``: the eigenvalue is the Rayleigh
@@ -199,8 +211,8 @@ def smallest_eigenpairs(
     )
     with np.errstate(invalid="ignore", divide="ignore"):
         r = np.where(p > 0, det / (2.0 * p * p2), 0.0)
-    phi = np.arccos(np.clip(r, -1.0, 1.0)) / 3.0
-    lam = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+    phi = acos(np.clip(r, -1.0, 1.0)) / 3.0  # Cephes' arithmetic: the kernel's bits
+    lam = q + 2.0 * p * cos(phi + 2.0 * np.pi / 3.0)
     # null vector of C - lam I: the longest cross product of two of its rows
     m00, m11, m22 = a00 - lam, a11 - lam, a22 - lam
     rows = (
@@ -224,7 +236,7 @@ def smallest_eigenpairs(
         _, V = np.linalg.eigh(C[rank1])
         best[rank1] = V[:, :, 0]
         best_n[rank1] = 1.0
-    best /= np.sqrt(np.einsum("gi,gi->g", best, best))[:, None]
+    best /= np.sqrt(_dot3(best, best))[:, None]
     if rayleigh:  # v^T (C v), left to right (navkit.planes._kernels.plane_rows' order)
         v0, v1, v2 = best[:, 0], best[:, 1], best[:, 2]
         u0 = a00 * v0 + a01 * v1 + a02 * v2
@@ -292,15 +304,26 @@ def _moment_rows(
     return M
 
 
+def _dot3(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``a . b`` over the last axis (length 3, broadcasting) as ``(a0 b0 + a1 b1) + a2 b2``: the
+    order of the kernels' dot products (:func:`navkit.planes._kernels._dot3`), the same bits on
+    every CPU - ``numpy.einsum`` and matrix products group the terms by the SIMD width or the
+    BLAS in use."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
 def _sum_rows(
     groups: NDArray[np.int64], n_groups: int, M: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    """Sums of the rows of ``M`` per group (``-1`` = none): ``(n_groups, M.shape[1])``. A one-hot
-    matrix product: ~4x faster than a weighted ``bincount`` per column for a few hundred rows.
-    Both paths use it for the region sums of the patch moments (the same floats); the mixed
-    patches' rows are summed inside :func:`navkit.planes._kernels.refine_pixels`."""
-    onehot = (groups[None, :] == np.arange(n_groups)[:, None]).astype(np.float64)
-    return onehot @ M
+    """Sums of the rows of ``M`` per group (``-1`` = none): ``(n_groups, M.shape[1])``, each
+    group's rows added one after the other in their order, from +0 (``numpy.add.at``: one
+    unbuffered addition per row) - the additions of :func:`navkit.planes._kernels.sum_rows`, so
+    the same bits on every CPU (a one-hot matrix product would group them per BLAS build and
+    thread count)."""
+    R = np.zeros((n_groups, M.shape[1]))
+    sel = groups >= 0
+    np.add.at(R, groups[sel], M[sel])
+    return R
 
 
 def _planes_from_rows(
@@ -309,8 +332,8 @@ def _planes_from_rows(
     """TLS planes of moment rows: normals ``(G, 3)`` pointing away from the origin, rho ``(G,)``,
     RMS orthogonal residual ``(G,)`` and means ``(G, 3)`` (metres), by the closed form of
     :func:`smallest_eigenpairs`. ``compiled``: row by row in one loop
-    (:func:`navkit.planes._kernels.plane_rows`; equal to the NumPy closed form up to the last
-    bits of ``arccos`` / ``cos``). ``rayleigh``: the RMS from the Rayleigh quotient of the
+    (:func:`navkit.planes._kernels.plane_rows`: the NumPy closed form's operations in its order,
+    the same bits). ``rayleigh``: the RMS from the Rayleigh quotient of the
     normal (:func:`smallest_eigenpairs`; accurate for the final planes' extreme spreads)."""
     if compiled:
         normal, rho, rms, mean, rank1 = _kernels().plane_rows(np.ascontiguousarray(M), rayleigh)
@@ -323,7 +346,7 @@ def _planes_from_rows(
     # the closed form for any number of rows (the few dozen region rows too: LAPACK's eigh had
     # less overhead there, but the compiled path fits them with the same closed form)
     lam, normal = smallest_eigenpairs(C, rayleigh=rayleigh)
-    d = np.einsum("gi,gi->g", normal, m)
+    d = _dot3(normal, m)
     normal[d < 0] *= -1
     return normal, np.abs(d), np.sqrt(lam), m
 
@@ -355,8 +378,8 @@ def _lapack_planes(M: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray
     m = M[:, 1:4] / n[:, None]
     C = M[:, 4:].reshape(-1, 3, 3) / n[:, None, None] - m[:, :, None] * m[:, None, :]
     _, V = np.linalg.eigh(C)
-    v = V[:, :, 0] / np.sqrt(np.einsum("gi,gi->g", V[:, :, 0], V[:, :, 0]))[:, None]
-    d = np.einsum("gi,gi->g", v, m)
+    v = V[:, :, 0] / np.sqrt(_dot3(V[:, :, 0], V[:, :, 0]))[:, None]
+    d = _dot3(v, m)
     v[d < 0] *= -1
     return v, np.abs(d)
 
@@ -544,7 +567,7 @@ def _grow_regions(
 
         return _prune_merge(M, normal, mean, bound, planar, union_find, s, cos_t, compiled)
     normal, d, rms, mean = _planes_from_rows(M)
-    bound = s.noise(np.einsum("gi,gi->g", mean, mean))
+    bound = s.noise(_dot3(mean, mean))
     planar = (M[:, 0] >= s.min_fill * c * c) & (rms < bound)
     ids = np.arange(G).reshape(hc, wc)
     pa = np.concatenate([ids[:, :-1].ravel(), ids[:-1, :].ravel()])
@@ -552,9 +575,9 @@ def _grow_regions(
     # edge tests that do not depend on the kept set: normals agree, centroids on each other's plane
     tol = s.distance_factor * np.maximum(bound[pa], bound[pb])
     edge_ok = (
-        (np.einsum("ei,ei->e", normal[pa], normal[pb]) > cos_t)
-        & (np.abs(np.einsum("ei,ei->e", normal[pa], mean[pb]) - d[pa]) < tol)
-        & (np.abs(np.einsum("ei,ei->e", normal[pb], mean[pa]) - d[pb]) < tol)
+        (_dot3(normal[pa], normal[pb]) > cos_t)
+        & (np.abs(_dot3(normal[pa], mean[pb]) - d[pa]) < tol)
+        & (np.abs(_dot3(normal[pb], mean[pa]) - d[pb]) < tol)
     )
 
     # the cell graph as an image: patches at even (row, col), the edge between two neighbours
@@ -601,17 +624,17 @@ def _prune_merge(
     # 4. prune patches that disagree with their region's refit plane, then regroup
     rn, rd, _, _ = _planes_from_rows(_sum_rows(comp, n_reg, M))
     r = np.maximum(comp, 0)
-    agree = (np.einsum("gi,gi->g", normal, rn[r]) > cos_t) & (
-        np.abs(np.einsum("gi,gi->g", rn[r], mean) - rd[r]) < s.distance_factor * bound
+    agree = (_dot3(normal, rn[r]) > cos_t) & (
+        np.abs(_dot3(rn[r], mean) - rd[r]) < s.distance_factor * bound
     )
     n_reg, comp = regions(planar & (comp >= 0) & agree)
     if n_reg == 0:
         return 0, comp, n_planar, None
     # merge coplanar regions (e.g. a wall cut in two by an object in front of it)
     rn, rd, _, rmean = _planes_from_rows(_sum_rows(comp, n_reg, M))
-    rtol = s.distance_factor * s.noise(np.einsum("gi,gi->g", rmean, rmean))
-    same = (rn @ rn.T > cos_t) & (
-        np.abs(np.einsum("ai,bi->ab", rn, rmean) - rd[:, None])
+    rtol = s.distance_factor * s.noise(_dot3(rmean, rmean))
+    same = (_dot3(rn[:, None], rn[None]) > cos_t) & (
+        np.abs(_dot3(rn[:, None], rmean[None]) - rd[:, None])
         < np.maximum(rtol[:, None], rtol[None, :])
     )
     same &= same.T
@@ -709,7 +732,9 @@ def _refine_border(
     (*mixed*) patches give per-pixel moments, grouped by (patch, plane), summed in float64 (the
     products of the float32 coordinates are exact in float64). ``compiled``: one loop over the
     border pixels (:func:`navkit.planes._kernels.refine_pixels`); else NumPy passes per
-    candidate slot (the oracle: same labels, moments within float64 rounding).
+    candidate slot (the oracle: the same labels, and the same moments bit for bit - per (patch,
+    candidate) the pixels' float64 terms added one after the other in raster order, then the
+    rows per region in (patch, candidate) order, as the kernel adds them).
     """
     B = len(cand)
     n32 = rn.astype(np.float32)
@@ -808,20 +833,26 @@ def _refine_border_numpy(
         np.copyto(best_d[:b], dist, where=better)
         np.copyto(label[:b], k.astype(label.dtype)[e], where=better)
     complete = (own >= 0) & np.all((label == own[e]) | (tol < 0), axis=(1, 2))
-    # per-pixel moments of the mixed patches per (patch, candidate): one batched product of
-    # the candidate indicators (Bm, m, c^2) with the pixels' [1, d, d d^T] (Bm, c^2, 10)
+    # per-pixel moments of the mixed patches per (patch, candidate slot): the labelled pixels'
+    # [1, d, d d^T] in float64 (the products of float32 values are exact) summed by a weighted
+    # bincount per quantity - one addition per pixel from +0, in raster order within a patch,
+    # as the kernel adds them
     mixed = np.flatnonzero(~complete)
     Bm = len(mixed)
+    G = np.zeros((Bm * m, 10))
+    if Bm == 0:
+        return complete, G
     lm = label[mixed].reshape(Bm, c * c)
     cm = cand[mixed]
-    onehot = np.equal(lm[:, None, :], cm[:, :, None]).astype(np.float64)  # -1 never matches
-    dx, dy, dz = (a[mixed].reshape(Bm, c * c).astype(np.float64) for a in d)
-    Q = np.empty((10, Bm, c * c))  # one contiguous image per quantity
-    Q[0] = 1.0
-    Q[1], Q[2], Q[3] = dx, dy, dz
+    slot = np.argmax(lm[:, None, :] == cm[:, :, None], axis=1)  # (Bm, c^2), a label's slot
+    bi, pix = np.nonzero(lm >= 0)  # raster order within a patch, patches in order
+    gid = bi * m + slot[bi, pix]
+    q = [a[mixed].reshape(Bm, c * c)[bi, pix].astype(np.float64) for a in d]
+    G[:, 0] = np.bincount(gid, minlength=Bm * m)
+    for a in range(3):
+        G[:, 1 + a] = np.bincount(gid, weights=q[a], minlength=Bm * m)
     for j, (a_, b_) in enumerate(zip(*_IU, strict=True)):
-        np.multiply(Q[1 + a_], Q[1 + b_], out=Q[4 + j])
-    G = np.matmul(onehot, Q.transpose(1, 2, 0)).reshape(-1, 10)
+        G[:, 4 + j] = np.bincount(gid, weights=q[a_] * q[b_], minlength=Bm * m)
     return complete, G
 
 
@@ -1102,7 +1133,7 @@ def _outlines(
     cr, cq = np.where(lat_ok, lat_r, own_r), np.where(lat_ok, lat_q, own_q)
     quads = project([pt.P[cr, cq, a] for a in range(3)], qseg[:, None])  # (Q, 4, 2)
     edge = np.diff(quads, axis=1, append=quads[:, :1])  # (Q, 4, 2) the four sides
-    longest = np.sqrt(np.max(np.einsum("qei,qei->qe", edge, edge), axis=1))
+    longest = np.sqrt(np.max(edge[..., 0] * edge[..., 0] + edge[..., 1] * edge[..., 1], axis=1))
     use = np.all(lat_ok | (labels[own_r, own_q] == qseg[:, None]), axis=1)
     use &= longest <= 2.0 * cell * c
     qcuts = np.searchsorted(qseg, np.arange(K + 1))
