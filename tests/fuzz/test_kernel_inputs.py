@@ -247,10 +247,10 @@ def _stereo_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
         yield f"compute_disparity/{label}", lambda a=a: compute_disparity(a, right, settings)
     disp = np.full((48, 96), 8.0)
     for label, a in _variants(disp, rng):
-        yield f"warp_right_disparity/{label}", lambda a=a: warp_right_disparity(a, compiled=True)
-        yield f"lr_consistency/{label}", lambda a=a: lr_consistency(a, disp, compiled=True)
-        yield f"lr_consistency/right/{label}", lambda a=a: lr_consistency(disp, a, compiled=True)
-        yield f"fill_background/{label}", lambda a=a: fill_background(a, compiled=True)
+        yield f"warp_right_disparity/{label}", lambda a=a: warp_right_disparity(a)
+        yield f"lr_consistency/{label}", lambda a=a: lr_consistency(a, disp)
+        yield f"lr_consistency/right/{label}", lambda a=a: lr_consistency(disp, a)
+        yield f"fill_background/{label}", lambda a=a: fill_background(a)
 
 
 def _path_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
