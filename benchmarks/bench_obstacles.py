@@ -64,7 +64,7 @@ _COMPILE_SCRIPT = """
 import json, time, numpy as np
 t0 = time.perf_counter(); c0 = time.process_time()
 from navkit.obstacles import ObstacleSettings, Mounting, cloud_to_grid, detect_obstacles_in_grid
-from navkit.obstacles import _kernels  # imports numba
+from navkit.obstacles import _kernels_grid, _kernels_map, _kernels_mesh  # imports numba
 t_import = time.perf_counter() - t0
 from navkit.experiments.obstacles import kitti_frame
 pts = kitti_frame("000000")[0]
@@ -116,8 +116,7 @@ def backend_comparison(
     compiled stages 1-7 with stage 8's outlines (``"1-7+o"``: what earlier rounds timed as
     "stages 1-7" - no shapes, but the obstacle records with their hulls) and Patchwork++,
     frame by frame in the same run."""
-    from dataclasses import replace
-
+    from navkit import jit
     from navkit.obstacles import (
         Mounting,
         ObstacleSettings,
@@ -125,9 +124,10 @@ def backend_comparison(
         detect_obstacles_in_grid,
     )
 
-    def run_nav(pts: Any, st: Any) -> None:
-        grid = cloud_to_grid(pts, backend=st.backend)
-        detect_obstacles_in_grid(grid, Mounting(SENSOR_HEIGHT_KITTI), st)
+    def run_nav(pts: Any, st: Any, implementation: str) -> None:
+        with jit.use("eager" if implementation == "compiled" else "numpy"):
+            grid = cloud_to_grid(pts)
+            detect_obstacles_in_grid(grid, Mounting(SENSOR_HEIGHT_KITTI), st)
 
     stages_1_7 = ObstacleSettings(build_map=False)
     outlines = ObstacleSettings(shapes=(), guaranteed_shapes=())
@@ -142,7 +142,7 @@ def backend_comparison(
             ("all", full, ("compiled", "numpy")),
         ):
             for be in backends:
-                fn = partial(run_nav, pts, replace(st, backend=be))
+                fn = partial(run_nav, pts, st, be)
                 row[f"{tag} {be}"] = 1e3 * cpu_wall_time(fn, repeats)[0]
         row["pw again"] = 1e3 * cpu_wall_time(partial(patchwork_ground, pw, pts), repeats)[0]
         table.append(row)

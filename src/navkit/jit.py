@@ -1,8 +1,8 @@
 """Which implementation runs navkit's per-frame hot paths: the compiled kernels or their NumPy twins.
 
 Every hot path has two implementations that give the same answers, bit for bit
-(``docs/kernels.md``, "The equivalence contract"): Numba kernels (``_kernels.py`` of each
-capability) and their NumPy twins. The kernels are 2-7x faster per frame, but the first call on a
+(``docs/kernels.md``, "The equivalence contract"): Numba kernels (the ``_kernels*.py`` modules
+of each capability, :data:`KERNEL_MODULES`) and their NumPy twins. The kernels are 2-7x faster per frame, but the first call on a
 machine compiles them: about a minute of CPU for all of them on a 2-core machine, once, after
 which they load from Numba's on-disk cache in under a second.
 
@@ -34,10 +34,9 @@ Decisions:
   and size, Numba's and Python's versions, the machine and CPU model, ``NUMBA_CACHE_DIR``).
   A stale or missing cache entry behind a valid stamp costs an in-process compilation of that
   kernel (the ``"eager"`` behaviour), never a wrong answer.
-- Explicit requests win: a function called with ``compiled=True`` (or ``backend="compiled"``)
-  runs the kernel whatever the policy; the defaults (``compiled=None``, ``backend="auto"``, the
-  ``compiled`` attribute an online object sets from :func:`kernels_enabled` when it is built)
-  follow it.
+- One switch: every function and online object with a kernel follows :func:`kernels_enabled`
+  (the innermost :func:`use`, else the policy); none takes an argument or setting that chooses
+  the implementation. An online object decides when it is built and keeps that decision.
 """
 
 from __future__ import annotations
@@ -56,7 +55,6 @@ from pathlib import Path
 from navkit.errors import ConfigError
 
 __all__ = [
-    "BACKENDS",
     "KERNEL_MODULES",
     "MODES",
     "JitStatus",
@@ -67,8 +65,6 @@ __all__ = [
     "lock_path",
     "mode",
     "on_missing_kernels",
-    "resolve",
-    "resolve_backend",
     "stamp_path",
     "status",
     "use",
@@ -83,8 +79,10 @@ ENV = "NAVKIT_JIT"
 KERNEL_MODULES = (
     "geometry/_kernels.py",
     "localization/_kernels.py",
-    "obstacles/_kernels.py",
+    "obstacles/_kernels_common.py",
+    "obstacles/_kernels_grid.py",
     "obstacles/_kernels_map.py",
+    "obstacles/_kernels_mesh.py",
     "path/_kernels.py",
     "planes/_kernels.py",
     "stereo/_kernels.py",
@@ -267,10 +265,8 @@ class use:
     ``"numpy"`` (their NumPy twins) or ``"auto"`` (the process's policy, ``NAVKIT_JIT``).
 
     ``jit.use("numpy")`` holds for the rest of the process; ``with jit.use("numpy"): ...`` for the
-    block only. The one switch of the whole package: every default (``backend="auto"``,
-    ``compiled=None``, the ``compiled`` an online object takes when it is built) follows it, and
-    an explicit ``backend="compiled"`` / ``compiled=True`` argument still wins. An online object
-    keeps the implementation it was built with (build it inside the block).
+    block only. The one switch of the whole package: every function with a kernel follows it; an
+    online object keeps the implementation it was built with (build it inside the block).
     """
 
     def __init__(self, implementation: str) -> None:
@@ -299,22 +295,3 @@ def implementation() -> str:
     if decided is None:
         return "no kernel needed"
     return "compiled kernels" if decided else "NumPy twins"
-
-
-def resolve(compiled: bool | None) -> bool:
-    """An explicit ``True``/``False`` as given; ``None`` (a default) as :func:`kernels_enabled`."""
-    return kernels_enabled() if compiled is None else bool(compiled)
-
-
-BACKENDS = ("auto", "compiled", "numpy")
-"""Values of a ``backend`` setting: ``"auto"`` follows the policy, the others are explicit."""
-
-
-def resolve_backend(backend: str, *, field: str = "backend") -> str:
-    """``"compiled"`` or ``"numpy"`` for a ``backend`` setting (``"auto"`` as
-    :func:`kernels_enabled`); anything else is a :class:`~navkit.errors.ConfigError`."""
-    if backend not in BACKENDS:
-        raise ConfigError(f"= {backend!r}", field=field, expected=f"one of {BACKENDS}")
-    if backend == "auto":
-        return "compiled" if kernels_enabled() else "numpy"
-    return backend

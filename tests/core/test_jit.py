@@ -90,15 +90,12 @@ def test_mode_reads_the_environment_and_refuses_unknown_values(monkeypatch):
     assert "NAVKIT_JIT" in str(e.value) and "'eager'" in str(e.value)
 
 
-@pytest.mark.parametrize(("policy", "backend"), [("eager", "compiled"), ("numpy", "numpy")])
-def test_explicit_policies_decide_the_auto_backend(fresh, monkeypatch, policy, backend):
+@pytest.mark.parametrize(("policy", "enabled"), [("eager", True), ("numpy", False)])
+def test_explicit_policies_decide_the_implementation(fresh, monkeypatch, policy, enabled):
     monkeypatch.setenv("NAVKIT_JIT", policy)
-    assert jit.resolve_backend("auto") == backend
-    assert jit.resolve(None) is (backend == "compiled")
-    # explicit requests are kept whatever the policy
-    assert jit.resolve_backend("numpy") == "numpy" and jit.resolve(True) is True
-    with pytest.raises(ConfigError, match="backend"):
-        jit.resolve_backend("fast")
+    assert jit.kernels_enabled() is enabled
+    with pytest.raises(ConfigError, match="implementation"):
+        jit.use("fast")
     assert not list(fresh.iterdir())  # nothing started, nothing written
 
 
@@ -150,8 +147,6 @@ def test_use_switches_for_a_block_or_the_process(fresh, monkeypatch):
     assert jit.kernels_enabled() is True
     with jit.use("numpy"):
         assert jit.kernels_enabled() is False
-        assert jit.resolve(None) is False and jit.resolve_backend("auto") == "numpy"
-        assert jit.resolve(True) is True  # an explicit request still wins
         with jit.use("eager"):
             assert jit.kernels_enabled() is True and jit.implementation() == "compiled kernels"
         assert jit.kernels_enabled() is False and jit.implementation() == "NumPy twins"

@@ -102,7 +102,7 @@ def _obstacles_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
 
     rng = np.random.default_rng(0)
     P = _obstacle_grid()
-    compiled = ObstacleSettings(backend="compiled")
+    compiled = ObstacleSettings()  # the kernels: this process runs under NAVKIT_JIT=eager
     for label, a in _variants(P, rng):
         yield (
             f"detect_obstacles_grid/{label}",
@@ -122,22 +122,20 @@ def _obstacles_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
         )
     cloud = _lidar_cloud()
     for label, a in _variants(cloud, rng):
-        yield f"cloud_to_grid/{label}", lambda a=a: cloud_to_grid(a, backend="compiled")
+        yield f"cloud_to_grid/{label}", lambda a=a: cloud_to_grid(a)
         yield (
             f"cloud_to_grid/elevation/{label}",
-            lambda a=a: cloud_to_grid(a, ring_method="elevation", backend="compiled"),
+            lambda a=a: cloud_to_grid(a, ring_method="elevation"),
         )
     for n in (10**9, 2**31, 2**63 - 1, 0, -5):
         yield (
             f"cloud_to_grid/n_columns={n}",
-            lambda n=n: cloud_to_grid(cloud, n_columns=n, backend="compiled"),
+            lambda n=n: cloud_to_grid(cloud, n_columns=n),
         )
     for n in (10**9, 0):
         yield (
             f"cloud_to_grid/n_rings={n}",
-            lambda n=n: cloud_to_grid(
-                cloud, n_rings=n, ring_method="elevation", backend="compiled"
-            ),
+            lambda n=n: cloud_to_grid(cloud, n_rings=n, ring_method="elevation"),
         )
     det = detect_obstacles_grid(P, (0, 0, 1.5), compiled)
     for label, v in POISON.items():
@@ -163,10 +161,10 @@ def _geometry_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
     rng = np.random.default_rng(1)
     pts = rng.normal(size=(40, 2)) * [2.0, 0.5]
     for label, a in _variants(pts, rng):
-        yield f"compute_shapes/{label}", lambda a=a: compute_shapes([a, pts], backend="compiled")
+        yield f"compute_shapes/{label}", lambda a=a: compute_shapes([a, pts])
         yield (
             f"compute_shapes/hulls/{label}",
-            lambda a=a: compute_shapes([a], are_hulls=True, backend="compiled"),
+            lambda a=a: compute_shapes([a], are_hulls=True),
         )
         for fn in (hull_points, convex_hull_2d, min_circle_welzl, mvee_khachiyan, ellipse_a6):
             yield f"{fn.__name__}/{label}", lambda a=a, fn=fn: fn(a)
@@ -249,10 +247,10 @@ def _stereo_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
         yield f"compute_disparity/{label}", lambda a=a: compute_disparity(a, right, settings)
     disp = np.full((48, 96), 8.0)
     for label, a in _variants(disp, rng):
-        yield f"warp_right_disparity/{label}", lambda a=a: warp_right_disparity(a, compiled=True)
-        yield f"lr_consistency/{label}", lambda a=a: lr_consistency(a, disp, compiled=True)
-        yield f"lr_consistency/right/{label}", lambda a=a: lr_consistency(disp, a, compiled=True)
-        yield f"fill_background/{label}", lambda a=a: fill_background(a, compiled=True)
+        yield f"warp_right_disparity/{label}", lambda a=a: warp_right_disparity(a)
+        yield f"lr_consistency/{label}", lambda a=a: lr_consistency(a, disp)
+        yield f"lr_consistency/right/{label}", lambda a=a: lr_consistency(disp, a)
+        yield f"fill_background/{label}", lambda a=a: fill_background(a)
 
 
 def _path_cases() -> Iterator[tuple[str, Callable[[], Any]]]:

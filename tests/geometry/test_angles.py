@@ -22,6 +22,7 @@ def _pairs(rng: np.random.Generator, n: int = 400_000) -> tuple[np.ndarray, np.n
     return np.concatenate([y, Y.ravel(), ye, -ye]), np.concatenate([x, X.ravel(), xe, xe])
 
 
+@pytest.mark.twin("atan2_kernel")
 def test_twin_and_kernel_give_the_same_bits(rng):
     from navkit.geometry._kernels import atan2_kernel
 

@@ -52,6 +52,7 @@ def _trig_args(rng: np.random.Generator) -> np.ndarray:
     return np.concatenate([x, k, np.nextafter(k, np.inf), np.nextafter(k, -np.inf), SPECIAL])
 
 
+@pytest.mark.twin("sincos_kernel")
 def test_sincos_twin_and_kernel_give_the_same_bits(rng):
     from navkit.geometry._kernels import sincos_kernel
 
@@ -62,6 +63,7 @@ def test_sincos_twin_and_kernel_give_the_same_bits(rng):
     assert _same_bits(s, sk) and _same_bits(c, ck)
 
 
+@pytest.mark.twin("exp_kernel", "log_kernel")
 def test_exp_and_log_twins_and_kernels_give_the_same_bits(rng):
     from navkit.geometry._kernels import exp_kernel, log_kernel
 

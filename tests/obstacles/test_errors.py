@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from navkit import jit
 from navkit.errors import ConfigError, InputError
 from navkit.obstacles import ObstacleSettings, detect_obstacles, detect_obstacles_grid
 from navkit.sensors import RangeScan
@@ -63,28 +64,31 @@ def _floor_with_box() -> np.ndarray:
     return P
 
 
-@pytest.mark.parametrize("backend", ["compiled", "numpy"])
-def test_coordinates_beyond_the_bound_are_refused_by_both_backends(backend):
+@pytest.mark.parametrize("implementation", ["eager", "numpy"])
+def test_coordinates_beyond_the_bound_are_refused_by_kernels_and_twins(implementation):
     """Finite coordinates beyond 1e9 m (here 1e30: their grid indices overflow) are refused
     before any kernel runs; NaN and inf stay no-returns."""
     P = _floor_with_box()
-    settings = ObstacleSettings(backend=backend)
-    with pytest.raises(
-        InputError, match=r"field .points.: has a coordinate of magnitude .*e\+31 m"
-    ):
-        detect_obstacles_grid(P * 1e30, (0, 0, 1.5), settings)
-    Q = P.copy()
-    Q[3, 4] = [np.nan, np.inf, -np.inf]
-    assert len(detect_obstacles_grid(Q, (0, 0, 1.5), settings).obstacles) == 1
+    settings = ObstacleSettings()
+    with jit.use(implementation):
+        with pytest.raises(
+            InputError, match=r"field .points.: has a coordinate of magnitude .*e\+31 m"
+        ):
+            detect_obstacles_grid(P * 1e30, (0, 0, 1.5), settings)
+        Q = P.copy()
+        Q[3, 4] = [np.nan, np.inf, -np.inf]
+        assert len(detect_obstacles_grid(Q, (0, 0, 1.5), settings).obstacles) == 1
 
 
-@pytest.mark.parametrize("backend", ["compiled", "numpy"])
-def test_ground_grid_beyond_the_cell_bound_is_refused_by_both_backends(backend, monkeypatch):
+@pytest.mark.parametrize("implementation", ["eager", "numpy"])
+def test_ground_grid_beyond_the_cell_bound_is_refused_by_kernels_and_twins(
+    implementation, monkeypatch
+):
     """The ground-height grid's size is checked before it is allocated, with the same error from
     the kernel (which alone knows the reference points) and from the twin."""
     monkeypatch.setenv("NAVKIT_MAX_GRID_CELLS", "2")
-    settings = ObstacleSettings(backend=backend, ground_cell_m=0.5)
-    with pytest.raises(InputError, match=r"ground_cell_m.*exceeds the bound of 2 cells"):
+    settings = ObstacleSettings(ground_cell_m=0.5)
+    with jit.use(implementation), pytest.raises(InputError, match=r"ground_cell_m.*exceeds"):
         detect_obstacles_grid(_floor_with_box(), (0, 0, 1.5), settings)
 
 

@@ -1,11 +1,12 @@
-"""The compiled (Numba) backend of stages 1-7 against its NumPy twin: the same answers.
+"""The compiled (Numba) kernels of stages 1-8 against their NumPy twins: the same answers.
 
 Classes, obstacle ids, shadow owners, boundaries and per-vertex labels must be identical; floats
 (points, normals, z extrema, shape parameters) equal to 1e-9 relative (in practice bit-identical:
 the kernels repeat the twin's float32 / float64 operations in the same order). Run on simulated
 scenes (both scanners, with noise) and on every real scan grid in ``NAVKIT_DATA/lidar``
 (SemanticKITTI clouds through ``cloud_to_grid``, SqueezeSeg range images through
-``organized_to_grid``).
+``organized_to_grid``). Each test names the kernels it compares (``pytest.mark.twin``;
+``tests/core/test_twins.py`` checks that every kernel of a ``TWINS`` table has one).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from navkit import jit
 from navkit.errors import ConfigError
 from navkit.geometry._validate import MAX_COORDINATE_M
 from navkit.obstacles import (
@@ -27,8 +29,8 @@ from navkit.obstacles import (
     organized_to_grid,
 )
 from navkit.obstacles.detector import ObstacleDetection
-from navkit.obstacles.mesh import build_mesh, robust_cell_normals
-from navkit.obstacles.rules import _mesh_and_classes, classify, mesh_and_classes
+from navkit.obstacles.mesh import robust_strides, robust_strides_compiled
+from navkit.obstacles.rules import _mesh_and_classes, mesh_and_classes
 
 pytest.importorskip("numba")
 
@@ -86,14 +88,35 @@ def assert_same_detection(a: ObstacleDetection, b: ObstacleDetection) -> None:
 
 
 def _both(run):  # type: ignore[no-untyped-def]
-    return run(replace(FAST, backend="numpy")), run(replace(FAST, backend="compiled"))
+    """``run(FAST)`` on the NumPy twins and on the kernels."""
+    with jit.use("numpy"):
+        twin = run(FAST)
+    with jit.use("eager"):
+        return twin, run(FAST)
 
 
-def test_backend_is_validated():
-    with pytest.raises(ConfigError, match="backend"):
-        ObstacleSettings(backend="cuda")
+def _twin(fn, *args, **kw):  # type: ignore[no-untyped-def]
+    with jit.use("numpy"):
+        return fn(*args, **kw)
 
 
+def _kernel(fn, *args, **kw):  # type: ignore[no-untyped-def]
+    with jit.use("eager"):
+        return fn(*args, **kw)
+
+
+def test_the_implementation_is_no_setting():
+    """``navkit.jit`` chooses kernels or twins; a settings file with a ``backend`` key is refused
+    with a message that says so."""
+    with pytest.raises(ConfigError) as e:
+        ObstacleSettings.from_dict({"backend": "numpy"}, source="obstacles.toml")
+    assert "obstacles.toml" in str(e.value) and "NAVKIT_JIT" in str(e.value)
+    with pytest.raises(TypeError):
+        ObstacleSettings(backend="numpy")  # type: ignore[call-arg]
+
+
+@pytest.mark.twin("points_kernel", "split_kernel", "vertex_kernel", "ground_cells_kernel")
+@pytest.mark.twin("refine_kernel", "map_groups_kernel", "stages_2_5_kernel")
 @pytest.mark.parametrize(
     ("scene", "scanner", "noise"),
     [("four", "tilting", 0.01), ("four", "spinning64", 0.01), ("box", "spinning64", 0.02)],
@@ -117,37 +140,23 @@ def _kitti_grids(data_path):  # type: ignore[no-untyped-def]
     from navkit.io.pointcloud import read_kitti_bin
 
     folder = data_path("lidar/semantickitti-seq00")
-    return [
-        (f.name, cloud_to_grid(read_kitti_bin(f), backend="numpy"))
-        for f in sorted(folder.glob("*.bin"))
-    ]
+    return [(f.name, _twin(cloud_to_grid, read_kitti_bin(f))) for f in sorted(folder.glob("*.bin"))]
 
 
-def test_stage_kernels_equal_numpy_on_kitti(data_path):
-    """Stages 2-5 separately, bit for bit, on every SemanticKITTI frame."""
+@pytest.mark.twin("stages_2_5_kernel", "robust_strides_kernel")
+def test_stages_2_5_kernel_equals_numpy_on_kitti(data_path):
+    """Stages 2-5 (the fused kernel) and the robust normals' strides, bit for bit, on every
+    SemanticKITTI frame."""
     s = ObstacleSettings()
     for name, grid in _kitti_grids(data_path):
         P = Mounting(1.73).to_body(grid.points)
         valid = np.isfinite(P).all(axis=-1)
         o = np.array([0.0, 0.0, 1.73])
-        kw = dict(
-            wrap=True,
-            jump_height_m=s.jump_height_m,
-            jump_range_fraction=s.jump_range_fraction,
-            jump_range_ratio=s.jump_range_ratio,
-        )
-        ma = build_mesh(P, valid, o, steep_cos=math.cos(s.c1_rad), backend="numpy", **kw)
-        mb = build_mesh(P, valid, o, steep_cos=math.cos(s.c1_rad), backend="compiled", **kw)
-        for f in ("valid", "normal", "vertex_ray", "range_mean", "z_min", "z_max", "jump"):
-            np.testing.assert_array_equal(getattr(ma, f), getattr(mb, f), err_msg=f"{name} {f}")
-        ra = robust_cell_normals(P, valid, o, support_m=1.0, backend="numpy", **kw)
-        rb = robust_cell_normals(P, valid, o, support_m=1.0, backend="compiled", **kw)
-        np.testing.assert_array_equal(ra, rb, err_msg=f"{name} robust normals")
-        la, rules_a = classify(ma, s, wrap=True, robust_cells=ra, backend="numpy")
-        lb, rules_b = classify(ma, s, wrap=True, robust_cells=ra, backend="compiled")
-        np.testing.assert_array_equal(la, lb, err_msg=f"{name} labels")
-        for k in rules_a:
-            np.testing.assert_array_equal(rules_a[k], rules_b[k], err_msg=f"{name} {k}")
+        k_a, m_a = robust_strides(P, valid, o, s.normal_support_m, 32)
+        k_b, m_b = robust_strides_compiled(P, valid, o, s.normal_support_m, 32)
+        assert k_a.dtype == k_b.dtype == np.float32 and k_a == k_b, name
+        np.testing.assert_array_equal(m_a, m_b, err_msg=f"{name} elevation strides")
+        _, la, _ = _twin(mesh_and_classes, P, valid, o, s, wrap=True)
         assert (la == -2).sum() > 1000 and (la == 0).sum() > 50000  # a real frame, not empty
         _same_stages_2_5(P, valid, o, name)
 
@@ -172,12 +181,8 @@ def _same_stages_2_5(P, valid, o, name, settings=None):  # type: ignore[no-untyp
     variants = [base, replace(base, normal_support_m=0.0), replace(base, jump_range_ratio=math.inf)]
     for s in variants:
         for wrap in (True, False):
-            ma, la, ra = mesh_and_classes(
-                P, valid, o, replace(s, backend="numpy"), wrap=wrap, rules=True
-            )
-            mb, lb, rb = mesh_and_classes(
-                P, valid, o, replace(s, backend="compiled"), wrap=wrap, rules=True
-            )
+            ma, la, ra = _twin(mesh_and_classes, P, valid, o, s, wrap=wrap, rules=True)
+            mb, lb, rb = _kernel(mesh_and_classes, P, valid, o, s, wrap=wrap, rules=True)
             what = f"{name} wrap={wrap} {s.normal_support_m} {s.jump_range_ratio}"
             for f in _MESH_FIELDS:
                 np.testing.assert_array_equal(getattr(ma, f), getattr(mb, f), err_msg=f"{what} {f}")
@@ -186,7 +191,7 @@ def _same_stages_2_5(P, valid, o, name, settings=None):  # type: ignore[no-untyp
             for k in ra:
                 np.testing.assert_array_equal(ra[k], rb[k], err_msg=f"{what} {k}")
             # without the rules, the same mesh and labels
-            mc, lc, rc = mesh_and_classes(P, valid, o, replace(s, backend="compiled"), wrap=wrap)
+            mc, lc, rc = _kernel(mesh_and_classes, P, valid, o, s, wrap=wrap)
             np.testing.assert_array_equal(lc, lb, err_msg=what)
             for f in _MESH_FIELDS:
                 np.testing.assert_array_equal(getattr(mc, f), getattr(mb, f), err_msg=what)
@@ -194,7 +199,7 @@ def _same_stages_2_5(P, valid, o, name, settings=None):  # type: ignore[no-untyp
             # the detector's lean call: the same labels and the fields stages 6-8 read, without
             # the ones nothing reads after stage 5
             md, ld, rd = _mesh_and_classes(
-                P, valid, o, replace(s, backend="compiled"), wrap=wrap, rules=False, full_mesh=False
+                P, valid, o, s, wrap=wrap, rules=False, full_mesh=False, compiled=True
             )
             np.testing.assert_array_equal(ld, lb, err_msg=f"{what} lean labels")
             for f in ("triangles", "normal", "z_min", "z_max", "jump"):
@@ -203,6 +208,7 @@ def _same_stages_2_5(P, valid, o, name, settings=None):  # type: ignore[no-untyp
             assert rd == {}
 
 
+@pytest.mark.twin("stages_2_5_kernel")
 def test_fused_stages_equal_numpy_on_simulated_grids():
     """The fused kernel on simulated grids with holes, both scanners, 1-2 % range noise, a
     grid with empty elevation columns (``np.interp`` of the strides) and a tiny grid."""
@@ -222,7 +228,7 @@ def test_fused_stages_equal_numpy_on_simulated_grids():
             rng=3,
             max_range=60.0,
         )
-        det = detect_obstacles(sim.scan, replace(FAST, backend="numpy"))  # stage 1's grid
+        det = _twin(detect_obstacles, sim.scan, FAST)  # stage 1's grid
         P, valid, o = det.points, det.valid, det.sensor_origin
         _same_stages_2_5(P, valid, o, f"{scene} {scanner}")
         holes = P.copy()
@@ -234,6 +240,8 @@ def test_fused_stages_equal_numpy_on_simulated_grids():
     _same_stages_2_5(tiny, np.isfinite(tiny).all(axis=-1), o, "3 x 4 grid")
 
 
+@pytest.mark.twin("points_kernel", "body_points_kernel", "split_kernel", "vertex_kernel")
+@pytest.mark.twin("ground_cells_kernel", "refine_kernel", "map_groups_kernel")
 def test_compiled_equals_numpy_on_kitti(data_path):
     for name, grid in _kitti_grids(data_path):
         a, b = _both(
@@ -263,21 +271,24 @@ def _same_grid(a, b) -> None:  # type: ignore[no-untyped-def]
     np.testing.assert_array_equal(a.azimuth, b.azimuth)
 
 
+@pytest.mark.twin("cloud_valid_kernel", "rings_order_kernel", "grid_order_fill_kernel")
+@pytest.mark.twin("phase_sin_cos_kernel", "cloud_prep_kernel", "rings_by_order_kernel")
+@pytest.mark.twin("grid_cells_kernel", "grid_fill_kernel")
 def test_cloud_to_grid_compiled_equals_numpy_on_kitti(data_path):
     from navkit.io.pointcloud import read_kitti_bin
 
     folder = data_path("lidar/semantickitti-seq00")
     for f in sorted(folder.glob("*.bin")):
         pts = read_kitti_bin(f)
-        a = cloud_to_grid(pts, backend="numpy")
-        b = cloud_to_grid(pts, backend="compiled")
+        a = _twin(cloud_to_grid, pts)
+        b = _kernel(cloud_to_grid, pts)
         assert a.method == "order"
         _same_grid(a, b)
         # rings by elevation (the other recovery), and a shuffled cloud that is not a sweep
         sub = pts[::7]
         _same_grid(
-            cloud_to_grid(sub, ring_method="elevation", n_rings=64, backend="numpy"),
-            cloud_to_grid(sub, ring_method="elevation", n_rings=64, backend="compiled"),
+            _twin(cloud_to_grid, sub, ring_method="elevation", n_rings=64),
+            _kernel(cloud_to_grid, sub, ring_method="elevation", n_rings=64),
         )
 
 
@@ -292,15 +303,16 @@ def test_cloud_to_grid_fixed_atan2_keeps_the_grids_of_numpys_arctan2(data_path, 
     folder = data_path("lidar/semantickitti-seq00")
     for f in sorted(folder.glob("*.bin")):
         pts = read_kitti_bin(f)
-        fixed = cloud_to_grid(pts, backend="numpy")
+        fixed = _twin(cloud_to_grid, pts)
         with monkeypatch.context() as m:
             m.setattr(grids, "atan2", np.arctan2)
-            libm = cloud_to_grid(pts, backend="numpy")
+            libm = _twin(cloud_to_grid, pts)
         assert np.array_equal(fixed.points, libm.points, equal_nan=True)
         assert np.array_equal(fixed.cell_of_point, libm.cell_of_point)
         np.testing.assert_allclose(fixed.azimuth, libm.azimuth, rtol=0, atol=1e-13)
 
 
+@pytest.mark.twin("cloud_prep_kernel", "grid_fill_kernel")
 def test_cloud_to_grid_compiled_equals_numpy_on_a_shuffled_cloud(rng):
     az = np.repeat(np.linspace(-np.pi, np.pi, 720, endpoint=False), 16)
     el = np.tile(np.radians(np.linspace(-20, 5, 16)), 720)
@@ -308,11 +320,12 @@ def test_cloud_to_grid_compiled_equals_numpy_on_a_shuffled_cloud(rng):
     P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * r[:, None]
     P = np.concatenate([P, P[rng.integers(0, len(P), 3000)] * 1.01])[rng.permutation(len(P) + 3000)]
     P[rng.random(len(P)) < 0.05] = 0.0  # no-returns stored as zeros
-    a = cloud_to_grid(P, backend="numpy")
+    a = _twin(cloud_to_grid, P)
     assert a.method == "elevation"
-    _same_grid(a, cloud_to_grid(P, backend="compiled"))
+    _same_grid(a, _kernel(cloud_to_grid, P))
 
 
+@pytest.mark.twin("rings_order_kernel", "grid_order_fill_kernel")
 def test_cloud_to_grid_by_order_decides_near_ties_as_numpy(rng):
     """The compiled order path ranks rings and picks each cell's nearest point without the
     twin's ``hypot`` unless the answer is close: rings at the same elevation (tied keys), exact
@@ -338,13 +351,14 @@ def test_cloud_to_grid_by_order_decides_near_ties_as_numpy(rng):
             rows.append(np.array([p[0] * c - p[1] * s, p[0] * s + p[1] * c, p[2]]))
     Q = np.array(rows)
     Q[rng.random(len(Q)) < 0.03] = 0.0  # no-returns stored as zeros
-    a = cloud_to_grid(Q, backend="numpy")
+    a = _twin(cloud_to_grid, Q)
     assert a.method == "order"
-    _same_grid(a, cloud_to_grid(Q, backend="compiled"))
+    _same_grid(a, _kernel(cloud_to_grid, Q))
     Q32 = Q.astype(np.float32)  # float32 input, as KITTI's: read by the kernel itself
-    _same_grid(cloud_to_grid(Q32, backend="numpy"), cloud_to_grid(Q32, backend="compiled"))
+    _same_grid(_twin(cloud_to_grid, Q32), _kernel(cloud_to_grid, Q32))
 
 
+@pytest.mark.twin("phase_sin_cos_kernel", "phase_fractions_kernel")
 def test_cloud_to_grid_phase_without_libm_sin_cos(rng, monkeypatch):
     """Where NumPy's ``sin`` / ``cos`` would not be libm's, the phase takes NumPy's: the twin's
     grid either way (the branch forced here)."""
@@ -355,20 +369,21 @@ def test_cloud_to_grid_phase_without_libm_sin_cos(rng, monkeypatch):
     el = np.repeat(np.radians([-12.0, -8.0, -5.0, -2.0, 1.0, 3.0]), n_az)
     r = rng.uniform(2, 30, size=az.size)
     P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * r[:, None]
-    a = cloud_to_grid(P, backend="numpy")
+    a = _twin(cloud_to_grid, P)
     assert a.method == "order"
     monkeypatch.setattr(grids, "_LIBM_SIN_COS", [False])
-    _same_grid(a, cloud_to_grid(P, backend="compiled"))
+    _same_grid(a, _kernel(cloud_to_grid, P))
     monkeypatch.setattr(grids, "_LIBM_SIN_COS", [True])
-    _same_grid(a, cloud_to_grid(P, backend="compiled"))
+    _same_grid(a, _kernel(cloud_to_grid, P))
 
 
+@pytest.mark.twin("rings_order_kernel", "grid_order_fill_kernel")
 def test_ring_ranking_falls_back_to_exact_keys():
     """Ring keys closer than their error bound are not ranked by the approximate sums: two rings
     whose elevations differ by 1e-13 relative, the approximate sums of the higher one lowered
     (within the bound) so that they rank it first - the ranking must be the exact keys', as
     the twin's, and so the grid."""
-    from navkit.obstacles import _kernels
+    from navkit.obstacles import _kernels_grid as _kernels
     from navkit.obstacles.grids import _ring_lut
 
     n_az = 400
@@ -376,7 +391,7 @@ def test_ring_ranking_falls_back_to_exact_keys():
     az = np.tile(az0, 2)
     el = np.repeat([0.1 * (1 + 1e-13), 0.1], n_az)  # ring 0 is the higher one
     P = np.c_[np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)] * 10.0
-    twin = cloud_to_grid(P, backend="numpy")
+    twin = _twin(cloud_to_grid, P)
     assert twin.method == "order"
     qx, qy, qz = (np.ascontiguousarray(P[:, k]) for k in range(3))
     n = len(P)
@@ -414,7 +429,7 @@ def test_cells_pass_equals_the_modulo(rng):
     """The columns as two selects are the twin's ``floor(...) % n_columns`` for every phase
     ``arctan2 / 2 pi`` can give, the ends of both ranges included; the points that are not
     valid (not in ``idx``) get -1."""
-    from navkit.obstacles import _kernels
+    from navkit.obstacles import _kernels_grid as _kernels
 
     n, n_columns, n_el = 5000, 360, 4
     az = rng.uniform(-np.pi, np.pi, n)
@@ -439,6 +454,7 @@ def test_cells_pass_equals_the_modulo(rng):
         np.testing.assert_array_equal(r2w, q[0] * q[0] + q[1] * q[1] + q[2] * q[2])
 
 
+@pytest.mark.twin("mvee_weights_kernel", "a6_search_kernel")
 def test_mvee_and_a6_compiled_equal_numpy(rng):
     from navkit.geometry.shapes import ellipse_a5, ellipses_a6_batch, hull_points, mvee_batch
 
@@ -449,12 +465,10 @@ def test_mvee_and_a6_compiled_equal_numpy(rng):
         sets.append(hull_points(P))
     sets.append(hull_points(np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])))  # a triangle
     starts = [ellipse_a5(h) for h in sets]
-    pairs = list(
-        zip(mvee_batch(sets, backend="numpy"), mvee_batch(sets, backend="compiled"), strict=True)
-    ) + list(
+    pairs = list(zip(_twin(mvee_batch, sets), _kernel(mvee_batch, sets), strict=True)) + list(
         zip(
-            ellipses_a6_batch(sets, starts, backend="numpy"),
-            ellipses_a6_batch(sets, starts, backend="compiled"),
+            _twin(ellipses_a6_batch, sets, starts),
+            _kernel(ellipses_a6_batch, sets, starts),
             strict=True,
         )
     )
@@ -465,12 +479,13 @@ def test_mvee_and_a6_compiled_equal_numpy(rng):
                 assert np.float64(pa[f]).view(np.int64) == np.float64(pb[f]).view(np.int64), f
 
 
+@pytest.mark.twin("body_points_kernel", "points_kernel")
 def test_stage_1_from_sensor_points_equals_to_body(rng):
     """The fused stage 1 (``body_points_kernel``) gives ``Mounting.to_body`` + the validity
     codes bit for bit (signed zeros included) for the rotations it takes (identity, axis swaps),
     with holes, infinities and zeros in the input; whole detections through it are compared with
     the twin in ``test_compiled_equals_numpy_on_kitti``."""
-    from navkit.obstacles import _kernels
+    from navkit.obstacles import _kernels_grid as _kernels
 
     S = rng.normal(scale=20.0, size=(40, 16, 3))
     S[rng.random((40, 16)) < 0.1] = np.nan
@@ -519,7 +534,7 @@ def test_stage_1_from_sensor_points_equals_to_body(rng):
 def test_banded_median_equals_numpy(rng):
     """The exact median of the ring recovery and the strides (one bracket pass for both middle
     order statistics) is ``np.median`` on odd and even sizes, ties, and brackets that miss."""
-    from navkit.obstacles import _kernels
+    from navkit.obstacles import _kernels_common as _kernels
 
     cases = [rng.random(n) for n in (1, 2, 3, 4, 5, 100, 101, 4096, 4097, 20000, 20001)]
     cases += [rng.integers(0, 3, n).astype(float) for n in (10, 11, 5000, 5001)]  # ties

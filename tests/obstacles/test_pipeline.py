@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from navkit import jit
 from navkit.obstacles import (
     GROUND,
     OBSTACLE,
@@ -187,8 +188,8 @@ def test_grid_entry_takes_points_directly():
     assert det.obstacles == () and det.triangle_labels.shape == (60, 40)
 
 
-@pytest.mark.parametrize("backend", ["numpy", "compiled"])
-def test_build_map_false_stops_after_stage_7_with_the_same_labels(backend):
+@pytest.mark.parametrize("implementation", ["numpy", "eager"])
+def test_build_map_false_stops_after_stage_7_with_the_same_labels(implementation):
     """``build_map=False`` (stages 1-7 only): the same per-point and per-triangle classes,
     obstacle ids and boundaries as the full detection of a scan with obstacles, and no records."""
     from navkit.experiments.obstacles import paper_scenes, scanners
@@ -199,8 +200,9 @@ def test_build_map_false_stops_after_stage_7_with_the_same_labels(backend):
     sim = render_scan(
         paper_scenes()["four"], sc, se3_from_rt(np.eye(3), [0.0, 0.0, height]), max_range=60.0
     )
-    full = detect_obstacles(sim.scan, ObstacleSettings(backend=backend))
-    part = detect_obstacles(sim.scan, ObstacleSettings(backend=backend, build_map=False))
+    with jit.use(implementation):
+        full = detect_obstacles(sim.scan, ObstacleSettings())
+        part = detect_obstacles(sim.scan, ObstacleSettings(build_map=False))
     assert len(full.obstacles) >= 3 and part.obstacles == ()
     for name in ("vertex_labels", "vertex_obstacle", "boundary", "triangle_labels"):
         assert np.array_equal(getattr(part, name), getattr(full, name)), name
@@ -212,18 +214,21 @@ def test_build_map_false_stops_after_stage_7_with_the_same_labels(backend):
 def test_a_detection_keeps_its_arrays_when_the_next_frame_runs():
     """The compiled stages keep work arrays between frames of one grid shape
     (``_buffers.cached_work``): every array a detection returns must stay as it was when the
-    next frame of the same shape is detected, and equal the NumPy backend's."""
+    next frame of the same shape is detected, and equal the NumPy twins'."""
     step, _ = step_scan()
     flat = flat_scan(height=2.0, n_az=41, n_el=41)
-    st = ObstacleSettings(backend="compiled")
-    first = detect_obstacles(step, st)
+    st = ObstacleSettings()
+    with jit.use("eager"):
+        first = detect_obstacles(step, st)
     names = ("points", "valid", "normals", "jump", "triangle_labels", "triangle_obstacle")
     names += ("vertex_labels", "vertex_obstacle", "boundary")
     kept = {k: getattr(first, k).copy() for k in names}
     assert first.triangle_obstacle.max() >= 1 and first.boundary.any()
-    second = detect_obstacles(flat, st)
+    with jit.use("eager"):
+        second = detect_obstacles(flat, st)
     assert second.triangle_obstacle.max() == 0
-    ref = detect_obstacles(step, ObstacleSettings(backend="numpy"))
+    with jit.use("numpy"):
+        ref = detect_obstacles(step, st)
     for k in names:
         assert np.array_equal(getattr(first, k), kept[k], equal_nan=k in ("points", "normals")), k
         if k != "normals":  # float32 normals: the twins agree to rounding (test_kernels)

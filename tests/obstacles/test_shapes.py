@@ -11,6 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+from navkit import jit
 from navkit.errors import InputError
 from navkit.geometry.shapes import (
     SHAPES,
@@ -200,7 +201,8 @@ def _bits(shapes: dict) -> dict[str, np.ndarray]:
 
 
 def assert_same_shapes_bits(point_sets, *, are_hulls=False):  # type: ignore[no-untyped-def]
-    """``compute_shapes`` with every built-in shape on both backends: equal bit for bit.
+    """``compute_shapes`` with every built-in shape on the kernels and the twins: equal bit for
+    bit.
 
     This holds on any CPU, not only on the machine that runs the test: the kernels and the
     twins make the same IEEE-754 operations in the same order (no fused multiply-add, no
@@ -213,8 +215,10 @@ def assert_same_shapes_bits(point_sets, *, are_hulls=False):  # type: ignore[no-
     operations are correctly rounded by IEEE-754, so equal inputs give equal bits everywhere.
     """
     sets = list(point_sets)
-    a = compute_shapes(sets, ALL, are_hulls=are_hulls, backend="numpy")
-    b = compute_shapes(sets, ALL, are_hulls=are_hulls, backend="compiled")
+    with jit.use("numpy"):
+        a = compute_shapes(sets, ALL, are_hulls=are_hulls)
+    with jit.use("eager"):
+        b = compute_shapes(sets, ALL, are_hulls=are_hulls)
     assert len(a) == len(b) == len(sets)
     for k, (sa, sb) in enumerate(zip(a, b, strict=True)):
         ba, bb = _bits(sa), _bits(sb)
@@ -222,6 +226,7 @@ def assert_same_shapes_bits(point_sets, *, are_hulls=False):  # type: ignore[no-
             assert np.array_equal(ba[name], bb[name]), f"set {k} {name}: {sa[name]} {sb[name]}"
 
 
+@pytest.mark.twin("hulls_csr_kernel", "basic_shapes_kernel", "a6_csr_kernel", "mvee_csr_kernel")
 def test_compiled_shapes_equal_numpy_bit_for_bit_on_random_sets(rng):
     pytest.importorskip("numba")
     sets = []
@@ -261,7 +266,8 @@ def test_compiled_shapes_equal_numpy_bit_for_bit_on_simulated_scans(scene, scann
     sim = render_scan(
         paper_scenes()[scene], sc, T, noise=RangeNoise(relative_sigma=0.01), rng=3, max_range=60.0
     )
-    det = detect_obstacles(sim.scan, ObstacleSettings(backend="compiled"))
+    with jit.use("eager"):
+        det = detect_obstacles(sim.scan, ObstacleSettings())
     boundary, a7 = _stage_8_inputs(det)
     assert len(boundary) > 0
     assert_same_shapes_bits(boundary)
@@ -285,7 +291,8 @@ def test_compiled_shapes_equal_numpy_bit_for_bit_on_kitti(data_path):
     assert files
     for f in files:
         grid = cloud_to_grid(read_kitti_bin(f))
-        det = detect_obstacles_in_grid(grid, Mounting(1.73), ObstacleSettings(backend="compiled"))
+        with jit.use("eager"):
+            det = detect_obstacles_in_grid(grid, Mounting(1.73), ObstacleSettings())
         boundary, a7 = _stage_8_inputs(det)
         assert len(boundary) > 20
         assert_same_shapes_bits(boundary)

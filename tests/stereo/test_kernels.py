@@ -4,6 +4,7 @@ results on random disparity maps with holes and on the Middlebury pair (both mat
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from navkit import jit
 from navkit.stereo.disparity import fill_background, lr_consistency, warp_right_disparity
@@ -19,6 +20,7 @@ def _same(a: np.ndarray, b: np.ndarray) -> bool:
     return bool(np.array_equal(a, b, equal_nan=True))
 
 
+@pytest.mark.twin("fill_background", "lr_consistency", "warp_right")
 def test_random_maps(rng):
     for _ in range(5):
         d = rng.uniform(0, 60, (37, 53))
@@ -44,6 +46,7 @@ def test_random_maps(rng):
     assert _same(warp_right_disparity(d), _twin(warp_right_disparity, d))
 
 
+@pytest.mark.twin("fill_background", "lr_consistency", "warp_right")
 def test_middlebury_pair(data_path):
     import cv2
 

@@ -7,8 +7,9 @@ with one fixed arithmetic (the scalar functions below; :mod:`navkit.geometry.fix
 :mod:`navkit.geometry.angles`); see ``docs/kernels.md`` ("Equivalence contract: geometry").
 The kernels read the constants of those two modules when they compile: Numba's cache is keyed
 by this file, so a change to those constants needs this file touched (or the cache cleared).
-Selected by the ``backend`` keyword of :func:`~navkit.geometry.shapes.mvee_batch`
-and :func:`~navkit.geometry.shapes.compute_shapes` (``"compiled"`` by default).
+:func:`~navkit.geometry.shapes.compute_shapes`, :func:`~navkit.geometry.shapes.mvee_batch` and
+:func:`~navkit.geometry.shapes.ellipses_a6_batch` run them when :mod:`navkit.jit` says so
+(``navkit.jit.use``).
 """
 
 from __future__ import annotations
@@ -33,6 +34,25 @@ __all__ = [
     "mvee_weights_kernel",
     "sincos_kernel",
 ]
+
+TWINS = {
+    "a6_csr_kernel": "navkit.geometry.shapes.ellipses_a6_batch",
+    "a6_search_kernel": "navkit.geometry.shapes.ellipses_a6_batch",
+    "atan2_kernel": "navkit.geometry.angles.atan2",
+    "basic_shapes_kernel": "navkit.geometry.shapes.compute_shapes",
+    "exp_kernel": "navkit.geometry.fixedmath.exp",
+    "hulls_csr_kernel": "navkit.geometry.shapes.hull_points",
+    "log_kernel": "navkit.geometry.fixedmath.log",
+    "mvee_csr_kernel": "navkit.geometry.shapes.mvee_batch",
+    "mvee_weights_kernel": "navkit.geometry.shapes.mvee_batch",
+    "sincos_kernel": "navkit.geometry.fixedmath.sincos",
+}
+"""Each public kernel -> its NumPy twin (``basic_shapes_kernel``: the set-by-set shapes A1-A5
+and Welzl's circle of :func:`~navkit.geometry.shapes.compute_shapes`' twin)."""
+
+TEST_ONLY = ("exp_kernel", "log_kernel", "sincos_kernel")
+"""Array entry points of the scalar ``_exp``, ``_log`` and ``_sincos`` that the shape kernels
+inline: the tests compare them with :mod:`navkit.geometry.fixedmath` bit for bit."""
 
 # ------------------------------------------------------------------------------------------
 # sin, cos, exp, log and atan2 with one fixed arithmetic: the scalar twins of

@@ -43,7 +43,7 @@ from navkit.errors import InputError
 from navkit.geometry import fixedmath
 from navkit.geometry._validate import as_points, check_coordinates
 from navkit.geometry.angles import atan2 as fixed_atan2
-from navkit.jit import resolve_backend
+from navkit.jit import kernels_enabled
 
 __all__ = [
     "SHAPES",
@@ -468,7 +468,6 @@ def ellipses_a6_batch(
     *,
     max_iter: int = 120,
     rel_tol: float = 3e-3,
-    backend: str = "auto",
 ) -> list[Ellipse]:
     """A6 for many point sets at once: a compass (pattern) search vectorised over the sets.
 
@@ -482,13 +481,13 @@ def ellipses_a6_batch(
     fall below ``rel_tol`` of its size. The result is never larger than the start (A5); on
     random elongated sets it lands within 0.6 % (median), 3 % (90th percentile) of the MVEE.
 
-    ``backend="compiled"`` runs the search set by set in a Numba kernel
+    With the compiled kernels (:mod:`navkit.jit`) the search runs set by set in a Numba kernel
     (:func:`navkit.geometry._kernels.a6_search_kernel`: the same trials in the same order);
-    ``"numpy"``: the batched search below. Both take ``cos``, ``sin``, ``exp`` and ``log`` from
+    else the batched search below (its twin). Both take ``cos``, ``sin``, ``exp`` and ``log`` from
     :mod:`navkit.geometry.fixedmath` (NumPy's SIMD versions and the C library's, which a kernel
     would call, differ in the last bit and per CPU), so they give the same ellipses bit for bit.
     """
-    backend = resolve_backend(backend)
+    compiled = kernels_enabled()
     n = len(hulls)
     if n == 0:
         return []
@@ -501,7 +500,7 @@ def ellipses_a6_batch(
     for b in np.unique(bucket):
         members = np.flatnonzero(bucket == b).tolist()
         res = _a6_batch(
-            [hulls[i] for i in members], [starts[i] for i in members], max_iter, rel_tol, backend
+            [hulls[i] for i in members], [starts[i] for i in members], max_iter, rel_tol, compiled
         )
         for i, e in zip(members, res, strict=True):
             out[i] = e
@@ -513,7 +512,7 @@ def _a6_batch(
     starts: Sequence[Ellipse],
     max_iter: int,
     rel_tol: float,
-    backend: str = "numpy",
+    compiled: bool,
 ) -> list[Ellipse]:
     """The pattern search of :func:`ellipses_a6_batch` on one batch of sets."""
     n = len(hulls)
@@ -547,7 +546,7 @@ def _a6_batch(
         P[i, len(h) :] = h[0]
     three = np.array([-1.0, 0.0, 1.0])
     active = np.ones(n, dtype=bool)
-    if backend == "compiled":
+    if compiled:
         from navkit.geometry import _kernels
 
         counts = np.array([len(h) for h in hulls], dtype=np.int64)
@@ -669,7 +668,6 @@ def mvee_batch(
     *,
     tol: float = 1e-3,
     max_iter: int = 2000,
-    backend: str = "auto",
 ) -> list[Ellipse]:
     """Minimum-volume enclosing ellipses of many 2D sets (Khachiyan 1996; Todd & Yildirim 2007).
 
@@ -681,13 +679,13 @@ def mvee_batch(
     ``A = (P diag(u) P^T - c c^T)^{-1} / d`` is then scaled to contain every point exactly, so it
     encloses the set and its area is within ``(1 + tol)`` (about) of the optimum.
 
-    ``backend="compiled"`` runs the iterations set by set in a Numba kernel
-    (:func:`navkit.geometry._kernels.mvee_weights_kernel`; no per-iteration NumPy overhead);
-    ``"numpy"``: the batched loop below. Both make the same IEEE operations in the same order
+    With the compiled kernels (:mod:`navkit.jit`) the iterations run set by set in a Numba
+    kernel (:func:`navkit.geometry._kernels.mvee_weights_kernel`; no per-iteration NumPy
+    overhead); else the batched loop below (its twin). Both make the same IEEE operations in the same order
     (every sum over the points in index order, :func:`_sum_in_order`; the 2 x 2 inverse and
     eigen-decomposition written out, :func:`_mvee_axes`), so they give the same bits.
     """
-    backend = resolve_backend(backend)
+    compiled = kernels_enabled()
     n = len(hulls)
     if n == 0:
         return []
@@ -713,7 +711,7 @@ def mvee_batch(
     idx = np.arange(n)
     Fa, ua = F, u.copy()
     r = np.arange(n)
-    if backend == "compiled":
+    if compiled:
         from navkit.geometry import _kernels
 
         u = _kernels.mvee_weights_kernel(P, mask, float(tol), int(max_iter))
@@ -857,14 +855,14 @@ def compute_shapes(
     names: Sequence[str] = ("A1", "A2", "A3", "A4", "A5", "A6", "MEC", "MVEE"),
     *,
     are_hulls: bool = False,
-    backend: str = "auto",
 ) -> list[dict[str, Any]]:
     """Every requested shape for every point set: a list of ``{name: shape}`` dicts.
 
     A6 and MVEE are computed for all sets at once (vectorised); A6 starts from the set's A5.
     ``are_hulls=True`` says the sets already are :func:`hull_points` outputs (not recomputed).
-    ``backend="compiled"`` computes the hulls (:func:`hulls_csr`) and the shipped shapes
-    (:func:`shapes_csr`) in kernels over all sets at once; ``"numpy"`` set by set (the twin).
+    With the compiled kernels (:mod:`navkit.jit`) the hulls (:func:`hulls_csr`) and the shipped
+    shapes (:func:`shapes_csr`) are computed in kernels over all sets at once; else set by set
+    (the twin), the same shapes bit for bit.
     """
     unknown = [n for n in names if n not in SHAPES]
     if unknown:
@@ -879,8 +877,7 @@ def compute_shapes(
             field="point_sets",
             expected="a list of (N, 2) point arrays",
         )
-    backend = resolve_backend(backend)
-    if backend == "compiled":
+    if kernels_enabled():
         sets = [as_points(p, 2) for p in point_sets]
         xy = np.concatenate(sets) if sets else np.empty((0, 2))
         check_coordinates(xy, field="point_sets")
@@ -901,16 +898,16 @@ def compute_shapes(
         starts = [
             res["A5"] if "A5" in res else _ellipse_a5(H) for res, H in zip(out, hulls, strict=False)
         ]
-        for res, e in zip(out, ellipses_a6_batch(hulls, starts, backend=backend), strict=False):
+        for res, e in zip(out, ellipses_a6_batch(hulls, starts), strict=False):
             res["A6"] = e
     if "MVEE" in names and SHAPES["MVEE"] is mvee_khachiyan:
-        for res, e in zip(out, mvee_batch(hulls, backend=backend), strict=False):
+        for res, e in zip(out, mvee_batch(hulls), strict=False):
             res["MVEE"] = e
     return [{n: res[n] for n in names} for res in out]
 
 
 # ----------------------------------------------------------------------------------------------
-# many sets at once in a CSR layout (the compiled backend of stage 8)
+# many sets at once in a CSR layout (stage 8 with the compiled kernels)
 
 _BUILTIN: dict[str, ShapeFn] = dict(SHAPES)
 """The registered methods as shipped: the compiled path computes these in kernels."""
@@ -1057,12 +1054,12 @@ def _rectangles(rows: NDArray[np.float64]) -> list[Rectangle]:
 def shapes_csr(
     H: NDArray[np.float64], hoff: NDArray[np.int64], names: Sequence[str]
 ) -> list[dict[str, Any]]:
-    """Every requested shape of every hull ``H[hoff[s]:hoff[s + 1]]`` (compiled backend).
+    """Every requested shape of every hull ``H[hoff[s]:hoff[s + 1]]`` (compiled kernels).
 
     The shipped methods run in kernels over all hulls at once
     (:func:`navkit.geometry._kernels.basic_shapes_kernel`: A1-A5 and Welzl's circle;
     ``a6_csr_kernel``; ``mvee_csr_kernel``) with their twins' arithmetic, so the shapes equal
-    :func:`compute_shapes` with ``backend="numpy"`` bit for bit, on any CPU. A method
+    :func:`compute_shapes`' NumPy twin bit for bit, on any CPU. A method
     replaced or added with :func:`register_shape` is called hull by hull.
     """
     from navkit.geometry import _kernels

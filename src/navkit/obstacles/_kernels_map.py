@@ -1,8 +1,8 @@
 """Compiled (Numba) kernels of stages 6-8 that share passes or batch all obstacles at once.
 
-Twins (the NumPy references) live in :mod:`navkit.obstacles.detector` and
-:mod:`navkit.obstacles.segment`; see ``docs/kernels.md`` ("Obstacles"). The shape kernels of
-stage 8 are in :mod:`navkit.geometry._kernels`.
+Twins (the NumPy references, ``TWINS`` below) live in :mod:`navkit.obstacles.detector`,
+:mod:`navkit.obstacles.segment` and :mod:`navkit.obstacles.ground`; see ``docs/kernels.md``
+("Obstacles"). The shape kernels of stage 8 are in :mod:`navkit.geometry._kernels`.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import math
 import numpy as np
 from numba import njit
 
-from navkit.obstacles._kernels import (
+from navkit.obstacles._kernels_common import (
     _OFF_I,
     _OFF_J,
     _find,
@@ -26,9 +26,19 @@ from navkit.obstacles._kernels import (
 __all__ = [
     "ground_cells_kernel",
     "map_groups_kernel",
+    "refine_kernel",
     "split_kernel",
     "vertex_kernel",
 ]
+
+TWINS = {
+    "ground_cells_kernel": "navkit.obstacles.ground.ground_height_map",
+    "map_groups_kernel": "navkit.obstacles.detector._build_obstacles",
+    "refine_kernel": "navkit.obstacles.ground.refine_by_ground_height",
+    "split_kernel": "navkit.obstacles.detector._split",
+    "vertex_kernel": "navkit.obstacles.detector._vertices",
+}
+"""Each public kernel -> its NumPy twin."""
 
 
 # ------------------------------------------------------------------------------------------
@@ -800,6 +810,35 @@ def ground_cells_kernel(P, sel, cell_m, quantile, work_f, work_i, max_cells):  #
     origin[0] = gx_min
     origin[1] = gy_min
     return heights, origin, missing
+
+
+# ------------------------------------------------------------------------------------------
+# stage 7: refinement by height above the ground
+
+
+@njit(cache=True)
+def refine_kernel(P, vlab, valid, grid, origin, cell_m, band_m, above_m):  # type: ignore[no-untyped-def]
+    """``ground.refine_by_ground_height`` (``envelope = 0``) per valid vertex.
+
+    Any finite coordinates: the cell index is clamped to the grid as a float, before it becomes
+    an integer (a far point's ``(x - origin) / cell_m`` may not fit one), so every read of
+    ``grid`` is in range."""
+    n = P.shape[0]
+    out = vlab.copy()
+    nx, ny = grid.shape
+    for p in range(n):
+        if not valid[p]:
+            continue
+        fx = min(max(np.floor((P[p, 0] - origin[0]) / cell_m), 0.0), nx - 1.0)
+        fy = min(max(np.floor((P[p, 1] - origin[1]) / cell_m), 0.0), ny - 1.0)
+        h = P[p, 2] - grid[int(fx), int(fy)]
+        lab = out[p]
+        if abs(h) <= band_m:
+            lab = 0
+        if lab == 0 and h > above_m:
+            lab = -2
+        out[p] = lab
+    return out
 
 
 # ------------------------------------------------------------------------------------------

@@ -20,6 +20,7 @@ from navkit.geometry._validate import (
     max_grid_cells,
 )
 from navkit.geometry.shapes import compute_shapes, hull_points, hulls_csr, shapes_csr
+from navkit.jit import kernels_enabled
 from navkit.obstacles.grids import ScanGrid
 from navkit.obstacles.ground import refine_by_ground_height
 from navkit.obstacles.mesh import MeshCharacteristics
@@ -33,7 +34,7 @@ from navkit.obstacles.segment import (
     merge_close_components,
     vertex_labels,
 )
-from navkit.obstacles.settings import ObstacleSettings, resolved
+from navkit.obstacles.settings import ObstacleSettings
 from navkit.sensors import RangeScan
 
 __all__ = [
@@ -53,7 +54,7 @@ MAIN_GROUND_SHARE = 0.1
 
 STAGES = ("points", "mesh", "classes", "split", "boundaries", "map")
 """Stage names used as keys of :attr:`ObstacleDetection.timings` (stages 3-4 are in "mesh"; with
-the compiled backend stages 2-5 run as one kernel, charged to "mesh", and "classes" is ~0)."""
+the compiled kernels stages 2-5 run as one kernel, charged to "mesh", and "classes" is ~0)."""
 
 
 @dataclass(frozen=True)
@@ -256,17 +257,18 @@ def detect_obstacles_grid(
     InputError
         If the grid has the wrong shape or no valid point at all.
     """
-    settings = resolved(settings or ObstacleSettings())
+    settings = settings or ObstacleSettings()
     clock = _Clock()
     P = _check_grid(points, source)
     origin = np.asarray(sensor_origin, dtype=np.float64).reshape(3)
-    if settings.backend == "compiled":
-        from navkit.obstacles import _kernels
+    compiled = kernels_enabled()
+    if compiled:
+        from navkit.obstacles import _kernels_grid
         from navkit.obstacles._buffers import arena
 
         P_in = P
         P, valid = arena([(P_in.shape, np.float64), (P_in.shape[:2], np.bool_)])
-        n_valid, n_far = _kernels.points_kernel(P_in, P, valid, MAX_COORDINATE_M)
+        n_valid, n_far = _kernels_grid.points_kernel(P_in, P, valid, MAX_COORDINATE_M)
         if n_far:
             check_coordinates(P_in, field="points", source=source)
         any_valid = n_valid > 0
@@ -281,9 +283,9 @@ def detect_obstacles_grid(
             field="points",
             expected="at least one measured point",
         )
-    if settings.backend != "compiled":
+    if not compiled:
         P = np.where(valid[..., None], P, np.nan)
-    return _detect_from_stage_1(P, valid, origin, settings, azimuth, clock)
+    return _detect_from_stage_1(P, valid, origin, settings, azimuth, clock, compiled)
 
 
 def _detect_from_stage_1(
@@ -293,9 +295,11 @@ def _detect_from_stage_1(
     settings: ObstacleSettings,
     azimuth: ArrayLike | None,
     clock: _Clock,
+    compiled: bool,
 ) -> ObstacleDetection:
     """Stages 2-8 of :func:`detect_obstacles_grid` after stage 1 (``P`` with NaN rows where not
-    ``valid``, at least one valid point)."""
+    ``valid``, at least one valid point); ``compiled``: the kernels (the frame's one decision,
+    :func:`navkit.jit.kernels_enabled`), else the NumPy twins."""
     wrap = (
         settings.wrap_azimuth
         if settings.wrap_azimuth is not None
@@ -308,13 +312,12 @@ def _detect_from_stage_1(
     # rules P1-P5 -> classes (compiled: one pass over the grid, all charged to "mesh")
     # (the mesh's valid, vertex_ray and range_mean are not computed: nothing below reads them)
     mesh, labels, _rules = _mesh_and_classes(
-        P, valid, origin, settings, wrap=wrap, rules=False, full_mesh=False
+        P, valid, origin, settings, wrap=wrap, rules=False, full_mesh=False, compiled=compiled
     )
     clock.lap("mesh")
     clock.lap("classes")
 
     # stage 6: separate obstacles (mesh components), drop tiny / flat ones, give shadows an owner
-    compiled = settings.backend == "compiled"
     if compiled:
         obs_lab, n, tri_obstacle, tcode, shadows, ntri = _compiled_split(
             labels, mesh, P, wrap, settings
@@ -499,9 +502,9 @@ def _compiled_vertices(
     tcode: NDArray[np.int8],
 ) -> tuple[NDArray[np.int32], NDArray[np.bool_], NDArray[np.int8]]:
     """Stage 7 with the kernels of :mod:`navkit.obstacles._kernels_map` (one pass over the
-    vertices, on stage 6's triangle codes ``tcode``) and :mod:`navkit.obstacles._kernels` (the
-    ground-height refinement); same answers."""
-    from navkit.obstacles import _kernels, _kernels_map
+    vertices, on stage 6's triangle codes ``tcode``, then the ground-height refinement); same
+    answers."""
+    from navkit.obstacles import _kernels_map
     from navkit.obstacles.ground import fill_missing_cells
 
     _, _, work_f, work_i = _work_6_7(labels.shape[0], labels.shape[1], valid.size)
@@ -517,7 +520,7 @@ def _compiled_vertices(
             check_grid_size(tuple(origin), setting="ground_cell_m", source="ground height map")
         if missing:
             grid = fill_missing_cells(grid)
-        vlab = _kernels.refine_kernel(
+        vlab = _kernels_map.refine_kernel(
             flat,
             vlab.reshape(-1),
             valid.reshape(-1),
@@ -641,7 +644,7 @@ def _build_compiled(
     n: int,
     settings: ObstacleSettings,
 ) -> list[Obstacle]:
-    """:func:`_build_obstacles` on the compiled backend: the groupings in one kernel
+    """:func:`_build_obstacles` with the compiled kernels: the groupings in one kernel
     (:func:`navkit.obstacles._kernels_map.map_groups_kernel`, on stage 6's ``tri_obstacle``,
     shadow triangles and triangle counts),
     then :func:`_assemble_compiled`; the same obstacles."""
@@ -676,12 +679,12 @@ def _assemble_obstacles(
     # lexicographically smallest vertex: A3 and Welzl depend on the start)
     hulls = [hull_points(b) for b in bxy]
     shapes = (
-        compute_shapes(hulls, settings.shapes, are_hulls=True, backend=settings.backend)
+        compute_shapes(hulls, settings.shapes, are_hulls=True)
         if settings.shapes
         else [{} for _ in range(n)]
     )
     guaranteed = (
-        compute_shapes(guaranteed_sets, settings.guaranteed_shapes, backend=settings.backend)
+        compute_shapes(guaranteed_sets, settings.guaranteed_shapes)
         if settings.guaranteed_shapes
         else [{} for _ in range(n)]
     )
@@ -835,7 +838,7 @@ def detect_obstacles_in_grid(
     360 deg. Per-point labels: ``grid.per_point(result.vertex_labels)``.
     """
     mounting = mounting or Mounting()
-    settings = resolved(settings or ObstacleSettings())
+    settings = settings or ObstacleSettings()
     t0, c0 = time.perf_counter(), time.process_time()
     clock = _Clock()  # the compiled stage 1 below charges it
     if settings.wrap_azimuth is None:
@@ -843,7 +846,7 @@ def detect_obstacles_in_grid(
     R = mounting.R_body_sensor
     S = grid.points
     if (
-        settings.backend == "compiled"
+        kernels_enabled()
         and S.ndim == 3
         and S.shape[2] == 3
         and min(S.shape[:2]) >= 2
@@ -851,13 +854,13 @@ def detect_obstacles_in_grid(
         and np.all((R == 0).sum(axis=1) == 2)
     ):
         # stage 1 in one pass (mounting.to_body + the validity codes, the same bits: R only
-        # permutes and flips axes, see _kernels.body_points_kernel)
-        from navkit.obstacles import _kernels
+        # permutes and flips axes, see _kernels_grid.body_points_kernel)
+        from navkit.obstacles import _kernels_grid
         from navkit.obstacles._buffers import arena
 
         P, valid = arena([(S.shape, np.float64), (S.shape[:2], np.bool_)])
         S64 = np.ascontiguousarray(S, dtype=np.float64)
-        n_valid, n_far = _kernels.body_points_kernel(
+        n_valid, n_far = _kernels_grid.body_points_kernel(
             S64, R, float(mounting.height_m), P, valid, MAX_COORDINATE_M
         )
         if n_far:  # the body points of a permuting mounting: the sensor's coordinates + height
@@ -865,7 +868,7 @@ def detect_obstacles_in_grid(
         if n_valid:
             clock.lap("points")
             res = _detect_from_stage_1(
-                P, valid, mounting.T_body_sensor[:3, 3], settings, None, clock
+                P, valid, mounting.T_body_sensor[:3, 3], settings, None, clock, True
             )
             return res
     P = mounting.to_body(grid.points)

@@ -26,7 +26,7 @@ from navkit.errors import InputError
 from navkit.geometry import R_BODY_FROM_OPTICAL
 from navkit.geometry._validate import MAX_COORDINATE_M, check_grid_size, max_grid_cells
 from navkit.geometry.angles import atan2
-from navkit.obstacles.settings import check_backend
+from navkit.jit import kernels_enabled
 from navkit.sensors import PinholeCamera
 
 __all__ = ["ScanGrid", "cloud_to_grid", "depth_to_grid", "organized_to_grid"]
@@ -199,7 +199,6 @@ def cloud_to_grid(
     n_columns: int | None = None,
     ring_method: str = "auto",
     source: str = "points",
-    backend: str = "auto",
 ) -> ScanGrid:
     """Recover the scan grid of a spinning-lidar cloud (any beam count, any storage order).
 
@@ -220,10 +219,6 @@ def cloud_to_grid(
         whose beams are not at a fixed elevation: the HDL-64E lasers have offset origins);
         ``"elevation"``: rings by clustering the elevation angles (any order);
         ``"auto"``: ``"order"`` when the storage order is a coherent sweep, else ``"elevation"``.
-    backend : {"compiled", "numpy"}
-        ``"compiled"``: the nearest-point fill in one pass
-        (:func:`navkit.obstacles._kernels.grid_fill_kernel`); ``"numpy"``: the vectorised
-        reference. The same grid.
 
     Returns
     -------
@@ -231,8 +226,11 @@ def cloud_to_grid(
         Rings sorted by rising mean elevation; azimuth columns rising counter-clockwise from
         -pi, centred on the sensor's firing azimuths (their phase is estimated); each cell keeps
         its nearest point.
+
+    With the compiled kernels (:mod:`navkit.jit`) the steps run in
+    :mod:`navkit.obstacles._kernels_grid`; the NumPy code below is their twin: the same grid.
     """
-    compiled = check_backend(backend) == "compiled"
+    compiled = kernels_enabled()
     if ring_method not in ("auto", "order", "elevation"):
         raise InputError(
             f"= {ring_method!r}", field="ring_method", expected="'auto', 'order' or 'elevation'"
@@ -246,10 +244,10 @@ def cloud_to_grid(
             return fast
     N = len(P)
     far = np.abs(P) >= _FAR  # NaN compares False
-    if far.any():  # a "return" beyond 1e9 m is a corrupt value, not a point (both backends)
+    if far.any():  # a "return" beyond 1e9 m is a corrupt value, not a point (kernels and twin)
         P = np.where(far.any(axis=1, keepdims=True), np.nan, P)
     if compiled:  # validity, the valid rows as float64 and their horizontal range: one pass
-        from navkit.obstacles import _kernels
+        from navkit.obstacles import _kernels_grid as _kernels
 
         Q, idx, rh = _kernels.cloud_prep_kernel(P)
     else:
@@ -351,9 +349,7 @@ def cloud_to_grid(
     # the nearest point of each cell represents it: scatter every point's index, then let points
     # nearer than their cell's current winner overwrite it until none is (a few rounds: as many
     # as the largest number of points in one cell) - no sort
-    if check_backend(backend) == "compiled":
-        from navkit.obstacles import _kernels
-
+    if compiled:
         grid = _kernels.grid_fill_kernel(Q, rh, cell, n_columns * n_el)
     else:
         r = np.sqrt(rh * rh + Q[:, 2] * Q[:, 2])
@@ -377,9 +373,9 @@ def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
     bit for bit). ``None`` when the order is not a sweep (the caller then
     takes the general path). The same grid as the twin, bit for bit: the twin's ``hypot`` per
     point only enters comparisons, which are decided exactly without it (:func:`_ring_lut`,
-    :func:`navkit.obstacles._kernels.grid_order_fill_kernel`)."""
+    :func:`navkit.obstacles._kernels_grid.grid_order_fill_kernel`)."""
     from navkit.geometry._kernels import atan2_kernel
-    from navkit.obstacles import _kernels
+    from navkit.obstacles import _kernels_grid as _kernels
     from navkit.obstacles._buffers import arena, cached_work
 
     N = len(P)
@@ -501,7 +497,7 @@ def _libm_sin_cos() -> bool:
     ``[0, 2 pi)``. NumPy calls libm for them on the machines measured; a NumPy build with its
     own SIMD versions keeps NumPy's in the phase (the twin's values either way)."""
     if not _LIBM_SIN_COS:
-        from navkit.obstacles import _kernels
+        from navkit.obstacles import _kernels_grid as _kernels
 
         az = np.random.default_rng(12).uniform(-np.pi, np.pi, 4096)
         az[:64] = np.linspace(-np.pi, np.pi, 64, endpoint=False)

@@ -17,12 +17,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from navkit.obstacles.settings import check_backend
-
 __all__ = [
     "MeshCharacteristics",
     "build_mesh",
     "robust_cell_normals",
+    "robust_strides",
     "smooth_normals",
     "triangle_indices",
 ]
@@ -128,7 +127,6 @@ def build_mesh(
     jump_range_fraction: float,
     jump_range_ratio: float = np.inf,
     steep_cos: float | None = None,
-    backend: str = "auto",
 ) -> MeshCharacteristics:
     """Stages 2-4: mesh, normals, H_s (normal, line of sight, jump) for a grid of points.
 
@@ -156,29 +154,12 @@ def build_mesh(
         The validity codes C_d.
     sensor_origin : (3,) float
         Sensor position in the body frame.
-    backend : {"compiled", "numpy"}
-        ``"compiled"``: one fused pass (:func:`navkit.obstacles._kernels.mesh_kernel`, same
-        float32 results bit for bit); ``"numpy"``: the vectorised reference below.
+
+    NumPy only: with the compiled kernels the detector runs stages 2-5 in one kernel that repeats
+    this arithmetic (:func:`navkit.obstacles.rules.mesh_and_classes`).
     """
     n_az, n_el = valid.shape
     tri = triangle_indices(n_az, n_el, wrap)
-    if check_backend(backend) == "compiled":
-        from navkit.obstacles import _kernels
-
-        use_ratio = bool(np.isfinite(jump_range_ratio))
-        ok, normal, vray, rng, z_min, z_max, jump = _kernels.mesh_kernel(
-            np.ascontiguousarray(points, dtype=np.float64),
-            np.ascontiguousarray(valid, dtype=np.bool_),
-            np.asarray(sensor_origin, dtype=np.float32).reshape(3),
-            bool(wrap),
-            np.float32(jump_height_m),
-            np.float32(jump_range_fraction),
-            np.float32(jump_range_ratio if use_ratio else 0.0),
-            use_ratio,
-            np.float32(steep_cos if steep_cos is not None else 0.0),
-            steep_cos is not None,
-        )
-        return MeshCharacteristics(tri, ok, normal, vray, rng, z_min, z_max, jump)
     o = np.asarray(sensor_origin, dtype=np.float32)
     X, Y, Z = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(3))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -271,88 +252,17 @@ def _nanmedian_rows(a: NDArray[Any]) -> NDArray[Any]:
     return np.where(cnt > 0, out, np.nan)
 
 
-def robust_strides_compiled(
-    points: NDArray[np.float64],
+def _strides(
+    X: NDArray[np.float32],
+    Y: NDArray[np.float32],
     valid: NDArray[np.bool_],
     sensor_origin: NDArray[np.float64],
     support_m: float,
     max_stride: int,
-) -> tuple[np.float32, NDArray[np.intp]]:
-    """The strides of :func:`robust_cell_normals` (``k_scale`` float32 and the elevation stride
-    per column), computed by :func:`navkit.obstacles._kernels.robust_strides_kernel` - the same
-    values as the NumPy twin's. NumPy computes only the ``arctan2`` of the sampled columns (its
-    SIMD ``arctan2`` differs from libm's in the last bit)."""
-    from navkit.obstacles import _kernels
-
-    step = max(1, valid.shape[1] // 8)
-    Xs, Ys = (points[:, ::step, k].astype(np.float32) for k in range(2))
-    az = np.arctan2(Ys - sensor_origin[1], Xs - sensor_origin[0])
-    dalpha, m_col = _kernels.robust_strides_kernel(
-        np.ascontiguousarray(points, dtype=np.float64),
-        np.ascontiguousarray(valid, dtype=np.bool_),
-        np.asarray(sensor_origin, dtype=np.float64).reshape(3),
-        az,
-        float(support_m),
-        int(max_stride),
-    )
-    return np.float32(support_m / (2.0 * dalpha)), m_col
-
-
-def robust_cell_normals(
-    points: NDArray[np.float64],
-    valid: NDArray[np.bool_],
-    sensor_origin: NDArray[np.float64],
-    *,
-    support_m: float,
-    wrap: bool,
-    max_stride: int = 32,
-    jump_height_m: float = 0.3,
-    jump_range_fraction: float = 0.01,
-    jump_range_ratio: float = 0.2,
-    backend: str = "auto",
-) -> NDArray[np.float64]:
-    """Noise-robust unit normals per grid cell ``(R, C, 3)`` from a support of about ``support_m``.
-
-    At each vertex the two tangents are central differences whose strides (in cells) are chosen
-    so that they span about ``support_m`` metres: along azimuth ``k = support_m / (2 r dalpha)``
-    with ``r`` the horizontal range and ``dalpha`` the grid's azimuth step, along elevation from
-    the measured spacing to the next point (both clipped to ``[1, max_stride]``). The normal is
-    their cross product (sign: z up); a cell's normal is the normalised sum of its four corners'.
-    On level ground the height noise is about ``sigma_rel * z_D`` whatever the range, so a fixed
-    metric support gives a slope noise of about ``sqrt(2) sigma_rel z_D / support_m`` rad, instead
-    of the per-triangle ``sqrt(2) sigma_rel z_D / (r dalpha)``, which explodes close to a
-    spinning lidar. An end point across a discontinuity (the jump tests of :func:`build_mesh`)
-    is replaced by the centre vertex, so the difference becomes one-sided rather than mixing the
-    ground with an obstacle or with the ground far behind it; what remains is a mixing over
-    ``support_m / 2`` across the foot of an obstacle.
-    Cells whose corners have no valid robust normal get NaN.
-
-    ``backend="compiled"`` runs the per-vertex and per-cell passes as one kernel
-    (:func:`navkit.obstacles._kernels.robust_normals_kernel`, the same float32 results bit for
-    bit), and the strides by :func:`robust_strides_compiled`.
-    """
-    n_az, n_el = valid.shape
-    if check_backend(backend) == "compiled":
-        from navkit.obstacles import _kernels
-
-        k_scale, m_col = robust_strides_compiled(
-            points, valid, sensor_origin, support_m, max_stride
-        )
-        use_ratio = bool(np.isfinite(jump_range_ratio))
-        return _kernels.robust_normals_kernel(  # type: ignore[no-any-return]
-            np.ascontiguousarray(points, dtype=np.float64),
-            np.asarray(sensor_origin, dtype=np.float64).reshape(3),
-            k_scale,
-            m_col,
-            bool(wrap),
-            int(max_stride),
-            float(jump_height_m),
-            float(jump_range_fraction),
-            float(jump_range_ratio) if use_ratio else 0.0,
-            use_ratio,
-        )
+) -> tuple[np.float32, NDArray[np.intp], NDArray[np.float32]]:
+    """:func:`robust_strides` from the float32 coordinates, with the horizontal ranges."""
+    n_el = valid.shape[1]
     step = max(1, n_el // 8)
-    X, Y, Z = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(3))
     rh = np.hypot(X - np.float32(sensor_origin[0]), Y - np.float32(sensor_origin[1]))
     rh4 = rh[::4]
     Xs, Ys = X[:, ::step], Y[:, ::step]
@@ -377,6 +287,84 @@ def robust_cell_normals(
         se_col = np.concatenate([se_col, se_col[-1:]])
         se_col = np.maximum(np.fmin(se_col, np.roll(se_col, 1)), 1e-3)
         m_col = np.clip(np.rint(support_m / (2.0 * se_col)), 1, max_stride).astype(np.intp)
+    return k_scale, m_col, rh
+
+
+def robust_strides(
+    points: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    sensor_origin: NDArray[np.float64],
+    support_m: float,
+    max_stride: int = 32,
+) -> tuple[np.float32, NDArray[np.intp]]:
+    """The strides of :func:`robust_cell_normals`: ``k_scale`` (float32; a vertex at horizontal
+    range ``r`` gets the azimuth stride ``rint(k_scale / r)`` clipped to ``[1, max_stride]``) and
+    the elevation stride per column ``(n_el,) intp`` in ``[1, max_stride]``."""
+    X, Y = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(2))
+    k_scale, m_col, _ = _strides(X, Y, valid, sensor_origin, support_m, max_stride)
+    return k_scale, m_col
+
+
+def robust_strides_compiled(
+    points: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    sensor_origin: NDArray[np.float64],
+    support_m: float,
+    max_stride: int,
+) -> tuple[np.float32, NDArray[np.intp]]:
+    """:func:`robust_strides` by :func:`navkit.obstacles._kernels_mesh.robust_strides_kernel`:
+    the same values. NumPy computes only the ``arctan2`` of the sampled columns (its SIMD
+    ``arctan2`` differs from libm's in the last bit)."""
+    from navkit.obstacles import _kernels_mesh
+
+    step = max(1, valid.shape[1] // 8)
+    Xs, Ys = (points[:, ::step, k].astype(np.float32) for k in range(2))
+    az = np.arctan2(Ys - sensor_origin[1], Xs - sensor_origin[0])
+    dalpha, m_col = _kernels_mesh.robust_strides_kernel(
+        np.ascontiguousarray(points, dtype=np.float64),
+        np.ascontiguousarray(valid, dtype=np.bool_),
+        np.asarray(sensor_origin, dtype=np.float64).reshape(3),
+        az,
+        float(support_m),
+        int(max_stride),
+    )
+    return np.float32(support_m / (2.0 * dalpha)), m_col
+
+
+def robust_cell_normals(
+    points: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    sensor_origin: NDArray[np.float64],
+    *,
+    support_m: float,
+    wrap: bool,
+    max_stride: int = 32,
+    jump_height_m: float = 0.3,
+    jump_range_fraction: float = 0.01,
+    jump_range_ratio: float = 0.2,
+) -> NDArray[np.float64]:
+    """Noise-robust unit normals per grid cell ``(R, C, 3)`` from a support of about ``support_m``.
+
+    At each vertex the two tangents are central differences whose strides (in cells) are chosen
+    so that they span about ``support_m`` metres: along azimuth ``k = support_m / (2 r dalpha)``
+    with ``r`` the horizontal range and ``dalpha`` the grid's azimuth step, along elevation from
+    the measured spacing to the next point (both clipped to ``[1, max_stride]``). The normal is
+    their cross product (sign: z up); a cell's normal is the normalised sum of its four corners'.
+    On level ground the height noise is about ``sigma_rel * z_D`` whatever the range, so a fixed
+    metric support gives a slope noise of about ``sqrt(2) sigma_rel z_D / support_m`` rad, instead
+    of the per-triangle ``sqrt(2) sigma_rel z_D / (r dalpha)``, which explodes close to a
+    spinning lidar. An end point across a discontinuity (the jump tests of :func:`build_mesh`)
+    is replaced by the centre vertex, so the difference becomes one-sided rather than mixing the
+    ground with an obstacle or with the ground far behind it; what remains is a mixing over
+    ``support_m / 2`` across the foot of an obstacle.
+    Cells whose corners have no valid robust normal get NaN.
+
+    NumPy only: with the compiled kernels the detector computes these normals inside the stage
+    2-5 kernel (:func:`navkit.obstacles.rules.mesh_and_classes`), the same values.
+    """
+    n_az, n_el = valid.shape
+    X, Y, Z = (np.ascontiguousarray(points[..., k], dtype=np.float32) for k in range(3))
+    k_scale, m_col, rh = _strides(X, Y, valid, sensor_origin, support_m, max_stride)
     with np.errstate(invalid="ignore", divide="ignore"):
         k = np.rint(k_scale / rh)
     k = np.clip(np.nan_to_num(k, nan=1.0, posinf=max_stride), 1, max_stride).astype(np.intp)

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from navkit.jit import kernels_enabled
 from navkit.obstacles.mesh import (
     MeshCharacteristics,
     build_mesh,
@@ -16,7 +17,7 @@ from navkit.obstacles.mesh import (
     smooth_normals,
     triangle_indices,
 )
-from navkit.obstacles.settings import ObstacleSettings, check_backend
+from navkit.obstacles.settings import ObstacleSettings
 
 __all__ = [
     "GROUND",
@@ -63,7 +64,6 @@ def classify(
     *,
     wrap: bool,
     robust_cells: NDArray[np.float64] | None = None,
-    backend: str = "auto",
 ) -> tuple[NDArray[np.int8], dict[str, NDArray[np.bool_]]]:
     """Labels ``m_t (R, 2C) int8`` from the production rules (paper 1, stage 5).
 
@@ -88,33 +88,9 @@ def classify(
     rules : dict of (R, 2C) bool
         ``P1 .. P5`` as evaluated (for inspection and tests).
 
-    ``backend="compiled"`` evaluates the five rules and the classes in one pass along each row
-    (:func:`navkit.obstacles._kernels.classify_kernel`; identical labels); with
-    ``settings.normal_support > 0`` (a box filter over the normals) the NumPy path runs.
+    NumPy only: with the compiled kernels the detector evaluates the rules inside the stage 2-5
+    kernel (:func:`mesh_and_classes`), the same labels.
     """
-    if check_backend(backend) == "compiled" and settings.normal_support <= 0:
-        from navkit.obstacles import _kernels
-
-        use_robust = robust_cells is not None
-        rz = (
-            np.ascontiguousarray(robust_cells[..., 2], dtype=np.float32)
-            if robust_cells is not None
-            else np.empty((1, 1), dtype=np.float32)
-        )
-        labels, p1, p2, p3, p4, p5 = _kernels.classify_kernel(
-            mesh.valid,
-            mesh.jump,
-            mesh.normal.astype(np.float32, copy=False),
-            mesh.vertex_ray.astype(np.float32, copy=False),
-            mesh.z_min.astype(np.float32, copy=False),
-            rz,
-            use_robust,
-            mesh.vertex_ray.shape[0],
-            float(settings.c2),
-            np.float32(math.cos(settings.c1_rad)),
-            float(settings.chain_min_height_m),
-        )
-        return labels, {"P1": p1, "P2": p2, "P3": p3, "P4": p4, "P5": p5}
     ok = mesh.valid
     jump = mesh.jump
     # zones matter only across a jump: evaluate them there only
@@ -184,11 +160,12 @@ def mesh_and_classes(
     robust normals (:func:`~navkit.obstacles.mesh.robust_cell_normals`, when
     ``settings.normal_support_m > 0``) and the classes (:func:`classify`).
 
-    With ``settings.backend = "compiled"`` (and ``normal_support = 0``) the three run as one
-    pass over the grid (:func:`navkit.obstacles._kernels.stages_2_5_kernel`): each cell's two
-    triangles get their normal, jump test, robust normal and class at once, and the robust
-    vertex normals are computed one row ahead of the cells that use them. The results are those
-    of the three functions one after the other (``"numpy"``, the reference), bit for bit.
+    With the compiled kernels (:mod:`navkit.jit`; and ``normal_support = 0``) the three run as
+    one pass over the grid (:func:`navkit.obstacles._kernels_mesh.stages_2_5_kernel`): each
+    cell's two triangles get their normal, jump test, robust normal and class at once, and the
+    robust vertex normals are computed one row ahead of the cells that use them. The results are
+    those of the three functions one after the other (the NumPy twin), bit for bit. With
+    ``normal_support > 0`` (a box filter over the normals, SciPy's) the twin runs.
 
     Parameters
     ----------
@@ -213,7 +190,14 @@ def mesh_and_classes(
         ``P1 .. P5`` (empty unless ``rules``).
     """
     return _mesh_and_classes(
-        points, valid, sensor_origin, settings, wrap=wrap, rules=rules, full_mesh=True
+        points,
+        valid,
+        sensor_origin,
+        settings,
+        wrap=wrap,
+        rules=rules,
+        full_mesh=True,
+        compiled=kernels_enabled(),
     )
 
 
@@ -226,8 +210,10 @@ def _mesh_and_classes(
     wrap: bool,
     rules: bool,
     full_mesh: bool,
+    compiled: bool,
 ) -> tuple[MeshCharacteristics, NDArray[np.int8], dict[str, NDArray[np.bool_]]]:
-    """:func:`mesh_and_classes`; with ``full_mesh=False`` (the detector's path) the compiled pass
+    """:func:`mesh_and_classes` (``compiled``: the kernel, as the caller decided from
+    :func:`navkit.jit.kernels_enabled`); with ``full_mesh=False`` (the detector's path) the compiled pass
     leaves out the mesh fields no later stage reads - ``valid``, ``vertex_ray`` and
     ``range_mean`` are then empty arrays - which saves ~2.75 MB of writes per KITTI grid (and the
     zeroing of their fresh pages). Every other field, the classes and the rules are the same."""
@@ -237,14 +223,13 @@ def _mesh_and_classes(
         "jump_range_ratio": settings.jump_range_ratio,
     }
     steep_cos = math.cos(settings.c1_rad)
-    if check_backend(settings.backend) != "compiled" or settings.normal_support > 0:
+    if not compiled or settings.normal_support > 0:
         mesh = build_mesh(
             points,
             valid,
             sensor_origin,
             wrap=wrap,
             steep_cos=steep_cos,
-            backend=settings.backend,
             **jump_kw,
         )
         robust = None
@@ -258,13 +243,10 @@ def _mesh_and_classes(
                 jump_height_m=settings.jump_height_m,
                 jump_range_fraction=settings.jump_range_fraction,
                 jump_range_ratio=settings.jump_range_ratio,
-                backend=settings.backend,
             )
-        labels, found = classify(
-            mesh, settings, wrap=wrap, robust_cells=robust, backend=settings.backend
-        )
+        labels, found = classify(mesh, settings, wrap=wrap, robust_cells=robust)
         return mesh, labels, found if rules else {}
-    from navkit.obstacles import _kernels
+    from navkit.obstacles import _kernels_mesh
     from navkit.obstacles._buffers import arena, cached_work
 
     n_az, n_el = valid.shape
@@ -313,7 +295,7 @@ def _mesh_and_classes(
             ((5, rr, rc), np.bool_),
         ]
     )
-    _kernels.stages_2_5_kernel(
+    _kernels_mesh.stages_2_5_kernel(
         np.ascontiguousarray(points, dtype=np.float64),
         np.ascontiguousarray(valid, dtype=np.bool_),
         origin,

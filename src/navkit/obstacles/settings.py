@@ -2,46 +2,22 @@
 
 from __future__ import annotations
 
-import functools
 import math
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, fields
 
 from navkit.errors import ConfigError
 from navkit.geometry._validate import check_settings
-from navkit.jit import BACKENDS, resolve_backend
 
-__all__ = ["BACKENDS", "DEFAULT_SHAPES", "ObstacleSettings", "check_backend", "resolved"]
+__all__ = ["DEFAULT_SHAPES", "ObstacleSettings"]
 
 DEFAULT_SHAPES = ("A1", "A2", "A3", "A4", "A5", "A6", "MEC", "MVEE")
-
-# BACKENDS (from navkit.jit): implementations of stages 1-8 - "compiled" (Numba kernels,
-# navkit.obstacles._kernels), "numpy" (the vectorised reference; the same answers, see
-# docs/kernels.md) and "auto" (the process's policy, navkit.jit).
-
-
-def check_backend(backend: str) -> str:
-    """``"compiled"`` or ``"numpy"`` for a backend setting (``"auto"`` resolved by the process's
-    policy, :func:`navkit.jit.kernels_enabled`); else :class:`~navkit.errors.ConfigError`."""
-    return resolve_backend(backend)
-
-
-def resolved(settings: ObstacleSettings) -> ObstacleSettings:
-    """``settings`` with ``backend="auto"`` replaced by the implementation this process runs."""
-    if settings.backend != "auto":
-        return settings
-    return _with_backend(settings, check_backend("auto"))
-
-
-@functools.lru_cache(maxsize=32)
-def _with_backend(settings: ObstacleSettings, backend: str) -> ObstacleSettings:
-    """One validated copy per (settings, backend): a detection per frame does not re-check
-    the same settings (``replace`` runs ``__post_init__``)."""
-    return replace(settings, backend=backend)
 
 
 @dataclass(frozen=True)
 class ObstacleSettings:
-    """Thresholds and options of the eight stages.
+    """Thresholds and options of the eight stages (the implementation, compiled kernels or their
+    NumPy twins, is no setting: :mod:`navkit.jit` chooses it, with the same results).
+
 
     Attributes
     ----------
@@ -119,13 +95,6 @@ class ObstacleSettings:
         boundary vertices (stage 8).
     guaranteed_shapes : tuple of str
         Shapes recomputed over the obstacle together with its shadows: the paper's A7.
-    backend : {"auto", "compiled", "numpy"}
-        Implementation of stages 1-8: ``"compiled"`` runs the fused Numba kernels of
-        :mod:`navkit.obstacles._kernels`; ``"numpy"`` the vectorised NumPy reference;
-        ``"auto"`` (default) the kernels once they are compiled on this machine
-        (:mod:`navkit.jit`). Both give
-        the same classes, ids and boundaries and floats equal to the last bit (tested); with
-        ``normal_support > 0`` stage 5 uses NumPy's filters whatever the backend.
     """
 
     c0_deg: float = 20.0
@@ -149,7 +118,6 @@ class ObstacleSettings:
     build_map: bool = True
     shapes: tuple[str, ...] = DEFAULT_SHAPES
     guaranteed_shapes: tuple[str, ...] = ("A1", "MEC")
-    backend: str = "auto"
 
     def __post_init__(self) -> None:
         check_settings(self, allow_inf=("jump_range_ratio",))
@@ -184,7 +152,6 @@ class ObstacleSettings:
         check("ground_above_m", self.ground_above_m > 0, "metres > 0")
         check("ground_cell_m", self.ground_cell_m > 0, "metres > 0")
         check("min_obstacle_height_m", self.min_obstacle_height_m >= 0, "metres >= 0")
-        check("backend", self.backend in BACKENDS, f"one of {BACKENDS}")
         object.__setattr__(self, "shapes", tuple(self.shapes))
         object.__setattr__(self, "guaranteed_shapes", tuple(self.guaranteed_shapes))
         from navkit.geometry.shapes import SHAPES
@@ -201,6 +168,15 @@ class ObstacleSettings:
     @classmethod
     def from_dict(cls, data: dict[str, object], source: str = "settings") -> ObstacleSettings:
         """Build from a mapping (e.g. a TOML table), rejecting unknown keys."""
+        if "backend" in data:
+            raise ConfigError(
+                "has `backend`, which is no setting any more",
+                source=source,
+                field="backend",
+                expected="no `backend` key: the compiled kernels and their NumPy twins give the "
+                "same results, and the environment variable NAVKIT_JIT (or navkit.jit.use) "
+                "chooses between them",
+            )
         known = {f.name for f in fields(cls)}
         unknown = sorted(set(data) - known)
         if unknown:

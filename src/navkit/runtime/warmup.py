@@ -107,13 +107,14 @@ def _lidar_cloud() -> None:
     # ring by ring, each ring one sweep (as KITTI stores a cloud): the grid from the storage order
     P = sim.scan.points("sensor").transpose(1, 0, 2).reshape(-1, 3)
     P = P[np.isfinite(P[:, 0])]
-    grid = cloud_to_grid(P.astype(np.float32), backend="compiled")
-    cloud_to_grid(P[::-1], ring_method="elevation", backend="compiled")  # any order
-    compiled = ObstacleSettings(backend="compiled")
-    detect_obstacles_in_grid(grid, Mounting(1.0), compiled)
-    detect_obstacles_in_grid(grid, Mounting(1.0, pitch_deg=3.0), compiled)
-    tilting = render_scan(scene, TiltingScanner(), T).scan
-    detect_obstacles(tilting, compiled)
+    with jit.use("eager"):
+        grid = cloud_to_grid(P.astype(np.float32))
+        cloud_to_grid(P[::-1], ring_method="elevation")  # any order
+        settings = ObstacleSettings()
+        detect_obstacles_in_grid(grid, Mounting(1.0), settings)
+        detect_obstacles_in_grid(grid, Mounting(1.0, pitch_deg=3.0), settings)
+        tilting = render_scan(scene, TiltingScanner(), T).scan
+        detect_obstacles(tilting, settings)
 
 
 def _global_fix() -> None:

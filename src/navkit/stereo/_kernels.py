@@ -11,6 +11,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+TWINS = {
+    "fill_background": "navkit.stereo.disparity.fill_background",
+    "lr_consistency": "navkit.stereo.disparity.lr_consistency",
+    "warp_right": "navkit.stereo.disparity.warp_right_disparity",
+}
+"""Each kernel -> its NumPy twin (the NumPy path of that function)."""
+
 
 @njit(cache=True)
 def fill_background(d: np.ndarray) -> np.ndarray:  # pragma: no cover - compiled
