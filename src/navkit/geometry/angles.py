@@ -5,7 +5,7 @@ NumPy's ``arctan2`` is not one function across machines: with AVX-512 it runs it
 (SVML) code, elsewhere it calls the C library's ``atan2`` point by point, and the two differ in
 the last bit. Per point it is also the largest single cost of recovering a lidar scan grid on a
 machine without AVX-512 (about 2.5 ms of a 124k-point SemanticKITTI frame on a Zen 3 core, ~20
-ns a call; ``docs/kernels.md``, "Obstacles on AVX2").
+ns a call; ``docs/kernels.md``, "Decisions").
 
 :func:`atan2` here is Cephes' ``atan`` (S. L. Moshier; the same coefficients as Go's
 ``math.Atan``): the argument reduced to ``|t| <= tan(pi/8)`` by ``t -> (t - 1) / (t + 1)``
