@@ -122,8 +122,8 @@ def _write(kind: str, folder: Path) -> Path:
         write_path_json(p, approximate(np.c_[s, np.sin(s)], timed=False).spline)
     elif kind == "middlebury_calib.txt":
         p.write_text(
-            "cam0=[1758.23 0 953.34; 0 1758.23 552.29; 0 0 1]\n"
-            "cam1=[1758.23 0 953.34; 0 1758.23 552.29; 0 0 1]\n"
+            "cam0=[1758.23 0 370.34; 0 1758.23 248.29; 0 0 1]\n"
+            "cam1=[1758.23 0 370.34; 0 1758.23 248.29; 0 0 1]\n"
             "doffs=0\nbaseline=111.53\nwidth=741\nheight=497\nndisp=290\nvmin=23\nvmax=245\n"
         )
     elif kind == "generic_calib.yaml":
