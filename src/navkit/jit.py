@@ -78,6 +78,7 @@ ENV = "NAVKIT_JIT"
 
 KERNEL_MODULES = (
     "geometry/_kernels.py",
+    "geometry/_kernels_math.py",
     "localization/_kernels.py",
     "obstacles/_kernels_common.py",
     "obstacles/_kernels_grid.py",

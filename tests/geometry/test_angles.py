@@ -24,7 +24,7 @@ def _pairs(rng: np.random.Generator, n: int = 400_000) -> tuple[np.ndarray, np.n
 
 @pytest.mark.twin("atan2_kernel")
 def test_twin_and_kernel_give_the_same_bits(rng):
-    from navkit.geometry._kernels import atan2_kernel
+    from navkit.geometry._kernels_math import atan2_kernel
 
     y, x = _pairs(rng)
     a = atan2(y, x)

@@ -16,7 +16,7 @@ with ``P`` of degree 4 and ``Q`` of degree 5, and ``pi/2``'s low bits added back
 ``tests/geometry/test_angles.py``); ``arctan2`` of libm is within 1 ulp.
 
 Every operation is one IEEE-754 double operation in a fixed order (no fused multiply-add, no
-reassociation), so the NumPy version and :func:`navkit.geometry._kernels.atan2_kernel` (one
+reassociation), so the NumPy version and :func:`navkit.geometry._kernels_math.atan2_kernel` (one
 vectorised loop: about 0.5 ms for 124k points on the same core) give the same bits, on any
 machine: a compiled path and its NumPy oracle can use it and agree exactly.
 
@@ -71,7 +71,7 @@ PI_4 = math.pi / 4
 
 def atan2(y: ArrayLike, x: ArrayLike) -> NDArray[np.float64]:
     """The angle of ``(x, y)`` in ``[-pi, pi]``, elementwise, with the fixed arithmetic of this
-    module (the same bits as :func:`navkit.geometry._kernels.atan2_kernel`); within 2 ulp of
+    module (the same bits as :func:`navkit.geometry._kernels_math.atan2_kernel`); within 2 ulp of
     ``numpy.arctan2``. Finite inputs; broadcasting as NumPy's."""
     yv, xv = np.broadcast_arrays(np.asarray(y, dtype=np.float64), np.asarray(x, dtype=np.float64))
     shape = yv.shape

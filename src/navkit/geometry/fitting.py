@@ -14,7 +14,6 @@ weighted. ``rms`` is the root-mean-square orthogonal residual.
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
 
 import numpy as np

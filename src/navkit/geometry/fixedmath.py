@@ -114,7 +114,7 @@ def _array(x: ArrayLike) -> NDArray[np.float64]:
 
 def sincos(x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """``(sin x, cos x)`` elementwise with the fixed arithmetic of this module (the same bits as
-    ``navkit.geometry._kernels._sincos``). NaN where ``|x| >= 2^29`` or ``x`` is not finite."""
+    ``navkit.geometry._kernels_math._sincos``). NaN where ``|x| >= 2^29`` or ``x`` is not finite."""
     xv = _array(x)
     ax = np.abs(xv)
     ok = ax < SINCOS_MAX  # False for NaN and infinities
@@ -154,7 +154,7 @@ def sincos(x: ArrayLike) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
 
 def exp(x: ArrayLike) -> NDArray[np.float64]:
     """``e^x`` elementwise with the fixed arithmetic of this module (the same bits as
-    ``navkit.geometry._kernels._exp``)."""
+    ``navkit.geometry._kernels_math._exp``)."""
     xv = _array(x)
     ok = (xv >= EXP_MIN) & (xv <= EXP_MAX)
     xr = np.where(ok, xv, 0.0)
@@ -176,7 +176,7 @@ def exp(x: ArrayLike) -> NDArray[np.float64]:
 
 def log(x: ArrayLike) -> NDArray[np.float64]:
     """``ln x`` elementwise with the fixed arithmetic of this module (the same bits as
-    ``navkit.geometry._kernels._log``)."""
+    ``navkit.geometry._kernels_math._log``)."""
     xv = _array(x)
     ok = (xv > 0) & (xv < np.inf)
     f, e = np.frexp(np.where(ok, xv, 1.0))  # x = f 2^e, 0.5 <= f < 1

@@ -274,7 +274,7 @@ def cloud_to_grid(
     # the azimuth with one fixed arithmetic (navkit.geometry.angles: the same bits on every
     # machine and in the kernel; NumPy's arctan2 differs between machines)
     if compiled:
-        from navkit.geometry._kernels import atan2_kernel
+        from navkit.geometry._kernels_math import atan2_kernel
 
         qy, qx = np.ascontiguousarray(Q[:, 1]), np.ascontiguousarray(Q[:, 0])
         az = atan2_kernel(qy, qx, np.empty(len(Q)))
@@ -369,12 +369,12 @@ def cloud_to_grid(
 def _grid_by_order_compiled(P: NDArray[Any], source: str) -> ScanGrid | None:
     """:func:`cloud_to_grid` with rings from the storage order, compiled: five kernels over
     caller-provided arrays (:mod:`navkit.obstacles._buffers`), the azimuth by
-    :func:`navkit.geometry._kernels.atan2_kernel` (the twin's :func:`navkit.geometry.angles.atan2`,
+    :func:`navkit.geometry._kernels_math.atan2_kernel` (the twin's :func:`navkit.geometry.angles.atan2`,
     bit for bit). ``None`` when the order is not a sweep (the caller then
     takes the general path). The same grid as the twin, bit for bit: the twin's ``hypot`` per
     point only enters comparisons, which are decided exactly without it (:func:`_ring_lut`,
     :func:`navkit.obstacles._kernels_grid.grid_order_fill_kernel`)."""
-    from navkit.geometry._kernels import atan2_kernel
+    from navkit.geometry._kernels_math import atan2_kernel
     from navkit.obstacles import _kernels_grid as _kernels
     from navkit.obstacles._buffers import arena, cached_work
 
