@@ -59,16 +59,19 @@ from navkit.obstacles.settings import DEFAULT_SHAPES
 
 __all__ = [
     "CloudKind",
+    "FilterScores",
     "GroundSurface",
     "UnorganisedDetection",
     "UnorganisedSettings",
     "classify_triangles",
     "detect_unorganised",
+    "filter_scores",
     "ground_surface",
     "height_noise",
     "lowest_per_cell",
     "point_spacing",
     "recognise_cloud",
+    "reference_ground",
 ]
 
 
@@ -262,10 +265,21 @@ def recognise_cloud(points: ArrayLike, *, source: str = "points") -> CloudKind:
             return CloudKind("scan", "the storage order sweeps the azimuth ring after ring")
         rh = np.hypot(Q[:, 0], Q[:, 1])
         with np.errstate(invalid="ignore", divide="ignore"):
-            ring = _rings_by_elevation(np.arctan2(Q[:, 2], rh), None)
+            el = np.arctan2(Q[:, 2], rh)
+            ring = _rings_by_elevation(el, None)
         kept = ring >= 0
         n_rings = int(ring[kept].max()) + 1 if kept.any() else 0
         if 2 <= n_rings <= 512 and kept.mean() >= 0.9 and len(Q) >= 64 * n_rings:
+            # beams: each ring thin in elevation beside the gaps between rings
+            r, e = ring[kept], el[kept]
+            cnt = np.maximum(np.bincount(r, minlength=n_rings), 1)
+            mean = np.bincount(r, weights=e, minlength=n_rings) / cnt
+            spread = np.sqrt(np.bincount(r, weights=(e - mean[r]) ** 2, minlength=n_rings) / cnt)
+            gap = float(np.median(np.diff(np.sort(mean))))
+            beams = float(np.median(spread)) < 0.25 * gap
+        else:
+            beams = False
+        if beams:
             return CloudKind(
                 "scan", f"the elevation angles from the sensor fall into {n_rings} beams"
             )
@@ -1044,3 +1058,76 @@ def _stage_8(
             )
         )
     return out
+
+
+# ----------------------------------------------------------------------------------------------
+# scoring against a per-point ground reference (the ISPRS filter-test measures)
+
+
+@dataclass(frozen=True)
+class FilterScores:
+    """The ISPRS "Comparison of Filters" measures (Sithole & Vosselman 2004), in %.
+
+    Attributes
+    ----------
+    total, type_i, type_ii : float
+        Total error (points misclassified / all), type I (ground rejected / ground) and type II
+        (objects accepted as ground / objects).
+    kappa : float
+        Cohen's kappa of the two-class confusion matrix, %.
+    n_points : int
+    """
+
+    total: float
+    type_i: float
+    type_ii: float
+    kappa: float
+    n_points: int
+
+
+def filter_scores(predicted_ground: ArrayLike, true_ground: ArrayLike) -> FilterScores:
+    """Total, type I, type II errors and kappa of a per-point ground / non-ground labelling.
+
+    Raises
+    ------
+    InputError
+        If the two arrays differ in length or are empty.
+    """
+    p = np.asarray(predicted_ground, dtype=bool).reshape(-1)
+    g = np.asarray(true_ground, dtype=bool).reshape(-1)
+    if p.shape != g.shape or p.size == 0:
+        raise InputError(
+            f"has {g.size} reference labels for {p.size} predictions",
+            field="true_ground",
+            expected="one reference label per point, at least one point",
+        )
+    n = p.size
+    a = float(np.count_nonzero(g & p))
+    b = float(np.count_nonzero(g & ~p))
+    c = float(np.count_nonzero(~g & p))
+    d = float(np.count_nonzero(~g & ~p))
+    po = (a + d) / n
+    pe = ((a + b) * (a + c) + (c + d) * (b + d)) / (n * n)
+    kappa = (po - pe) / (1.0 - pe) if pe < 1.0 else float("nan")
+    return FilterScores(
+        100.0 * (b + c) / n,
+        100.0 * b / (a + b) if a + b else float("nan"),
+        100.0 * c / (c + d) if c + d else float("nan"),
+        100.0 * kappa,
+        n,
+    )
+
+
+def reference_ground(
+    points: ArrayLike, ground_points: ArrayLike, *, tolerance: float = 1e-3
+) -> NDArray[np.bool_]:
+    """Per-point reference labels from a second cloud holding only the ground points (the PCL
+    copy of the ISPRS samples: ``sampXX-utm.pcd`` and ``sampXX-utm-ground.pcd``): a point is
+    ground when the ground cloud has a point within ``tolerance`` of it in x, y and z."""
+    P = np.asarray(points, dtype=np.float64)[:, :3]
+    G = np.asarray(ground_points, dtype=np.float64)[:, :3]
+    if len(G) == 0:
+        return np.zeros(len(P), dtype=bool)
+    off = P.min(axis=0)
+    d, _ = cKDTree(G - off).query(P - off, p=np.inf)
+    return np.asarray(d <= tolerance)
