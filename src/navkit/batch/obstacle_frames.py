@@ -168,6 +168,9 @@ def process_frame(
     from navkit.obstacles.occupancy import occupancy_grid
 
     t0 = time.perf_counter()
+    cloud = read_unorganised(path, opts)
+    if cloud is not None:
+        return _process_unorganised(path, out, cloud, mopts, t0), height
     scan, mounting = read_mounted(path, opts)
     t1 = time.perf_counter()
     if height is None or (scan.sensor_height_m is not None and opts.sensor_height_m is None):
@@ -211,6 +214,7 @@ def process_frame(
         "input": str(path),
         "output": str(out),
         "kind": scan.kind,
+        "path": "scan",
         "grid_method": scan.grid.method,
         "grid_shape": list(det.vertex_labels.shape),
         "n_points": int(scan.grid.cell_of_point.size),
@@ -228,6 +232,104 @@ def process_frame(
         },
     }
     return frame, height
+
+
+UNORGANISED_OUTPUTS = ("labels", "obstacles")
+"""What the unorganised path writes: per-point labels and the obstacles (no sensor, so no
+sensor-centred grid, figure or GeoJSON)."""
+
+
+def read_unorganised(path: Path | str, opts: InputOptions) -> tuple[Any, Any] | None:
+    """``(points, CloudKind)`` when the input is a point-by-point cloud without a recoverable
+    ring structure (:func:`navkit.obstacles.unorganised.recognise_cloud`); ``None`` for scans,
+    organised clouds, depth images and clouds whose rings can be recovered (the scan path).
+    ``--rings`` / ``--columns`` / ``--ring-method`` other than ``auto`` force the scan path."""
+    from navkit.io.urls import local_copy, url_name
+
+    suffix = Path(url_name(path)).suffix.lower()
+    if suffix not in (".pcd", ".ply", ".npy"):
+        return None
+    if opts.rings is not None or opts.columns is not None or opts.ring_method != "auto":
+        return None
+    import numpy as np
+
+    from navkit.errors import FormatError
+    from navkit.obstacles.unorganised import recognise_cloud
+
+    with local_copy(path) as local:
+        if suffix == ".npy":
+            try:
+                arr = np.load(local, mmap_mode="r", allow_pickle=False)
+            except (OSError, ValueError) as exc:
+                raise FormatError(f"cannot be read as .npy: {exc}", source=path) from exc
+            if arr.ndim != 2:
+                return None
+            points = np.asarray(arr)
+        else:
+            from navkit.io.pointcloud import read_pcd, read_ply
+
+            cloud = read_pcd(local) if suffix == ".pcd" else read_ply(local)
+            if cloud.height > 1:
+                return None
+            points = cloud.points
+    kind = recognise_cloud(points, source=str(path))
+    return (points, kind) if kind.path == "unorganised" else None
+
+
+def _process_unorganised(
+    path: Path | str, out: Path, cloud: tuple[Any, Any], mopts: MapOptions, t0: float
+) -> dict[str, Any]:
+    """The unorganised path of one frame: detection, per-point labels, obstacles.json."""
+    from navkit.errors import ConfigError
+    from navkit.io.obstacles import write_labels, write_obstacles_json
+    from navkit.obstacles.unorganised import detect_unorganised
+
+    points, kind = cloud
+    unsupported = sorted(set(mopts.outputs) - set(UNORGANISED_OUTPUTS))
+    if unsupported:
+        raise ConfigError(
+            f"{unsupported} need a sensor position and {path} is an unorganised cloud "
+            f"({kind.reason})",
+            field="--outputs",
+            expected=f"outputs among {list(UNORGANISED_OUTPUTS)} for unorganised clouds",
+        )
+    t1 = time.perf_counter()
+    det = detect_unorganised(points, source=str(path))
+    t2 = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    if "labels" in mopts.outputs:
+        write_labels(out / "labels.npy", det.point_labels)
+    if "obstacles" in mopts.outputs:
+        write_obstacles_json(
+            out / "obstacles.json",
+            det,
+            source=str(path),
+            extra={"path": "unorganised", "ground_band_m": det.band_m},
+        )
+    t3 = time.perf_counter()
+    return {
+        "input": str(path),
+        "output": str(out),
+        "kind": "cloud",
+        "path": "unorganised",
+        "path_reason": kind.reason,
+        "n_points": int(det.point_labels.size),
+        "n_ground_points": int(det.ground.sum()),
+        "n_obstacles": len(det.obstacles),
+        "spacing_m": det.spacing_m,
+        "noise_m": det.noise_m,
+        "ground_band_m": det.band_m,
+        "n_tiles": len(det.tiles),
+        "triangles": det.counts,
+        "bytes_written": sum(f.stat().st_size for f in out.iterdir() if f.is_file()),
+        "timings_s": {
+            "read_and_recognise": t1 - t0,
+            **det.timings,
+            "detect_total": t2 - t1,
+            "write_outputs": t3 - t2,
+            "frame_total": t3 - t0,
+        },
+    }
 
 
 def obstacles_frame_job(

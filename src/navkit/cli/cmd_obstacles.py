@@ -260,8 +260,10 @@ def detect(
         )
         if height is not None and height.source != "given":
             log.info("sensor height %.3f m (%s)", height.height_m, height.source)
+        paths = sorted({str(f.get("path", "scan")) for f in frames})
         typer.echo(
-            f"{len(frames)} frame(s), {sum(f['n_obstacles'] for f in frames)} obstacles"
+            f"{len(frames)} frame(s) ({', '.join(paths) or 'no'} path), "
+            f"{sum(f['n_obstacles'] for f in frames)} obstacles"
             + (f", {len(failed)} failed (see frames.csv)" if failed else "")
             + f" -> {out}"
         )

@@ -1,0 +1,1133 @@
+"""Paper 1's rules on clouds without a scan structure: a 2.5-D triangulation instead of the grid.
+
+Merged maps, airborne and drone lidar, solid-state lidars with non-repetitive patterns and fused
+depth clouds have no rings, so the paper's mesh over the ``(alpha_i, beta_j)`` grid (stage 2)
+cannot be built. This module builds the mesh the data allow and runs the paper's stages 3-8 on it:
+
+1. **Recognise the input** (:func:`recognise_cloud`): a cloud whose rings can be recovered goes to
+   the scan path (:func:`~navkit.obstacles.cloud_to_grid`); a cloud without them to this one.
+2. **The mesh**: a Delaunay triangulation in x-y (``scipy.spatial.Delaunay``) over the cloud
+   thinned to its lowest point per cell, the cell being the data's median nearest-neighbour
+   spacing (:func:`point_spacing`). Large clouds run in overlapping square tiles
+   (:attr:`UnorganisedSettings.tile_m`): the triangulation and every per-triangle array are
+   bounded by one tile.
+3. **A ground surface estimate** (:func:`ground_surface`). A scan sees the ground around the
+   sensor from above it; the paper's zones and its rule P5 use the line of sight to tell the top
+   of an obstacle from the ground behind it. A 2.5-D cloud has no line of sight to the sensor, and
+   an airborne cloud has roofs larger than the distance between two jumps. The ground is
+   estimated from the data: the lowest point per cell (a minimum surface), a progressive opening
+   with growing windows marks the cells that rise above their surroundings faster than the
+   terrain slope allows (objects narrower than the window), and a TIN through the lowest
+   remaining points is the ground surface; components of that TIN bounded by height jumps that
+   all step down out of them (a roof that survived the opening, a tree) are removed by the
+   paper's jump rule.
+4. **The rules on the mesh** (:func:`classify_triangles`, stages 3-5): per triangle the normal
+   (stage 3), its tilt, the height-jump code and the vertices' height over the ground estimate
+   (stage 4); the classes (stage 5) with the line of sight taken as the vertical (the view of a
+   2.5-D surface): a triangle across a jump has a horizontal ray, so zones I/II never hold and a
+   jump triangle is a side shadow (-3); ``P1`` (tilt over ``c1``) or ``P5`` (all three vertices
+   above the ground band: the top of an obstacle) make an obstacle (-2); the rest is ground (0);
+   triangles with an edge longer than the gap limit (a hole in the data) are unreliable (-1).
+5. **Stages 6-8 as in the paper**: connected obstacle triangles form one obstacle, shadow
+   triangles go to the obstacle they touch, boundary vertices are those with both obstacle and
+   other triangles around them, and the bounding shapes A1-A6 (and A7 over obstacle plus shadow)
+   come from :func:`navkit.geometry.shapes.compute_shapes`.
+
+Per-point labels (for scoring against a reference): a point is ground (0) when its height over the
+ground surface is within the ground band, else obstacle (-2). The thresholds are in the data's
+units, derived from its spacing and its measured height noise (:class:`UnorganisedSettings`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import Delaunay, QhullError, cKDTree
+
+from navkit.errors import ConfigError, InputError
+from navkit.obstacles.detector import Obstacle
+from navkit.obstacles.rules import GROUND, OBSTACLE, SIDE_SHADOW, UNRELIABLE
+from navkit.obstacles.settings import DEFAULT_SHAPES
+
+__all__ = [
+    "CloudKind",
+    "FilterScores",
+    "GroundSurface",
+    "UnorganisedDetection",
+    "UnorganisedSettings",
+    "classify_triangles",
+    "detect_unorganised",
+    "filter_scores",
+    "ground_surface",
+    "height_noise",
+    "lowest_per_cell",
+    "point_spacing",
+    "recognise_cloud",
+    "reference_ground",
+]
+
+
+@dataclass(frozen=True)
+class UnorganisedSettings:
+    """Settings of the unorganised path: one object for every cloud.
+
+    Lengths are either multiples of the data's point spacing ``s`` (median horizontal
+    nearest-neighbour distance, measured per cloud) or metres of the scene (object sizes).
+
+    Attributes
+    ----------
+    c0_deg : float
+        Steepest terrain slope (deg). An edge of the ground TIN rising faster than this plus the
+        ground band is a height jump (rule P4), and a triangle tilted more than ``c1`` is steep
+        (P1). Natural terrain in the data may reach it (hillsides, embankments); walls exceed it.
+    c1_deg : float or None
+        Tilt threshold of P1 (deg); ``None`` = ``c0_deg`` (as on the scan path).
+    grid_spacings : float
+        Cell of the minimum surface used by the opening, in point spacings (1.5: most cells
+        hold a point, so the surface has few holes to fill).
+    thin_spacings : float
+        Thinning cell of the mesh, in point spacings (the lowest point per cell is a vertex).
+    max_object_m : float
+        Half-width of the largest object the opening removes (m): the largest window radius. An
+        object wider than twice this is left to the jump rule on the TIN.
+    opening_slope : float
+        Terrain slope (rise over run) the opening tolerates between two window sizes: a cell
+        whose opened height drops by more than ``opening_slope * window`` is an object cell.
+    band_noise : float
+        Ground band = ``max(band_min_m, band_noise * noise)`` with ``noise`` the measured height
+        noise of the cloud (:func:`height_noise`): a point within the band of the ground surface
+        is ground.
+    band_min_m : float
+        Floor of the ground band (m): below it the data cannot separate low objects (grass,
+        kerbs) from the ground whatever the noise.
+    slope_scale_m : float
+        The band grows by ``slope_scale_m * tan(slope)`` of the ground surface: on a slope an
+        error in x-y of a fraction of the spacing is a height error.
+    low_factor : float
+        A point more than ``low_factor`` bands below the ground surface is a low outlier
+        (multipath, a wrong echo), not ground.
+    gap_spacings : float
+        A mesh triangle with an edge longer than this many spacings spans a hole in the data
+        (water, an occlusion): unreliable (-1).
+    tile_m, overlap_m : float
+        Square tiles processed one at a time (m) and how far each tile's working area reaches
+        past its own square (m). ``overlap_m`` must hold the largest opening window.
+    min_obstacle_triangles : int
+        Connected obstacle zones with fewer triangles are not reported as obstacles (their
+        points keep their per-point label).
+    min_obstacle_height_m : float
+        Obstacle zones lower than this over the ground surface are not reported.
+    build_map, shapes, guaranteed_shapes : see :class:`~navkit.obstacles.ObstacleSettings`.
+    """
+
+    c0_deg: float = 35.0
+    c1_deg: float | None = None
+    grid_spacings: float = 1.5
+    thin_spacings: float = 1.0
+    max_object_m: float = 18.0
+    opening_slope: float = 0.15
+    band_noise: float = 3.0
+    band_min_m: float = 0.5
+    slope_scale_m: float = 1.25
+    low_factor: float = 3.0
+    gap_spacings: float = 20.0
+    tile_m: float = 512.0
+    overlap_m: float = 48.0
+    min_obstacle_triangles: int = 4
+    min_obstacle_height_m: float = 1.0
+    build_map: bool = True
+    shapes: tuple[str, ...] = DEFAULT_SHAPES
+    guaranteed_shapes: tuple[str, ...] = ("A1", "MEC")
+
+    def __post_init__(self) -> None:
+        def check(name: str, ok: bool, expected: str) -> None:
+            if not ok:
+                raise ConfigError(f"= {getattr(self, name)!r}", field=name, expected=expected)
+
+        for name in (
+            "grid_spacings",
+            "thin_spacings",
+            "max_object_m",
+            "opening_slope",
+            "band_noise",
+            "band_min_m",
+            "slope_scale_m",
+            "low_factor",
+            "gap_spacings",
+            "tile_m",
+            "min_obstacle_height_m",
+        ):
+            v = getattr(self, name)
+            check(name, isinstance(v, (int, float)) and math.isfinite(v) and v > 0, "a number > 0")
+        check("c0_deg", 0.0 < self.c0_deg < 90.0, "degrees in (0, 90)")
+        check(
+            "c1_deg", self.c1_deg is None or 0.0 < self.c1_deg < 90.0, "None or degrees in (0, 90)"
+        )
+        check("overlap_m", math.isfinite(self.overlap_m) and self.overlap_m >= 0, "metres >= 0")
+        check(
+            "overlap_m",
+            self.overlap_m >= self.max_object_m,
+            f"metres >= max_object_m ({self.max_object_m}): a tile must hold the widest window",
+        )
+        check("min_obstacle_triangles", self.min_obstacle_triangles >= 1, "an integer >= 1")
+        object.__setattr__(self, "shapes", tuple(self.shapes))
+        object.__setattr__(self, "guaranteed_shapes", tuple(self.guaranteed_shapes))
+        from navkit.geometry.shapes import SHAPES
+
+        for name in ("shapes", "guaranteed_shapes"):
+            bad = [s for s in getattr(self, name) if s not in SHAPES]
+            check(name, not bad, f"names among {sorted(SHAPES)}")
+
+    @property
+    def c1_rad(self) -> float:
+        """The P1 tilt threshold in radians."""
+        return math.radians(self.c0_deg if self.c1_deg is None else self.c1_deg)
+
+
+# ----------------------------------------------------------------------------------------------
+# input recognition
+
+
+@dataclass(frozen=True)
+class CloudKind:
+    """Which path a cloud takes, and why.
+
+    Attributes
+    ----------
+    path : str
+        ``"scan"`` (rings recoverable: the paper's scan mesh) or ``"unorganised"``.
+    reason : str
+        One sentence for the run summary.
+    """
+
+    path: str
+    reason: str
+
+
+def _finite_points(points: ArrayLike, source: str) -> NDArray[np.float64]:
+    try:
+        P = np.asarray(points)
+    except (TypeError, ValueError) as exc:  # pragma: no cover - numpy rarely refuses
+        raise InputError(
+            f"is not numeric: {exc}", source=source, field="points", expected="(N, 3) floats"
+        ) from exc
+    if P.dtype.kind not in "fiu" or P.ndim != 2 or P.shape[1] < 3:
+        raise InputError(
+            f"has shape {P.shape} and dtype {P.dtype}",
+            source=source,
+            field="points",
+            expected="an (N, >=3) float array",
+        )
+    Q = np.asarray(P[:, :3], dtype=np.float64)
+    ok = np.isfinite(Q).all(axis=1) & (Q != 0).any(axis=1)
+    return Q[ok]
+
+
+def recognise_cloud(points: ArrayLike, *, source: str = "points") -> CloudKind:
+    """Decide whether a point-by-point cloud is a scan (rings recoverable) or unorganised.
+
+    A scan is stored in the sensor's frame: the sensor (the origin) lies among its points, and
+    either the storage order sweeps the azimuth ring after ring, or the elevation angles seen
+    from the origin fall into separate beams (a few to 512 clusters holding nearly every point).
+    A cloud with neither is unorganised when it spans an area (a 2.5-D surface can be
+    triangulated in x-y); one that does neither is refused.
+
+    Raises
+    ------
+    InputError
+        Fewer than 3 valid points, or points that do not span an area in x-y (all on one
+        vertical line or one vertical plane): neither path can mesh them.
+    """
+    from navkit.obstacles.grids import _rings_by_elevation, _rings_by_order
+
+    Q = _finite_points(points, source)
+    if len(Q) < 3:
+        raise InputError(
+            f"has {len(Q)} valid points",
+            source=source,
+            field="points",
+            expected="at least 3 points that are not NaN or (0, 0, 0)",
+        )
+    lo, hi = Q[:, :2].min(axis=0), Q[:, :2].max(axis=0)
+    span = hi - lo
+    origin_inside = bool(np.all(lo <= 0.0) and np.all(hi >= 0.0))
+    if origin_inside:
+        az = np.arctan2(Q[:, 1], Q[:, 0])
+        if _rings_by_order(az) is not None:
+            return CloudKind("scan", "the storage order sweeps the azimuth ring after ring")
+        rh = np.hypot(Q[:, 0], Q[:, 1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            el = np.arctan2(Q[:, 2], rh)
+            ring = _rings_by_elevation(el, None)
+        kept = ring >= 0
+        n_rings = int(ring[kept].max()) + 1 if kept.any() else 0
+        if 2 <= n_rings <= 512 and kept.mean() >= 0.9 and len(Q) >= 64 * n_rings:
+            # beams: each ring thin in elevation beside the gaps between rings
+            r, e = ring[kept], el[kept]
+            cnt = np.maximum(np.bincount(r, minlength=n_rings), 1)
+            mean = np.bincount(r, weights=e, minlength=n_rings) / cnt
+            spread = np.sqrt(np.bincount(r, weights=(e - mean[r]) ** 2, minlength=n_rings) / cnt)
+            gap = float(np.median(np.diff(np.sort(mean))))
+            beams = float(np.median(spread)) < 0.25 * gap
+        else:
+            beams = False
+        if beams:
+            return CloudKind(
+                "scan", f"the elevation angles from the sensor fall into {n_rings} beams"
+            )
+    # 2.5-D: the points must span an area in x-y (the triangulation needs it)
+    xy = Q[:, :2] - Q[:, :2].mean(axis=0)
+    sv = np.linalg.svd(xy[:: max(1, len(xy) // 100_000)], compute_uv=False)
+    extent = float(max(span.max(), np.ptp(Q[:, 2]), 1e-12))
+    if sv.size < 2 or sv[1] <= 1e-9 * extent * math.sqrt(len(xy)):
+        raise InputError(
+            "the points do not span an area in x-y (a vertical line or plane): they are not a "
+            "scan with recoverable rings and cannot be triangulated as a 2.5-D surface",
+            source=source,
+            field="points",
+            expected="a lidar scan in its sensor frame, or a cloud covering an area seen from "
+            "above (an airborne, merged or accumulated cloud, z up)",
+        )
+    why = (
+        "no ring structure: the sensor's origin is not among the points"
+        if not origin_inside
+        else "no ring structure: neither the storage order nor the elevation angles give beams"
+    )
+    return CloudKind("unorganised", why)
+
+
+# ----------------------------------------------------------------------------------------------
+# spacing, noise, thinning
+
+
+def point_spacing(xy: NDArray[np.float64], *, sample: int = 20_000) -> float:
+    """Median horizontal nearest-neighbour distance (the data's point spacing), on at most
+    ``sample`` query points (the median of a few thousand is stable to a few %)."""
+    if len(xy) < 2:
+        return float("nan")
+    tree = cKDTree(xy)
+    q = xy[:: max(1, len(xy) // sample)]
+    d, _ = tree.query(q, k=2)
+    pos = d[:, 1][d[:, 1] > 0]
+    return float(np.median(pos)) if pos.size else float("nan")
+
+
+def lowest_per_cell(
+    xy: NDArray[np.float64],
+    z: NDArray[np.float64],
+    cell: float,
+    subset: NDArray[np.int64] | None = None,
+) -> NDArray[np.int64]:
+    """Indices (into ``xy``) of the lowest point of each ``cell`` x ``cell`` square (among
+    ``subset`` when given), sorted."""
+    idx = np.arange(len(xy)) if subset is None else np.asarray(subset, dtype=np.int64)
+    if idx.size == 0:
+        return idx
+    ij = np.floor((xy[idx] - xy[idx].min(axis=0)) / cell).astype(np.int64)
+    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    o = np.lexsort((z[idx], key))
+    first = np.ones(len(o), dtype=bool)
+    first[1:] = key[o][1:] != key[o][:-1]
+    return np.sort(idx[o[first]])
+
+
+def _min_grid(
+    xy: NDArray[np.float64], z: NDArray[np.float64], cell: float
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """The minimum surface: lowest z per cell, empty cells filled from the nearest full cell."""
+    ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
+    shape = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
+    Z = np.full(shape[0] * shape[1], np.inf)
+    np.minimum.at(Z, ij[:, 0] * shape[1] + ij[:, 1], z)
+    Z = Z.reshape(shape)
+    empty = ~np.isfinite(Z)
+    if empty.any():
+        _, ind = ndimage.distance_transform_edt(empty, return_indices=True)
+        Z = Z[tuple(ind)]
+    return Z, empty
+
+
+def height_noise(Z: NDArray[np.float64]) -> float:
+    """Height noise of a minimum surface: the robust spread (1.4826 x MAD) of each cell's
+    second difference to its 3 x 3 neighbourhood's median, over the cells whose neighbourhood
+    is smooth (the lower half of the local ranges: ground, not walls). For independent noise
+    of deviation sigma on a plane this is about ``1.1 sigma``."""
+    med = ndimage.median_filter(Z, size=3, mode="nearest")
+    rng = ndimage.maximum_filter(Z, size=3) - ndimage.minimum_filter(Z, size=3)
+    smooth = rng <= np.median(rng)
+    r = (Z - med)[smooth]
+    if r.size < 10:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+# ----------------------------------------------------------------------------------------------
+# the ground surface
+
+
+@dataclass(frozen=True)
+class GroundSurface:
+    """A TIN through ground points: the ground estimate.
+
+    Attributes
+    ----------
+    xy, z : arrays
+        The TIN's vertices.
+    tri : scipy.spatial.Delaunay
+        Their triangulation in x-y.
+    band_m : float
+        The ground band (m) the surface was built with.
+    noise_m : float
+        The measured height noise (m).
+    """
+
+    xy: NDArray[np.float64]
+    z: NDArray[np.float64]
+    tri: Any
+    band_m: float
+    noise_m: float
+
+    def at(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Height and slope (rise over run) of the surface at ``q (M, 2)``; outside the hull
+        the nearest vertex's height and slope 0."""
+        return _tin_at(self.xy, self.z, self.tri, q)
+
+
+def _tin_at(
+    vxy: NDArray[np.float64], vz: NDArray[np.float64], tri: Any, q: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    s = _find_simplex(tri, q)
+    s0 = np.maximum(s, 0)
+    T = tri.transform[s0]
+    b = np.einsum("ijk,ik->ij", T[:, :2], q - T[:, 2])
+    bc = np.column_stack([b, 1.0 - b.sum(axis=1)])
+    V = tri.simplices[s0]
+    zq = np.einsum("ij,ij->i", vz[V], bc)
+    A, Zv = vxy[V], vz[V]
+    e1 = np.column_stack([A[:, 1] - A[:, 0], Zv[:, 1] - Zv[:, 0]])
+    e2 = np.column_stack([A[:, 2] - A[:, 0], Zv[:, 2] - Zv[:, 0]])
+    n = np.cross(e1, e2)
+    slope = np.hypot(n[:, 0], n[:, 1]) / np.maximum(np.abs(n[:, 2]), 1e-12)
+    out = s < 0
+    if out.any():
+        _, nn = cKDTree(vxy).query(q[out])
+        zq[out] = vz[nn]
+        slope[out] = 0.0
+    return zq, slope
+
+
+def _framed(
+    vxy: NDArray[np.float64],
+    vz: NDArray[np.float64],
+    lo: NDArray[np.float64],
+    hi: NDArray[np.float64],
+    step: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The TIN vertices plus a frame around ``[lo, hi]`` (a vertex every ``step`` along the
+    rectangle one step outside it), each at the height of its nearest vertex: every query in
+    the rectangle is then inside the triangulation (SciPy's point location falls back to a
+    search over every triangle for a query outside the hull)."""
+    a, b = lo - step, hi + step
+    nx = max(1, math.ceil((b[0] - a[0]) / step))
+    ny = max(1, math.ceil((b[1] - a[1]) / step))
+    xs = np.linspace(a[0], b[0], nx + 1)
+    ys = np.linspace(a[1], b[1], ny + 1)[1:-1]
+    frame = np.concatenate(
+        [
+            np.column_stack([xs, np.full_like(xs, a[1])]),
+            np.column_stack([xs, np.full_like(xs, b[1])]),
+            np.column_stack([np.full_like(ys, a[0]), ys]),
+            np.column_stack([np.full_like(ys, b[0]), ys]),
+        ]
+    )
+    _, nn = cKDTree(vxy).query(frame)
+    return np.concatenate([vxy, frame]), np.concatenate([vz, vz[nn]])
+
+
+def _find_simplex(tri: Any, q: NDArray[np.float64]) -> NDArray[np.int64]:
+    """The triangle of ``tri`` holding each query (-1 outside), by Matplotlib's trapezoid map
+    (O(log n) a query whatever the triangulation). SciPy's ``find_simplex`` walks from triangle
+    to triangle and, when a walk fails on the near-collinear vertices of quantised coordinates
+    (UTM stored as float32), searches every triangle: seconds for one airborne tile."""
+    from matplotlib.tri import Triangulation
+
+    pts = tri.points
+    finder = Triangulation(pts[:, 0], pts[:, 1], tri.simplices).get_trifinder()
+    return np.asarray(finder(q[:, 0], q[:, 1]), dtype=np.int64)
+
+
+def _tin_edges(tri: Any) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    ip, ix = tri.vertex_neighbor_vertices
+    return np.repeat(np.arange(len(ip) - 1), np.diff(ip)), ix.astype(np.int64)
+
+
+def _jump_components(
+    xy: NDArray[np.float64],
+    z: NDArray[np.float64],
+    tan0: float,
+    band: float,
+    *,
+    rounds: int = 4,
+) -> tuple[NDArray[np.int64], Any]:
+    """Rules P1/P4 on a ground TIN: drop the vertices of components that stand on jumps.
+
+    Edges rising faster than ``band + tan0 * length`` are height jumps; the TIN cut at its jumps
+    falls into components. A component whose jump edges all step down out of it (at least 90 %
+    of them) is an obstacle top (a roof, a tree crown); a component of at most 3 vertices whose
+    jumps all step up is a low outlier. The largest component is the terrain and stays. Returns
+    the kept vertex indices and their triangulation.
+    """
+    keep = np.arange(len(xy))
+    tri = Delaunay(xy)
+    for _ in range(rounds):
+        i, j = _tin_edges(tri)
+        d = np.hypot(*(xy[keep][i] - xy[keep][j]).T)
+        dz = z[keep][i] - z[keep][j]
+        cut = np.abs(dz) > band + tan0 * d
+        m = len(keep)
+        smooth = ~cut
+        graph = coo_matrix((np.ones(int(smooth.sum())), (i[smooth], j[smooth])), shape=(m, m))
+        nc, lab = connected_components(graph, directed=False)
+        li, lj = lab[i], lab[j]
+        c = cut & (li != lj)
+        down = np.bincount(li[c], weights=(dz[c] > 0).astype(float), minlength=nc)
+        total = np.bincount(li[c], minlength=nc)
+        size = np.bincount(lab, minlength=nc)
+        top = (total > 0) & (down >= 0.9 * total)
+        pit = (total > 0) & (down <= 0.1 * total) & (size <= 3)
+        bad = top | pit
+        bad[int(size.argmax())] = False
+        if not bad.any():
+            break
+        keep = keep[~bad[lab]]
+        tri = Delaunay(xy[keep])
+    return keep, tri
+
+
+def ground_surface(
+    xy: NDArray[np.float64],
+    z: NDArray[np.float64],
+    settings: UnorganisedSettings,
+    spacing: float,
+) -> GroundSurface:
+    """The ground estimate of one tile (see the module docstring, step 3).
+
+    1. The minimum surface on cells of ``grid_spacings * spacing``; its noise gives the band.
+    2. The progressive opening: windows of radius 1, 2, ... cells up to ``max_object_m``; a cell
+       whose opened height drops by more than ``opening_slope * radius * cell`` from the previous
+       window's is an object cell (SMRF's test, Pingel et al. 2013, with square windows).
+    3. A first ground TIN through the centres of the ground cells; the points within the band
+       (grown by the slope) of it are ground candidates.
+    4. The lowest candidate per ``thin_spacings * spacing`` cell, cut at its jumps
+       (:func:`_jump_components`), is the ground TIN returned.
+    """
+    cell = settings.grid_spacings * spacing
+    Z, empty = _min_grid(xy, z, cell)
+    noise = height_noise(Z)
+    band = max(settings.band_min_m, settings.band_noise * noise)
+    obj = np.zeros(Z.shape, dtype=bool)
+    last = Z
+    for w in range(1, max(1, math.ceil(settings.max_object_m / cell)) + 1):
+        size = 2 * w + 1
+        opened = ndimage.maximum_filter(ndimage.minimum_filter(Z, size=size), size=size)
+        obj |= (last - opened) > settings.opening_slope * w * cell
+        last = opened
+    ground_cells = ~obj & ~empty
+    if np.count_nonzero(ground_cells) < 3:
+        ground_cells = ~empty
+    gi = np.argwhere(ground_cells)
+    cxy = (gi + 0.5) * cell + xy.min(axis=0)
+    cz = Z[ground_cells]
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    step = 10.0 * cell
+    try:
+        fxy, fz = _framed(cxy, cz, lo, hi, step)
+        zs, slope = _tin_at(fxy, fz, Delaunay(fxy), xy)
+    except QhullError:
+        zs, slope = np.full(len(z), float(np.median(cz))), np.zeros(len(z))
+    r = z - zs
+    thr = band + settings.slope_scale_m * slope
+    cand = np.flatnonzero((r < thr) & (r > -settings.low_factor * thr))
+    if cand.size < 3:
+        cand = np.arange(len(z))
+    v = lowest_per_cell(xy, z, settings.thin_spacings * spacing, cand)
+    tan0 = math.tan(math.radians(settings.c0_deg))
+    try:
+        keep, _ = _jump_components(xy[v], z[v], tan0, band)
+        gxy, gz = _framed(xy[v[keep]], z[v[keep]], lo, hi, step)
+        tri = Delaunay(gxy)
+    except QhullError as exc:
+        raise InputError(
+            f"the ground points are degenerate in x-y ({exc.__class__.__name__})",
+            field="points",
+            expected="ground points spanning an area",
+        ) from None
+    return GroundSurface(gxy, gz, tri, band, noise)
+
+
+# ----------------------------------------------------------------------------------------------
+# stages 3-5 on the mesh
+
+
+def classify_triangles(
+    vxy: NDArray[np.float64],
+    vz: NDArray[np.float64],
+    simplices: NDArray[np.int64],
+    height: NDArray[np.float64],
+    band: NDArray[np.float64],
+    settings: UnorganisedSettings,
+    spacing: float,
+) -> tuple[NDArray[np.int8], NDArray[np.float64], NDArray[np.bool_], dict[str, NDArray[np.bool_]]]:
+    """Stages 3-5 on a 2.5-D mesh: normals, H_s and the classes.
+
+    Parameters
+    ----------
+    vxy, vz : mesh vertices.
+    simplices : (T, 3) vertex indices of the triangles.
+    height : (V,) vertex height over the ground surface.
+    band : (V,) the ground band at each vertex (slope-grown).
+
+    Rules (the line of sight is the vertical; see the module docstring):
+
+    - P1: the normal is tilted from the vertical by more than ``c1``.
+    - P2 / P3: never (the horizontal projection of a vertical ray is zero: zone III).
+    - P4: no height jump: the triangle's vertical extent is at most
+      ``band + tan(c0) * horizontal extent``.
+    - P5: all three vertices are above the ground band (the top of an obstacle reached across
+      its steep faces; on a scan the chain along the ray carries this).
+
+    Productions in the paper's order: ``~(P2 | P3) & ~P4 -> -3`` (side shadow),
+    ``P1 | P5 -> -2`` with P1 counted only off the ground (at least one vertex above the band:
+    a hillside steeper than ``c1`` whose vertices lie on the ground surface is ground),
+    else ``0``; triangles with an edge longer than ``gap_spacings * spacing`` ``-1``.
+
+    Returns ``labels (T,) int8``, ``normals (T, 3)``, ``jump (T,) bool`` and the rules.
+    """
+    P = np.column_stack([vxy, vz])[simplices]  # (T, 3, 3)
+    n = np.cross(P[:, 1] - P[:, 0], P[:, 2] - P[:, 0])
+    norm = np.linalg.norm(n, axis=1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = n / norm
+    n *= np.where(n[:, 2:3] < 0, -1.0, 1.0)  # normals into the upper half-space
+    exy = P[:, [1, 2, 0], :2] - P[:, :, :2]
+    edge = np.linalg.norm(exy, axis=2)
+    reliable = (edge.max(axis=1) <= settings.gap_spacings * spacing) & (norm[:, 0] > 0)
+    zext = P[:, :, 2].max(axis=1) - P[:, :, 2].min(axis=1)
+    bnd = band[simplices].min(axis=1)
+    jump = zext > bnd + math.tan(math.radians(settings.c0_deg)) * edge.max(axis=1)
+    above = height[simplices] > band[simplices]
+    with np.errstate(invalid="ignore"):
+        p1 = n[:, 2] < math.cos(settings.c1_rad)
+    p5 = above.all(axis=1)
+    p4 = ~jump
+    side = reliable & jump
+    obstacle = reliable & ~side & ((p1 & above.any(axis=1)) | p5)
+    labels = np.full(len(simplices), UNRELIABLE, dtype=np.int8)
+    labels[reliable] = GROUND
+    labels[obstacle] = OBSTACLE
+    labels[side] = SIDE_SHADOW
+    none = np.zeros(len(simplices), dtype=bool)
+    return labels, n, jump, {"P1": p1, "P2": none, "P3": none, "P4": p4, "P5": p5}
+
+
+# ----------------------------------------------------------------------------------------------
+# stages 6-8
+
+
+def _triangle_components(
+    neighbors: NDArray[np.int64], mask: NDArray[np.bool_]
+) -> tuple[NDArray[np.int32], int]:
+    """Connected components (1-based, 0 = not in ``mask``) of the masked triangles, adjacency
+    across shared edges."""
+    T = len(mask)
+    a = np.repeat(np.arange(T), 3)
+    b = neighbors.reshape(-1)
+    ok = (b >= 0) & mask[a] & mask[np.maximum(b, 0)]
+    g = coo_matrix((np.ones(int(ok.sum())), (a[ok], b[ok])), shape=(T, T))
+    _, lab = connected_components(g, directed=False)
+    sel = np.flatnonzero(mask)
+    comp = np.zeros(T, dtype=np.int32)
+    if sel.size == 0:
+        return comp, 0
+    _, inv = np.unique(lab[sel], return_inverse=True)
+    comp[sel] = inv.astype(np.int32) + 1
+    return comp, int(inv.max()) + 1
+
+
+def _assign_shadows(
+    neighbors: NDArray[np.int64], comp: NDArray[np.int32], shadow: NDArray[np.bool_]
+) -> NDArray[np.int32]:
+    """Stage 6: each shadow triangle goes to the obstacle it touches (across an edge, through
+    other shadow triangles; the smallest id when it touches several)."""
+    out = comp.copy()
+    todo = shadow & (out == 0)
+    for _ in range(64):
+        nb = np.where(neighbors >= 0, out[np.maximum(neighbors, 0)], 0)
+        nb = np.where(nb > 0, nb, np.iinfo(np.int32).max).min(axis=1)
+        take = todo & (nb < np.iinfo(np.int32).max)
+        if not take.any():
+            break
+        out[take] = nb[take]
+        todo &= ~take
+    return out
+
+
+@dataclass(frozen=True)
+class UnorganisedDetection:
+    """Everything the unorganised path produces for one cloud.
+
+    Attributes
+    ----------
+    point_labels : (N,) int8
+        Per input point: 0 ground, -2 obstacle (above the ground band, or a low outlier),
+        -1 for NaN / (0, 0, 0) points.
+    point_obstacle : (N,) int32
+        Obstacle id of each point (0 = none): the id of its nearest mesh vertex when the point
+        is not ground.
+    ground_z : (N,) float
+        Height of the ground surface under each point (NaN for invalid points).
+    obstacles : tuple of Obstacle
+        Stage 8 records (coordinates in the input's frame).
+    counts : dict
+        Triangles per class over all tiles.
+    spacing_m, noise_m, band_m : float
+        The measured point spacing, height noise and the ground band used (first tile's noise
+        and band when there are several; per-tile values in ``tiles``).
+    tiles : list of dict
+        Per tile: its square, points, spacing, noise, band, mesh size.
+    timings : dict
+        Wall-clock seconds per stage.
+    sensor_origin : None
+        No sensor position is known for an unorganised cloud.
+    """
+
+    point_labels: NDArray[np.int8]
+    point_obstacle: NDArray[np.int32]
+    ground_z: NDArray[np.float64]
+    obstacles: tuple[Obstacle, ...]
+    counts: dict[str, int]
+    spacing_m: float
+    noise_m: float
+    band_m: float
+    tiles: list[dict[str, Any]] = field(default_factory=list)
+    timings: dict[str, float] = field(default_factory=dict)
+    sensor_origin: None = None
+
+    @property
+    def ground(self) -> NDArray[np.bool_]:
+        """Per-point ground flag."""
+        return self.point_labels == GROUND
+
+
+def _tile_origins(lo: NDArray[np.float64], hi: NDArray[np.float64], tile: float) -> list[Any]:
+    nx = max(1, math.ceil((hi[0] - lo[0]) / tile))
+    ny = max(1, math.ceil((hi[1] - lo[1]) / tile))
+    # equal tiles covering the extent (no thin last tile)
+    tx, ty = (hi[0] - lo[0]) / nx, (hi[1] - lo[1]) / ny
+    return [(lo[0] + a * tx, lo[1] + b * ty, tx, ty) for a in range(nx) for b in range(ny)]
+
+
+def detect_unorganised(
+    points: ArrayLike,
+    settings: UnorganisedSettings | None = None,
+    *,
+    source: str = "points",
+) -> UnorganisedDetection:
+    """Paper 1's stages 3-8 on a cloud without rings (see the module docstring).
+
+    Parameters
+    ----------
+    points : (N, >=3) float
+        x, y, z with z up (extra columns ignored). NaN and ``(0, 0, 0)`` points are no-returns.
+    settings : UnorganisedSettings, optional
+
+    Raises
+    ------
+    InputError
+        Fewer than 3 valid points or points that do not span an area in x-y.
+    """
+    settings = settings or UnorganisedSettings()
+    clock: dict[str, float] = {}
+    t0 = time.perf_counter()
+    try:
+        P = np.asarray(points)
+    except (TypeError, ValueError) as exc:  # pragma: no cover
+        raise InputError(f"is not numeric: {exc}", source=source, field="points") from exc
+    if P.dtype.kind not in "fiu" or P.ndim != 2 or P.shape[1] < 3:
+        raise InputError(
+            f"has shape {P.shape} and dtype {P.dtype}",
+            source=source,
+            field="points",
+            expected="an (N, >=3) float array",
+        )
+    Q = np.asarray(P[:, :3], dtype=np.float64)
+    valid = np.isfinite(Q).all(axis=1) & (Q != 0).any(axis=1)
+    idx = np.flatnonzero(valid)
+    if idx.size < 3:
+        raise InputError(
+            f"has {idx.size} valid points",
+            source=source,
+            field="points",
+            expected="at least 3 points that are not NaN or (0, 0, 0)",
+        )
+    offset = Q[idx, :2].min(axis=0)  # local coordinates: UTM values lose precision in products
+    xy_all = Q[idx, :2] - offset
+    z_all = Q[idx, 2]
+    n = len(Q)
+    labels = np.full(n, UNRELIABLE, dtype=np.int8)
+    obstacle_id = np.zeros(n, dtype=np.int32)
+    ground_z = np.full(n, np.nan)
+    counts = {"ground": 0, "unreliable": 0, "obstacle": 0, "side_shadow": 0, "shadow_behind": 0}
+    obstacles: list[Obstacle] = []
+    tiles_info: list[dict[str, Any]] = []
+    lo, hi = xy_all.min(axis=0), xy_all.max(axis=0)
+    clock["prepare"] = time.perf_counter() - t0
+    for tx0, ty0, tw, th in _tile_origins(lo, hi, settings.tile_m):
+        ov = settings.overlap_m
+        in_work = (
+            (xy_all[:, 0] >= tx0 - ov)
+            & (xy_all[:, 0] <= tx0 + tw + ov)
+            & (xy_all[:, 1] >= ty0 - ov)
+            & (xy_all[:, 1] <= ty0 + th + ov)
+        )
+        in_core = (
+            (xy_all[:, 0] >= tx0)
+            & (xy_all[:, 0] <= tx0 + tw)
+            & (xy_all[:, 1] >= ty0)
+            & (xy_all[:, 1] <= ty0 + th)
+        )
+        work = np.flatnonzero(in_work)
+        core = in_core[work]
+        if not core.any():
+            continue
+        res = _detect_tile(xy_all[work], z_all[work], settings, source, clock)
+        rows = idx[work[core]]
+        # a point on a shared tile edge is written by the last tile: the same rule everywhere
+        labels[rows] = res["labels"][core]
+        ground_z[rows] = res["ground_z"][core]
+        base = len(obstacles)
+        ids = res["point_obstacle"][core]
+        keep_obs = []
+        for ob in res["obstacles"]:
+            cx, cy = ob.polygon_xy.mean(axis=0) if len(ob.polygon_xy) else (np.nan, np.nan)
+            if tx0 <= cx <= tx0 + tw and ty0 <= cy <= ty0 + th:
+                keep_obs.append(ob)
+        remap = np.zeros(len(res["obstacles"]) + 1, dtype=np.int32)
+        for k, ob in enumerate(keep_obs):
+            remap[ob.id] = base + k + 1
+        obstacle_id[rows] = remap[ids]
+        for k, ob in enumerate(keep_obs):
+            obstacles.append(_shifted(ob, base + k + 1, offset))
+        for key, v in res["counts"].items():
+            counts[key] += v
+        tiles_info.append(
+            {
+                "square_m": [float(tx0 + offset[0]), float(ty0 + offset[1]), tw, th],
+                "n_points": int(core.sum()),
+                "n_work_points": int(work.size),
+                **res["info"],
+            }
+        )
+    first = tiles_info[0] if tiles_info else {"spacing_m": np.nan, "noise_m": np.nan, "band_m": 0}
+    clock["total"] = time.perf_counter() - t0
+    return UnorganisedDetection(
+        labels,
+        obstacle_id,
+        ground_z,
+        tuple(obstacles),
+        counts,
+        float(first["spacing_m"]),
+        float(first["noise_m"]),
+        float(first["band_m"]),
+        tiles_info,
+        clock,
+    )
+
+
+def _shift_shape(shape: Any, dx: float, dy: float) -> Any:
+    """A bounding shape moved by ``(dx, dy)`` (rectangles by their bounds, circles and ellipses
+    by their centre; other registered shapes are returned as they are)."""
+    from dataclasses import fields, replace
+
+    names = {f.name for f in fields(shape)} if hasattr(shape, "__dataclass_fields__") else set()
+    if {"xmin", "xmax", "ymin", "ymax"} <= names:
+        return replace(
+            shape,
+            xmin=shape.xmin + dx,
+            xmax=shape.xmax + dx,
+            ymin=shape.ymin + dy,
+            ymax=shape.ymax + dy,
+        )
+    if {"x", "y"} <= names:
+        return replace(shape, x=shape.x + dx, y=shape.y + dy)
+    return shape
+
+
+def _shifted(ob: Obstacle, new_id: int, offset: NDArray[np.float64]) -> Obstacle:
+    """``ob`` (local coordinates) in the input frame, with id ``new_id``."""
+    from dataclasses import replace
+
+    dx, dy = float(offset[0]), float(offset[1])
+    return replace(
+        ob,
+        id=new_id,
+        boundary_xy=ob.boundary_xy + offset,
+        polygon_xy=ob.polygon_xy + offset,
+        shadow_xy=ob.shadow_xy + offset,
+        shapes={k: _shift_shape(v, dx, dy) for k, v in ob.shapes.items()},
+        guaranteed={k: _shift_shape(v, dx, dy) for k, v in ob.guaranteed.items()},
+    )
+
+
+def _tick(clock: dict[str, float], key: str, t: float) -> float:
+    now = time.perf_counter()
+    clock[key] = clock.get(key, 0.0) + now - t
+    return now
+
+
+def _detect_tile(
+    xy: NDArray[np.float64],
+    z: NDArray[np.float64],
+    settings: UnorganisedSettings,
+    source: str,
+    clock: dict[str, float],
+) -> dict[str, Any]:
+    """Stages 2-8 on one tile's points (local x-y)."""
+    t = time.perf_counter()
+    spacing = point_spacing(xy)
+    if not math.isfinite(spacing) or spacing <= 0:
+        raise InputError(
+            "every point of a tile has the same x-y (no spacing to triangulate)",
+            source=source,
+            field="points",
+            expected="points spread over an area",
+        )
+    surf = ground_surface(xy, z, settings, spacing)
+    t = _tick(clock, "ground", t)
+    zg, slope = surf.at(xy)
+    h = z - zg
+    band = surf.band_m + settings.slope_scale_m * slope
+    ground = (h <= band) & (h >= -settings.low_factor * band)
+    labels = np.where(ground, GROUND, OBSTACLE).astype(np.int8)
+    t = _tick(clock, "labels", t)
+    # stage 2: the mesh over the thinned cloud (lowest point per spacing cell)
+    v = lowest_per_cell(xy, z, settings.thin_spacings * spacing)
+    info = {
+        "spacing_m": spacing,
+        "noise_m": surf.noise_m,
+        "band_m": surf.band_m,
+        "n_ground_vertices": len(surf.z),
+        "n_mesh_vertices": int(v.size),
+    }
+    counts = {"ground": 0, "unreliable": 0, "obstacle": 0, "side_shadow": 0, "shadow_behind": 0}
+    point_obstacle = np.zeros(len(z), dtype=np.int32)
+    obstacles: list[Obstacle] = []
+    try:
+        mesh = Delaunay(xy[v])
+    except QhullError:
+        info["n_triangles"] = 0
+        return {
+            "labels": labels,
+            "ground_z": zg,
+            "point_obstacle": point_obstacle,
+            "obstacles": obstacles,
+            "counts": counts,
+            "info": info,
+        }
+    t = _tick(clock, "mesh", t)
+    simp = mesh.simplices.astype(np.int64)
+    tri_labels, _, _, _ = classify_triangles(xy[v], z[v], simp, h[v], band[v], settings, spacing)
+    t = _tick(clock, "classes", t)
+    for k, name in ((0, "ground"), (-1, "unreliable"), (-2, "obstacle"), (-3, "side_shadow")):
+        counts[name] = int(np.count_nonzero(tri_labels == k))
+    info["n_triangles"] = len(simp)
+    # stage 6: separate obstacles; small or low zones are not reported
+    nbr = mesh.neighbors.astype(np.int64)
+    comp, nc = _triangle_components(nbr, tri_labels == OBSTACLE)
+    if nc:
+        ntri = np.bincount(comp, minlength=nc + 1)
+        top = np.full(nc + 1, -np.inf)
+        hv = h[v][simp].max(axis=1)
+        np.maximum.at(top, comp, hv)
+        ok = (ntri >= settings.min_obstacle_triangles) & (top >= settings.min_obstacle_height_m)
+        ok[0] = False
+        lut = np.zeros(nc + 1, dtype=np.int32)
+        lut[ok] = np.arange(1, int(ok.sum()) + 1, dtype=np.int32)
+        comp = lut[comp]
+        nc = int(ok.sum())
+    owner = _assign_shadows(nbr, comp, tri_labels == SIDE_SHADOW)
+    t = _tick(clock, "split", t)
+    # stage 7: boundary vertices (some, not all, of their triangles belong to the obstacle)
+    nv = len(v)
+    flat_v = simp.reshape(-1)
+    flat_c = np.repeat(comp, 3)
+    n_inc = np.bincount(flat_v, minlength=nv)
+    # vertex -> obstacle id: the largest id among its obstacle triangles
+    vid = np.zeros(nv, dtype=np.int32)
+    np.maximum.at(vid, flat_v, flat_c)
+    n_obs_inc = np.bincount(flat_v, weights=(flat_c > 0).astype(float), minlength=nv)
+    boundary = (n_obs_inc > 0) & (n_obs_inc < n_inc)
+    t = _tick(clock, "boundary", t)
+    # per-point obstacle ids: a non-ground point takes its nearest vertex's id
+    if nc:
+        _, nn = cKDTree(xy[v]).query(xy[~ground])
+        point_obstacle[~ground] = vid[nn]
+    if settings.build_map and nc:
+        obstacles = _stage_8(xy, z, v, simp, comp, owner, vid, boundary, nc, settings)
+    _tick(clock, "shapes", t)
+    return {
+        "labels": labels,
+        "ground_z": zg,
+        "point_obstacle": point_obstacle,
+        "obstacles": obstacles,
+        "counts": counts,
+        "info": info,
+    }
+
+
+def _stage_8(
+    xy: NDArray[np.float64],
+    z: NDArray[np.float64],
+    v: NDArray[np.int64],
+    simp: NDArray[np.int64],
+    comp: NDArray[np.int32],
+    owner: NDArray[np.int32],
+    vid: NDArray[np.int32],
+    boundary: NDArray[np.bool_],
+    nc: int,
+    settings: UnorganisedSettings,
+) -> list[Obstacle]:
+    """Stage 8: an :class:`~navkit.obstacles.Obstacle` per obstacle, shapes on its boundary
+    vertices (A1-A6, ...) and A7 over obstacle plus shadow vertices. Coordinates are local
+    (the caller's x-y)."""
+    from navkit.geometry.shapes import compute_shapes, hull_points
+
+    vxy, vz = xy[v], z[v]
+    order = np.argsort(vid, kind="stable")
+    starts = np.searchsorted(vid[order], np.arange(1, nc + 2))
+    shadow_tri = (owner > 0) & (comp == 0)
+    sv = simp[shadow_tri].reshape(-1)
+    so = np.repeat(owner[shadow_tri], 3)
+    s_order = np.argsort(so, kind="stable")
+    s_starts = np.searchsorted(so[s_order], np.arange(1, nc + 2))
+    P = vxy[simp]
+    area = 0.5 * np.abs(
+        (P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1])
+        - (P[:, 2, 0] - P[:, 0, 0]) * (P[:, 1, 1] - P[:, 0, 1])
+    )
+    shadow_area = np.bincount(owner[shadow_tri], weights=area[shadow_tri], minlength=nc + 1)
+    ntri = np.bincount(comp, minlength=nc + 1)
+    sets, shadow_sets, recs = [], [], []
+    for k in range(1, nc + 1):
+        mem = order[starts[k - 1] : starts[k]]
+        bnd = mem[boundary[mem]]
+        pts = vxy[bnd] if len(bnd) >= 1 else vxy[mem]
+        sh = np.unique(np.concatenate([mem, sv[s_order[s_starts[k - 1] : s_starts[k]]]]))
+        sets.append(pts)
+        shadow_sets.append(vxy[sh])
+        recs.append((mem, bnd, sh))
+    shapes = compute_shapes(sets, settings.shapes, backend="numpy") if settings.shapes else []
+    guaranteed = (
+        compute_shapes(shadow_sets, settings.guaranteed_shapes, backend="numpy")
+        if settings.guaranteed_shapes
+        else []
+    )
+    out = []
+    for k, (mem, bnd, _) in enumerate(recs, start=1):
+        out.append(
+            Obstacle(
+                id=k,
+                n_triangles=int(ntri[k]),
+                n_points=len(mem),
+                z_min=float(vz[mem].min()),
+                z_max=float(vz[mem].max()),
+                boundary_xy=vxy[bnd],
+                polygon_xy=hull_points(sets[k - 1]),
+                shadow_xy=shadow_sets[k - 1],
+                shadow_area=float(shadow_area[k]),
+                shapes=shapes[k - 1] if shapes else {},
+                guaranteed=guaranteed[k - 1] if guaranteed else {},
+            )
+        )
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# scoring against a per-point ground reference (the ISPRS filter-test measures)
+
+
+@dataclass(frozen=True)
+class FilterScores:
+    """The ISPRS "Comparison of Filters" measures (Sithole & Vosselman 2004), in %.
+
+    Attributes
+    ----------
+    total, type_i, type_ii : float
+        Total error (points misclassified / all), type I (ground rejected / ground) and type II
+        (objects accepted as ground / objects).
+    kappa : float
+        Cohen's kappa of the two-class confusion matrix, %.
+    n_points : int
+    """
+
+    total: float
+    type_i: float
+    type_ii: float
+    kappa: float
+    n_points: int
+
+
+def filter_scores(predicted_ground: ArrayLike, true_ground: ArrayLike) -> FilterScores:
+    """Total, type I, type II errors and kappa of a per-point ground / non-ground labelling.
+
+    Raises
+    ------
+    InputError
+        If the two arrays differ in length or are empty.
+    """
+    p = np.asarray(predicted_ground, dtype=bool).reshape(-1)
+    g = np.asarray(true_ground, dtype=bool).reshape(-1)
+    if p.shape != g.shape or p.size == 0:
+        raise InputError(
+            f"has {g.size} reference labels for {p.size} predictions",
+            field="true_ground",
+            expected="one reference label per point, at least one point",
+        )
+    n = p.size
+    a = float(np.count_nonzero(g & p))
+    b = float(np.count_nonzero(g & ~p))
+    c = float(np.count_nonzero(~g & p))
+    d = float(np.count_nonzero(~g & ~p))
+    po = (a + d) / n
+    pe = ((a + b) * (a + c) + (c + d) * (b + d)) / (n * n)
+    kappa = (po - pe) / (1.0 - pe) if pe < 1.0 else float("nan")
+    return FilterScores(
+        100.0 * (b + c) / n,
+        100.0 * b / (a + b) if a + b else float("nan"),
+        100.0 * c / (c + d) if c + d else float("nan"),
+        100.0 * kappa,
+        n,
+    )
+
+
+def reference_ground(
+    points: ArrayLike, ground_points: ArrayLike, *, tolerance: float = 1e-3
+) -> NDArray[np.bool_]:
+    """Per-point reference labels from a second cloud holding only the ground points (the PCL
+    copy of the ISPRS samples: ``sampXX-utm.pcd`` and ``sampXX-utm-ground.pcd``): a point is
+    ground when the ground cloud has a point within ``tolerance`` of it in x, y and z."""
+    P = np.asarray(points, dtype=np.float64)[:, :3]
+    G = np.asarray(ground_points, dtype=np.float64)[:, :3]
+    if len(G) == 0:
+        return np.zeros(len(P), dtype=bool)
+    off = P.min(axis=0)
+    d, _ = cKDTree(G - off).query(P - off, p=np.inf)
+    return np.asarray(d <= tolerance)
