@@ -1034,9 +1034,9 @@ def _stage_8(
         sets.append(pts)
         shadow_sets.append(vxy[sh])
         recs.append((mem, bnd, sh))
-    shapes = compute_shapes(sets, settings.shapes, backend="numpy") if settings.shapes else []
+    shapes = compute_shapes(sets, settings.shapes) if settings.shapes else []
     guaranteed = (
-        compute_shapes(shadow_sets, settings.guaranteed_shapes, backend="numpy")
+        compute_shapes(shadow_sets, settings.guaranteed_shapes)
         if settings.guaranteed_shapes
         else []
     )
