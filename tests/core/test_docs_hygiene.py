@@ -71,7 +71,6 @@ DIARY_PENDING = {
     "docs/kernels.md",
     "src/navkit/planes/extract.py",
     "src/navkit/planes/_kernels.py",
-    "src/navkit/planes/mapping.py",
     "src/navkit/planes/motion.py",
     "src/navkit/cli/cmd_run.py",
 }
