@@ -29,7 +29,7 @@ demo: $(STAMP)
 # that a file's kernels compile once; 2 = the CI machine's cores. TEST_WORKERS=0 runs serially.
 TEST_WORKERS ?= 2
 test: $(STAMP)
-	MPLBACKEND=Agg $(BIN)/python -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile
+	MPLBACKEND=Agg $(BIN)/python -m pytest -q -p no:cacheprovider -n $(TEST_WORKERS) --dist loadfile --durations=25
 
 # The kernel, twin and mission tests once more as another CPU would run them: Numba compiling for
 # a generic x86-64 (no AVX) with bounds checks on, into a cache of its own, and NumPy with its

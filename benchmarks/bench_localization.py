@@ -94,7 +94,7 @@ def _real_logs(quick: bool) -> list[Row]:
         for k, p in zip(idx, prior, strict=True):
             pts = lg.points(int(k), 30.0)
             c0, t0 = time.process_time(), time.perf_counter()
-            est_nk.append(reported_poses([loc.register(pts, prior=p)])[0])
+            est_nk.append(reported_poses([loc.update(pts, prior=p)])[0])
             t1, c1 = time.perf_counter(), time.process_time()
             est_icp.append(icp_2d(fld.points, tree, pts, p))
             t2, c2 = time.perf_counter(), time.process_time()
@@ -112,13 +112,13 @@ def _real_logs(quick: bool) -> list[Row]:
         gidx = idx[:: max(1, len(idx) // n_global)][:n_global]
         est_g, t_g, c_g, ok_flag = [], [], [], []
         c0 = time.process_time()
-        loc.register(
+        loc.update(
             lg.points(int(gidx[0]), 30.0)
         )  # no odometry: global; builds the coarse field's caches
         first_g = 1e3 * (time.process_time() - c0)
         for k in gidx:
             c0, t0 = time.process_time(), time.perf_counter()
-            fix = loc.register(lg.points(int(k), 30.0))
+            fix = loc.update(lg.points(int(k), 30.0))
             t_g.append(time.perf_counter() - t0)
             c_g.append(time.process_time() - c0)
             est_g.append(reported_poses([fix])[0])

@@ -422,7 +422,7 @@ def _sequence_rows(o3d, n_frames: int) -> list[Row]:
     odo = PlaneOdometry(OdometrySettings())
     t0 = time.perf_counter()
     for f in frames:
-        odo.register_frame(observe_rgbd(f))
+        odo.update(observe_rgbd(f))
     nav_ms = 1000 * (time.perf_counter() - t0) / n_frames
     est = odo.trajectory
     chain = [np.eye(4)]
@@ -518,7 +518,7 @@ def _mode_rows(obs: list, truth: np.ndarray, label: str) -> list[Row]:
         odo = PlaneOdometry(OdometrySettings(frame_to_map=f2m))
         t0 = time.process_time()
         for o in obs:
-            odo.register_frame(o)
+            odo.update(o)
         cpu = 1000 * (time.process_time() - t0) / n_frames
         est = odo.trajectory
         end = np.linalg.norm((se3_inverse(truth[-1]) @ est[-1])[:3, 3])

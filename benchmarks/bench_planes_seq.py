@@ -64,15 +64,15 @@ def _rel_errors(P: np.ndarray, G: np.ndarray, ok: np.ndarray) -> tuple[np.ndarra
 
 
 def _navkit(frames: list, cameras: Any) -> tuple[np.ndarray, np.ndarray, list[float], list[str]]:
-    from navkit.planes import PlaneOdometry, observe_rgbd
+    from navkit.planes import FrameMotion, PlaneOdometry, observe_rgbd
 
     odo = PlaneOdometry()
     cpu, sources = [], []
     for f in frames:
         t0 = time.process_time()
-        r = odo.register_frame(observe_rgbd(f))
+        r = odo.update(observe_rgbd(f))
         cpu.append(1000 * (time.process_time() - t0))
-        sources.append(r.source or r.status[:40])
+        sources.append(r.source if isinstance(r, FrameMotion) else f"failed: {r.reason}"[:40])
     return odo.trajectory, odo.tracked, cpu, sources
 
 

@@ -7,7 +7,7 @@ its sensor's frame period, on one core.
 | planes (paper 2) | 640 x 480 slambook frame: plane extraction alone, and ``observe_rgbd`` + ``estimate_motion`` against the previous frame | RGB-D 30 Hz, 33.3 ms |
 | localization (paper 3) | CARMEN Intel scan: tracking fix (``match_scan`` with a prior) | laser 40 Hz, 25 ms |
 | stereo (paper 3) | Middlebury Q pair: ``compute_disparity`` | VO camera 10 Hz, 100 ms |
-| path (paper 4) | KITTI 00 ground truth, eps 0.05 m: ``OnlineApproximator.add`` per point, mean and worst | VO 10 Hz, 100 ms |
+| path (paper 4) | KITTI 00 ground truth, eps 0.05 m: ``OnlineApproximator.update`` per point, mean and worst | VO 10 Hz, 100 ms |
 
 One core: OpenCV is told to use one thread and the time is the process's CPU time
 (``time.process_time``, all threads), so it is what one core spends. The figure is the median

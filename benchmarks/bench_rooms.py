@@ -134,12 +134,12 @@ def sim_rooms(
                 B = stereo_wall_points(st.pair.left, st.pair.right, rig, camera_height=height)
                 parts.append(se2_apply(se2_from_xytheta(0.0, 0.0, k * np.pi / 2), B))
                 if k == 0 and len(B) >= 3:
-                    f1 = reported_poses([loc.register(B)])[0]  # global, one view
+                    f1 = reported_poses([loc.update(B)])[0]  # global, one view
                     single.append(np.hypot(*(f1[:2] - p[:2])))
                     sig1 = stereo_range_sigma(B, rig.baseline, rig.camera.fx)
                     # (a) the paper's method: correlation at the known heading + refinement
                     t0 = time.process_time()
-                    kf = kh_loc.register(B, heading=p[2]).match
+                    kf = kh_loc.update(B, heading=p[2]).match
                     assert isinstance(kf, KnownHeadingFix)
                     kh["paper_ms"].append(1e3 * (time.process_time() - t0))
                     e_k = float(np.hypot(*(kf.position - p[:2])))
@@ -179,7 +179,7 @@ def sim_rooms(
                     kh["search_err_raw"].append(float(np.hypot(*(sf.pose[:2] - p[:2]))))
             frag = np.concatenate(parts)
             sig4 = stereo_range_sigma(frag, rig.baseline, rig.camera.fx)
-            fix = loc.register(frag)  # no odometry: a global search
+            fix = loc.update(frag)  # no odometry: a global search
             fix_pose = reported_poses([fix])[0]
             rg = refine_pose(m.walls, frag, fix_pose, range_sigma=sig4)
             rpe.append(float(np.hypot(*((rg.pose if rg.converged else fix_pose)[:2] - p[:2]))))
@@ -195,7 +195,7 @@ def sim_rooms(
             twin_ok.append(bool(t_p[0] <= SUCCESS_M and t_h[0] <= SUCCESS_DEG))
             # tracking from a coarse prior (uniform error up to 0.5 m / 10 deg)
             prior = p + rng.uniform(-1, 1, 3) * np.array([0.5, 0.5, np.radians(10)])
-            tf = loc.register(frag, prior=prior)
+            tf = loc.update(frag, prior=prior)
             tf_pose = reported_poses([tf])[0]
             rt = refine_pose(m.walls, frag, tf_pose, range_sigma=sig4)
             rtpe.append(float(np.hypot(*((rt.pose if rt.converged else tf_pose)[:2] - p[:2]))))

@@ -29,7 +29,7 @@ def _per_point(xy: np.ndarray, eps: float, compiled: bool) -> np.ndarray:
     t = np.zeros(len(xy))
     for i, p in enumerate(xy):
         c0 = time.thread_time()
-        a.add(p)
+        a.update(p)
         t[i] = time.thread_time() - c0
     return t
 

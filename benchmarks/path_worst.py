@@ -48,7 +48,7 @@ def _record(xy: np.ndarray, eps: float, clock: _GcClock) -> tuple[Any, ...]:
     for i, p in enumerate(xy):
         g0 = clock.total
         c0 = time.thread_time()
-        a.add(p)
+        a.update(p)
         t[i] = time.thread_time() - c0
         g[i] = clock.total - g0
     r = a.finish()

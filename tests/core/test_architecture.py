@@ -18,6 +18,7 @@ CORE = {
     "datasets",
     "jit",
     "domains",  # the declared domains of options, settings and file fields
+    "results",  # the online objects' Result / Failure bases
     "_intrinsics",  # Numba intrinsics shared by the capabilities' kernels
     "_version",
     "__init__",

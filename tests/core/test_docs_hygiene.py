@@ -70,7 +70,6 @@ COMMIT = re.compile(r"(?<![\w./#-])(?=[0-9a-f]*[a-f])(?=[0-9a-f]*\d)[0-9a-f]{7,4
 DIARY_PENDING = {
     "src/navkit/planes/extract.py",
     "src/navkit/planes/_kernels.py",
-    "src/navkit/planes/mapping.py",
     "src/navkit/planes/motion.py",
     "src/navkit/cli/cmd_run.py",
 }

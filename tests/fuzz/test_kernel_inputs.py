@@ -191,20 +191,20 @@ def _localization_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
         yield f"match_scan/global/{label}", lambda a=a: match_scan(field, a)
         yield f"match_scan/prior/{label}", lambda a=a: match_scan(field, a, prior=pose)
         yield f"score_poses/{label}", lambda a=a: score_poses(field, a, pose[None])
-        yield f"Localizer.register/{label}", lambda a=a: loc.register(a)
+        yield f"Localizer.update/{label}", lambda a=a: loc.update(a)
     for label, a in _variants(room, rng):
         yield (
             f"LikelihoodField.from_points/{label}",
             lambda a=a: LikelihoodField.from_points(a, 0.05, 0.1),
         )
-        yield f"Localizer.from_points/{label}", lambda a=a: Localizer.from_points(a).register(scan)
+        yield f"Localizer.from_points/{label}", lambda a=a: Localizer.from_points(a).update(scan)
     for label, v in POISON.items():
         bad = np.array([v, 1.0, 0.2])
         yield f"match_scan/prior-{label}", lambda bad=bad: match_scan(field, scan, prior=bad)
         yield f"score_poses/pose-{label}", lambda bad=bad: score_poses(field, scan, bad[None])
         yield (
-            f"Localizer.register/prior-{label}",
-            lambda bad=bad: Localizer.from_points(room).register(scan, prior=bad),
+            f"Localizer.update/prior-{label}",
+            lambda bad=bad: Localizer.from_points(room).update(scan, prior=bad),
         )
 
 
@@ -267,7 +267,7 @@ def _path_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
         def online(a: np.ndarray = a) -> Any:
             rec = OnlineApproximator()
             for p in a:
-                rec.add(p)
+                rec.update(p)
             return rec.finish()
 
         yield f"OnlineApproximator/{label}", online

@@ -71,7 +71,7 @@ def test_tracking_in_the_simulated_room(room, refine, median_m, max_m):
     for k in range(len(truth)):
         pts = scan_points(LSHAPE, truth[k], n=181, fov=np.pi, noise=0.02, rng=rng)
         d = None if k == 0 else _delta(odo[k - 1], odo[k])
-        results.append(loc.register(pts, odometry_delta=d))
+        results.append(loc.update(pts, odometry_delta=d))
     assert all(isinstance(r, Fix) for r in results)
     assert results[0].method == "global" and {r.method for r in results[1:]} == {"tracking"}
     assert all(r.refined == refine for r in results)
@@ -91,9 +91,7 @@ def test_known_heading_in_the_simulated_room(room):
     rng = np.random.default_rng(4)
     loc = Localizer(wall_map, LocalizerSettings(refine=True))
     for p in truth[::5]:
-        r = loc.register(
-            scan_points(LSHAPE, p, n=181, fov=np.pi, noise=0.02, rng=rng), heading=p[2]
-        )
+        r = loc.update(scan_points(LSHAPE, p, n=181, fov=np.pi, noise=0.02, rng=rng), heading=p[2])
         assert isinstance(r, Fix) and r.method == "known heading"
         assert r.pose[2] == p[2]  # the heading is kept
         assert np.hypot(*(r.pose[:2] - p[:2])) < 0.01
@@ -107,7 +105,7 @@ def test_a_straight_wall_is_a_failure_along_it(room):
     wall = np.column_stack([np.linspace(-1.0, 1.0, 60), np.full(60, -1.0)])
     # (a tracking window narrower than the exclusion radius: no distinct second peak in it)
     s = LocalizerSettings(matcher=MatcherSettings(linear_window=0.4, angular_window_deg=5.0))
-    r = Localizer(wall_map, s).register(wall, prior=np.array([5.0, 1.0, 0.0]))
+    r = Localizer(wall_map, s).update(wall, prior=np.array([5.0, 1.0, 0.0]))
     assert isinstance(r, LocalizationFailure) and not r.ok and r.ambiguous
     assert r.reason == "elongated peak" and r.free_dof == ("along",)
     assert abs(r.direction[0]) > 0.99  # along the wall (x)
@@ -119,14 +117,14 @@ def test_a_straight_wall_is_a_failure_along_it(room):
 def test_too_few_points_keep_the_odometry_for_the_next_scan(room):
     wall_map, truth = room
     loc = Localizer(wall_map)
-    assert isinstance(loc.register(scan_points(LSHAPE, truth[10], n=181, fov=np.pi)), Fix)
-    r = loc.register(
+    assert isinstance(loc.update(scan_points(LSHAPE, truth[10], n=181, fov=np.pi)), Fix)
+    r = loc.update(
         np.array([[1.0, 0.0], [np.nan, 1.0]]), odometry_delta=_delta(truth[10], truth[11])
     )
     assert isinstance(r, LocalizationFailure) and r.reason == "too few points"
     assert r.free_dof == ("x", "y", "theta") and np.all(np.isnan(r.candidate))
     # the next scan is tracked from the increments of both steps
-    r2 = loc.register(
+    r2 = loc.update(
         scan_points(LSHAPE, truth[12], n=181, fov=np.pi),
         odometry_delta=_delta(truth[11], truth[12]),
     )
@@ -142,7 +140,7 @@ def test_blending_and_gate(room):
     s = LocalizerSettings(fix_weight=0.5, gate_m=0.4, matcher=MatcherSettings(linear_window=0.4))
     loc = Localizer(wall_map, s)
     est = p + np.array([0.2, -0.1, 0.02])
-    r = loc.register(pts, prior=est)
+    r = loc.update(pts, prior=est)
     assert isinstance(r, Fix) and r.used
     np.testing.assert_allclose(r.estimate[:2], 0.5 * (est[:2] + r.pose[:2]))
     assert abs(wrap_angle(r.estimate[2] - 0.5 * (est[2] + r.pose[2]))) < 1e-12
@@ -151,7 +149,7 @@ def test_blending_and_gate(room):
         wall_map, LocalizerSettings(gate_m=0.3, matcher=MatcherSettings(linear_window=0.5))
     )
     far = p + np.array([0.35, 0.0, 0.0])
-    r = loc.register(pts, prior=far)
+    r = loc.update(pts, prior=far)
     assert isinstance(r, Fix) and not r.used
     np.testing.assert_allclose(r.estimate, far)
 
@@ -272,7 +270,7 @@ def test_map_locate_is_a_loop_over_the_localizer(cli, data_path, tmp_path, prior
             if j and prior == "odometry"
             else None
         )
-        results.append(loc.register(lg.points(int(k), 30.0), odometry_delta=d))
+        results.append(loc.update(lg.points(int(k), 30.0), odometry_delta=d))
     rows = _read_fixes(out / "fixes.csv")
     assert [int(r["index"]) for r in rows] == sel.tolist()
     assert [r["ok"] == "True" for r in rows] == [r.ok for r in results]
@@ -325,7 +323,7 @@ def test_from_views_and_from_points_cover_the_missions_use(room):
         recent[-1],
     )
     est = recent[-1] + np.array([0.15, -0.1, 0.03])
-    r = loc.register(frag, prior=est)
+    r = loc.update(frag, prior=est)
     assert isinstance(r, Fix) and r.used and r.method == "tracking"
     assert np.hypot(*(r.pose[:2] - recent[-1, :2])) < 0.03
     np.testing.assert_allclose(r.estimate, est + 0.7 * (r.pose - est), atol=1e-12)
@@ -335,7 +333,7 @@ def test_from_views_and_from_points_cover_the_missions_use(room):
     )
     loc2 = Localizer.from_points(pts, s)
     assert loc2.map is None
-    r2 = loc2.register(views[0], prior=poses[0] + np.array([0.1, 0.1, 0.0]))
+    r2 = loc2.update(views[0], prior=poses[0] + np.array([0.1, 0.1, 0.0]))
     assert r2.ok and np.hypot(*(r2.pose[:2] - poses[0, :2])) < 0.03
     with pytest.raises(InputError):
         Localizer.from_views([], np.zeros((0, 3)))

@@ -154,10 +154,10 @@ def test_online_use_matches_batch_and_can_continue():
     P = _random_track(rng, 300, 0.05, 0.2, 0.001)
     rec = OnlineApproximator(ApproximatorSettings(tolerance=0.01))
     for p in P[:150]:
-        rec.add(p)
+        rec.update(p)
     part = rec.spline  # frozen segments so far
     for p in P[150:]:
-        rec.add(p)
+        rec.update(p)
     full = rec.finish()
     batch = approximate(P, ApproximatorSettings(tolerance=0.01), timed=False)
     np.testing.assert_allclose(full.raw_spline.ax, batch.raw_spline.ax)
@@ -173,7 +173,7 @@ def test_bad_settings_and_points():
     with pytest.raises(InputError, match="points"):
         approximate(np.zeros((5, 3)))
     with pytest.raises(InputError, match="point"):
-        OnlineApproximator().add([1.0, 2.0, 3.0])
+        OnlineApproximator().update([1.0, 2.0, 3.0])
 
 
 def test_segment_point_cap_and_refit_fallback_keep_the_guarantee():
@@ -187,7 +187,7 @@ def test_segment_point_cap_and_refit_fallback_keep_the_guarantee():
     settings = ApproximatorSettings(tolerance=0.5, max_segment_points=500)
     rec = OnlineApproximator(settings)
     for p in P:
-        rec.add(p)
+        rec.update(p)
     result = rec.finish()
     _assert_within(result, 0.5)
     # a segment holds at most 500 points besides its anchor, so there are at least 12000 / 500

@@ -28,7 +28,7 @@ def _run(xy: np.ndarray, settings: ApproximatorSettings, compiled: bool) -> Onli
     a = OnlineApproximator(settings)
     a.compiled = a._chain.compiled = compiled
     for p in xy:
-        a.add(p)
+        a.update(p)
     return a
 
 
@@ -82,7 +82,7 @@ def test_all_crossings_of_a_chain_match():
         a = OnlineApproximator(ApproximatorSettings(tolerance=0.02, remove_loops=False))
         a._chain.compiled = compiled
         for p in xy:
-            a.add(p)
+            a.update(p)
         out.append(a._chain.find_crossings(0))
     assert len(out[0]) >= 3
     assert len(out[0]) == len(out[1])
@@ -194,7 +194,7 @@ def test_compiled_chain_is_the_numpy_chain():
     ref = OnlineApproximator(ApproximatorSettings(tolerance=0.05, remove_loops=False))
     ref.compiled = ref._chain.compiled = False
     for p in xy:
-        ref.add(p)
+        ref.update(p)
     raw = ref.finish().raw_spline
     chains = []
     for compiled in (True, False):

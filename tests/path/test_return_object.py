@@ -28,14 +28,14 @@ def drive(ret, mapper, pose, t_max=80.0):
     """Closed loop on the true pose (no estimation error): the map is checked every 0.5 s."""
     t, got, poses = 0.0, None, [pose]
     while t < t_max:
-        got = ret.step(pose, t)
+        got = ret.update(pose, t)
         if isinstance(got, ReturnFailure) or got.home:
             break
         pose = unicycle_step(pose, got.v, got.omega, DT)
         poses.append(pose)
         t += DT
         if round(t / DT) % 5 == 0:
-            ret.observe(pose, t, mapper)
+            ret.update(pose, t, mapper)
     return got, np.array(poses)
 
 

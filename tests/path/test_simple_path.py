@@ -143,7 +143,7 @@ def test_path_so_far_is_simple_after_every_add(track):
     rec = OnlineApproximator(ApproximatorSettings(tolerance=eps))
     seen = (0, 0.0)
     for p in P:
-        rec.add(p)
+        rec.update(p)
         path = rec.spline  # the frozen, loop-free part; it changes only when a segment freezes
         now = (path.n_segments, path.total_length)
         if now != seen:

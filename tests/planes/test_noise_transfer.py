@@ -8,11 +8,11 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from navkit.geometry import se3_from_rt, se3_inverse
-from navkit.planes import OdometrySettings, PlaneOdometry, observe_rgbd
+from navkit.planes import FrameMotion, OdometrySettings, PlaneOdometry, observe_rgbd
 from navkit.planes.dense import DenseFrame, dense_align
-from navkit.planes.mapping import DenseGates
 from navkit.planes.metrics import poses_at
 from navkit.planes.noise import KINECT_V1_K, DepthNoise, brightness_sigma
+from navkit.planes.odometry import DenseGates
 from navkit.planes.texture import to_gray
 
 TUM = "rgbd/tum-fr3-structure-notexture-far"
@@ -77,10 +77,10 @@ def test_dense_step_engages_on_the_tum_frames(tum):
     seq, G = tum
     idx = list(range(10, 25))
     odo = PlaneOdometry(OdometrySettings())
-    res = [odo.register_frame(observe_rgbd(seq.frame(i))) for i in idx]
+    res = [odo.update(observe_rgbd(seq.frame(i))) for i in idx]
     for k in range(1, len(idx)):
         r = res[k]
-        assert r.tracked and r.source.endswith("+dense"), (idx[k], r.status, r.reason)
+        assert isinstance(r, FrameMotion) and r.source.endswith("+dense"), (idx[k], r)
         assert r.dense is not None
         assert 0.5 < r.dense.overlap <= 1.0
         assert np.isfinite(r.dense.geometric_sigmas) and np.isfinite(r.dense.photometric_sigmas)

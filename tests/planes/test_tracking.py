@@ -15,12 +15,12 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from navkit.geometry import Plane, canonical_plane, rotation_angle, se3_from_rt, se3_inverse
-from navkit.planes import OdometrySettings, PlaneOdometry, observe_rgbd
+from navkit.planes import FrameMotion, OdometrySettings, PlaneOdometry, observe_rgbd
 from navkit.planes.associate import AssociationSettings
 from navkit.planes.frame import PlaneObservation
-from navkit.planes.mapping import MapView
 from navkit.planes.metrics import ate, rpe
 from navkit.planes.motion import MotionPrior, MotionSettings, _fill_from_prior, estimate_motion
+from navkit.planes.plane_map import MapView
 from navkit.planes.solve import MotionEstimate, MotionFailure
 from navkit.sensors import RGBDFrame
 from navkit.sim import RangeNoise, render_rgbd
@@ -62,7 +62,7 @@ def _run(seq: Sequence, frame_to_map: bool, priors=None) -> PlaneOdometry:
     # tracking, map and failure handling; the dense step has its own tests (test_dense.py)
     odo = PlaneOdometry(OdometrySettings(frame_to_map=frame_to_map, dense=None))
     for k, o in enumerate(seq.obs):
-        odo.register_frame(o, None if priors is None or k == 0 else priors[k])
+        odo.update(o, None if priors is None or k == 0 else priors[k])
     return odo
 
 
@@ -84,7 +84,7 @@ def test_frame_to_map_lowers_drift_on_a_corridor_loop(loop_runs):
     seq, f2f, f2m = loop_runs
     assert all(r.source == "map" for r in f2m.results[1:])
     assert all(r.source == "frame" for r in f2f.results[1:])
-    assert all(r.case == 2 and r.status == "ok" for r in f2m.results[1:])
+    assert all(isinstance(r, FrameMotion) and r.case == 2 for r in f2m.results[1:])
     ate_f, ate_m = ate(f2f.trajectory, seq.truth), ate(f2m.trajectory, seq.truth)
     assert ate_m < 0.7 * ate_f
     # the loop closes: the last frame (back at the second frame's place)
@@ -120,7 +120,7 @@ def test_frame_to_map_recovers_after_a_failed_frame():
     seq = Sequence(obs, se3_inverse(poses[0]) @ np.array(poses))
     f2f, f2m = _run(seq, False), _run(seq, True)
     for odo in (f2f, f2m):
-        assert odo.results[5].status.startswith("failed")
+        assert isinstance(odo.results[5], MotionFailure)
         assert all(5 not in mp.observations for mp in odo.map.planes)
     err_f = [_err(f2f.trajectory[k], seq.truth[k])[0] for k in range(len(obs))]
     err_m = [_err(f2m.trajectory[k], seq.truth[k])[0] for k in range(len(obs))]
@@ -279,7 +279,7 @@ def test_prior_uncertainty_sets_the_association_gate():
     assert _err(loose.T, p.T_1_2)[1] < 0.1
 
 
-def test_register_frame_with_a_prior_tracks_where_texture_fails():
+def test_update_with_a_prior_tracks_where_texture_fails():
     """Heavy image noise (40/255) flattens D(mu): the texture steps fail. Without a prior the
     frames are failures and the trajectory is the (identity) prediction - decimetres off after
     a few frames; with a visual-odometry-like prior (the true step perturbed by 1 cm / 0.3 deg
@@ -298,16 +298,16 @@ def test_register_frame_with_a_prior_tracks_where_texture_fails():
     bare = _run(seq, True)
     # without a prior the texture steps fail (the last frame may match the map, seen from a
     # prediction that by then is 49 cm / 7 deg off, with one plane only)
-    assert all(r.status.startswith("failed") for r in bare.results[1:4])
+    assert all(isinstance(r, MotionFailure) for r in bare.results[1:4])
     odo = _run(seq, True, priors)
     filled = []
     for k, r in enumerate(odo.results[1:], start=1):
-        assert isinstance(r.motion, MotionEstimate) and r.status.startswith("ok")
+        assert isinstance(r, FrameMotion) and isinstance(r.motion, MotionEstimate)
         # mu is either measured (a texture step against the map can succeed: the map texture
         # is fused) or filled from the prior and then named
         assert (r.motion.prior_dof, r.motion.texture_dof) in ((("mu",), ()), ((), ("mu",)))
         if r.motion.prior_dof:
-            assert r.status == "ok (from the prior: mu)"
+            assert r.prior_dof == ("mu",) and r.dof_sources["mu"] == "prior"
             filled.append(k)
         # rotation measured by the planes (0.01 deg class) although the prior is 0.3-0.9 off
         assert _err(r.T_world_frame, seq.truth[k])[1] < 0.05
@@ -338,19 +338,18 @@ def test_slambook_sequence_is_flagged_and_recovers_the_second_motion(data_path):
     Q = np.array([se3_from_xyz_quat(p[:3], p[3:]) for p in np.loadtxt(root / "pose.txt")])
     obs = [observe_rgbd(seq.frame(k)) for k in range(len(seq))]
     odo = PlaneOdometry()
-    res = [odo.register_frame(o) for o in obs]
-    assert res[1].status.startswith("failed") and isinstance(res[1].motion, MotionFailure)
-    assert res[1].reason
+    res = [odo.update(o) for o in obs]
+    assert isinstance(res[1], MotionFailure) and res[1].reason and res[1].free_dof
     for k in (1, 2):
-        if res[k].tracked:
+        if isinstance(res[k], FrameMotion):
             t_err, r_err = _err(res[k].T_world_frame, se3_inverse(Q[0]) @ Q[k])
             assert t_err < 0.05 and r_err < 2.0
         else:
             assert res[k].reason and not odo.tracked[k]
     pair = PlaneOdometry()
-    pair.register_frame(obs[1])
-    r = pair.register_frame(obs[2])
-    assert r.tracked and r.source.endswith("+dense") and r.case == 3
+    pair.update(obs[1])
+    r = pair.update(obs[2])
+    assert isinstance(r, FrameMotion) and r.source.endswith("+dense") and r.case == 3
     t_err, r_err = _err(r.motion.T, se3_inverse(Q[1]) @ Q[2])
     assert t_err < 0.05 and r_err < 2.0
 

@@ -298,7 +298,7 @@ def test_localization_is_the_localizer(carmen):
         r = lg.ranges[seq.indices[k]].astype(np.float32).astype(np.float64)
         ok = np.isfinite(r) & (r < 30.0)
         pts = np.c_[r[ok] * np.cos(bearings[ok]), r[ok] * np.sin(bearings[ok])]
-        fix = loc.register(pts, odometry_delta=seq.odometry_delta(k))
+        fix = loc.update(pts, odometry_delta=seq.odometry_delta(k))
         assert rec["ok"] == isinstance(fix, Fix) and rec["reason"] == fix.reason
         if isinstance(fix, Fix):
             np.testing.assert_allclose([rec["x"], rec["y"], rec["theta"]], fix.pose, atol=1e-9)

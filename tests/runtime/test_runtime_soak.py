@@ -218,6 +218,6 @@ def test_plane_odometry_memory_is_bounded(tmp_path):
     )
     for k in range(n):
         f = frames[k % N_DISTINCT]
-        odo.register_frame(observe_rgbd(RGBDFrame(f.color, f.depth, f.camera, k / 30)))
+        odo.update(observe_rgbd(RGBDFrame(f.color, f.depth, f.camera, k / 30)))
     assert len(odo.poses) == n
     np.testing.assert_allclose(traj.poses, odo.trajectory, atol=1e-6)

@@ -72,7 +72,7 @@ def test_trajectory_file_path_memory(data_path, tmp_path):
     tr = read_trajectory(f)
     rec = OnlineApproximator(ApproximatorSettings(tolerance=0.05))
     for p in tr.poses[:, :2, 3]:
-        rec.add(p)
+        rec.update(p)
     want = rec.finish().spline
     got = read_path_json(tmp_path / "o" / "path" / "path.json")
     assert got.n_segments == want.n_segments == s["capabilities"]["path"]["segments"]
@@ -112,16 +112,15 @@ def test_rgbd_folder_plane_odometry(data_path, tmp_path):
     odo = PlaneOdometry(OdometrySettings())
     want = np.stack(
         [
-            odo.register_frame(
-                observe_rgbd(seq.frame(i), ExtractionSettings(cell=20))
-            ).T_world_frame
+            odo.update(observe_rgbd(seq.frame(i), ExtractionSettings(cell=20))).T_world_frame
             for i in range(3)
         ]
     )
     got = read_tum(tmp_path / "o" / "planes" / "trajectory.tum").poses
     np.testing.assert_allclose(got, want, atol=1e-6)
     recs = [json.loads(x) for x in (tmp_path / "o" / "frames.jsonl").read_text().splitlines()]
-    assert next(r["status"].split(" ")[0] for r in recs if r["capability"] == "planes") == "first"
+    first = next(r for r in recs if r["capability"] == "planes")
+    assert (first["status"], first["source"]) == ("tracked", "first")
 
 
 class _PosesAt10Hz:

@@ -121,7 +121,7 @@ def locate_input(
     if iterate is not None:
         steps = iterate(steps, len(seq))
     results = [
-        loc.register(
+        loc.update(
             seq.points(k),
             odometry_delta=seq.odometry_delta(k) if tracking else None,
             heading=float(seq.reference[k, 2]) if inp.known_heading else None,

@@ -299,21 +299,25 @@ def _open_sequence(sequence: list[str], cam: CameraOverride, cell: int, max_fram
 
 
 def _frame_row(i: int, stamp: float, r, t_extract: float) -> dict[str, Any]:
+    """One frame's row: a tracked frame (``FrameMotion``) or a ``MotionFailure``."""
+    from navkit.results import Failure
+
+    failed = isinstance(r, Failure)
+    motion = r if failed else r.motion
     return {
         "index": i,
         "timestamp": stamp,
-        "status": "tracked" if r.tracked else "failed",
-        "source": r.source or ("first" if r.status == "first" else "prediction (not written)"),
-        "reason": r.reason,
-        "detail": r.status,
+        "status": "failed" if failed else "tracked",
+        "source": "prediction (not written)" if failed else r.source,
+        "reason": r.reason if failed else r.note,
         "case": r.case,
         "planes": r.n_planes,
         "extract_ms": t_extract,
         "motion_ms": r.ms,
-        "dof_sources": r.dof_sources,
-        "texture_dof": list(getattr(r.motion, "texture_dof", ())),
-        "free_dof": list(getattr(r.motion, "free_dof", ())),
-        "prior_dof": list(getattr(r.motion, "prior_dof", ())),
+        "dof_sources": {} if failed else r.dof_sources,
+        "texture_dof": list(getattr(motion, "texture_dof", ())),
+        "free_dof": list(getattr(motion, "free_dof", ())),
+        "prior_dof": list(getattr(motion, "prior_dof", ())),
     }
 
 
@@ -388,7 +392,7 @@ def odometry_cmd(
             t0 = time.perf_counter()
             obs = observe(i)
             t_extract = 1000 * (time.perf_counter() - t0)
-            frames.append(_frame_row(i, float(stamps[i]), odo.register_frame(obs), t_extract))
+            frames.append(_frame_row(i, float(stamps[i]), odo.update(obs), t_extract))
         if reference is None and len(sequence) == 1:  # a TUM folder carries its truth
             gt = Path(sequence[0]) / "groundtruth.txt"
             reference = gt if gt.is_file() else None

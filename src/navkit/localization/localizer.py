@@ -2,7 +2,7 @@
 
 :class:`Localizer` keeps the map (a :class:`~navkit.localization.mapping.WallMap` and its
 likelihood field, whose pyramids the matcher caches on first use) and the last estimate, and
-reads like the method, one line per stage (:meth:`Localizer.register`):
+reads like the method, one line per stage (:meth:`Localizer.update`):
 
 1. **prior** - the caller's own estimate (``prior=``: a fused estimate, as in the mission), or
    the last estimate moved by the odometry increments since (tracking), or none (global
@@ -69,6 +69,7 @@ from navkit.localization.raster import sample_segments
 from navkit.localization.refine import PoseRefinement, RefineSettings, refine_pose
 from navkit.localization.visibility import ViewModel
 from navkit.localization.walls import WallSegment
+from navkit.results import Failure, Result, deprecated_alias
 
 __all__ = [
     "Fix",
@@ -178,7 +179,7 @@ class LocalizerSettings:
 
 
 @dataclass(frozen=True)
-class Fix:
+class Fix(Result):
     """A confident localization.
 
     Attributes
@@ -215,7 +216,7 @@ class Fix:
         The search was exhaustive (False: the candidate budget cut it).
     refinement : PoseRefinement or None
     seconds : float
-        Wall time of :meth:`Localizer.register`.
+        Wall time of :meth:`Localizer.update`.
     match : ScanMatch or KnownHeadingFix
         The matcher's own result (:class:`navkit.localization.matcher.ScanMatch` or
         :class:`~navkit.localization.correlation.KnownHeadingFix`: the ambiguity report, the
@@ -238,7 +239,6 @@ class Fix:
     seconds: float
     match: ScanMatch | KnownHeadingFix
 
-    ok: ClassVar[bool] = True
     ambiguous: ClassVar[bool] = False
     reason: ClassVar[str] = ""
     free_dof: ClassVar[tuple[str, ...]] = ()
@@ -258,7 +258,7 @@ class Fix:
 
 
 @dataclass(frozen=True)
-class LocalizationFailure:
+class LocalizationFailure(Failure):
     """No fix: the scan leaves degrees of freedom free, or contradicts the map.
 
     Attributes
@@ -312,7 +312,6 @@ class LocalizationFailure:
     seconds: float = 0.0
     match: ScanMatch | KnownHeadingFix | None = None
 
-    ok: ClassVar[bool] = False
     used: ClassVar[bool] = False
 
     @property
@@ -476,7 +475,7 @@ class Localizer:
         self._motion = np.eye(3)
 
     # ------------------------------------------------------------------ one scan
-    def register(
+    def update(
         self,
         points: ArrayLike,
         *,
@@ -501,6 +500,7 @@ class Localizer:
         Returns
         -------
         Fix or LocalizationFailure
+            The fix, or why there is none and which degrees of freedom the scan leaves free.
         """
         t0 = time.perf_counter()
         s = self.settings
@@ -553,6 +553,18 @@ class Localizer:
             seconds=time.perf_counter() - t0,
             match=m.raw,
         )
+
+    def register(
+        self,
+        points: ArrayLike,
+        *,
+        odometry_delta: ArrayLike | None = None,
+        heading: float | None = None,
+        prior: ArrayLike | None = None,
+    ) -> Fix | LocalizationFailure:
+        """Deprecated alias of :meth:`update` (removed in the next release)."""
+        deprecated_alias("Localizer.register", "Localizer.update")
+        return self.update(points, odometry_delta=odometry_delta, heading=heading, prior=prior)
 
     # ------------------------------------------------------------------ stages
     def _accumulate(self, delta: ArrayLike | None) -> None:

@@ -180,7 +180,7 @@ class MissionLocalizer:
         if len(frag) < 20:
             return est
         with timed(self.timings, "localize"):
-            res = self.room.register(frag, prior=est)
+            res = self.room.update(frag, prior=est)
         return take_fix(res, est, truth, t, rec.fixes)
 
     def finish_room(self) -> None:
@@ -221,7 +221,7 @@ class MissionLocalizer:
         if self.return_map is None or len(obstacle_xy) < self.F.map_fix_min_points:
             return est
         with timed(self.timings, "localize_obstacle_map"):
-            res = self.return_map.register(obstacle_xy, prior=est)
+            res = self.return_map.update(obstacle_xy, prior=est)
         return take_fix(res, est, truth, t, self.rec.map_fixes)
 
 

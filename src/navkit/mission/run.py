@@ -41,7 +41,16 @@ from navkit.mission.robot import SimRobot
 from navkit.mission.settings import MissionSettings, Route
 from navkit.obstacles import ObstacleSettings, detect_obstacles
 from navkit.obstacles.mapper import MapperSettings, ObstacleMapper, scan_points_2d
-from navkit.path import ApproximatorSettings, OnlineApproximator, Return, ReturnFailure, ReturnStep
+from navkit.path import (
+    ApproximatorSettings,
+    OnlineApproximator,
+    PathUpdate,
+    Return,
+    ReturnFailure,
+    ReturnStep,
+    WayAhead,
+    WayBlocked,
+)
 from navkit.path.control import ReturnSettings
 from navkit.path.returning import ReturnTripSettings
 from navkit.timing import Timings, new_timings, timed
@@ -211,7 +220,7 @@ class Mission:
         self.rows: list[tuple[float, int, Any, Any, Any]] = []
         self._record()
         with timed(lg.timings, "path_record"):
-            added = self.recorder.add(self.est[:2])
+            added = isinstance(self.recorder.update(self.est[:2]), PathUpdate)
         self._det: Any = None
         self._scan_pose: NDArray[np.float64] | None = None
         self.last_step = self._step_record(added, False, 0, 0, 0)
@@ -242,7 +251,7 @@ class Mission:
         added = False
         if self.phase == OUTBOUND:
             with timed(self.lg.timings, "path_record"):
-                added = self.recorder.add(self.est[:2])  # 6. paper 4 path memory
+                added = isinstance(self.recorder.update(self.est[:2]), PathUpdate)  # 6. paper 4
         self._record()
         link_lost = phase_before == OUTBOUND and self.phase == RETURN
         self.last_step = self._step_record(added, link_lost, n_fix, n_map_fix, n_plane)
@@ -305,7 +314,7 @@ class Mission:
             else:
                 return cmd
         assert self.ret is not None
-        got = self.ret.step(self.est, t)
+        got = self.ret.update(self.est, t)
         if isinstance(got, ReturnStep) and got.home:
             self.lg.outcome = "returned"
         elif t - self.t_phase > s.max_time:
@@ -339,10 +348,10 @@ class Mission:
             outbound = self.phase == OUTBOUND
             self.est = self.localizer.room_view(view, self.est, truth, self.t, outbound, fix_now)
         if self.ret is not None:
-            event = self.ret.observe(self.est, self.t, self.mapper)
-            if event == "detour":
+            way = self.ret.update(self.est, self.t, self.mapper)
+            if isinstance(way, WayAhead) and way.detour_started:
                 self.ret.detours[-1]["start_true_xy"] = truth[:2].tolist()
-            elif event == "blocked" and self.ret.blocked is not None:
+            elif isinstance(way, WayBlocked) and self.ret.blocked is not None:
                 self.ret.blocked["robot_true"] = truth.tolist()
 
     def _camera(self) -> None:

@@ -4,7 +4,8 @@ Mode 1 (recording): :class:`OnlineApproximator` / :func:`approximate` turn posit
 at a time into a :class:`PathSpline` (cubic segments over arc length) within a tolerance, cutting
 loops out as they close. Mode 2 (return): :class:`ReturnController` steers a robot back along the
 stored path to its start; :class:`Return` is the online object of the whole way back (round a
-blocked stretch on an obstacle map, or a :class:`ReturnFailure`). Everything works on NumPy arrays; file formats live at the edge
+blocked stretch on an obstacle map, or a :class:`ReturnFailure`). Both take one observation per
+:meth:`update` call and return a typed result or a typed failure (:mod:`navkit.results`). Everything works on NumPy arrays; file formats live at the edge
 (``path.json`` in :mod:`navkit.io.pathjson`, trajectories in ``navkit.io.trajectory``).
 """
 
@@ -12,11 +13,20 @@ from navkit.path.approximator import (
     ApproximationResult,
     ApproximatorSettings,
     OnlineApproximator,
+    PathUpdate,
+    Skipped,
     approximate,
 )
 from navkit.path.fitting import VARIANTS
 from navkit.path.loops import Crossing, LoopCut, LoopFreeChain, find_crossings, remove_loops
-from navkit.path.returning import Return, ReturnFailure, ReturnStep, ReturnTripSettings
+from navkit.path.returning import (
+    Return,
+    ReturnFailure,
+    ReturnStep,
+    ReturnTripSettings,
+    WayAhead,
+    WayBlocked,
+)
 from navkit.path.spline import PathSpline
 
 __all__ = [
@@ -28,10 +38,14 @@ __all__ = [
     "LoopFreeChain",
     "OnlineApproximator",
     "PathSpline",
+    "PathUpdate",
     "Return",
     "ReturnFailure",
     "ReturnStep",
     "ReturnTripSettings",
+    "Skipped",
+    "WayAhead",
+    "WayBlocked",
     "approximate",
     "find_crossings",
     "remove_loops",

@@ -50,8 +50,16 @@ from navkit.path.fitting import (
 )
 from navkit.path.loops import LoopCut, LoopFreeChain, kept_intervals
 from navkit.path.spline import _GL_W, _GL_X, PathSpline, gauss_legendre_length
+from navkit.results import Failure, Result, deprecated_alias
 
-__all__ = ["ApproximationResult", "ApproximatorSettings", "OnlineApproximator", "approximate"]
+__all__ = [
+    "ApproximationResult",
+    "ApproximatorSettings",
+    "OnlineApproximator",
+    "PathUpdate",
+    "Skipped",
+    "approximate",
+]
 
 log = logging.getLogger(__name__)
 
@@ -235,14 +243,54 @@ class ApproximationResult:
         }
 
 
+@dataclass(frozen=True, slots=True)
+class PathUpdate(Result):
+    """A point :meth:`OnlineApproximator.update` took into the path.
+
+    Attributes
+    ----------
+    index : int
+        The point's number among all points offered (0-based, skipped ones counted).
+    frozen : int
+        Segments this point froze (0: it extends the current segment; 1: the segment before it
+        was frozen and the next one starts).
+    segments : int
+        Segments frozen so far (:attr:`OnlineApproximator.spline`).
+    """
+
+    index: int
+    frozen: int
+    segments: int
+
+
+@dataclass(frozen=True, slots=True)
+class Skipped(Failure):
+    """A point :meth:`OnlineApproximator.update` did not take (normal for sensor data).
+
+    Attributes
+    ----------
+    index : int
+        The point's number among all points offered (0-based).
+    reason : str
+        ``"not finite"`` (a NaN or infinite coordinate) or ``"repeat"`` (within
+        ``ApproximatorSettings.min_step`` of the last point taken).
+    free_dof : tuple of str
+        Empty: a skipped point is not about a pose.
+    """
+
+    index: int
+    reason: str
+    free_dof: tuple[str, ...] = ()
+
+
 class OnlineApproximator:
-    """The path recorder: feed points with :meth:`add`, get the path with :meth:`finish`.
+    """The path recorder: feed points with :meth:`update`, get the path with :meth:`finish`.
 
     Examples
     --------
     >>> rec = OnlineApproximator(ApproximatorSettings(tolerance=0.05))
     >>> for p in np.c_[np.linspace(0, 3, 31), np.zeros(31)]:
-    ...     _ = rec.add(p)
+    ...     _ = rec.update(p)
     >>> result = rec.finish()
     >>> result.spline.n_segments, round(result.spline.total_length, 6)
     (1, 3.0)
@@ -315,8 +363,9 @@ class OnlineApproximator:
         self._fit: CubicFit | None = None
 
     # ------------------------------------------------------------------ adding points (steps 1.2 - 1.5)
-    def add(self, point: ArrayLike) -> bool:
-        """Offer the next point ``(2,)``; returns False if it was skipped (NaN or a repeat).
+    def update(self, point: ArrayLike) -> PathUpdate | Skipped:
+        """Offer the next point ``(2,)`` (x, y metres): a :class:`PathUpdate` when it was taken,
+        a :class:`Skipped` naming why when not (not finite, or a repeat).
 
         Raises
         ------
@@ -333,20 +382,28 @@ class OnlineApproximator:
         x, y = float(p[0]), float(p[1])
         if abs(x) > MAX_COORDINATE_M or abs(y) > MAX_COORDINATE_M:  # NaN compares False
             check_coordinates(p, field="point")  # refuses a finite one; inf is a no-return
+        index = self.n_input
         self.n_input += 1
         if not (math.isfinite(x) and math.isfinite(y)):
             self.n_nonfinite += 1
-            return False
+            return Skipped(index, "not finite")
         last = self._last
         if last is not None and math.hypot(x - last[0], y - last[1]) <= self._min_step:
             self.n_repeated += 1
-            return False
+            return Skipped(index, "repeat")
         self._last = p
+        before = len(self._raw)
         if self._n == 0:
             self._start_segment(p)
-            return True
-        self._push(p)
-        return True
+        else:
+            self._push(p)
+        return PathUpdate(index, len(self._raw) - before, len(self._raw))
+
+    def add(self, point: ArrayLike) -> bool:
+        """Deprecated alias of :meth:`update` (removed in the next release): True when the
+        point was taken."""
+        deprecated_alias("OnlineApproximator.add", "OnlineApproximator.update")
+        return isinstance(self.update(point), PathUpdate)
 
     def _grow(self) -> None:
         if self._n + 1 >= len(self._tau):
@@ -660,10 +717,10 @@ def approximate(
     if timed:
         for i, p in wrap(enumerate(P)):
             t0, c0 = clock(), cpu_clock()
-            rec.add(p)
+            rec.update(p)
             times[i], cpu[i] = clock() - t0, cpu_clock() - c0
     else:
         for p in wrap(P):
-            rec.add(p)
+            rec.update(p)
     result = rec.finish(seconds_per_point=times if timed else None)
     return dataclasses.replace(result, cpu_seconds_per_point=cpu) if timed else result

@@ -3,15 +3,18 @@ round a blocked stretch (:mod:`navkit.path.detour`), stopping when there is no w
 
 :class:`Return` is built from the stored :class:`~navkit.path.PathSpline` and frozen
 :class:`ReturnTripSettings`; it keeps its own state (the controller's progress, the detour being
-followed, since when the way is blocked) and takes one observation at a time:
+followed, since when the way is blocked) and takes one observation at a time through
+:meth:`Return.update`:
 
-- :meth:`Return.step` every control cycle: the pose estimate -> a :class:`ReturnStep` (speeds,
+- ``update(pose, t)`` every control cycle: the pose estimate -> a :class:`ReturnStep` (speeds,
   whether home) or a :class:`ReturnFailure` (blocked for ``wait`` seconds with no way round);
-- :meth:`Return.observe` whenever a new obstacle map is available (a lidar scan): is the way ahead
-  (the detour being followed, or the stored path) blocked? -> plan a way round it, or stop.
+- ``update(pose, t, obstacles)`` whenever a new obstacle map is available (a lidar scan): is the
+  way ahead (the detour being followed, or the stored path) blocked? -> a :class:`WayAhead`
+  (clear, or a detour round the block was started) or a :class:`WayBlocked` (no way round: the
+  robot stops).
 
-Two calls rather than one because the map is checked at the sensor's rate with the pose after
-the motion, the controller at the control rate with the pose before it. The obstacle map is any
+Two observations rather than one because the map is checked at the sensor's rate with the pose
+after the motion, the controller at the control rate with the pose before it. The obstacle map is any
 object with the :class:`ObstacleView` methods (:class:`navkit.obstacles.ObstacleMapper` has
 them); the path package does not import the obstacles package.
 """
@@ -20,7 +23,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, overload
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,9 +31,18 @@ from numpy.typing import NDArray
 from navkit.path.control import ReturnController, ReturnSettings
 from navkit.path.detour import Detour, DetourFailure, DetourSettings, plan_detour, polyline_spline
 from navkit.path.spline import PathSpline
+from navkit.results import Failure, Result, deprecated_alias
 from navkit.timing import Timings, timed
 
-__all__ = ["ObstacleView", "Return", "ReturnFailure", "ReturnStep", "ReturnTripSettings"]
+__all__ = [
+    "ObstacleView",
+    "Return",
+    "ReturnFailure",
+    "ReturnStep",
+    "ReturnTripSettings",
+    "WayAhead",
+    "WayBlocked",
+]
 
 log = logging.getLogger(__name__)
 
@@ -84,17 +96,16 @@ class ReturnTripSettings:
 
 
 @dataclass(frozen=True)
-class ReturnStep:
+class ReturnStep(Result):
     """One control cycle: speeds (m/s, rad/s) and whether the robot is home."""
 
     v: float
     omega: float
     home: bool
-    ok = True
 
 
 @dataclass(frozen=True)
-class ReturnFailure:
+class ReturnFailure(Failure):
     """The return gave up.
 
     Attributes
@@ -104,11 +115,52 @@ class ReturnFailure:
     detail : str
         Why there is no way round (the last :class:`~navkit.path.detour.DetourFailure`, or
         ``"detours disabled"``).
+    free_dof : tuple of str
+        Empty: the pose is known, the way is not.
     """
 
     reason: str
     detail: str = ""
-    ok = False
+    free_dof: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class WayAhead(Result):
+    """The way ahead on the obstacle map is free to drive.
+
+    Attributes
+    ----------
+    detour_started : bool
+        The stored path was blocked and a detour round the block was started on this map
+        (:attr:`Return.detours` holds it); False: the way ahead (stored path or the detour
+        being followed) is clear.
+    """
+
+    detour_started: bool = False
+
+
+@dataclass(frozen=True)
+class WayBlocked(Failure):
+    """The way ahead is blocked on the obstacle map and there is no way round: the robot stops
+    (a :class:`ReturnFailure` follows when it stays blocked for ``wait`` seconds).
+
+    Attributes
+    ----------
+    reason : str
+        Why there is no way round (the last :class:`~navkit.path.detour.DetourFailure`, or
+        ``"detours disabled"``).
+    distance_ahead_m : float
+        The blocked point, metres ahead along the way.
+    point : (2,) array
+        The blocked point, world x, y metres.
+    free_dof : tuple of str
+        Empty: the pose is known, the way is not.
+    """
+
+    reason: str
+    distance_ahead_m: float
+    point: NDArray[np.float64]
+    free_dof: tuple[str, ...] = ()
 
 
 @dataclass
@@ -166,8 +218,41 @@ class Return:
         self.detours: list[dict[str, Any]] = []
         self.detour_paths: list[NDArray[np.float64]] = []
 
-    # --- every control cycle -----------------------------------------------------------------
+    # --- one observation ---------------------------------------------------------------------
+    @overload
+    def update(self, pose: NDArray[np.float64], t: float) -> ReturnStep | ReturnFailure: ...
+
+    @overload
+    def update(
+        self, pose: NDArray[np.float64], t: float, obstacles: ObstacleView
+    ) -> WayAhead | WayBlocked: ...
+
+    def update(
+        self, pose: NDArray[np.float64], t: float, obstacles: ObstacleView | None = None
+    ) -> ReturnStep | ReturnFailure | WayAhead | WayBlocked:
+        """One observation: the estimated ``pose`` ``(x, y, theta)`` at time ``t`` (a control
+        cycle: the speeds, :meth:`_control`), or with the latest ``obstacles`` map (the way
+        ahead checked on it, a detour planned round a block, :meth:`_check_way`)."""
+        if obstacles is None:
+            return self._control(pose, t)
+        return self._check_way(pose, t, obstacles)
+
     def step(self, pose: NDArray[np.float64], t: float) -> ReturnStep | ReturnFailure:
+        """Deprecated alias of ``update(pose, t)`` (removed in the next release)."""
+        deprecated_alias("Return.step", "Return.update(pose, t)")
+        return self._control(pose, t)
+
+    def observe(self, pose: NDArray[np.float64], t: float, obstacles: ObstacleView) -> str:
+        """Deprecated alias of ``update(pose, t, obstacles)`` (removed in the next release):
+        ``"detour"``, ``"blocked"`` or ``""``."""
+        deprecated_alias("Return.observe", "Return.update(pose, t, obstacles)")
+        r = self._check_way(pose, t, obstacles)
+        if isinstance(r, WayBlocked):
+            return "blocked"
+        return "detour" if r.detour_started else ""
+
+    # --- every control cycle -----------------------------------------------------------------
+    def _control(self, pose: NDArray[np.float64], t: float) -> ReturnStep | ReturnFailure:
         """Speeds for the robot at the estimated ``pose`` ``(x, y, theta)`` at time ``t``."""
         with timed(self.timings, "return_control"):
             if self.round is not None and self.round.done(pose):
@@ -194,9 +279,11 @@ class Return:
         return ReturnStep(v, om, home)
 
     # --- whenever the obstacle map changes ---------------------------------------------------
-    def observe(self, pose: NDArray[np.float64], t: float, obstacles: ObstacleView) -> str:
-        """Check the way ahead on the map; returns ``"detour"`` (a detour was started),
-        ``"blocked"`` (the way is blocked and there is no way round) or ``""``."""
+    def _check_way(
+        self, pose: NDArray[np.float64], t: float, obstacles: ObstacleView
+    ) -> WayAhead | WayBlocked:
+        """Check the way ahead on the map: clear, a detour started, or blocked with no way
+        round."""
         st = self.settings
         with timed(self.timings, "block_check"):
             if self.round is not None:
@@ -225,7 +312,7 @@ class Return:
             new = self._plan(obstacles, pose, s_now, s_now - float(ss[j]))
             if isinstance(new, _Detouring):
                 self._start_detour(new, pose, t, ahead[j], float(s_now - ss[j]))
-                return "detour"
+                return WayAhead(detour_started=True)
             self.no_detour = str(new)
         if hit.any():
             j = int(np.argmax(hit))
@@ -235,12 +322,14 @@ class Return:
                 else abs(float(ss[j]) - s_now)
             )
             self._block(t, s_now, d_ahead, ahead[j])
-            return "blocked"
+            return WayBlocked(
+                self.no_detour or "detours disabled", d_ahead, np.asarray(ahead[j], float).copy()
+            )
         if self.blocked_since is not None:
             self.blocked_since = None
             if self.blocked is not None:
                 self.blocked["active"] = False
-        return ""
+        return WayAhead()
 
     def _start_detour(
         self, new: _Detouring, pose: NDArray[np.float64], t: float, point: Any, dist: float

@@ -7,7 +7,8 @@ Pipeline (one module per stage)::
     texture  -> brightness on a grid in each plane        (texture.py)
     associate-> the same planes in two frames              (associate.py)
     solve    -> >= 3 closed form | 2: eq. 7 | 1: eqs. 3-4, 8-11  (solve.py, align.py, quaternion.py)
-    mapping  -> trajectory + merged, textured plane map    (mapping.py)
+    odometry -> trajectory, frame-to-map tracking          (odometry.py)
+    map      -> merged, textured plane map                 (plane_map.py)
 
 Everything works on NumPy arrays; readers for files are in :mod:`navkit.io.rgbd` and
 :mod:`navkit.io.pointcloud`.
@@ -22,15 +23,9 @@ from navkit.planes.extract import (
     extract_planes_organized,
 )
 from navkit.planes.frame import PlaneObservation, observe_points, observe_rgbd
-from navkit.planes.mapping import (
-    DenseGates,
-    FrameResult,
-    MapPlane,
-    OdometrySettings,
-    PlaneMap,
-    PlaneOdometry,
-)
 from navkit.planes.motion import MotionPrior, MotionSettings, estimate_motion
+from navkit.planes.odometry import DenseGates, FrameMotion, OdometrySettings, PlaneOdometry
+from navkit.planes.plane_map import MapPlane, PlaneMap
 from navkit.planes.quaternion import euler_zxy_from_quat
 from navkit.planes.segments import ExtractionResult, PlaneSegment, plane_frame
 from navkit.planes.solve import (
@@ -52,7 +47,7 @@ __all__ = [
     "DenseSettings",
     "ExtractionResult",
     "ExtractionSettings",
-    "FrameResult",
+    "FrameMotion",
     "MapPlane",
     "MotionEstimate",
     "MotionFailure",

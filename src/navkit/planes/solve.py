@@ -45,6 +45,7 @@ from navkit.planes.quaternion import (
     translation_eq10,
 )
 from navkit.planes.texture import PlaneTexture
+from navkit.results import Failure, Result
 
 __all__ = [
     "MotionEstimate",
@@ -109,7 +110,7 @@ class SolverSettings:
 
 
 @dataclass(frozen=True)
-class MotionEstimate:
+class MotionEstimate(Result):
     """A recovered motion ``T_1_2`` (frame 2 -> frame 1).
 
     Attributes
@@ -142,8 +143,6 @@ class MotionEstimate:
     pairs: tuple[tuple[int, int], ...] = ()
     prior_dof: tuple[str, ...] = ()
 
-    ok = True
-
     @property
     def rotation(self) -> NDArray[np.float64]:
         return self.T[:3, :3]
@@ -162,8 +161,12 @@ class MotionEstimate:
 
 
 @dataclass(frozen=True)
-class MotionFailure:
+class MotionFailure(Failure):
     """No motion: the input leaves degrees of freedom free.
+
+    Returned by the solvers and :func:`~navkit.planes.motion.estimate_motion` for a pair of
+    frames, and by :meth:`~navkit.planes.odometry.PlaneOdometry.update` for a frame of a
+    sequence, which also fills the frame fields.
 
     Attributes
     ----------
@@ -173,13 +176,24 @@ class MotionFailure:
         The degrees of freedom neither geometry nor texture fixed.
     reason : str
         Why (no overlap, uniform texture, flat functional, ...).
+    index : int
+        The frame's number in the sequence (-1 outside ``PlaneOdometry``).
+    T_world_frame : (4, 4) array or None
+        The pose the trajectory carries for the frame: the prediction, not a measurement (None
+        outside ``PlaneOdometry``).
+    ms : float
+        Wall time of the odometry's update, milliseconds (NaN outside it).
+    n_planes : int
+        The frame's planes (0 outside ``PlaneOdometry``).
     """
 
     case: int
     free_dof: tuple[str, ...]
     reason: str
-
-    ok = False
+    index: int = -1
+    T_world_frame: NDArray[np.float64] | None = None
+    ms: float = float("nan")
+    n_planes: int = 0
 
 
 def _kabsch(

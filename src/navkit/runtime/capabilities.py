@@ -526,7 +526,7 @@ class LaserLocalizationStage:
             )
         To = poses.at(self.odom_topic, msg.stamp_ns) if self.odom_topic else None
         delta = self._odometry_delta(planar(To) if To is not None else None)
-        r = self.localizer.register(scan.points(self.cfg.max_range_m), odometry_delta=delta)
+        r = self.localizer.update(scan.points(self.cfg.max_range_m), odometry_delta=delta)
         ok = isinstance(r, Fix)
         pose = r.pose if isinstance(r, Fix) else r.candidate
         rec: dict[str, Any] = {
@@ -636,7 +636,7 @@ def textured_planes(
 
 class PlanesStage:
     """Paper 2's plane odometry on depth (+ colour) frames with ``CameraInfo``
-    (``planes.PlaneOdometry.register_frame``); publishes the camera pose and the frame's planes."""
+    (``planes.PlaneOdometry.update``); publishes the camera pose and the frame's planes."""
 
     name = "planes"
 
@@ -705,7 +705,7 @@ class PlanesStage:
         return self._frame(d, c if paired else None)
 
     def _frame(self, d: Message, c: Message | None) -> StageResult:
-        from navkit.planes import observe_rgbd
+        from navkit.planes import FrameMotion, observe_rgbd
         from navkit.sensors import PinholeCamera, RGBDFrame
 
         cam = self.camera
@@ -719,13 +719,14 @@ class PlanesStage:
         pc = PinholeCamera(cam.fx, cam.fy, cam.cx, cam.cy, depth.shape[1], depth.shape[0])
         self.depth = self.color = None
         obs = observe_rgbd(RGBDFrame(color, depth, pc, d.stamp), self.es)
-        r = self.odo.register_frame(obs)
+        r = self.odo.update(obs)  # a FrameMotion, or a MotionFailure at the prediction
+        T = self.odo.poses[-1]  # the trajectory's pose of the frame (the prediction if failed)
         self.n += 1
-        self.n_ok += str(r.status).startswith(("ok", "first"))
-        self._append_pose(d.stamp_ns, r.T_world_frame)
-        outs = [Output("/navkit/planes/pose", "pose", d.stamp_ns, "planes_odom", r.T_world_frame)]
+        self.n_ok += isinstance(r, FrameMotion)
+        self._append_pose(d.stamp_ns, T)
+        outs = [Output("/navkit/planes/pose", "pose", d.stamp_ns, "planes_odom", T)]
         lines = []
-        R, t = r.T_world_frame[:3, :3], r.T_world_frame[:3, 3]
+        R, t = T[:3, :3], T[:3, 3]
         for k, seg in enumerate(obs.extraction.segments):
             P = np.asarray(seg.outline_3d(), dtype=np.float64)  # camera frame
             if P.ndim == 2 and len(P) >= 3:
@@ -735,7 +736,7 @@ class PlanesStage:
                 Output("/navkit/planes/outlines", "markers", d.stamp_ns, "planes_odom", lines)
             )
         if c is not None and self.cfg.textures:
-            planes = textured_planes(obs, color, r.T_world_frame)
+            planes = textured_planes(obs, color, T)
             if planes:
                 outs.append(
                     Output(
@@ -749,11 +750,12 @@ class PlanesStage:
         return StageResult(
             outs,
             {
-                "status": r.status,
+                "status": "tracked" if isinstance(r, FrameMotion) else "failed",
+                "reason": r.note if isinstance(r, FrameMotion) else r.reason,
                 "case": r.case,
                 "planes": r.n_planes,
                 "motion_ms": r.ms,
-                "source": r.source,
+                "source": r.source if isinstance(r, FrameMotion) else "",
             },
         )
 
@@ -798,9 +800,11 @@ class PathStage:
         return Output("/navkit/path", "path", stamp_ns, self.frame, np.c_[xy, np.zeros(len(xy))])
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
+        from navkit.path import Skipped
+
         self.frame = msg.frame_id or "map"
         T = msg.data
-        if not self.rec.add(T[:2, 3]):
+        if isinstance(self.rec.update(T[:2, 3]), Skipped):  # NaN or a repeat
             return StageResult()
         self.n_accepted += 1
         if self.n_accepted % max(self.cfg.publish_every, 1) == 0:

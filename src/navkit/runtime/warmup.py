@@ -127,7 +127,7 @@ def _global_fix() -> None:
     pose = np.array([2.5, 2.0, 0.4])
     c, s = np.cos(pose[2]), np.sin(pose[2])
     local = (walls - pose[:2]) @ np.array([[c, -s], [s, c]])
-    Localizer.from_points(walls).register(local[::3])
+    Localizer.from_points(walls).update(local[::3])
 
 
 def _camera_frames() -> None:

@@ -1,12 +1,13 @@
-"""Sequences -> trajectory + merged plane map (paper 2, step 7 and figs. 8-9).
+"""Plane odometry: sequences -> trajectory + merged plane map (paper 2, step 7 and figs. 8-9).
 
-:class:`PlaneOdometry` reads like the paper's pipeline, one call per frame:
+:meth:`PlaneOdometry.update` reads like the paper's pipeline, one call per frame and one named
+step per stage:
 
 1. extract the frame's planes (done by the caller: a :class:`~navkit.planes.frame.PlaneObservation`);
 2. predict the pose: the previous pose moved by the motion prior (:class:`~navkit.planes.motion.
    MotionPrior`, e.g. visual odometry) or, without one, by the last motion (constant velocity);
 3. **frame-to-map**: associate the frame's planes with the *map* planes seen from the predicted
-   pose (:class:`MapView`) and solve the correction with the case the geometry allows (>= 3, 2
+   pose (:class:`~navkit.planes.plane_map.MapView`) and solve the correction with the case the geometry allows (>= 3, 2
    or 1 plane directions; the 1- and 2-plane texture steps run against the map's fused
    textures);
 4. **frame-to-frame** against the previous frame when the map gives less (fewer plane
@@ -17,19 +18,21 @@
    - is refined by a dense photometric + point-to-plane alignment with the current keyframe
    (or an old keyframe the camera is back at, :meth:`PlaneOdometry._revisit`) and accepted
    only when it passes :class:`DenseGates`; otherwise the frame is an explicit failure
-   (``FrameResult.reason``), never a silent pose;
+   (:class:`~navkit.planes.solve.MotionFailure`), never a silent pose;
 6. chain onto the trajectory (``T_world_frame``; the first frame is the world);
-7. merge the frame's planes into the map: the same physical plane (normal, distance and overlap
-   agree in the world frame) becomes one map plane whose extent (a sample of its inlier points)
-   and texture (running mean of brightness on a fixed lattice of the plane) are fused.
+7. merge the frame's planes into the map (:meth:`~navkit.planes.plane_map.PlaneMap.merge`):
+   the same physical plane (normal, distance and overlap agree in the world frame) becomes one
+   map plane whose extent (a sample of its inlier points) and texture (running mean of
+   brightness on a fixed lattice of the plane) are fused.
 
 Tracking against the map bounds the drift: while a map plane stays in view, every frame is
 referred to the same fused plane (and texture) instead of to the previous frame's noisy one.
 
-When a motion cannot be determined the prediction is used for the trajectory, the frame is
-flagged (``FrameResult.status``), never silently, and its planes are not merged into the map;
-neither are the planes of a frame whose pose holds degrees of freedom filled from the prior
-(``FrameResult.motion.prior_dof``).
+A tracked frame is a :class:`FrameMotion`. When a motion cannot be determined the frame is a
+:class:`~navkit.planes.solve.MotionFailure` naming its reason and free degrees of freedom, the
+prediction is used for the trajectory, and its planes are not merged into the map; neither are
+the planes of a frame whose pose holds degrees of freedom filled from the prior
+(``FrameMotion.prior_dof``).
 """
 
 from __future__ import annotations
@@ -38,14 +41,12 @@ import logging
 import time
 from dataclasses import dataclass, field, replace
 
-import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from navkit.errors import ConfigError, InputError, NavkitError
-from navkit.geometry import Plane, canonical_plane, points_in_polygon, se3_inverse
+from navkit.errors import ConfigError, NavkitError
+from navkit.geometry import se3_inverse
 from navkit.geometry._validate import check_settings
-from navkit.geometry.linalg import rows_matmul
 from navkit.planes.dense import DenseFrame, DenseResult, DenseSettings, dense_align, rigid
 from navkit.planes.frame import PlaneObservation
 from navkit.planes.motion import (
@@ -55,19 +56,11 @@ from navkit.planes.motion import (
     depth_consistency,
     estimate_motion,
 )
-from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points
+from navkit.planes.plane_map import MapView, PlaneMap
 from navkit.planes.solve import MotionEstimate, MotionFailure, normal_rank
-from navkit.planes.texture import PlaneTexture
+from navkit.results import Result, deprecated_alias
 
-__all__ = [
-    "DenseGates",
-    "FrameResult",
-    "MapPlane",
-    "MapView",
-    "OdometrySettings",
-    "PlaneMap",
-    "PlaneOdometry",
-]
+__all__ = ["DenseGates", "FrameMotion", "OdometrySettings", "PlaneOdometry"]
 
 log = logging.getLogger(__name__)
 
@@ -216,274 +209,40 @@ class OdometrySettings:
                 )
 
 
-@dataclass
-class MapPlane:
-    """One plane of the map (world frame), fused over the frames that saw it.
-
-    Attributes
-    ----------
-    id : int
-    plane : Plane
-        TLS fit over all kept points (world frame).
-    points : (N, 3) array
-        Sample of inlier points (world frame).
-    outline : (M, 2) array
-        Outline in the plane's own frame (``plane.rho * plane.normal``, ``plane.basis()``).
-    area : float
-        m^2.
-    observations : list of int
-        Frame indices that saw the plane.
-    tex_sum, tex_count : (h, w) arrays
-        Running brightness sum and count on the lattice ``tex_ref + (i0 + i) nu u + (j0 + j) nu v``.
-    tex_ref : (3,) array; tex_axes : (2, 3) array; tex_index0 : (2,) int array
-    """
-
-    id: int
-    plane: Plane
-    points: NDArray[np.float64]
-    outline: NDArray[np.float64]
-    area: float
-    observations: list[int]
-    tex_ref: NDArray[np.float64]
-    tex_axes: NDArray[np.float64]
-    tex_index0: NDArray[np.int64] = field(default_factory=lambda: np.zeros(2, np.int64))
-    tex_sum: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)))
-    tex_count: NDArray[np.float64] = field(default_factory=lambda: np.zeros((0, 0)))
-
-    @property
-    def texture(self) -> NDArray[np.float64]:
-        """Fused brightness ``(h, w)`` in [0, 1], NaN where never seen."""
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return np.where(
-                self.tex_count > 0, self.tex_sum / np.maximum(self.tex_count, 1), np.nan
-            )
-
-    def add_texture(
-        self, image: NDArray[np.float32], mask: NDArray[np.bool_], index0: NDArray[np.int64]
-    ) -> None:
-        """Accumulate a texture sampled on this plane's lattice (window at ``index0``)."""
-        if self.tex_sum.size == 0:
-            self.tex_index0 = np.asarray(index0, np.int64).copy()
-            self.tex_sum = np.zeros(image.shape)
-            self.tex_count = np.zeros(image.shape)
-        lo = np.minimum(self.tex_index0, index0)
-        hi = np.maximum(
-            self.tex_index0 + self.tex_sum.shape[::-1], np.asarray(index0) + image.shape[::-1]
-        )
-        if np.any(lo != self.tex_index0) or np.any(
-            hi != self.tex_index0 + self.tex_sum.shape[::-1]
-        ):
-            S = np.zeros((hi[1] - lo[1], hi[0] - lo[0]))
-            C = np.zeros_like(S)
-            o = self.tex_index0 - lo
-            S[o[1] : o[1] + self.tex_sum.shape[0], o[0] : o[0] + self.tex_sum.shape[1]] = (
-                self.tex_sum
-            )
-            C[o[1] : o[1] + self.tex_sum.shape[0], o[0] : o[0] + self.tex_sum.shape[1]] = (
-                self.tex_count
-            )
-            self.tex_sum, self.tex_count, self.tex_index0 = S, C, lo
-        o = np.asarray(index0) - self.tex_index0
-        win = (slice(o[1], o[1] + image.shape[0]), slice(o[0], o[0] + image.shape[1]))
-        self.tex_sum[win] += np.where(mask, image, 0.0)
-        self.tex_count[win] += mask
-
-
-@dataclass
-class PlaneMap:
-    """The merged plane map (world frame = first frame's sensor frame)."""
-
-    planes: list[MapPlane] = field(default_factory=list)
-    nu: float = 0.02
-
-    def mesh(self) -> tuple[NDArray[np.float64], NDArray[np.uint8], NDArray[np.int64]]:
-        """Textured triangle mesh of all map planes: vertices ``(V, 3)`` at the texture pixel
-        centres, gray colours ``(V, 3)`` uint8, faces ``(F, 3)`` (two per 2 x 2 block of valid
-        texture pixels)."""
-        verts, cols, faces = [], [], []
-        base = 0
-        for mp in self.planes:
-            tex = mp.texture
-            if tex.size == 0:
-                continue
-            h, w = tex.shape
-            valid = np.isfinite(tex)
-            i = (mp.tex_index0[0] + np.arange(w)) * self.nu
-            j = (mp.tex_index0[1] + np.arange(h)) * self.nu
-            P = mp.tex_ref + i[None, :, None] * mp.tex_axes[0] + j[:, None, None] * mp.tex_axes[1]
-            idx = -np.ones((h, w), np.int64)
-            idx[valid] = base + np.arange(valid.sum())
-            verts.append(P[valid])
-            g = np.clip(np.rint(tex[valid] * 255), 0, 255).astype(np.uint8)
-            cols.append(np.repeat(g[:, None], 3, axis=1))
-            a, b, c, d = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
-            ok = (a >= 0) & (b >= 0) & (c >= 0) & (d >= 0)
-            faces.append(
-                np.concatenate(
-                    [np.stack([a[ok], c[ok], b[ok]], 1), np.stack([b[ok], c[ok], d[ok]], 1)]
-                )
-            )
-            base += int(valid.sum())
-        if not verts:
-            return np.zeros((0, 3)), np.zeros((0, 3), np.uint8), np.zeros((0, 3), np.int64)
-        return np.concatenate(verts), np.concatenate(cols), np.concatenate(faces)
-
-    def to_dict(self) -> dict:
-        """JSON-ready description (normals, rho, area, outline in world coordinates, observations)."""
-        out = []
-        for mp in self.planes:
-            o, ax = mp.plane.rho * mp.plane.normal, mp.plane.basis()
-            out.append(
-                {
-                    "id": mp.id,
-                    "normal": mp.plane.normal,
-                    "rho": mp.plane.rho,
-                    "rms": mp.plane.rms,
-                    "area_m2": mp.area,
-                    "points": len(mp.points),
-                    "outline_world": o + mp.outline @ ax if len(mp.outline) else np.zeros((0, 3)),
-                    "observations": mp.observations,
-                    "texture_shape": list(mp.tex_sum.shape),
-                    "texture_nu": self.nu,
-                }
-            )
-        return {"frame": "world = sensor frame of the first frame", "planes": out}
-
-
 @dataclass(frozen=True)
-class MapView(PlaneObservation):
-    """The map's planes seen from a predicted pose, shaped like a frame for
-    :func:`~navkit.planes.motion.estimate_motion` (the map plays frame 1).
+class FrameMotion(Result):
+    """A tracked frame: what :meth:`PlaneOdometry.update` measured (the pose is a measurement).
 
-    Segments are the map planes in the view frame (``T_world_view`` maps view coordinates to
-    the world): fused normal and distance, world outline moved into the view, the fused point
-    count. :meth:`texture` resamples the map's fused texture (bilinear, valid where every
-    neighbour was seen) onto the lattice the solver asks for, cropped to a window around where
-    the current frame sees the plane. There is no camera: the depth check of texture steps is
-    made against the previous frame instead (:class:`PlaneOdometry`).
-
-    Attributes
-    ----------
-    map_planes : tuple of MapPlane
-        ``map_planes[k]`` is segment ``k``.
-    T_world_view : (4, 4) array
-    nu_map : float
-        Pixel size of the fused textures, metres.
-    focus : tuple of (K_k, 3) arrays
-        Per segment, view-frame points of the current frame near the plane (where the
-        texture window is centred; empty = the whole fused texture).
-    margin : float
-        Window margin around ``focus``, metres (the solver's search range).
-    max_pixels : int
-        Largest window side, pixels.
-    """
-
-    map_planes: tuple[MapPlane, ...] = ()
-    T_world_view: NDArray[np.float64] = field(default_factory=lambda: np.eye(4))
-    nu_map: float = 0.02
-    focus: tuple[NDArray[np.float64], ...] = ()
-    margin: float = 0.6
-    max_pixels: int = 400
-
-    @property
-    def has_texture(self) -> bool:
-        return any(mp.tex_sum.size > 0 for mp in self.map_planes)
-
-    def texture(
-        self, k: int, axes: ArrayLike | None = None, ref: ArrayLike | None = None, nu: float = 0.01
-    ) -> PlaneTexture:
-        """Fused texture of map plane ``k`` on the lattice ``ref + (i0 + i) nu u + (j0 + j) nu v``
-        (view frame; default: the plane's own frame), see :mod:`navkit.planes.texture`."""
-        mp, seg = self.map_planes[k], self.segments[k]
-        if mp.tex_sum.size == 0 or not np.any(mp.tex_count > 0):
-            raise InputError(
-                f"map plane {mp.id} has no fused texture", field="texture", expected="a seen plane"
-            )
-        ax = seg.plane.basis() if axes is None else np.asarray(axes, dtype=np.float64)
-        o = seg.plane.rho * seg.plane.normal if ref is None else np.asarray(ref, dtype=np.float64)
-        R, t = self.T_world_view[:3, :3], self.T_world_view[:3, 3]
-        # the fused texture's valid extent, in the requested lattice
-        jj, ii = np.nonzero(mp.tex_count > 0)
-        corners = np.array([[ii.min(), jj.min()], [ii.max(), jj.max()]]) + mp.tex_index0
-        Cw = (
-            mp.tex_ref
-            + (corners[[0, 1, 0, 1], 0, None] * self.nu_map) * mp.tex_axes[0]
-            + (corners[[0, 0, 1, 1], 1, None] * self.nu_map) * mp.tex_axes[1]
-        )
-        uv = rows_matmul(rows_matmul(Cw - t, R) - o, ax.T)
-        lo = np.floor(uv.min(0) / nu).astype(np.int64) - 1
-        hi = np.ceil(uv.max(0) / nu).astype(np.int64) + 1
-        F = self.focus[k] if k < len(self.focus) else np.zeros((0, 3))
-        if len(F):
-            fuv = rows_matmul(F - o, ax.T)
-            flo = np.floor((fuv.min(0) - self.margin) / nu).astype(np.int64)
-            fhi = np.ceil((fuv.max(0) + self.margin) / nu).astype(np.int64)
-            lo, hi = np.maximum(lo, flo), np.minimum(hi, fhi)
-            mid = np.rint(np.median(fuv, axis=0) / nu).astype(np.int64)
-        else:
-            mid = (lo + hi) // 2
-        half = self.max_pixels // 2
-        lo, hi = np.maximum(lo, mid - half), np.minimum(hi, mid + half)
-        size = np.maximum(hi - lo + 1, 1)
-        # lattice points -> world -> the map texture's pixel coordinates (inverse mapping)
-        i = (lo[0] + np.arange(size[0])) * nu
-        j = (lo[1] + np.arange(size[1])) * nu
-        Pv = o + i[None, :, None] * ax[0] + j[:, None, None] * ax[1]
-        Pw = Pv @ R.T + t
-        d = Pw - mp.tex_ref
-        mx = ((d @ mp.tex_axes[0]) / self.nu_map - mp.tex_index0[0]).astype(np.float32)
-        my = ((d @ mp.tex_axes[1]) / self.nu_map - mp.tex_index0[1]).astype(np.float32)
-        seen = mp.tex_count > 0
-        tex = np.where(seen, mp.tex_sum / np.maximum(mp.tex_count, 1), 0.0).astype(np.float32)
-        bc = cv2.BORDER_CONSTANT
-        img = np.asarray(cv2.remap(tex, mx, my, cv2.INTER_LINEAR, borderMode=bc, borderValue=0))
-        seen_f = seen.astype(np.float32)
-        msk = (
-            np.asarray(cv2.remap(seen_f, mx, my, cv2.INTER_LINEAR, borderMode=bc, borderValue=0))
-            > 0.999
-        )
-        return PlaneTexture(
-            np.where(msk, img, np.nan).astype(np.float32),
-            msk,
-            o,
-            ax,
-            lo.astype(np.int64),
-            nu,
-            seg.plane,
-        )
-
-
-@dataclass(frozen=True)
-class FrameResult:
-    """What :meth:`PlaneOdometry.register_frame` did with one frame.
+    A frame whose motion cannot be measured is a :class:`~navkit.planes.solve.MotionFailure`
+    instead, with its reason, its free degrees of freedom and the same frame fields
+    (``index``, ``T_world_frame`` - there the prediction -, ``ms``, ``n_planes``).
 
     Attributes
     ----------
     index : int
+        Frame number (0 = the first frame, which defines the world).
     T_world_frame : (4, 4) array
-    motion : MotionEstimate, MotionFailure or None
-        None for the first frame.
-    status : str
-        ``"first"``, ``"ok"`` or ``"failed: <reason>"`` (then the pose is the constant-velocity
-        prediction).
+    motion : MotionEstimate or None
+        ``T_prev_curr`` and how it was found; None for the first frame.
     case : int
-        Solver case used (3 = >= 3 planes, 2, 1; 0 = none).
+        Solver case used (3 = >= 3 planes, 2, 1; 0 = none: the first frame, or a motion the
+        dense step found from the prediction).
     ms : float
-        Wall time of association + motion + map update, milliseconds.
+        Wall time of :meth:`PlaneOdometry.update`, milliseconds.
     n_planes : int
+        The frame's planes.
     source : str
-        Where the motion came from: ``"map"`` (planes, frame-to-map), ``"frame"`` (planes,
-        frame-to-frame), with ``"+dense"`` when the dense step refined and verified it;
-        ``"prediction+dense"`` when the planes gave nothing the pixels agree with and the
-        dense step started from the constant-velocity prediction (or the prior); ``""``
-        (first frame, or failed: the pose is the prediction and is not a measurement).
-    reason : str
-        Why a frame failed; for a tracked frame a note (e.g. the dense check was
-        inconclusive: too little overlap for the pixels to judge a large motion).
+        Where the motion came from: ``"first"``; ``"map"`` (planes, frame-to-map) or
+        ``"frame"`` (planes, frame-to-frame), with ``"+dense"`` when the dense step refined and
+        verified it; ``"prediction+dense"`` when the planes gave nothing the pixels agree with
+        and the dense step started from the constant-velocity prediction (or the prior).
+    note : str
+        What a reader of the frame should know, e.g. the dense check was inconclusive (too
+        little overlap for the pixels to judge a large motion); empty otherwise.
     dof_sources : dict
         For each degree of freedom (``tx ty tz rx ry rz``, frame axes): what fixed it -
-        ``"planes"`` / ``"planes+texture"`` (plane geometry / texture, when no dense step
-        ran) or the dense terms ``"depth"``, ``"image"``, ``"depth+image"``
+        ``"planes"`` / ``"texture"`` / ``"prior"`` (plane geometry, texture, the motion prior,
+        when no dense step ran) or the dense terms ``"depth"``, ``"image"``, ``"depth+image"``
         (:attr:`~navkit.planes.dense.DenseResult.dof_sources`).
     dense : DenseResult or None
         The accepted dense refinement (None without one).
@@ -493,21 +252,48 @@ class FrameResult:
 
     index: int
     T_world_frame: NDArray[np.float64]
-    motion: MotionEstimate | MotionFailure | None
-    status: str
+    motion: MotionEstimate | None
     case: int
     ms: float
     n_planes: int
-    source: str = ""
-    reason: str = ""
+    source: str
+    note: str = ""
     dof_sources: dict[str, str] = field(default_factory=dict)
     dense: DenseResult | None = None
     reference: int = -1
 
     @property
-    def tracked(self) -> bool:
-        """The pose is a measurement (first frame or a motion that passed every check)."""
-        return self.status == "first" or self.status.startswith("ok")
+    def prior_dof(self) -> tuple[str, ...]:
+        """Degrees of freedom taken from the motion prior (empty when all were measured)."""
+        return () if self.motion is None else self.motion.prior_dof
+
+
+@dataclass(frozen=True)
+class _Prediction:
+    """Stage 2: where the frame is expected, before any measurement."""
+
+    T_prev: NDArray[np.float64]  # T_world_prev (the last pose on the trajectory)
+    step: NDArray[np.float64]  # T_prev_curr predicted (constant velocity or the prior)
+    T: NDArray[np.float64]  # T_world_curr predicted
+    prior: MotionPrior | None
+
+
+@dataclass(frozen=True)
+class _Measured:
+    """Stages 3-5 for one frame: the pose and how it was found (or the failure)."""
+
+    T: NDArray[np.float64]  # T_world_frame (the prediction for a failure)
+    step: NDArray[np.float64]  # T_prev_frame (becomes the constant-velocity prediction)
+    motion: MotionEstimate | MotionFailure | None
+    case: int
+    source: str = ""
+    note: str = ""
+    dof_sources: dict[str, str] = field(default_factory=dict)
+    dense: DenseResult | None = None
+    reference: int = -1
+
+
+_Plane = tuple[str, MotionEstimate, NDArray[np.float64]]  # (source, estimate, T_world_frame)
 
 
 class PlaneOdometry:
@@ -518,7 +304,7 @@ class PlaneOdometry:
         self.settings = settings or OdometrySettings()
         self.map = PlaneMap(nu=self.settings.map_nu)
         self.poses: list[NDArray[np.float64]] = []
-        self.results: list[FrameResult] = []
+        self.results: list[FrameMotion | MotionFailure] = []
         self._prev: PlaneObservation | None = None
         self._velocity = np.eye(4)
         self._velocity_known = False  # a measured motion, not the start or a failure
@@ -531,129 +317,153 @@ class PlaneOdometry:
         self._plane_overlap = 0.0
         self._depth_note = ""
         self.n_frames = 0  # frames registered (frame numbers: poses may keep only the last ones)
-        self._next_plane_id = 0
 
-    def register_frame(
+    def update(
         self, obs: PlaneObservation, prior: MotionPrior | ArrayLike | None = None
-    ) -> FrameResult:
-        """Track one frame (stages 2-6 of the module docstring).
+    ) -> FrameMotion | MotionFailure:
+        """Track one frame (stages 2-7 of the module docstring).
 
         Parameters
         ----------
         obs : PlaneObservation
-            The frame's planes.
+            The frame's planes (stage 1).
         prior : MotionPrior or (4, 4) array, optional
             Predicted motion ``T_prev_curr`` from the previous frame to this one (e.g. visual
             odometry) with its uncertainty (a bare array gets
             :class:`~navkit.planes.motion.MotionPrior`'s default uncertainty). It replaces the
             constant-velocity prediction, sets the association gates, starts the texture
             searches and fills the degrees of freedom neither geometry nor texture fix
-            (``FrameResult.motion.prior_dof``; such a frame is not merged into the map).
+            (``FrameMotion.prior_dof``; such a frame is not merged into the map).
+
+        Returns
+        -------
+        FrameMotion or MotionFailure
+            The measured pose, or why there is none and which degrees of freedom are free
+            (the trajectory then carries the prediction, ``MotionFailure.T_world_frame``).
         """
         t0 = time.perf_counter()
         idx = self.n_frames
         self.n_frames += 1
-        motion: MotionEstimate | MotionFailure | None = None
-        source, reason = "", ""
-        dof_sources: dict[str, str] = {}
-        dense_res: DenseResult | None = None
-        ref_idx = -1
-        dframe = self._dense_frame(obs)
+        dframe = self._dense_frame(obs)  # the frame's image pyramid (None: no dense step)
         if self._prev is None:
-            T = np.eye(4)
-            status, case = "first", 0
+            m = _Measured(np.eye(4), np.eye(4), None, 0, source="first")  # the world frame
         else:
-            mprior = None if prior is None else as_prior(prior)
-            step_pred = self._velocity if mprior is None else mprior.T  # 2
-            T_prev = self.poses[-1]
-            T_pred = T_prev @ step_pred
-            plane, failure = self._planes(obs, T_prev, T_pred, step_pred, mprior)  # 3-4
-            if dframe is not None and self._keyframe is not None:  # dense: refine and verify
-                T_plane = None if plane is None else plane[2]
-                d = self._dense(dframe, T_plane, T_pred)
-                if d is not None:
-                    src, dense_res, T, ref_idx = d
-                    source = ("prediction" if src == "prediction" else plane[0]) + "+dense"  # type: ignore[index]
-                    base = plane[1] if (plane is not None and src != "prediction") else None
-                    step = se3_inverse(T_prev) @ T
-                    motion = (
-                        replace(base, T=step, prior_dof=())
-                        if base is not None
-                        else MotionEstimate(step, 0, (), ())
-                    )
-                    status, case = "ok", (base.case if base is not None else 0)
-                    dof_sources = dict(dense_res.dof_sources)
-                elif (
-                    plane is not None
-                    and not plane[1].prior_dof
-                    and self._plane_overlap < self.settings.gates.min_overlap
-                    and self._depth_agrees(obs, plane[2])
-                ):
-                    # a large motion: the frames share too few pixels for the dense step to
-                    # judge; the plane solution stands on the planes' own checks (depth
-                    # consistency, association) and says so
-                    reason = (
-                        f"dense check inconclusive (overlap {self._plane_overlap:.2f}): "
-                        f"planes only, depth check {self._depth_note}"
-                    )
-                else:
-                    why = self._dense_reason
-                    if plane is not None:
-                        why = f"the {plane[0]} plane solution disagrees with the pixels ({why})"
-                    elif failure is not None:
-                        why = f"{failure.reason}; dense from the prediction: {why}"
-                    failure = MotionFailure(
-                        failure.case if failure is not None else 0,
-                        ("rotation", "translation"),
-                        why,
-                    )
-                    plane = None
-            if motion is None and plane is not None:  # planes only (no dense data)
-                source, est, T = plane
-                step = se3_inverse(T_prev) @ T
-                motion = replace(est, T=step)  # always reported as T_prev_curr
-                status, case = "ok", est.case
-                if est.prior_dof:
-                    status = f"ok (from the prior: {', '.join(est.prior_dof)})"
-                dof_sources = _plane_dof_sources(est)
-            elif motion is None:
-                assert failure is not None
-                motion, step, T = failure, step_pred, T_pred
-                status, case, reason = f"failed: {failure.reason}", failure.case, failure.reason
-                log.warning(
-                    "frame %d: motion not determined (%s); using the prediction",
-                    idx,
-                    failure.reason,
-                )
-            self._velocity = rigid(step)  # 5
-            self._velocity_known = status.startswith("ok")
-        T = rigid(T)  # chained products stay rotations
+            pred = self._predict(prior)  # 2
+            plane, failure = self._planes(obs, pred)  # 3-4
+            m = self._verify(idx, obs, dframe, pred, plane, failure)  # 5
+            self._velocity = rigid(m.step)
+            self._velocity_known = isinstance(m.motion, MotionEstimate)
+        T = rigid(m.T)  # 6: chained products stay rotations
         self.poses.append(T)
-        measured = isinstance(motion, MotionEstimate) and not motion.prior_dof
-        if status == "first" or measured:  # a predicted pose is not good enough for the map
-            self._merge(obs, T, idx)  # 6
-            self._anchor = (obs, T)
-            if dframe is not None:
-                self._last_good = (idx, dframe, T)
-                self._update_keyframe(idx, dframe, T, dense_res, ref_idx)
+        if m.motion is None or (isinstance(m.motion, MotionEstimate) and not m.motion.prior_dof):
+            self._update_map(idx, obs, dframe, T, m)  # 7: only measured poses
         self._prev = obs
-        res = FrameResult(
-            idx,
-            T,
-            motion,
-            status,
-            case,
-            1000 * (time.perf_counter() - t0),
-            len(obs.segments),
-            source,
-            reason,
-            dof_sources,
-            dense_res,
-            ref_idx,
-        )
+        res = self._result(idx, obs, T, m, t0)
         self.results.append(res)
         self._bound()
         return res
+
+    def register_frame(
+        self, obs: PlaneObservation, prior: MotionPrior | ArrayLike | None = None
+    ) -> FrameMotion | MotionFailure:
+        """Deprecated alias of :meth:`update` (removed in the next release)."""
+        deprecated_alias("PlaneOdometry.register_frame", "PlaneOdometry.update")
+        return self.update(obs, prior)
+
+    def _predict(self, prior: MotionPrior | ArrayLike | None) -> _Prediction:
+        """Stage 2: the previous pose moved by the prior, or by the last motion."""
+        mprior = None if prior is None else as_prior(prior)
+        step = self._velocity if mprior is None else mprior.T
+        T_prev = self.poses[-1]
+        return _Prediction(T_prev, step, T_prev @ step, mprior)
+
+    def _verify(
+        self,
+        idx: int,
+        obs: PlaneObservation,
+        dframe: DenseFrame | None,
+        pred: _Prediction,
+        plane: _Plane | None,
+        failure: MotionFailure | None,
+    ) -> _Measured:
+        """Stage 5: the dense refinement and verification of the plane solution (or of the
+        prediction when the planes give nothing the pixels agree with); without dense data the
+        plane solution stands on its own checks. Else the frame fails, at the prediction."""
+        note = ""
+        if dframe is not None and self._keyframe is not None:
+            d = self._dense(dframe, None if plane is None else plane[2], pred.T)
+            if d is not None:
+                return _dense_measured(pred, plane, *d)
+            if (
+                plane is not None
+                and not plane[1].prior_dof
+                and self._plane_overlap < self.settings.gates.min_overlap
+                and self._depth_agrees(obs, plane[2])
+            ):
+                # a large motion: the frames share too few pixels for the dense step to
+                # judge; the plane solution stands on the planes' own checks (depth
+                # consistency, association) and says so
+                note = (
+                    f"dense check inconclusive (overlap {self._plane_overlap:.2f}): "
+                    f"planes only, depth check {self._depth_note}"
+                )
+            else:
+                why = self._dense_reason
+                if plane is not None:
+                    why = f"the {plane[0]} plane solution disagrees with the pixels ({why})"
+                elif failure is not None:
+                    why = f"{failure.reason}; dense from the prediction: {why}"
+                failure = MotionFailure(
+                    failure.case if failure is not None else 0, ("rotation", "translation"), why
+                )
+                plane = None
+        if plane is not None:  # the planes alone
+            source, est, T = plane
+            step = se3_inverse(pred.T_prev) @ T
+            motion = replace(est, T=step)  # always reported as T_prev_curr
+            return _Measured(T, step, motion, est.case, source, note, _plane_dof_sources(est))
+        assert failure is not None
+        log.warning(
+            "frame %d: motion not determined (%s); using the prediction", idx, failure.reason
+        )
+        return _Measured(pred.T, pred.step, failure, failure.case)
+
+    def _update_map(
+        self,
+        idx: int,
+        obs: PlaneObservation,
+        dframe: DenseFrame | None,
+        T: NDArray[np.float64],
+        m: _Measured,
+    ) -> None:
+        """Stage 7: merge the frame's planes into the map; it becomes the reference of the
+        next frame-to-frame step and, with dense data, of the keyframes."""
+        s = self.settings
+        self.map.merge(
+            obs,
+            T,
+            idx,
+            min_points=s.min_map_plane_points,
+            sample=s.map_points,
+            angle_deg=s.merge_angle_deg,
+            distance_m=s.merge_distance,
+            margin_m=s.merge_margin,
+        )
+        self._anchor = (obs, T)
+        if dframe is not None:
+            self._last_good = (idx, dframe, T)
+            self._update_keyframe(idx, dframe, T, m.dense, m.reference)
+
+    def _result(
+        self, idx: int, obs: PlaneObservation, T: NDArray[np.float64], m: _Measured, t0: float
+    ) -> FrameMotion | MotionFailure:
+        ms = 1000 * (time.perf_counter() - t0)
+        n = len(obs.segments)
+        if isinstance(m.motion, MotionFailure):
+            return replace(m.motion, index=idx, T_world_frame=T, ms=ms, n_planes=n)
+        return FrameMotion(
+            idx, T, m.motion, m.case, ms, n, m.source, m.note, m.dof_sources, m.dense, m.reference
+        )
 
     def _bound(self) -> None:
         """Apply ``max_history`` and ``max_map_planes`` (:class:`OdometrySettings`)."""
@@ -671,14 +481,11 @@ class PlaneOdometry:
             self.map.planes = [mp for mp in self.map.planes if id(mp) in kept]
 
     def _planes(
-        self,
-        obs: PlaneObservation,
-        T_prev: NDArray[np.float64],
-        T_pred: NDArray[np.float64],
-        step_pred: NDArray[np.float64],
-        mprior: MotionPrior | None,
-    ) -> tuple[tuple[str, MotionEstimate, NDArray[np.float64]] | None, MotionFailure | None]:
-        """Stages 3-4: the plane solution (source, estimate, ``T_world_frame``) or a failure."""
+        self, obs: PlaneObservation, pred: _Prediction
+    ) -> tuple[_Plane | None, MotionFailure | None]:
+        """Stages 3-4: the plane solution (source, estimate, ``T_world_frame``) - frame-to-map
+        first, frame-to-frame when the map gives less - and the last failure met."""
+        T_prev, T_pred, step_pred, mprior = pred.T_prev, pred.T, pred.step, pred.prior
         # without a prior and a measured last motion (second frame, after a failure) the
         # prediction is weak: frame-to-frame then uses the global (prior-free) association,
         # whose solution is verified on the points; the map is still tried (it is what
@@ -697,7 +504,7 @@ class PlaneOdometry:
                 f2f_prior = replace(f2f_prior, T=se3_inverse(T_ref) @ T_pred)
             elif f2f_prior is not None:
                 f2f_prior = se3_inverse(T_ref) @ T_pred
-        found: list[tuple[str, MotionEstimate, NDArray[np.float64]]] = []
+        found: list[_Plane] = []
         failure: MotionFailure | None = None
         if self.settings.frame_to_map and self.map.planes:  # 3
             r_map = self._track_map(obs, T_pred, mprior)
@@ -832,47 +639,24 @@ class PlaneOdometry:
         self._dense_reason = "; ".join(reasons) if reasons else "no reference frame"
         return None
 
+    def map_view(self, obs: PlaneObservation, T_world_view: NDArray[np.float64]) -> MapView:
+        """The map planes seen from ``T_world_view``, with the texture windows centred on where
+        the frame ``obs`` (placed at ``T_world_view``) sees each of them."""
+        s = self.settings
+        return self.map.view(
+            obs,
+            T_world_view,
+            near_m=3 * s.motion.association.max_distance,
+            margin_m=s.motion.solver.max_shift,
+            max_pixels=s.map_texture_pixels,
+        )
+
     def _rank(self, obs: PlaneObservation) -> int:
         """Plane directions among the frame's own solver-sized planes: the most any solution
         can use (frame-to-frame is skipped when the map already reached it)."""
         m = self.settings.motion
         N = np.array([sg.normal for sg in obs.segments if sg.plane.count >= m.min_plane_points])
         return normal_rank(N.reshape(-1, 3), m.solver.parallel_deg)[0]
-
-    def map_view(self, obs: PlaneObservation, T_world_view: NDArray[np.float64]) -> MapView:
-        """The map planes seen from ``T_world_view``, with the texture windows centred on where
-        the frame ``obs`` (placed at ``T_world_view``) sees each of them."""
-        s = self.settings
-        R, t = T_world_view[:3, :3], T_world_view[:3, 3]
-        P = np.asarray(obs.points, dtype=np.float64).reshape(-1, 3)
-        P = P[:: max(1, len(P) // 20_000)]
-        P = P[np.all(np.isfinite(P), axis=1)]
-        segs, focus, pts = [], [], []
-        for mp in self.map.planes:
-            nv = R.T @ mp.plane.normal
-            n, rho = canonical_plane(nv, float(mp.plane.rho - mp.plane.normal @ t))
-            c = R.T @ (mp.plane.centroid - t)
-            plane = Plane(n, rho, c, mp.plane.rms, mp.plane.count)
-            o_w, ax_w = mp.plane.rho * mp.plane.normal, mp.plane.basis()
-            ov = (
-                rows_matmul(o_w + mp.outline @ ax_w - t, R) if len(mp.outline) else np.zeros((0, 3))
-            )
-            outline = rows_matmul(ov - rho * n, plane.basis().T)
-            segs.append(PlaneSegment(plane, np.zeros(0, np.int64), outline, mp.area))
-            near = np.abs(P @ n - rho) < 3 * s.motion.association.max_distance
-            focus.append(P[near])
-            pts.append(rows_matmul(mp.points[:: max(1, len(mp.points) // 2000)] - t, R))
-        X = np.concatenate(pts) if pts else np.zeros((0, 3))
-        return MapView(
-            ExtractionResult(tuple(segs), -np.ones(len(X), np.int64)),
-            X,
-            map_planes=tuple(self.map.planes),
-            T_world_view=np.asarray(T_world_view, dtype=np.float64),
-            nu_map=self.map.nu,
-            focus=tuple(focus),
-            margin=s.motion.solver.max_shift,
-            max_pixels=s.map_texture_pixels,
-        )
 
     def _track_map(
         self, obs: PlaneObservation, T_pred: NDArray[np.float64], prior: MotionPrior | None
@@ -909,89 +693,10 @@ class PlaneOdometry:
                 )
         return res
 
-    def _merge(self, obs: PlaneObservation, T: NDArray[np.float64], frame: int) -> None:
-        s = self.settings
-        R, t = T[:3, :3], T[:3, 3]
-        rng = np.random.default_rng(frame)
-        P = obs.points.reshape(-1, 3)
-        for k, seg in enumerate(obs.segments):
-            if seg.plane.count < s.min_map_plane_points:
-                continue
-            n, rho = canonical_plane(R @ seg.normal, float(seg.rho + (R @ seg.normal) @ t))
-            pick = (
-                seg.inliers
-                if len(seg.inliers) <= s.map_points
-                else rng.choice(seg.inliers, s.map_points, replace=False)
-            )
-            pts = rows_matmul(P[pick], R.T) + t
-            target = self._find(n, rho, pts)
-            if target is None:
-                plane = Plane(n, rho, pts.mean(0), seg.rms, seg.plane.count)
-                mp = MapPlane(
-                    self._next_plane_id,
-                    plane,
-                    pts,
-                    np.zeros((0, 2)),
-                    0.0,
-                    [frame],
-                    tex_ref=rho * n,
-                    tex_axes=plane.basis(),
-                )
-                self.map.planes.append(mp)
-                self._next_plane_id += 1
-            else:
-                mp = target
-                mp.points = np.vstack([mp.points, pts])
-                if len(mp.points) > 20 * s.map_points:
-                    mp.points = mp.points[
-                        rng.choice(len(mp.points), 20 * s.map_points, replace=False)
-                    ]
-                mp.observations.append(frame)
-            self._refit(mp)
-            if obs.has_texture:
-                axes_c = mp.tex_axes @ R  # world axes seen in the frame
-                ref_c = R.T @ (mp.tex_ref - t)
-                try:
-                    tex = obs.texture(k, axes_c, ref_c, s.map_nu)
-                except NavkitError as exc:  # texture is optional for the map
-                    log.debug("map texture of plane %d skipped: %s", k, exc)
-                    continue
-                mp.add_texture(tex.image, tex.mask, tex.index0)
-
-    def _find(self, n, rho, pts) -> MapPlane | None:
-        s = self.settings
-        best, best_d = None, np.inf
-        for mp in self.map.planes:
-            ang = np.degrees(np.arccos(np.clip(n @ mp.plane.normal, -1, 1)))
-            d = abs(rho - mp.plane.rho)
-            if ang > s.merge_angle_deg or d > s.merge_distance:
-                continue
-            if len(mp.outline) >= 3:
-                o, ax = mp.plane.rho * mp.plane.normal, mp.plane.basis()
-                sub = pts[:: max(1, len(pts) // 300)]
-                if not points_in_polygon(
-                    (sub - o) @ ax.T, mp.outline, tolerance=s.merge_margin
-                ).any():
-                    continue
-            if d < best_d:
-                best, best_d = mp, d
-        return best
-
-    def _refit(self, mp: MapPlane) -> None:
-        X = mp.points
-        c = X.mean(0)
-        w, V = np.linalg.eigh(np.einsum("ni,nj->ij", X - c, X - c))
-        n, rho = canonical_plane(V[:, 0], float(V[:, 0] @ c))
-        mp.plane = Plane(n, rho, c, float(np.sqrt(max(w[0], 0) / len(X))), len(X))
-        o, ax = rho * n, mp.plane.basis()
-        uv = rows_matmul(X - o, ax.T)
-        mp.outline, _ = outline_from_points(uv, 0.05)
-        _, mp.area = outline_from_points(uv, 0.1)
-
     @property
     def tracked(self) -> NDArray[np.bool_]:
-        """``(N,)`` True where the pose is a measurement (see :attr:`FrameResult.tracked`)."""
-        return np.array([r.tracked for r in self.results], dtype=bool)
+        """``(N,)`` True where the pose is a measurement (a :class:`FrameMotion`)."""
+        return np.array([isinstance(r, FrameMotion) for r in self.results], dtype=bool)
 
     @property
     def trajectory(self) -> NDArray[np.float64]:
@@ -1017,3 +722,24 @@ def _plane_dof_sources(est: MotionEstimate) -> dict[str, str]:
     out.update({d: "texture" for d in est.texture_dof})
     out.update({d: "prior" for d in est.prior_dof})
     return out
+
+
+def _dense_measured(
+    pred: _Prediction,
+    plane: _Plane | None,
+    start: str,
+    dense: DenseResult,
+    T: NDArray[np.float64],
+    reference: int,
+) -> _Measured:
+    """The pose the dense step verified: the plane estimate it refined (its geometry and
+    texture cases kept, nothing left to the prior), or a bare estimate when it started from
+    the prediction."""
+    base = plane[1] if (plane is not None and start != "prediction") else None
+    source = ("prediction" if base is None else plane[0]) + "+dense"  # type: ignore[index]
+    step = se3_inverse(pred.T_prev) @ T
+    motion = (
+        replace(base, T=step, prior_dof=()) if base is not None else MotionEstimate(step, 0, (), ())
+    )
+    case = base.case if base is not None else 0
+    return _Measured(T, step, motion, case, source, "", dict(dense.dof_sources), dense, reference)
