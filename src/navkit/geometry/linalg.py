@@ -2,7 +2,7 @@
 
 ``(N, 3) @ (3, k)`` goes to BLAS gemm, which for such tall, thin operands is slow (and much
 slower when its threads compete with other processes: 0.23 s instead of 0.004 s for 307k rows
-on the 2-core development machine). Writing the three terms out is exact in the same way and
+on a loaded 2-core machine). Writing the three terms out is exact in the same way and
 stays in NumPy's element-wise loops.
 """
 

@@ -1003,7 +1003,7 @@ def _mvee_rows(H: NDArray[np.float64], hoff: NDArray[np.int64]) -> NDArray[np.fl
 # whose per-field ``object.__setattr__`` (the price of ``frozen=True``) is ~3x the cost of
 # filling ``__dict__`` directly; these classes have no ``__post_init__`` and stay frozen. The
 # fields are stored one by one into the instance's ``__dict__`` (no keyword dictionary built
-# and merged per record as with ``__dict__.update(x=...)``: ~1.5-2x faster, session 6).
+# and merged per record as with ``__dict__.update(x=...)``: ~1.5-2x faster).
 
 
 def _ellipses(rows: NDArray[np.float64]) -> list[Ellipse]:

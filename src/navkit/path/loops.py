@@ -81,8 +81,8 @@ class LoopCut:
     polyline : (K, 2) array
         Samples of the removed loop (for figures), every ~1 cm (16 to 2000 samples); computed
         on first access from the chain's segments as they were before the cut (kept as
-        ``segments``: lengths, x and y coefficients) - sampling it at the cut cost ~0.3 ms, a
-        third of the worst time per point (issue 12).
+        ``segments``: lengths, x and y coefficients), not at the cut: sampling it costs ~0.3 ms,
+        which would otherwise fall on the point that closes the loop.
     """
 
     s_start: float

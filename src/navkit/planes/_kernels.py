@@ -110,7 +110,7 @@ def patch_moments(
 
     Fills ``valid (hc c, wc c)`` (finite, non-zero range) and ``XP (G, 3, c c)`` (each patch's
     float32 coordinates, 0 where invalid, patch by patch: :func:`refine_pixels` reads the
-    border patches from it - session 7) and returns per patch the raw float64
+    border patches from it) and returns per patch the raw float64
     moment row ``(G, 13)`` (count, sums, sums of outer products: the float32 sums about the
     patch's float32 mean converted as ``extract._moment_rows`` does) and that mean ``(G, 3)``.
 
@@ -293,8 +293,8 @@ def refine_pixels(
     ``rho32 (n_reg,)`` distances, ``M (G, 13)`` the patch moments and ``raster`` the outline
     cell. Per (patch, candidate) the float32 offset ``n . ref - rho`` and per patch the outline
     samples' stride (``extract._sample_stride``) are computed here as the NumPy path computes
-    them (the same float32 / float64 operations in the same order; session 6: ~20 NumPy calls
-    less). The centred float32 coordinates and the bound are recomputed exactly as
+    them (the same float32 / float64 operations in the same order, instead of ~20 NumPy
+    calls). The centred float32 coordinates and the bound are recomputed exactly as
     :func:`patch_moments` / the NumPy path define them.
     Fills ``label (B, c, c)`` (closest candidate within the bound, -1 = none; ties keep the
     earlier slot). Returns ``complete (B,)``, the raw float64 moments ``(n_reg, 13)`` of the
@@ -307,10 +307,10 @@ def refine_pixels(
 
     A whole patch at a time, in loops over its ``c c`` pixels (400: 50 AVX2 vectors, no
     remainder; a row of 20 pixels was 8 + 8 + 4 scalar): the bound and the centred
-    coordinates from the patch's contiguous float32 block (session 7: before, its 20 rows of
-    float64 points were read from the grid, converted and de-interleaved here - the same
-    floats, as an invalid pixel's 0 has range 0 as its NaN had none; those loads were ~40 % of
-    the kernel), then one sweep per candidate. The mixed patches' sums add only the pixels of
+    coordinates from the patch's contiguous float32 block written by :func:`patch_moments` (the
+    same floats as the grid's rows converted here: an invalid pixel's 0 has range 0 as its NaN
+    has none; reading the float64 rows would be ~40 % of the kernel), then one sweep per
+    candidate. The mixed patches' sums add only the pixels of
     the candidate (the other pixels added exact zeros before: the same sums).
     """
     B, m = cand.shape
@@ -476,8 +476,8 @@ def label_image(
     segments.
 
     The segments' sizes ``sizes (K,)`` are known (the counts of their final moments: the valid
-    pixels of the wholesale patches plus the mixed patches' pixels of the segment; session 6:
-    the kernel counted them in a first pass over the mixed patches' labels), so that one raster
+    pixels of the wholesale patches plus the mixed patches' pixels of the segment, with no
+    first pass over the mixed patches' labels to count them), so that one raster
     pass writes each label once and places each inlier. A size that does not match the labels
     raises (checked before every write of a mixed patch's inlier and after every row of a
     wholesale patch, which can overrun by at most ``c - 1`` slots: the buffer has them spare)."""

@@ -33,9 +33,9 @@ The hot passes - the patch moments, the patches' planes, the planar and edge tes
 connected components (union-find instead of OpenCV on the cell-graph image; the same numbering),
 the border candidates, the border refinement with its outline samples, the label image with the
 inliers, the outline samples and rasters - run as compiled kernels (:mod:`navkit.planes._kernels`,
-Numba, issue 12); the NumPy versions here are their oracle (``_extract(..., compiled=False)``;
+Numba); the NumPy versions here are their oracle (``_extract(..., compiled=False)``;
 ``tests/planes/test_kernels.py``, ``docs/kernels.md``) and give the same result bit for bit on
-any CPU (issue 25): both run the same IEEE operations in the same order - float64 sums one term
+any CPU: both run the same IEEE operations in the same order - float64 sums one term
 after the other (:func:`_sum_rows`, the weighted ``bincount`` of the mixed patches' pixels; no
 BLAS product), three-term dot products left to right (:func:`_dot3`; no ``einsum``), the
 closed-form eigenvalue's ``acos`` / ``cos`` with Cephes' arithmetic
@@ -250,7 +250,7 @@ class _Workspace(threading.local):
     """Per-thread scratch buffers reused from call to call (CAPE preallocates its buffers the
     same way). Only temporaries that never leave :func:`extract_planes_organized` live here; the
     results are fresh arrays. Fresh multi-megabyte temporaries cost a page fault per 4 kB on
-    first touch - measured 7-8 ms of a ~16 ms frame on the loaded 2-core development VM. Holds
+    first touch - measured 7-8 ms of a ~16 ms frame on a loaded 2-core machine. Holds
     ~20 MB per thread after a 640 x 480 frame."""
 
     def __init__(self) -> None:

@@ -1,4 +1,4 @@
-"""``navkit run``: recordings streamed through the online capabilities (issue 14).
+"""``navkit run``: recordings streamed through the online capabilities.
 
 - :mod:`~navkit.runtime.sources`: ROS 1 / ROS 2 bags, MCAP, KITTI, CARMEN, RGB-D folders and
   trajectory files as time-ordered :class:`~navkit.runtime.messages.Message` streams;
