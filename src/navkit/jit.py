@@ -86,6 +86,7 @@ KERNEL_MODULES = (
     "obstacles/_kernels_mesh.py",
     "path/_kernels.py",
     "planes/_kernels.py",
+    "planes/_kernels_outline.py",
     "stereo/_kernels.py",
 )
 """Every module with Numba kernels, relative to the package (their stamps key the cache)."""

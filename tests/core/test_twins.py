@@ -24,14 +24,6 @@ pytest.importorskip("numba")
 ROOT = Path(__file__).resolve().parents[2]
 SRC = ROOT / "src" / "navkit"
 
-NO_TABLE_YET = {
-    "navkit.localization._kernels",
-    "navkit.path._kernels",
-    "navkit.planes._kernels",
-}
-"""Kernel modules whose twin table is still to be written (their kernels are compared with their
-twins in tests/<capability>/test_kernels.py, without the marker yet)."""
-
 
 def _module_names() -> list[str]:
     return ["navkit." + rel.removesuffix(".py").replace("/", ".") for rel in jit.KERNEL_MODULES]
@@ -97,14 +89,12 @@ def _used_names() -> dict[str, set[Path]]:
     return out
 
 
-TABLES = [n for n in _module_names() if n not in NO_TABLE_YET]
+TABLES = _module_names()
 
 
-def test_every_kernel_module_declares_its_twins_or_is_listed_as_pending():
-    assert NO_TABLE_YET <= set(_module_names())  # no stale entry
+def test_every_kernel_module_declares_its_twins():
     for name in _module_names():
-        mod = importlib.import_module(name)
-        assert hasattr(mod, "TWINS") != (name in NO_TABLE_YET), name
+        assert hasattr(importlib.import_module(name), "TWINS"), name
 
 
 @pytest.mark.parametrize("name", TABLES)

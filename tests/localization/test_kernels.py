@@ -34,6 +34,7 @@ def _modes(f):  # type: ignore[no-untyped-def]
     return out
 
 
+@pytest.mark.twin("window_offsets", "cubic_pose_scores", "bilinear_pose_scores")
 def test_window_tables_and_subcell_scores_identical(rng):
     from navkit.localization import LikelihoodField
 
@@ -54,6 +55,8 @@ def test_window_tables_and_subcell_scores_identical(rng):
             assert a.dtype == b.dtype == np.int32 and np.array_equal(a, b)
 
 
+@pytest.mark.twin("gather_sums", "expand_sums", "depth_first", "order_desc")
+@pytest.mark.twin("rotated_cells", "flat_table", "window_offsets", "cubic_pose_scores")
 @pytest.mark.parametrize("name", LOGS)
 def test_fixes_identical_on_recorded_logs(data_path, name):
     from navkit.io.carmen import read_carmen
@@ -73,6 +76,67 @@ def test_fixes_identical_on_recorded_logs(data_path, name):
         assert a.score == b.score and a.ok == b.ok
 
 
+@pytest.mark.twin("rotated_cells", "flat_table", "gather_sums", "expand_sums", "depth_first")
+def test_global_search_tables_sums_and_leaves_identical(rng):
+    """A global search's pieces on the kernels and on their twins: the region's cells and flat
+    tables (single rotations and rotation groups), the integer sums of nodes at every level,
+    the children of a batch of nodes with their sums (all of them, and those above a pruning
+    threshold), and the depth-first search's best leaf and collected leaves in order."""
+    from navkit.localization import LikelihoodField
+    from navkit.localization.search import _Search
+
+    walls = np.concatenate(
+        [np.c_[np.linspace(0, 8, 400), np.full(400, y)] for y in (0.0, 5.0)]
+        + [np.c_[np.full(250, x), np.linspace(0, 5, 250)] for x in (0.0, 8.0, 3.3)]
+    )
+    fld = LikelihoodField.from_points(walls, 0.05, 0.1)
+    pts = M._thin(walls[::3] - [4.0, 2.5] + rng.normal(0, 0.01, (len(walls[::3]), 2)), 0.1)
+    K, n = 96, 64
+    thetas = -np.pi + np.arange(K) * (2 * np.pi / K)  # the whole turn, as a global search
+    searches = []
+    for implementation in ("eager", "numpy"):
+        with jit.use(implementation):
+            searches.append(
+                _Search(fld, pts, thetas, np.array([2.4, 1.0]), n, cache=[], levels=7, rot_groups=3)
+            )
+    a, b = searches
+    assert a.compiled and not b.compiled and max(a.a) > 0  # rotation groups in use
+    assert a.a == b.a and a.Wp == b.Wp and np.array_equal(a.flat, b.flat)
+    assert a.F.dtype == b.F.dtype and np.array_equal(a.F, b.F)
+    assert a.FG.keys() == b.FG.keys() and len(a.FG) > 0
+    for h, t in a.FG.items():
+        assert t.dtype == b.FG[h].dtype and np.array_equal(t, b.FG[h])
+    for h in range(7):
+        m = 3000
+        k = rng.integers(0, K, m) >> a.a[h] << a.a[h]  # a group's first rotation
+        ix, iy = rng.integers(0, n, m) >> h << h, rng.integers(0, n, m) >> h << h
+        assert np.array_equal(a.scores(h, k, ix, iy), b.scores(h, k, ix, iy)), h
+    for h in range(1, 7):
+        m = 500  # nodes of level h: a group's first rotation, 2^h-aligned blocks
+        k = rng.integers(0, K, m) >> a.a[h] << a.a[h]
+        ix, iy = rng.integers(0, n, m) >> h << h, rng.integers(0, n, m) >> h << h
+        kb, xb, yb, sb = b._expand(h, k, ix, iy, None)
+        for thr in (-np.inf, float(np.median(sb))):
+            ka, xa, ya, sa = a._expand(h, k, ix, iy, None, thr)
+            if thr == -np.inf:  # every child, in the same order
+                for u, v in ((ka, kb), (xa, xb), (ya, yb), (sa, sb)):
+                    assert np.array_equal(u, v), h
+            else:  # the kernel may leave out children the caller prunes anyway
+                ma, mb = sa > thr, sb > thr
+                for u, v in ((ka, kb), (xa, xb), (ya, yb), (sa, sb)):
+                    assert np.array_equal(u[ma], v[mb]), h
+    for keep in (1.0, 0.9, 0.75):
+        best_a, exact_a = a.run(levels=7, lower=-1.0, cap=10**9, keep=keep)
+        best_b, exact_b = b.run(levels=7, lower=-1.0, cap=10**9, keep=keep)
+        assert exact_a and exact_b and best_a == best_b
+        if keep == 1.0:  # no leaves collected
+            assert a.leaves == b.leaves == []
+            continue
+        la, lb = ([np.concatenate(x) for x in zip(*z.leaves, strict=True)] for z in (a, b))
+        assert len(la[0]) >= 2 and all(np.array_equal(u, v) for u, v in zip(la, lb, strict=True))
+
+
+@pytest.mark.twin("order_desc")
 def test_counting_sort_is_numpys_stable_descending_argsort(rng):
     from navkit.localization import _kernels
 

@@ -220,6 +220,7 @@ def _lowest_best(k, ix, iy, score):  # type: ignore[no-untyped-def]
     return int(k[j]), int(ix[j]), int(iy[j]), len(top)
 
 
+@pytest.mark.twin("depth_first", "expand_sums")
 @pytest.mark.parametrize("compiled", [True, False])
 def test_equal_best_scores_resolve_to_the_lowest_rotation_and_translation(compiled):
     """Two poses score the same (the twin map): the search returns the leaf with the lowest
@@ -249,6 +250,7 @@ def test_equal_best_scores_resolve_to_the_lowest_rotation_and_translation(compil
             assert best[1:] == want[:3]
 
 
+@pytest.mark.twin("rotated_cells", "flat_table", "gather_sums", "expand_sums", "depth_first")
 def test_global_fix_on_two_equally_good_poses_is_the_documented_one():
     """A global fix on the twin map: both backends return the copy with the lower coarse
     ``(k, ix, iy)`` - the lower x here (the same heading) - and report the other as the second

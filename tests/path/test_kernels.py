@@ -61,6 +61,8 @@ def _assert_same(xy: np.ndarray, eps: float, **kw: object) -> int:
     return len(ca)
 
 
+@pytest.mark.twin("within", "natural_fit_endpoints")
+@pytest.mark.twin("append_search", "cut_search", "update_leaves", "find_crossings")
 def test_spirals_and_figure_eights(rng):
     """Synthetic tracks that close loops at shallow and steep angles, with noise."""
     t = np.linspace(0, 6 * np.pi, 1500)
@@ -73,6 +75,7 @@ def test_spirals_and_figure_eights(rng):
     assert sum(loops) > 0
 
 
+@pytest.mark.twin("find_crossings", "update_leaves")
 def test_all_crossings_of_a_chain_match():
     """find_crossings over a whole chain without loop removal, every crossing listed."""
     t = np.linspace(0, 4 * np.pi, 2000)
@@ -102,6 +105,8 @@ def test_all_crossings_of_a_chain_match():
         "odometry/mrclam-dataset7/Robot1_Odometry.dat",
     ],
 )
+@pytest.mark.twin("within", "natural_fit_endpoints")
+@pytest.mark.twin("append_search", "cut_search", "update_leaves", "find_crossings")
 def test_recorded_trajectories(data_path, relative):
     from navkit.io.trajectory import load_planar_track
 
@@ -110,6 +115,7 @@ def test_recorded_trajectories(data_path, relative):
     assert _assert_same(xy, 0.05) >= 1
 
 
+@pytest.mark.twin("within")
 def test_within_is_the_numpy_test(rng):
     """``_kernels.within`` (the exact deviation test of a point, stopping at the first miss)
     gives ``OnlineApproximator._within``'s verdict: residuals at the points' own parameters,
@@ -132,6 +138,7 @@ def test_within_is_the_numpy_test(rng):
             assert got == expected
 
 
+@pytest.mark.twin("gauss_legendre_length", "project", "power_sums", "fit_endpoints")
 def test_freeze_kernels_match_numpy(rng):
     """The freeze's passes - power sums, Gauss-Legendre arc lengths, Newton projection - give
     their NumPy twins' bits, on random cubics and noisy points (1 to 2000 of them, parameters
@@ -163,6 +170,7 @@ def test_freeze_kernels_match_numpy(rng):
             assert ok and np.array_equal(c, ref.coef) and ssr == ref.ssr
 
 
+@pytest.mark.twin("monotone_breaks")
 def test_monotone_breaks_kernel_is_the_python_one(rng):
     """``_kernels.monotone_breaks`` gives ``loops.monotone_breaks`` bit for bit, degenerate
     cubics (lines, parabolas, double roots, roots at the ends) included."""
@@ -183,6 +191,7 @@ def test_monotone_breaks_kernel_is_the_python_one(rng):
             assert np.array_equal(got, expected)
 
 
+@pytest.mark.twin("append_search", "cut_search", "update_leaves")
 def test_compiled_chain_is_the_numpy_chain():
     """``LoopFreeChain.append`` as one kernel call per step (push + search, cut + search) leaves
     the NumPy chain's state: the same segments, monotone pieces, leaf boxes and root box, the
@@ -223,6 +232,73 @@ def test_compiled_chain_is_the_numpy_chain():
         assert np.array_equal(x[1], y[1])  # the root: the whole chain
 
 
+def _figure_eight_segments(tolerance: float):  # type: ignore[no-untyped-def]
+    """The raw segments of a figure eight driven three times (the NumPy recorder, no loop
+    removal): a chain whose pieces overlap their older ones at every crossing."""
+    t = np.linspace(0, 6 * np.pi, 900)
+    xy = np.c_[10 * np.sin(t), 5 * np.sin(2 * t) + 0.02 * t]
+    ref = OnlineApproximator(ApproximatorSettings(tolerance=tolerance, remove_loops=False))
+    ref.compiled = ref._chain.compiled = False
+    for p in xy:
+        ref.add(p)
+    return ref.finish().raw_spline
+
+
+@pytest.mark.twin("push_segment", "update_leaves")
+def test_push_segment_is_the_numpy_push():
+    """``_kernels.push_segment`` (a segment, its monotone pieces, their leaves and ancestors)
+    leaves ``LoopFreeChain._push_segment``'s state, segment after segment: the same starts,
+    pieces and boxes bit for bit, the tree grown as the NumPy chain grows it."""
+    from navkit.path import _kernels as K
+    from navkit.path.loops import LoopFreeChain
+
+    raw = _figure_eight_segments(0.003)  # 67 pieces: the tree grows past its 64 leaves
+    a, b = LoopFreeChain(), LoopFreeChain()
+    a.compiled, b.compiled = True, False
+    for k in range(raw.n_segments):
+        ax, ay, length = raw.ax[k].copy(), raw.ay[k].copy(), float(raw.length[k])
+        a._reserve(5)  # room for the segment and its (at most 5) pieces, as append does
+        a.n_piece = K.push_segment(
+            a._ax, a._ay, a._len, a._s0, a._seg_first_piece, a._pseg, a._pu0, a._pu1,
+            a._lo, a._hi, a._cap, a.n_seg, a.n_piece, ax, ay, length,
+        )  # fmt: skip
+        a.n_seg += 1
+        b._push_segment(ax, ay, length)
+        assert (a.n_seg, a.n_piece) == (b.n_seg, b.n_piece)
+    n, m = a.n_seg, a.n_piece
+    assert m > n  # segments with several monotone pieces
+    for name in ("_ax", "_ay", "_len", "_s0"):
+        assert np.array_equal(getattr(a, name)[:n], getattr(b, name)[:n]), name
+    assert np.array_equal(a._seg_first_piece[: n + 1], b._seg_first_piece[: n + 1])
+    for name in ("_pseg", "_pu0", "_pu1"):
+        assert np.array_equal(getattr(a, name)[:m], getattr(b, name)[:m]), name
+    assert a._cap == b._cap == 128
+    assert np.array_equal(a._lo, b._lo) and np.array_equal(a._hi, b._hi)
+
+
+@pytest.mark.twin("candidate_pairs")
+def test_candidate_pairs_kernel_is_the_numpy_descent():
+    """``_kernels.candidate_pairs`` (depth-first descent of the box tree) gives
+    ``LoopFreeChain._candidate_pairs``' (older, newer) piece pairs in the same order, from
+    every first piece of a chain with crossings (none from beyond its last piece)."""
+    from navkit.path import _kernels as K
+    from navkit.path.loops import LoopFreeChain
+
+    raw = _figure_eight_segments(0.05)
+    chain = LoopFreeChain()
+    chain.compiled = False
+    for k in range(raw.n_segments):
+        chain.append(raw.ax[k], raw.ay[k], raw.length[k], remove_loops=False)
+    total = 0
+    for first in range(chain.n_piece + 1):
+        want_a, want_b = chain._candidate_pairs(first)
+        got_a, got_b = K.candidate_pairs(chain._lo, chain._hi, chain._cap, first, chain.n_piece)
+        assert np.array_equal(got_a, want_a) and np.array_equal(got_b, want_b), first
+        total += len(want_a)
+    assert total > chain.n_piece  # neighbours and the crossings' overlapping boxes
+
+
+@pytest.mark.twin("natural_fit_endpoints")
 def test_natural_fit_kernel_matches_numpy(rng):
     """``_kernels.natural_fit_endpoints`` (the freeze's fit over t, arc lengths, refit and
     projection in one call, in a reused workspace) against the NumPy steps of
@@ -270,6 +346,10 @@ def _random_track(rng: np.random.Generator, n: int) -> np.ndarray:
     return xy * 10.0 ** rng.uniform(-1, 1)
 
 
+@pytest.mark.twin(
+    "within", "natural_fit_endpoints", "power_sums", "gauss_legendre_length", "project"
+)
+@pytest.mark.twin("append_search", "cut_search", "update_leaves", "find_crossings")
 @pytest.mark.parametrize("variant", VARIANTS)
 def test_random_trajectories_every_variant(variant):
     """Random tracks (loops at every angle, noise, repeats, NaN rows), every fitting variant,

@@ -53,6 +53,7 @@ def assert_same(P: np.ndarray, s: ExtractionSettings | None = None) -> int:
     return len(a.segments)
 
 
+@pytest.mark.twin("patch_moments")
 def test_patch_moments_bit_identical(pairs):
     """The fused moments kernel gives NumPy's float32 block sums bit for bit (cells 20 and 7:
     the pairwise summation with and without the eight running sums' remainder)."""
@@ -74,12 +75,16 @@ def test_patch_moments_bit_identical(pairs):
         assert a.XP is not None and np.array_equal(a.XP, X)
 
 
+@pytest.mark.twin("patch_moments", "plane_rows", "patch_graph", "prune_merge", "sum_rows")
+@pytest.mark.twin("border_patches", "refine_pixels", "label_image", "outline_samples")
+@pytest.mark.twin("outline_rasters", "close_rasters")
 @pytest.mark.parametrize("n_dirs", [1, 2, 3])
 @pytest.mark.parametrize("refine", ["boundary", "full"])
 def test_simulator_frames(pairs, n_dirs, refine):
     assert assert_same(pairs[n_dirs].f1.frame.points(), ExtractionSettings(refine=refine)) >= 1
 
 
+@pytest.mark.twin("refine_pixels", "label_image", "outline_samples", "prune_merge")
 def test_real_slambook_and_cape(data_path):
     from navkit.io.rgbd import read_cape_frame, read_simple_rgbd
 
@@ -92,6 +97,7 @@ def test_real_slambook_and_cape(data_path):
     assert assert_same(read_cape_frame(data_path("rgbd/cape-tunnel")).points) >= 2
 
 
+@pytest.mark.twin("refine_pixels", "label_image", "outline_samples", "prune_merge")
 def test_real_pcl_kinect(data_path):
     from navkit.io.pointcloud import read_pcd
 
@@ -99,6 +105,7 @@ def test_real_pcl_kinect(data_path):
         assert assert_same(read_pcd(data_path(f"rgbd/pcl-kinect/capture000{k}.pcd")).grid()) >= 2
 
 
+@pytest.mark.twin("refine_pixels", "label_image", "outline_samples", "prune_merge")
 def test_real_7scenes(data_path):
     """All 100 frames (depth in mm, 0 and 65535 = no return; fx = fy = 585, c = (320, 240))."""
     import cv2
@@ -130,6 +137,7 @@ def test_backproject_same_bits(data_path):
     assert np.array_equal(a.view(np.uint64), b.view(np.uint64))
 
 
+@pytest.mark.twin("outline_rasters", "close_rasters")
 def test_outline_rasters_match_outline_from_points(rng):
     """The rasters of all planes in one compiled pass give ``outline_from_points``'s outlines
     and areas: point clouds with NaN rows, quadrilaterals (one with a NaN corner), a plane with
@@ -160,6 +168,7 @@ def test_outline_rasters_match_outline_from_points(rng):
     assert len(got[1][0]) == 0 and len(got[0][0]) >= 3 and got[3][1] > 0
 
 
+@pytest.mark.twin("cell_components")
 def test_cell_components_match_opencv(rng):
     """The union-find components of the cell graph are OpenCV's ``connectedComponents`` of the
     graph image (numbered by first patch in raster order, small ones dropped), on random
@@ -190,6 +199,7 @@ def test_cell_components_match_opencv(rng):
         assert np.array_equal(got, remap[comp + 1]), trial
 
 
+@pytest.mark.twin("patch_graph")
 def test_patch_graph_same_bits(pairs):
     """The compiled planar test and edge tests give the NumPy formulas' decisions (the bounds
     bit for bit; the dot products of three terms left to right in both)."""
@@ -227,6 +237,7 @@ def test_patch_graph_same_bits(pairs):
         assert planar.sum() > 20 and eh.sum() > 20
 
 
+@pytest.mark.twin("border_patches", "dense_components")
 def test_border_patches_and_dense_components(rng):
     """The compiled border-patch candidates and coplanar-region components equal the NumPy
     versions on random region maps and adjacency matrices."""
@@ -269,13 +280,14 @@ def test_largest_contour_is_opencvs(rng):
     assert n > 40
 
 
+@pytest.mark.twin("close_rasters")
 def test_close_rasters_is_opencvs_closing(rng):
     """The compiled 3 x 3 closing of rasters packed one after the other gives OpenCV's
     ``morphologyEx(MORPH_CLOSE)`` cells (its default border) and their count, on random
     rasters down to 1 x 1; rasters of another status are left alone."""
     import cv2
 
-    from navkit.planes._kernels import close_rasters
+    from navkit.planes._kernels_outline import close_rasters
 
     shapes = [(int(rng.integers(1, 40)), int(rng.integers(1, 40))) for _ in range(40)]
     shapes += [(1, 1), (1, 7), (9, 1), (2, 2)]
@@ -294,6 +306,7 @@ def test_close_rasters_is_opencvs_closing(rng):
         assert cells[k] == (0 if status[k] else np.count_nonzero(want))
 
 
+@pytest.mark.twin("prune_merge", "cell_components")
 def test_degenerate_region_takes_the_numpy_steps(monkeypatch):
     """A region whose points lie on a line (repeated smallest eigenvalue: the closed form has
     no LAPACK vector) makes the compiled steps 3-4 (``prune_merge``) report it; the extraction
@@ -333,6 +346,7 @@ def test_canonical_planes_are_canonical_plane_bit_for_bit(rng):
             assert np.array_equal(got_n[i], want_n) and got_r[i] == want_r
 
 
+@pytest.mark.twin("acos_scalar", "cos_scalar")
 def test_fixed_acos_cos_are_the_kernels_bits_and_libm_close(rng):
     """The closed-form eigenvalue's ``acos`` and ``cos`` (Cephes, :mod:`navkit.geometry.angles`)
     give the compiled scalar versions' bits - the same IEEE operations in the same order, so on
@@ -371,6 +385,7 @@ def test_fixed_acos_cos_are_the_kernels_bits_and_libm_close(rng):
     assert np.all(np.abs(got - want)[big] <= 2 * np.spacing(np.abs(want[big])))
 
 
+@pytest.mark.twin("sum_rows")
 def test_sum_rows_bit_for_bit(rng):
     """The region sums of moment rows: ``extract._sum_rows`` (``numpy.add.at``) gives the
     kernel's bits - each group's rows added one after the other from +0 in both - on rows whose
@@ -388,6 +403,7 @@ def test_sum_rows_bit_for_bit(rng):
     assert _same_bits(_sum_rows(np.full(5, -1), 3, M[:5]), np.zeros((3, 13)))
 
 
+@pytest.mark.twin("plane_rows")
 def test_plane_rows_bit_for_bit(rng):
     """The TLS planes of moment rows, compiled (``plane_rows``) and NumPy
     (``smallest_eigenpairs``), with and without the Rayleigh quotient: the same normals, rho,

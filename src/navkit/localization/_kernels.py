@@ -18,6 +18,21 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+TWINS = {
+    "bilinear_pose_scores": "navkit.localization.matcher._bilinear_scores",
+    "cubic_pose_scores": "navkit.localization.matcher._fine_scores",
+    "depth_first": "navkit.localization.search._Search.run",
+    "expand_sums": "navkit.localization.search._Search._expand",
+    "flat_table": "navkit.localization.search._Search._table",
+    "gather_sums": "navkit.localization.search._Search._sums",
+    "order_desc": "navkit.localization.search._Search._order",
+    "rotated_cells": "navkit.localization.search._Search._cells",
+    "window_offsets": "navkit.localization.search._Search._padded_window",
+}
+"""Each kernel -> its NumPy twin, the NumPy path of that function (``depth_first``: ``run``'s
+recursive ``descend``; ``expand_sums``: ``_children`` then ``scores``; ``gather_sums``: also
+``_sums_group``'s; ``order_desc``: ``np.argsort(-bound, kind="stable")``)."""
+
 
 @njit(cache=True)
 def gather_sums(

@@ -23,6 +23,29 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+TWINS = {
+    "append_search": "navkit.path.loops.LoopFreeChain.append",
+    "candidate_pairs": "navkit.path.loops.LoopFreeChain._candidate_pairs",
+    "cut_search": "navkit.path.loops.LoopFreeChain._cut",
+    "find_crossings": "navkit.path.loops.LoopFreeChain.find_crossings",
+    "fit_endpoints": "navkit.path.fitting._fit_endpoints",
+    "gauss_legendre_length": "navkit.path.spline.gauss_legendre_length",
+    "monotone_breaks": "navkit.path.loops.monotone_breaks",
+    "natural_fit_endpoints": "navkit.path.approximator.OnlineApproximator._natural_fit",
+    "power_sums": "navkit.path.fitting.power_sums",
+    "project": "navkit.path.fitting.project",
+    "push_segment": "navkit.path.loops.LoopFreeChain._push_segment",
+    "update_leaves": "navkit.path.loops.LoopFreeChain._update_leaves",
+    "within": "navkit.path.approximator.OnlineApproximator._within",
+}
+"""Each public kernel -> its NumPy twin (``append_search``: ``append``'s push and first
+search; ``cut_search``: ``_cut`` and the next search)."""
+
+HELPERS = ("refine_crossings", "update_tree")
+"""Kernels only other kernels call, with no NumPy function of their own: the refinement passes
+inside ``LoopFreeChain.find_crossings`` and the ancestors' update inside ``_update_leaves``
+(compared through :func:`find_crossings`, :func:`update_leaves` and the chain's tests)."""
+
 
 @njit(cache=True)
 def _cubic(c: np.ndarray, u: float) -> float:  # pragma: no cover - compiled

@@ -32,7 +32,7 @@ memory with them.
 The hot passes - the patch moments, the patches' planes, the planar and edge tests, the
 connected components (union-find instead of OpenCV on the cell-graph image; the same numbering),
 the border candidates, the border refinement with its outline samples, the label image with the
-inliers, the outline samples and rasters - run as compiled kernels (:mod:`navkit.planes._kernels`,
+inliers, the outline samples and rasters - run as compiled kernels (``navkit.planes._kernels*``,
 Numba); the NumPy versions here are their oracle (``_extract(..., compiled=False)``;
 ``tests/planes/test_kernels.py``, ``docs/kernels.md``) and give the same result bit for bit on
 any CPU: both run the same IEEE operations in the same order - float64 sums one term
@@ -279,6 +279,19 @@ def _kernels():  # type: ignore[no-untyped-def]
 
         _KERNELS.append(_kernels)
     return _KERNELS[0]
+
+
+_OUTLINE_KERNELS: list = []
+
+
+def _outline_kernels():  # type: ignore[no-untyped-def]
+    """The compiled kernels of the last step, the label image and the outlines
+    (:mod:`navkit.planes._kernels_outline`), imported on first use."""
+    if not _OUTLINE_KERNELS:
+        from navkit.planes import _kernels_outline
+
+        _OUTLINE_KERNELS.append(_kernels_outline)
+    return _OUTLINE_KERNELS[0]
 
 
 # ------------------------------------------------------------------------------ moments
@@ -933,7 +946,7 @@ def _extract(
     segmap = new_id[cellmap + 1]
     lab_cell = new_id[np.where(wholesale, comp, -1) + 1].reshape(hc, wc)
     if compiled:
-        labels, inl, cuts = _kernels().label_image(
+        labels, inl, cuts = _outline_kernels().label_image(
             pt.valid, lab_cell, ids, bd.complete, bd.label, new_id, count[keep], H, W
         )
         inliers = [inl[cuts[k] : cuts[k + 1]] for k in range(len(keep))]
@@ -991,8 +1004,8 @@ def _label_image_numpy(
     H: int,
     W: int,
 ) -> tuple[NDArray[np.int64], list[NDArray[np.int64]]]:
-    """NumPy oracle of :func:`navkit.planes._kernels.label_image`: the label image ``(H, W)``
-    and each segment's inliers in raster order."""
+    """NumPy oracle of :func:`navkit.planes._kernels_outline.label_image`: the label image
+    ``(H, W)`` and each segment's inliers in raster order."""
     hc, wc = lab_cell.shape
     c = valid.shape[0] // hc
     K = int(new_id.max()) + 1
@@ -1100,7 +1113,7 @@ def _outlines(
     K = len(planes)
     axes, off = _plane_frames(planes)
     if compiled:  # quadrilaterals, strides, grouping and projection in one kernel, same floats
-        uv_all, cuts, q_used, ucuts = _kernels().outline_samples(
+        uv_all, cuts, q_used, ucuts = _outline_kernels().outline_samples(
             pt.P, pt.valid, labels, wholesale, segmap, pt.M, points, point_region, new_id, axes,
             off, c, cell,
         )  # fmt: skip
@@ -1177,11 +1190,12 @@ def _outlines_compiled(
 ) -> list[tuple[NDArray[np.float64], float]]:
     """``outline_from_points(uv[cuts[k]:cuts[k + 1]:step[k]], cell, quads=quads[qcuts[k]:
     qcuts[k + 1]])`` for every segment ``k``, the same outlines and areas: the rasters of all
-    segments drawn in one compiled pass (:func:`navkit.planes._kernels.outline_rasters`), per
-    segment OpenCV's polygon fill, the closings of all rasters in one compiled pass
-    (:func:`navkit.planes._kernels.close_rasters`, OpenCV's cells) and per segment the contour
-    (``segments.outline_of_closed``)."""
-    buf, start, shape, lo, status, qint, qfin = _kernels().outline_rasters(
+    segments drawn in one compiled pass
+    (:func:`navkit.planes._kernels_outline.outline_rasters`), per segment OpenCV's polygon fill,
+    the closings of all rasters in one compiled pass
+    (:func:`navkit.planes._kernels_outline.close_rasters`, OpenCV's cells) and per segment the
+    contour (``segments.outline_of_closed``)."""
+    buf, start, shape, lo, status, qint, qfin = _outline_kernels().outline_rasters(
         np.ascontiguousarray(uv, dtype=np.float64).reshape(-1, 2),
         cuts,
         step,
@@ -1199,7 +1213,7 @@ def _outlines_compiled(
             qk = qint[qcuts[k] : qcuts[k + 1]][qfin[qcuts[k] : qcuts[k + 1]]]
             if len(qk):
                 cv2.fillPoly(grid, list(qk), 1, cv2.LINE_8, 4)
-    covered = _kernels().close_rasters(buf, start, shape, status)  # OpenCV's 3 x 3 closing
+    covered = _outline_kernels().close_rasters(buf, start, shape, status)  # OpenCV's closing
     out = []
     for k in range(K):
         if status[k] == 1:  # fewer than 3 points and corners

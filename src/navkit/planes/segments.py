@@ -120,8 +120,8 @@ def outline_of_closed(
 ) -> tuple[NDArray[np.float64], float]:
     """:func:`outline_of_raster` after its closing: ``grid`` is the closed raster and
     ``area`` its covered area (m^2). The organised extraction closes the rasters of all planes
-    in one compiled pass (``navkit.planes._kernels.close_rasters``, the same cells) and calls
-    this per plane."""
+    in one compiled pass (``navkit.planes._kernels_outline.close_rasters``, the same cells) and
+    calls this per plane."""
     contours, _ = cv2.findContours(grid, cv2.RETR_EXTERNAL, cv2.CHAIN_APPROX_SIMPLE)
     if not contours:
         return np.zeros((0, 2)), area
