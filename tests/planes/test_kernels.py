@@ -142,7 +142,7 @@ def test_outline_rasters_match_outline_from_points(rng):
     """The rasters of all planes in one compiled pass give ``outline_from_points``'s outlines
     and areas: point clouds with NaN rows, quadrilaterals (one with a NaN corner), a plane with
     two points only (empty outline) and one whose raster exceeds 4e6 cells (coarsened)."""
-    from navkit.planes.extract import _outlines_compiled
+    from navkit.planes.outlines import _outlines_compiled
     from navkit.planes.segments import outline_from_points
 
     sets = []
@@ -242,7 +242,7 @@ def test_border_patches_and_dense_components(rng):
     """The compiled border-patch candidates and coplanar-region components equal the NumPy
     versions on random region maps and adjacency matrices."""
     from navkit.planes import _kernels
-    from navkit.planes.extract import _border_patches, _dense_components
+    from navkit.planes.regions import _border_patches, _dense_components
 
     for trial in range(30):
         hc, wc = int(rng.integers(1, 25)), int(rng.integers(1, 33))
@@ -311,15 +311,15 @@ def test_degenerate_region_takes_the_numpy_steps(monkeypatch):
     """A region whose points lie on a line (repeated smallest eigenvalue: the closed form has
     no LAPACK vector) makes the compiled steps 3-4 (``prune_merge``) report it; the extraction
     then takes the NumPy steps and still agrees with the oracle."""
-    from navkit.planes import extract
+    from navkit.planes import regions
 
     P = np.zeros((100, 120, 3))  # y = 0, z = 2: the covariances are exactly diag(a, 0, 0)
     P[:, :, 0] = np.linspace(-1.0, 1.0, 120)[None, :]
     P[:, :, 2] = 2.0
     steps = []
-    numpy_steps = extract._prune_merge
+    numpy_steps = regions._prune_merge
     monkeypatch.setattr(
-        extract, "_prune_merge", lambda *a, **k: steps.append(k) or numpy_steps(*a, **k)
+        regions, "_prune_merge", lambda *a, **k: steps.append(k) or numpy_steps(*a, **k)
     )
     assert assert_same(P) >= 1
     assert len(steps) == 2  # the compiled path's fallback, then the oracle's own call

@@ -48,14 +48,14 @@ MAX_CELL = 128  # NumPy's PW_BLOCKSIZE: a patch's row sums are one pairwise bloc
 
 TWINS = {
     "acos_scalar": "navkit.geometry.angles.acos",
-    "border_patches": "navkit.planes.extract._border_patches",
-    "cell_components": "navkit.planes.extract._grow_regions",
+    "border_patches": "navkit.planes.regions._border_patches",
+    "cell_components": "navkit.planes.regions._grow_regions",
     "cos_scalar": "navkit.geometry.angles.cos",
-    "dense_components": "navkit.planes.extract._dense_components",
-    "patch_graph": "navkit.planes.extract._grow_regions",
+    "dense_components": "navkit.planes.regions._dense_components",
+    "patch_graph": "navkit.planes.regions._grow_regions",
     "patch_moments": "navkit.planes.extract._patch_moments",
     "plane_rows": "navkit.planes.extract._planes_from_rows",
-    "prune_merge": "navkit.planes.extract._prune_merge",
+    "prune_merge": "navkit.planes.regions._prune_merge",
     "refine_pixels": "navkit.planes.extract._refine_border_numpy",
     "sum_rows": "navkit.planes.extract._sum_rows",
 }
@@ -654,7 +654,7 @@ def patch_graph(
     cos_t: float,
     distance_factor: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """Steps 2-3 of the extraction (see ``extract._grow_regions``) in one loop over the patches:
+    """Steps 2-3 of the extraction (see ``regions._grow_regions``) in one loop over the patches:
     the thickness bound ``rms_base + rms_quadratic |mean|^2``, the planar test (``count >=
     min_count`` and ``rms < bound``) and the tests of the edges to the right and below that do
     not depend on the kept set (normals within ``cos_t``, each centroid within ``distance_factor
@@ -709,7 +709,7 @@ def cell_components(
     """Connected components of the kept patches ``keep (hc, wc)`` joined by the edges ``eh
     (hc, wc - 1)``, ``ev (hc - 1, wc)`` (union-find), numbered by their first patch in raster
     order - the order of OpenCV's ``connectedComponents`` on the cell-graph image of
-    ``extract._grow_regions`` - those below ``min_cells`` patches dropped and the others
+    ``regions._grow_regions`` - those below ``min_cells`` patches dropped and the others
     renumbered in that order. Returns their number and the component of each patch ``(G,)``
     (-1 = none)."""
     hc, wc = keep.shape
@@ -892,7 +892,7 @@ def prune_merge(
     rms_base: float,
     rms_quadratic: float,
 ) -> tuple[int, int, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """Steps 3-4 of the extraction (``extract._prune_merge`` with ``extract._grow_regions``'
+    """Steps 3-4 of the extraction (``regions._prune_merge`` with ``regions._grow_regions``'
     components) in one call, and the planes of the final regions: the components of the planar
     patches, their region planes (sums of the patch rows, :func:`plane_rows`), the patches that
     disagree with their region's plane dropped, the components again, the coplanar regions'

@@ -23,9 +23,9 @@ __all__ = ["close_rasters", "label_image", "outline_rasters", "outline_samples"]
 
 TWINS = {
     "close_rasters": "navkit.planes.segments.outline_of_raster",
-    "label_image": "navkit.planes.extract._label_image_numpy",
+    "label_image": "navkit.planes.outlines._label_image_numpy",
     "outline_rasters": "navkit.planes.segments.outline_from_points",
-    "outline_samples": "navkit.planes.extract._outlines",
+    "outline_samples": "navkit.planes.outlines._outlines",
 }
 """Each kernel -> its NumPy twin (``close_rasters``: the OpenCV closing and the cell count of
 ``outline_of_raster``; ``outline_samples``: the NumPy path of ``_outlines`` before the
@@ -127,7 +127,7 @@ def outline_rasters(
     np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray
 ]:  # pragma: no cover - compiled
     """The rasters of :func:`navkit.planes.segments.outline_from_points` for all segments at
-    once (see ``extract._outlines``): segment ``k`` has the points ``uv[cuts[k]:cuts[k + 1]:
+    once (see ``outlines._outlines``): segment ``k`` has the points ``uv[cuts[k]:cuts[k + 1]:
     step[k]] (., 2)`` and the quadrilaterals ``quads[qcuts[k]:qcuts[k + 1]] (., 4, 2)``.
 
     The bounding box, the raster size and the cells of the points are computed as that
@@ -216,7 +216,7 @@ def outline_rasters(
 def _project(
     x: float, y: float, z: float, axes: np.ndarray, off: np.ndarray, k: int, a: int
 ) -> float:  # pragma: no cover - compiled
-    """In-plane coordinate ``a`` of a point on segment ``k``'s axes (``extract._outlines``'
+    """In-plane coordinate ``a`` of a point on segment ``k``'s axes (``outlines._outlines``'
     arithmetic: ``x A0 + y A1 + z A2 - off``, left to right)."""
     return x * axes[k, a, 0] + y * axes[k, a, 1] + z * axes[k, a, 2] - off[k, a]
 
@@ -237,7 +237,7 @@ def outline_samples(
     c: int,
     cell: float,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # pragma: no cover - compiled
-    """What every segment's outline is rasterised from (see ``extract._outlines``), in plane
+    """What every segment's outline is rasterised from (see ``outlines._outlines``), in plane
     coordinates: the quadrilaterals of its wholesale patches that sample the plane densely and
     the points - the sampled pixels ``points (3, N)`` float32 of the mixed patches (regions
     ``point_region``, segment ``new_id[region + 1]``, -1 = none), then every ``t``-th row and column of the valid pixels of its
