@@ -177,7 +177,8 @@ def _mission_rows() -> list[Row]:
         run_mission,
     )
     from navkit.obstacles.evaluate import distance_to_polygon as _distance_to_polygon
-    from navkit.sim import footprint, load_scene
+    from navkit.sim import load_scene
+    from navkit.sim.footprints import footprint
 
     route, overrides = load_route(builtin_route_path("yard"))
     route = dataclasses.replace(route, block_at=5.0)

@@ -65,7 +65,8 @@ def _real_logs(quick: bool) -> list[Row]:
 
     from navkit import datasets
     from navkit.io.carmen import read_carmen
-    from navkit.localization import Localizer, build_map_from_scans, reported_poses
+    from navkit.localization import Localizer, build_map_from_scans
+    from navkit.localization.evaluation import reported_poses
 
     rows: list[Row] = []
     logs = LOGS[:2] if quick else LOGS

@@ -63,7 +63,8 @@ def cpu_wall_time(fn: Callable[[], Any], repeats: int = 7, warmup: int = 1) -> t
 _COMPILE_SCRIPT = """
 import json, time, numpy as np
 t0 = time.perf_counter(); c0 = time.process_time()
-from navkit.obstacles import ObstacleSettings, Mounting, cloud_to_grid, detect_obstacles_in_grid
+from navkit.obstacles import ObstacleSettings, Mounting, detect_obstacles_in_grid
+from navkit.obstacles.grids import cloud_to_grid
 from navkit.obstacles import _kernels_grid, _kernels_map, _kernels_mesh  # imports numba
 t_import = time.perf_counter() - t0
 from navkit.experiments.obstacles import kitti_frame
@@ -117,12 +118,8 @@ def backend_comparison(
     "stages 1-7" - no shapes, but the obstacle records with their hulls) and Patchwork++,
     frame by frame in the same run."""
     from navkit import jit
-    from navkit.obstacles import (
-        Mounting,
-        ObstacleSettings,
-        cloud_to_grid,
-        detect_obstacles_in_grid,
-    )
+    from navkit.obstacles import Mounting, ObstacleSettings, detect_obstacles_in_grid
+    from navkit.obstacles.grids import cloud_to_grid
 
     def run_nav(pts: Any, st: Any, implementation: str) -> None:
         with jit.use("eager" if implementation == "compiled" else "numpy"):
@@ -221,14 +218,10 @@ def run(quick: bool = False) -> list[Row]:
     import logging
 
     from navkit.errors import DataNotFoundError
-    from navkit.obstacles import (
-        GROUND,
-        Mounting,
-        ObstacleSettings,
-        cloud_to_grid,
-        detect_obstacles_in_grid,
-        ground_scores,
-    )
+    from navkit.obstacles import Mounting, ObstacleSettings, detect_obstacles_in_grid
+    from navkit.obstacles.evaluate import ground_scores
+    from navkit.obstacles.grids import cloud_to_grid
+    from navkit.obstacles.rules import GROUND
 
     log = logging.getLogger(__name__)
     rows: list[Row] = []

@@ -147,8 +147,9 @@ def brute_force_loops(spline, step: float) -> tuple[int, float]:
 
 # --------------------------------------------------------------------------- the benchmark
 def run(quick: bool = False) -> list[Row]:
-    from navkit.path import ApproximatorSettings, approximate, find_crossings
+    from navkit.path import ApproximatorSettings, approximate
     from navkit.path.control import ReturnSettings
+    from navkit.path.loops import find_crossings
     from navkit.sensors import VisualOdometryNoise
     from navkit.sim.return_sim import leg_drive, simulate_returns
 

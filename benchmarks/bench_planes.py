@@ -15,7 +15,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from benchmarks.common import Row, median_time, time_ratio
-from navkit.geometry import rotation_angle, se3_from_rt, se3_from_xyz_quat, se3_inverse
+from navkit.geometry import se3_from_rt, se3_from_xyz_quat, se3_inverse
+from navkit.geometry.rotations import rotation_angle
 from navkit.planes import (
     ExtractionSettings,
     MotionEstimate,
@@ -28,7 +29,8 @@ from navkit.planes import (
 from navkit.planes.frame import reproject_rgbd
 from navkit.planes.metrics import ate, rpe
 from navkit.sensors import PinholeCamera, RGBDFrame
-from navkit.sim import Ground, RangeNoise, Scene, Texture, Wall, render_rgbd
+from navkit.sim import Ground, Scene, Texture, Wall, render_rgbd
+from navkit.sim.scanners import RangeNoise
 
 log = logging.getLogger(__name__)
 AREA = "planes"

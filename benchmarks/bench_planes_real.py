@@ -58,7 +58,8 @@ def cpu_median(fn: Callable[[], Any], repeats: int = 3) -> tuple[float, Any]:
 
 def motion_error(T_est: np.ndarray, T_ref: np.ndarray) -> tuple[float, float]:
     """(rotation deg, translation cm) of ``T_ref^-1 T_est``."""
-    from navkit.geometry import rotation_angle, se3_inverse
+    from navkit.geometry import se3_inverse
+    from navkit.geometry.rotations import rotation_angle
 
     E = se3_inverse(T_ref) @ T_est
     return float(np.degrees(rotation_angle(E[:3, :3]))), float(100 * np.linalg.norm(E[:3, 3]))
@@ -359,7 +360,7 @@ def room_rows(quick: bool) -> list[Row]:
 
 def kinect_rows(quick: bool) -> list[Row]:
     from navkit import datasets
-    from navkit.geometry import rotation_angle
+    from navkit.geometry.rotations import rotation_angle
     from navkit.io.pointcloud import read_pcd
     from navkit.planes import estimate_motion, observe_points
     from navkit.planes.motion import matched_pairs

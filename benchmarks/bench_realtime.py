@@ -57,7 +57,8 @@ def _row(capability: str, what: str, seconds: float, hz: float, sensor: str, not
 
 def _obstacles(quick: bool) -> list[Row]:
     from navkit.experiments.obstacles import KITTI_FRAMES, SENSOR_HEIGHT_KITTI, kitti_frame
-    from navkit.obstacles import Mounting, cloud_to_grid, detect_obstacles_in_grid
+    from navkit.obstacles import Mounting, detect_obstacles_in_grid
+    from navkit.obstacles.grids import cloud_to_grid
 
     times = []
     for name in KITTI_FRAMES[:1] if quick else KITTI_FRAMES:

@@ -33,25 +33,28 @@ def sim_rooms(
     single-view known-heading fixes are checked for walls the map puts in view that the
     fragment lacks (False = the figures before).
     """
-    from navkit.geometry import points_in_polygon, se2_apply, se2_from_xytheta
+    from navkit.geometry import se2_apply, se2_from_xytheta
+    from navkit.geometry.polygons import points_in_polygon
     from navkit.localization import (
         Localizer,
         LocalizerSettings,
         MapSettings,
         MatcherSettings,
         build_map,
-        evaluate_map,
         match_scan,
-        reported_poses,
     )
     from navkit.localization.correlation import KnownHeadingFix, KnownHeadingSettings
+    from navkit.localization.evaluate import evaluate_map
+    from navkit.localization.evaluation import reported_poses
     from navkit.localization.refine import occluded_fraction, refine_pose, stereo_range_sigma
     from navkit.localization.visibility import ViewModel, check_visibility
     from navkit.sensors import PinholeCamera, StereoRig
-    from navkit.sim import render_stereo, scene_from_dict
-    from navkit.stereo import planar_camera_pose, stereo_wall_points
+    from navkit.sim import render_stereo
+    from navkit.sim.scene_io import scene_from_dict
+    from navkit.stereo import stereo_wall_points
     from navkit.stereo.floorplan import FloorplanSettings, default_num_disparities, usable_depth
     from navkit.stereo.rooms import ROOM_KINDS, room, sample_poses
+    from navkit.stereo.triangulation import planar_camera_pose
 
     rig = StereoRig(PinholeCamera.from_fov(width, width * 3 // 4, 90.0), 0.2)
     height = 1.2
@@ -270,9 +273,11 @@ def disparity_bias(
     Lucas-Kanade correction: wall pixels (rows above the horizon) of ``n_views`` random views per
     room against the renderer's true disparity (errors within 1 px)."""
     from navkit.sensors import PinholeCamera, StereoRig
-    from navkit.sim import render_stereo, scene_from_dict
-    from navkit.stereo import DisparitySettings, compute_disparity, planar_camera_pose
+    from navkit.sim import render_stereo
+    from navkit.sim.scene_io import scene_from_dict
+    from navkit.stereo import DisparitySettings, compute_disparity
     from navkit.stereo.rooms import room, sample_poses
+    from navkit.stereo.triangulation import planar_camera_pose
 
     rig = StereoRig(PinholeCamera.from_fov(width, width * 3 // 4, 90.0), 0.2)
     out: dict[str, dict[str, float]] = {}

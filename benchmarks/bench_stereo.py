@@ -19,7 +19,8 @@ def run(quick: bool = False) -> list[Row]:
 
     from navkit import datasets
     from navkit.io.images import read_image, read_pfm
-    from navkit.stereo import DisparitySettings, bad_pixel_rate, compute_disparity
+    from navkit.stereo import DisparitySettings, compute_disparity
+    from navkit.stereo.disparity import bad_pixel_rate
 
     root = datasets.find("stereo/middlebury2014-motorcycle-q")
     L, R = read_image(root / "im0.png"), read_image(root / "im1.png")

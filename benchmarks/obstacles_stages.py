@@ -25,7 +25,8 @@ _CHILD = r"""
 import json, sys, time
 import numpy as np
 from navkit.experiments.obstacles import KITTI_FRAMES, kitti_frame, patchwork_ground
-from navkit.obstacles import Mounting, ObstacleSettings, cloud_to_grid, detect_obstacles_in_grid
+from navkit.obstacles import Mounting, ObstacleSettings, detect_obstacles_in_grid
+from navkit.obstacles.grids import cloud_to_grid
 import pypatchworkpp as pwpp
 
 reps = int(sys.argv[1])

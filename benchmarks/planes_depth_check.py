@@ -23,7 +23,8 @@ from navkit.geometry import se3_from_rt
 from navkit.planes import ExtractionSettings, observe_rgbd
 from navkit.planes.motion import depth_consistency
 from navkit.sensors import PinholeCamera
-from navkit.sim import Box, Ground, RangeNoise, Scene, Sphere, Texture, Wall, render_rgbd
+from navkit.sim import Box, Ground, Scene, Sphere, Texture, Wall, render_rgbd
+from navkit.sim.scanners import RangeNoise
 
 log = logging.getLogger(__name__)
 

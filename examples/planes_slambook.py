@@ -15,7 +15,8 @@ import argparse
 import numpy as np
 
 from navkit import datasets
-from navkit.geometry import rotation_angle, se3_from_xyz_quat, se3_inverse
+from navkit.geometry import se3_from_xyz_quat, se3_inverse
+from navkit.geometry.rotations import rotation_angle
 from navkit.io.rgbd import open_rgbd_sequence
 from navkit.planes import estimate_motion, observe_rgbd
 

@@ -92,12 +92,11 @@ def _obstacles_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
         Mounting,
         ObstacleMapper,
         ObstacleSettings,
-        cloud_to_grid,
         detect_obstacles,
         detect_obstacles_grid,
         detect_obstacles_in_grid,
-        organized_to_grid,
     )
+    from navkit.obstacles.grids import cloud_to_grid, organized_to_grid
     from navkit.sensors import RangeScan
 
     rng = np.random.default_rng(0)
@@ -155,8 +154,14 @@ def _obstacles_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
 
 
 def _geometry_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
-    from navkit.geometry import compute_shapes, convex_hull_2d, min_circle_welzl, mvee_khachiyan
-    from navkit.geometry.shapes import ellipse_a6, hull_points
+    from navkit.geometry.polygons import convex_hull_2d
+    from navkit.geometry.shapes import (
+        compute_shapes,
+        ellipse_a6,
+        hull_points,
+        min_circle_welzl,
+        mvee_khachiyan,
+    )
 
     rng = np.random.default_rng(1)
     pts = rng.normal(size=(40, 2)) * [2.0, 0.5]
@@ -178,7 +183,9 @@ def _room(n: int = 400) -> np.ndarray:
 
 
 def _localization_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
-    from navkit.localization import LikelihoodField, Localizer, match_scan, score_poses
+    from navkit.localization import Localizer, match_scan
+    from navkit.localization.field import LikelihoodField
+    from navkit.localization.matcher import score_poses
 
     rng = np.random.default_rng(2)
     room = _room()
@@ -231,13 +238,8 @@ def _planes_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
 
 
 def _stereo_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
-    from navkit.stereo import (
-        DisparitySettings,
-        compute_disparity,
-        lr_consistency,
-        warp_right_disparity,
-    )
-    from navkit.stereo.disparity import fill_background
+    from navkit.stereo import DisparitySettings, compute_disparity
+    from navkit.stereo.disparity import fill_background, lr_consistency, warp_right_disparity
 
     rng = np.random.default_rng(4)
     left = rng.random((48, 96))
@@ -254,7 +256,8 @@ def _stereo_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
 
 
 def _path_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
-    from navkit.path import OnlineApproximator, approximate, find_crossings, remove_loops
+    from navkit.path import OnlineApproximator, approximate
+    from navkit.path.loops import find_crossings, remove_loops
 
     rng = np.random.default_rng(5)
     t = np.linspace(0, 4 * np.pi, 300)

@@ -78,24 +78,26 @@ def _trajectory():  # type: ignore[no-untyped-def]
 
 def _write(kind: str, folder: Path) -> Path:
     """Write a small valid file of ``kind`` into ``folder``; return its path."""
-    import navkit.io as nio
+    from navkit.io import images, maps, pointcloud, trajectory
     from navkit.io.pathjson import write_path_json
 
     p = folder / kind
     if kind == "kitti.bin":
-        nio.write_kitti_bin(p, np.random.default_rng(1).normal(size=(30, 4)))
+        pointcloud.write_kitti_bin(p, np.random.default_rng(1).normal(size=(30, 4)))
     elif kind == "kitti.label":
-        nio.write_kitti_labels(p, np.arange(30) % 7, np.arange(30) % 3)
+        pointcloud.write_kitti_labels(p, np.arange(30) % 7, np.arange(30) % 3)
     elif kind in ("ascii.pcd", "binary.pcd", "compressed.pcd"):
-        nio.write_pcd(p, _cloud(), binary=kind != "ascii.pcd", compressed=kind == "compressed.pcd")
+        pointcloud.write_pcd(
+            p, _cloud(), binary=kind != "ascii.pcd", compressed=kind == "compressed.pcd"
+        )
     elif kind in ("ascii.ply", "binary.ply"):
         c = _cloud()
         faces = np.array([[0, 1, 2], [2, 4, 5], [5, 6, 7]])
-        nio.write_ply(p, c.points, c.colors, faces, binary=kind == "binary.ply")
+        pointcloud.write_ply(p, c.points, c.colors, faces, binary=kind == "binary.ply")
     elif kind == "tum.txt":
-        nio.write_tum(p, _trajectory())
+        trajectory.write_tum(p, _trajectory())
     elif kind == "kitti_poses.txt":
-        nio.write_kitti_poses(p, _trajectory())
+        trajectory.write_kitti_poses(p, _trajectory())
     elif kind == "euroc.csv":
         rows = [
             f"{1403636579758555392 + k * 5000000},{k * 0.01},{np.sin(k)},0.8,1,0,0,0"
@@ -105,16 +107,16 @@ def _write(kind: str, folder: Path) -> Path:
     elif kind == "odometry.dat":
         p.write_text("".join(f"{k * 0.1:.3f} {0.2:.3f} {0.1 * np.sin(k):.3f}\n" for k in range(12)))
     elif kind == "image.png":
-        nio.write_image(p, np.random.default_rng(2).integers(0, 255, (6, 8, 3), dtype=np.uint8))
+        images.write_image(p, np.random.default_rng(2).integers(0, 255, (6, 8, 3), dtype=np.uint8))
     elif kind == "depth.png":
-        nio.write_depth(p, np.random.default_rng(3).uniform(0.5, 4, (6, 8)))
+        images.write_depth(p, np.random.default_rng(3).uniform(0.5, 4, (6, 8)))
     elif kind == "disparity.pfm":
-        nio.write_pfm(p, np.random.default_rng(4).uniform(0, 60, (6, 8)).astype(np.float32))
+        images.write_pfm(p, np.random.default_rng(4).uniform(0, 60, (6, 8)).astype(np.float32))
     elif kind == "map.yaml":
         grid = np.full((6, 8), -1, np.int8)
         grid[2:4, 2:6] = 0
         grid[0] = 100
-        nio.write_occupancy_grid(folder / "map", grid, 0.05, (1.0, -2.0))
+        maps.write_occupancy_grid(folder / "map", grid, 0.05, (1.0, -2.0))
     elif kind == "path.json":
         from navkit.path.approximator import approximate
 
@@ -154,28 +156,28 @@ def _write(kind: str, folder: Path) -> Path:
 
 
 def _readers() -> dict[str, Callable[[Path], Any]]:
-    import navkit.io as nio
+    from navkit.io import images, maps, pointcloud, trajectory
     from navkit.io.arrays import read_npy, read_npz
     from navkit.io.carmen import read_carmen
     from navkit.io.pathjson import read_path_json
     from navkit.io.stereo import read_stereo_calib
 
     return {
-        "kitti.bin": nio.read_kitti_bin,
-        "kitti.label": lambda p: nio.read_kitti_labels(p, n_points=30),
-        "ascii.pcd": nio.read_pcd,
-        "binary.pcd": nio.read_pcd,
-        "compressed.pcd": nio.read_pcd,
-        "ascii.ply": nio.read_ply,
-        "binary.ply": nio.read_ply,
-        "tum.txt": nio.read_tum,
-        "kitti_poses.txt": nio.read_kitti_poses,
-        "euroc.csv": nio.read_euroc,
-        "odometry.dat": nio.read_odometry_log,
-        "image.png": nio.read_image,
-        "depth.png": lambda p: nio.read_depth(p, 1000.0),
-        "disparity.pfm": nio.read_pfm,
-        "map.yaml": nio.read_occupancy_grid,
+        "kitti.bin": pointcloud.read_kitti_bin,
+        "kitti.label": lambda p: pointcloud.read_kitti_labels(p, n_points=30),
+        "ascii.pcd": pointcloud.read_pcd,
+        "binary.pcd": pointcloud.read_pcd,
+        "compressed.pcd": pointcloud.read_pcd,
+        "ascii.ply": pointcloud.read_ply,
+        "binary.ply": pointcloud.read_ply,
+        "tum.txt": trajectory.read_tum,
+        "kitti_poses.txt": trajectory.read_kitti_poses,
+        "euroc.csv": trajectory.read_euroc,
+        "odometry.dat": trajectory.read_odometry_log,
+        "image.png": images.read_image,
+        "depth.png": lambda p: images.read_depth(p, 1000.0),
+        "disparity.pfm": images.read_pfm,
+        "map.yaml": maps.read_occupancy_grid,
         "path.json": read_path_json,
         "middlebury_calib.txt": lambda p: read_stereo_calib(p, (741, 497)),
         "generic_calib.yaml": lambda p: read_stereo_calib(p, (64, 48)),

@@ -7,7 +7,7 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from navkit.errors import DegenerateGeometryError, InputError
-from navkit.geometry import (
+from navkit.geometry.fitting import (
     Plane,
     canonical_plane,
     fit_line_2d,

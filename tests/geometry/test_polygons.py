@@ -6,7 +6,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from navkit.errors import DegenerateGeometryError
-from navkit.geometry import (
+from navkit.geometry.polygons import (
     convex_hull_2d,
     ensure_ccw,
     points_in_polygon,

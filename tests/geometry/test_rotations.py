@@ -7,7 +7,8 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from navkit.errors import DegenerateGeometryError
-from navkit.geometry import (
+from navkit.geometry import wrap_angle
+from navkit.geometry.rotations import (
     euler_zxy_to_matrix,
     matrix_to_euler_zxy,
     matrix_to_quat,
@@ -18,7 +19,6 @@ from navkit.geometry import (
     quat_to_matrix,
     rotation_angle,
     rotation_between,
-    wrap_angle,
 )
 
 

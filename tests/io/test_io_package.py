@@ -7,6 +7,7 @@ import pytest
 
 import navkit.io as nio
 from navkit.errors import InputError
+from navkit.io import images
 
 
 @pytest.mark.parametrize("name", nio.__all__)
@@ -23,7 +24,7 @@ def test_unknown_attribute():
 def test_failed_write_leaves_nothing(tmp_path):
     target = tmp_path / "img.xyz"
     with pytest.raises(InputError, match=r"img\.xyz.*suffix"):
-        nio.write_image(target, np.zeros((2, 2, 3), np.uint8))
+        images.write_image(target, np.zeros((2, 2, 3), np.uint8))
     assert list(tmp_path.iterdir()) == []  # neither the target nor a temporary file
 
 
@@ -31,6 +32,6 @@ def test_failed_write_keeps_old_file(tmp_path):
     target = tmp_path / "img.xyz"
     target.write_bytes(b"old contents")
     with pytest.raises(InputError):
-        nio.write_image(target, np.zeros((2, 2, 3), np.uint8))
+        images.write_image(target, np.zeros((2, 2, 3), np.uint8))
     assert target.read_bytes() == b"old contents"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["img.xyz"]

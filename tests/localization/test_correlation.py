@@ -9,12 +9,9 @@ from hypothesis import strategies as st
 
 from navkit.errors import InputError
 from navkit.geometry import se2_apply, se2_from_xytheta
-from navkit.localization import (
-    LikelihoodField,
-    correlate_profiles,
-    locate_known_heading,
-    robot_position,
-)
+from navkit.localization import locate_known_heading
+from navkit.localization.correlation import correlate_profiles, robot_position
+from navkit.localization.field import LikelihoodField
 from tests.localization.helpers import LSHAPE, RECT, sample_walls, scan_points
 
 

@@ -36,7 +36,7 @@ def _modes(f):  # type: ignore[no-untyped-def]
 
 @pytest.mark.twin("window_offsets", "cubic_pose_scores", "bilinear_pose_scores")
 def test_window_tables_and_subcell_scores_identical(rng):
-    from navkit.localization import LikelihoodField
+    from navkit.localization.field import LikelihoodField
 
     walls = np.concatenate(
         [np.c_[np.linspace(0, 8, 400), np.full(400, y)] for y in (0.0, 5.0)]

@@ -20,9 +20,9 @@ from navkit.localization import (
     ScanMatch,
     build_map_from_scans,
     evaluate_fixes,
-    reported_poses,
-    stack_views,
 )
+from navkit.localization.evaluation import reported_poses
+from navkit.localization.localizer import stack_views
 from tests.localization.helpers import LSHAPE, cast, scan_points
 
 BEARINGS = np.linspace(-np.pi / 2, np.pi / 2, 181)

@@ -8,15 +8,10 @@ import numpy as np
 import pytest
 
 from navkit.errors import FormatError
-from navkit.geometry import polygon_area
-from navkit.localization import (
-    MapSettings,
-    WallMap,
-    build_map,
-    build_map_from_scans,
-    evaluate_map,
-    rasterize,
-)
+from navkit.geometry.polygons import polygon_area
+from navkit.localization import MapSettings, WallMap, build_map, build_map_from_scans
+from navkit.localization.evaluate import evaluate_map
+from navkit.localization.raster import rasterize
 from tests.localization.helpers import LSHAPE, LSHAPE_POLY, RECT, cast, scan_points
 
 
@@ -99,7 +94,7 @@ def test_json_round_trip_and_errors(rng, tmp_path):
 
 
 def test_rasterize_marks_walls_and_inside():
-    from navkit.localization import segment_from_points
+    from navkit.localization.walls import segment_from_points
 
     walls = [
         segment_from_points(np.stack([np.linspace(s[0], e[0], 50), np.linspace(s[1], e[1], 50)], 1))

@@ -6,13 +6,9 @@ import numpy as np
 import pytest
 
 from navkit.errors import ConfigError, InputError
-from navkit.localization import (
-    LikelihoodField,
-    MatcherSettings,
-    analyse_peak,
-    match_scan,
-    score_poses,
-)
+from navkit.localization import MatcherSettings, match_scan
+from navkit.localization.field import LikelihoodField
+from navkit.localization.matcher import analyse_peak, score_poses
 from tests.localization.helpers import LSHAPE, RECT, sample_walls, scan_points
 
 

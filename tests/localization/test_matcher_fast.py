@@ -8,14 +8,9 @@ import numpy as np
 import pytest
 
 from navkit import jit
-from navkit.localization import (
-    LikelihoodField,
-    MatcherSettings,
-    analyse_peak,
-    match_scan,
-    score_poses,
-)
-from navkit.localization.matcher import _thin
+from navkit.localization import MatcherSettings, match_scan
+from navkit.localization.field import LikelihoodField
+from navkit.localization.matcher import _thin, analyse_peak, score_poses
 from navkit.localization.search import _Search
 from tests.localization.helpers import LSHAPE, RECT, sample_walls, scan_points
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from navkit.errors import ConfigError, InputError
-from navkit.localization import LikelihoodField, locate_known_heading
+from navkit.localization import locate_known_heading
+from navkit.localization.field import LikelihoodField
 from navkit.localization.visibility import ViewModel, check_visibility
 from navkit.sensors import PinholeCamera, StereoRig
 from tests.localization.helpers import RECT, cast, sample_walls

@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from navkit.errors import ConfigError
-from navkit.localization import (
+from navkit.localization.walls import (
     SegmentationSettings,
     merge_two,
     ransac_walls,

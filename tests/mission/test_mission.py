@@ -7,7 +7,7 @@ import pytest
 
 from navkit.mission import mission_metrics
 from navkit.obstacles.evaluate import distance_to_polygon as _distance_to_polygon
-from navkit.sim import footprint
+from navkit.sim.footprints import footprint
 
 
 def test_every_obstacle_larger_than_the_robot_is_found(mission_run):

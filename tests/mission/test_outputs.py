@@ -11,7 +11,7 @@ import pytest
 
 from navkit.mission import mission_metrics
 from navkit.mission.demo import write_outputs
-from navkit.sim import scene_to_toml
+from navkit.sim.scene_io import scene_to_toml
 from navkit.viz.mission import write_report
 
 from .conftest import small_scene

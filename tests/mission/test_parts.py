@@ -11,9 +11,11 @@ from navkit.errors import ConfigError, FormatError
 from navkit.mission import CameraSettings, MissionSettings, PurePursuit, load_route
 from navkit.mission.driver import polyline_point
 from navkit.mission.pose2d import blend, compose, relative
-from navkit.obstacles import MapperSettings, ObstacleMapper, score_obstacle_map
+from navkit.obstacles import MapperSettings, ObstacleMapper
 from navkit.obstacles.evaluate import distance_to_polygon as _distance_to_polygon
-from navkit.sim import true_footprints, unicycle_step
+from navkit.obstacles.evaluate import score_obstacle_map
+from navkit.sim.footprints import true_footprints
+from navkit.sim.unicycle import unicycle_step
 
 from .conftest import small_scene
 
@@ -129,7 +131,7 @@ def test_known_obstacles_do_not_block_the_way_back_new_ones_do():
 
 def test_true_footprints_of_the_primitives():
     fps = {f.name: f for f in true_footprints(small_scene())}
-    from navkit.geometry import polygon_area
+    from navkit.geometry.polygons import polygon_area
 
     assert polygon_area(fps["crate"].polygon) == pytest.approx(1.0)
     assert fps["crate"].height == pytest.approx(1.0)

@@ -42,7 +42,7 @@ def test_bad_settings():
 def test_labels_of_the_wrong_length(tmp_path):
     from navkit.errors import FormatError
     from navkit.io.pointcloud import read_kitti_labels
-    from navkit.obstacles import ground_scores
+    from navkit.obstacles.evaluate import ground_scores
 
     path = tmp_path / "000000.label"
     np.arange(10, dtype=np.uint32).tofile(path)
@@ -93,7 +93,7 @@ def test_ground_grid_beyond_the_cell_bound_is_refused_by_kernels_and_twins(
 
 
 def test_cloud_to_grid_sizes_are_checked_before_allocating():
-    from navkit.obstacles import cloud_to_grid
+    from navkit.obstacles.grids import cloud_to_grid
 
     cloud = np.random.default_rng(0).normal(size=(400, 3))
     for n in (10**9, 0, 1.5):

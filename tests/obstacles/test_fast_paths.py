@@ -18,8 +18,8 @@ from navkit.geometry.shapes import (
     hull_points,
     mvee_batch,
 )
-from navkit.obstacles import cloud_to_grid
 from navkit.obstacles.detector import detect_obstacles_grid
+from navkit.obstacles.grids import cloud_to_grid
 from navkit.obstacles.mesh import _nanmedian_rows
 from navkit.obstacles.segment import MESH_STRUCTURE, _pairs, label_components
 

@@ -11,14 +11,9 @@ import pytest
 from navkit.errors import ConfigError, InputError
 from navkit.experiments.obstacles import paper_scenes
 from navkit.geometry import R_BODY_FROM_OPTICAL, se3_from_rt
-from navkit.obstacles import (
-    OBSTACLE,
-    Mounting,
-    cloud_to_grid,
-    depth_to_grid,
-    detect_obstacles_in_grid,
-    organized_to_grid,
-)
+from navkit.obstacles import Mounting, detect_obstacles_in_grid
+from navkit.obstacles.grids import cloud_to_grid, depth_to_grid, organized_to_grid
+from navkit.obstacles.rules import OBSTACLE
 from navkit.sensors import PinholeCamera
 from navkit.sim import SpinningLidar, render_rgbd, render_scan
 

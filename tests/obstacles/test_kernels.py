@@ -20,15 +20,9 @@ import pytest
 from navkit import jit
 from navkit.errors import ConfigError
 from navkit.geometry._validate import MAX_COORDINATE_M
-from navkit.obstacles import (
-    Mounting,
-    ObstacleSettings,
-    cloud_to_grid,
-    detect_obstacles,
-    detect_obstacles_in_grid,
-    organized_to_grid,
-)
+from navkit.obstacles import Mounting, ObstacleSettings, detect_obstacles, detect_obstacles_in_grid
 from navkit.obstacles.detector import ObstacleDetection
+from navkit.obstacles.grids import cloud_to_grid, organized_to_grid
 from navkit.obstacles.mesh import robust_strides, robust_strides_compiled
 from navkit.obstacles.rules import _mesh_and_classes, mesh_and_classes
 
@@ -124,7 +118,8 @@ def test_the_implementation_is_no_setting():
 def test_compiled_equals_numpy_on_simulated_scenes(scene, scanner, noise):
     from navkit.experiments.obstacles import paper_scenes, scanners
     from navkit.geometry import se3_from_rt
-    from navkit.sim import RangeNoise, render_scan
+    from navkit.sim import render_scan
+    from navkit.sim.scanners import RangeNoise
 
     sc, height = scanners()[scanner]
     T = se3_from_rt(np.eye(3), [0.0, 0.0, height])
@@ -214,7 +209,8 @@ def test_fused_stages_equal_numpy_on_simulated_grids():
     grid with empty elevation columns (``np.interp`` of the strides) and a tiny grid."""
     from navkit.experiments.obstacles import paper_scenes, scanners
     from navkit.geometry import se3_from_rt
-    from navkit.sim import RangeNoise, render_scan
+    from navkit.sim import render_scan
+    from navkit.sim.scanners import RangeNoise
 
     P = o = None
     for scene, scanner, noise in (("four", "tilting", 0.01), ("box", "spinning64", 0.02)):

@@ -8,8 +8,11 @@ import pytest
 
 from navkit.errors import ConfigError, InputError
 from navkit.geometry import se3_from_rt
-from navkit.obstacles import MapperSettings, ObstacleMapper, detect_obstacles, score_obstacle_map
-from navkit.sim import RangeNoise, SpinningLidar, load_scene, render_scan, true_footprints
+from navkit.obstacles import MapperSettings, ObstacleMapper, detect_obstacles
+from navkit.obstacles.evaluate import score_obstacle_map
+from navkit.sim import SpinningLidar, load_scene, render_scan
+from navkit.sim.footprints import true_footprints
+from navkit.sim.scanners import RangeNoise
 
 # The first 12 m of the yard's built-in route (navkit/data/mission_yard.toml), a scan every 1.5 m.
 WAYPOINTS = np.array([[0.0, 0.0], [4.0, -0.4], [8.0, -0.6], [12.0, -1.0]])

@@ -8,14 +8,9 @@ import numpy as np
 import pytest
 
 from navkit import jit
-from navkit.obstacles import (
-    GROUND,
-    OBSTACLE,
-    ObstacleSettings,
-    detect_obstacles,
-    detect_obstacles_grid,
-)
+from navkit.obstacles import ObstacleSettings, detect_obstacles, detect_obstacles_grid
 from navkit.obstacles.mesh import build_mesh, triangle_indices
+from navkit.obstacles.rules import GROUND, OBSTACLE
 from navkit.obstacles.segment import boundary_vertices, label_components, vertex_labels
 from navkit.sensors import RangeScan
 

@@ -7,14 +7,10 @@ import pytest
 from navkit.errors import InputError
 from navkit.experiments.obstacles import car_recall
 from navkit.io.pointcloud import read_kitti_bin, read_kitti_labels
-from navkit.obstacles import (
-    GROUND,
-    Mounting,
-    ObstacleSettings,
-    cloud_to_grid,
-    detect_obstacles_in_grid,
-    ground_scores,
-)
+from navkit.obstacles import Mounting, ObstacleSettings, detect_obstacles_in_grid
+from navkit.obstacles.evaluate import ground_scores
+from navkit.obstacles.grids import cloud_to_grid
+from navkit.obstacles.rules import GROUND
 
 pytestmark = pytest.mark.realdata
 

@@ -263,7 +263,8 @@ def test_compiled_shapes_equal_numpy_bit_for_bit_on_simulated_scans(scene, scann
     from navkit.experiments.obstacles import paper_scenes, scanners
     from navkit.geometry import se3_from_rt
     from navkit.obstacles import ObstacleSettings, detect_obstacles
-    from navkit.sim import RangeNoise, render_scan
+    from navkit.sim import render_scan
+    from navkit.sim.scanners import RangeNoise
 
     sc, height = scanners()[scanner]
     T = se3_from_rt(np.eye(3), [0.0, 0.0, height])
@@ -283,12 +284,8 @@ def test_compiled_shapes_equal_numpy_bit_for_bit_on_kitti(data_path):
     hundreds of vertices): its boundary and its A7 set (with the shadows)."""
     pytest.importorskip("numba")
     from navkit.io.pointcloud import read_kitti_bin
-    from navkit.obstacles import (
-        Mounting,
-        ObstacleSettings,
-        cloud_to_grid,
-        detect_obstacles_in_grid,
-    )
+    from navkit.obstacles import Mounting, ObstacleSettings, detect_obstacles_in_grid
+    from navkit.obstacles.grids import cloud_to_grid
 
     folder = data_path("lidar/semantickitti-seq00")
     files = sorted(folder.glob("*.bin"))

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from navkit.experiments.obstacles import footprint, footprint_distance, paper_scenes, run_experiment
-from navkit.obstacles import OBSTACLE, SHADOW_BEHIND, SIDE_SHADOW, unsort_vertex_array
+from navkit.obstacles.detector import unsort_vertex_array
+from navkit.obstacles.rules import OBSTACLE, SHADOW_BEHIND, SIDE_SHADOW
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from navkit.errors import ConfigError, InputError
-from navkit.path import VARIANTS, ApproximatorSettings, OnlineApproximator, approximate
+from navkit.path import ApproximatorSettings, OnlineApproximator, approximate
+from navkit.path.fitting import VARIANTS
 
 
 def _assert_within(result, eps: float) -> None:

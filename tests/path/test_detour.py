@@ -26,7 +26,7 @@ from navkit.path.detour import (
     plan_detour,
     polyline_spline,
 )
-from navkit.sim import unicycle_step
+from navkit.sim.unicycle import unicycle_step
 
 RES = 0.1
 ORIGIN = np.array([-2.0, -5.0])

@@ -9,14 +9,8 @@ import pytest
 from scipy.integrate import quad
 from scipy.optimize import brentq
 
-from navkit.path import (
-    ApproximatorSettings,
-    LoopFreeChain,
-    approximate,
-    find_crossings,
-    remove_loops,
-)
-from navkit.path.loops import monotone_breaks
+from navkit.path import ApproximatorSettings, approximate
+from navkit.path.loops import LoopFreeChain, find_crossings, monotone_breaks, remove_loops
 from navkit.path.spline import cubic_eval
 
 

@@ -8,7 +8,7 @@ import numpy as np
 from navkit.obstacles import MapperSettings, ObstacleMapper
 from navkit.path import Return, ReturnFailure, ReturnStep, ReturnTripSettings, approximate
 from navkit.path.control import ReturnSettings
-from navkit.sim import unicycle_step
+from navkit.sim.unicycle import unicycle_step
 
 DT = 0.1
 

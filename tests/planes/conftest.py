@@ -11,7 +11,8 @@ from scipy.spatial.transform import Rotation
 
 from navkit.geometry import se3_from_rt
 from navkit.sensors import PinholeCamera
-from navkit.sim import Ground, RangeNoise, Scene, Texture, Wall, render_rgbd
+from navkit.sim import Ground, Scene, Texture, Wall, render_rgbd
+from navkit.sim.scanners import RangeNoise
 
 BRICKS = Texture("bricks", scale=0.3, seed=3, color=(0.6, 0.3, 0.2), color2=(0.85, 0.8, 0.75))
 NOISE = Texture("noise", scale=0.4, seed=5)

@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from navkit.geometry import Plane
+from navkit.geometry.fitting import Plane
 from navkit.planes.align import search_1d, search_2d
 from navkit.planes.texture import PlaneTexture
 

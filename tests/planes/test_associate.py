@@ -7,8 +7,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from navkit.geometry import Plane, canonical_plane, se3_from_rt
-from navkit.planes import AssociationSettings, PlaneSegment, associate
+from navkit.geometry import se3_from_rt
+from navkit.geometry.fitting import Plane, canonical_plane
+from navkit.planes import PlaneSegment
+from navkit.planes.associate import AssociationSettings, associate
 
 
 def segment(n, rho, half=2.0):
@@ -88,7 +90,7 @@ def test_no_overlap_no_match():
     a = segment(np.array([0, 0, 1.0]), 2.0, half=0.5)
     from dataclasses import replace
 
-    from navkit.planes import plane_frame
+    from navkit.planes.segments import plane_frame
 
     o, axes = plane_frame(a.plane)
     moved = replace(a.plane, centroid=o + np.array([10.0, 10.0]) @ axes)

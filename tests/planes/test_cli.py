@@ -8,7 +8,8 @@ import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from navkit.geometry import rotation_angle, se3_from_rt, se3_inverse
+from navkit.geometry import se3_from_rt, se3_inverse
+from navkit.geometry.rotations import rotation_angle
 from navkit.io.trajectory import read_tum
 from navkit.sim import render_rgbd
 

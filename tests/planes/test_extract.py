@@ -9,7 +9,8 @@ from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
 from navkit.errors import InputError
-from navkit.geometry import canonical_plane, fit_plane, se3_inverse
+from navkit.geometry import se3_inverse
+from navkit.geometry.fitting import canonical_plane, fit_plane
 from navkit.planes import (
     CloudExtractionSettings,
     ExtractionSettings,
@@ -156,7 +157,7 @@ def test_wall_area_and_outline_match_the_view(pairs):
     # a 2 cm raster cell counts when any point falls in it: the border adds up to one cell along
     # the perimeter, 0.02 m x 8.5 m = 0.17 m^2 (3.8 %); depth noise (4 mm) moves points < 1 mm
     assert wall.area == pytest.approx(width * height, rel=0.06)
-    from navkit.geometry import polygon_area
+    from navkit.geometry.polygons import polygon_area
 
     assert polygon_area(wall.outline) == pytest.approx(width * height, rel=0.06)
     assert wall.area >= width * height  # the raster never loses covered area
@@ -314,9 +315,8 @@ def test_outline_from_patches_covers_what_the_pixels_cover(pairs):
     """The outline rasterised from whole patches (quadrilaterals) and border pixels covers the
     same area as all inlier pixels rasterised (the former definition, computed here): the two
     rasters can differ only in the cells along the outline, <= one 2 cm cell x perimeter."""
-    from navkit.geometry import polygon_perimeter
-    from navkit.planes import plane_frame
-    from navkit.planes.segments import outline_from_points
+    from navkit.geometry.polygons import polygon_perimeter
+    from navkit.planes.segments import outline_from_points, plane_frame
 
     for n_dirs in (1, 3):
         P = pairs[n_dirs].f1.frame.points().reshape(-1, 3)

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from navkit.geometry import rotation_angle, se3_from_rt, se3_inverse
+from navkit.geometry import se3_from_rt, se3_inverse
+from navkit.geometry.rotations import rotation_angle
 from navkit.planes import MotionEstimate, estimate_motion, extract_planes_cloud
 from navkit.planes.extract_cloud import cloud_scales
 from navkit.planes.frame import PlaneObservation

@@ -326,11 +326,11 @@ def test_degenerate_region_takes_the_numpy_steps(monkeypatch):
 
 
 def test_canonical_planes_are_canonical_plane_bit_for_bit(rng):
-    """The extraction's vectorised :func:`navkit.geometry.canonical_plane` gives its bits on
+    """The extraction's vectorised :func:`navkit.geometry.fitting.canonical_plane` gives its bits on
     random nearly-unit normals, and its special cases (a plane through the origin) row by
     row. Bit for bit holds on any CPU: both compute the same IEEE-exact operations (products,
     sums, a square root, divisions) in the same order, with no BLAS call that may fuse them."""
-    from navkit.geometry import canonical_plane
+    from navkit.geometry.fitting import canonical_plane
     from navkit.planes.extract import _canonical_planes
 
     n = rng.normal(size=(500, 3))

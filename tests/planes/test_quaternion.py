@@ -7,7 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from navkit.geometry import quat_rotate, quat_to_matrix
+from navkit.geometry.rotations import quat_rotate, quat_to_matrix
 from navkit.planes.quaternion import (
     compose_q3_q1,
     euler_zxy_from_quat,

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from navkit.geometry import rotation_angle, se3_from_rt, se3_from_xyz_quat, se3_inverse
+from navkit.geometry import se3_from_rt, se3_from_xyz_quat, se3_inverse
+from navkit.geometry.rotations import rotation_angle
 from navkit.planes import MotionEstimate, estimate_motion, observe_rgbd
 from navkit.planes.frame import reproject_rgbd
 

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from navkit.geometry import rotation_angle, se3_inverse
+from navkit.geometry import se3_inverse
+from navkit.geometry.rotations import rotation_angle
 from navkit.planes import (
     ExtractionSettings,
     MotionEstimate,

@@ -8,19 +8,19 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from navkit.geometry import Plane, canonical_plane, rotation_angle, se3_from_rt, se3_inverse
+from navkit.geometry import se3_from_rt, se3_inverse
+from navkit.geometry.fitting import Plane, canonical_plane
+from navkit.geometry.rotations import rotation_angle
 from navkit.planes import (
     ExtractionSettings,
     MotionEstimate,
     MotionFailure,
-    SolverSettings,
     estimate_motion,
-    euler_zxy_from_quat,
     observe_rgbd,
-    solve_three_planes,
 )
 from navkit.planes.align import search_1d
-from navkit.planes.solve import normal_rank
+from navkit.planes.quaternion import euler_zxy_from_quat
+from navkit.planes.solve import SolverSettings, normal_rank, solve_three_planes
 from navkit.planes.texture import PlaneTexture
 
 from .conftest import SOLID, render_pair

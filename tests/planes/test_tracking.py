@@ -14,7 +14,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
 
-from navkit.geometry import Plane, canonical_plane, rotation_angle, se3_from_rt, se3_inverse
+from navkit.geometry import se3_from_rt, se3_inverse
+from navkit.geometry.fitting import Plane, canonical_plane
+from navkit.geometry.rotations import rotation_angle
 from navkit.planes import FrameMotion, OdometrySettings, PlaneOdometry, observe_rgbd
 from navkit.planes.associate import AssociationSettings
 from navkit.planes.frame import PlaneObservation
@@ -23,7 +25,8 @@ from navkit.planes.motion import MotionPrior, MotionSettings, _fill_from_prior, 
 from navkit.planes.plane_map import MapView
 from navkit.planes.solve import MotionEstimate, MotionFailure
 from navkit.sensors import RGBDFrame
-from navkit.sim import RangeNoise, render_rgbd
+from navkit.sim import render_rgbd
+from navkit.sim.scanners import RangeNoise
 
 from .conftest import CAMERA, SOLID, corridor, render_pair, start_pose
 

@@ -7,7 +7,8 @@ import pytest
 
 from navkit.geometry import R_BODY_FROM_OPTICAL, se3_apply, se3_from_rt
 from navkit.sensors import PinholeCamera, StereoRig
-from navkit.sim import Box, Ground, RangeNoise, Scene, Texture, Wall, render_rgbd, render_stereo
+from navkit.sim import Box, Ground, Scene, Texture, Wall, render_rgbd, render_stereo
+from navkit.sim.scanners import RangeNoise
 
 
 def _camera_pose(x, y, z, yaw=0.0):

@@ -6,16 +6,8 @@ import numpy as np
 import pytest
 
 from navkit.geometry import se3_apply, se3_from_rt
-from navkit.sim import (
-    Box,
-    Ground,
-    Hemisphere,
-    RangeNoise,
-    Scene,
-    SpinningLidar,
-    TiltingScanner,
-    render_scan,
-)
+from navkit.sim import Box, Ground, Hemisphere, Scene, SpinningLidar, TiltingScanner, render_scan
+from navkit.sim.scanners import RangeNoise
 
 
 def _pose(x, y, z, yaw=0.0, pitch=0.0):

@@ -21,8 +21,8 @@ from navkit.sim import (
     builtin_scene_path,
     builtin_scenes,
     load_scene,
-    scene_to_toml,
 )
+from navkit.sim.scene_io import scene_to_toml
 
 
 def test_round_trip_of_every_primitive_type(tmp_path):
@@ -148,6 +148,6 @@ def test_shipped_yard_has_what_the_mission_needs():
 def load_scene_from_text(text: str) -> Scene:
     import tomllib
 
-    from navkit.sim import scene_from_dict
+    from navkit.sim.scene_io import scene_from_dict
 
     return scene_from_dict(tomllib.loads(text))

@@ -17,8 +17,8 @@ from navkit.sim import (
     Wall,
     render_scan,
     simulate_unicycle,
-    unicycle_step,
 )
+from navkit.sim.unicycle import unicycle_step
 
 
 def test_constant_turn_is_a_circle():

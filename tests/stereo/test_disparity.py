@@ -6,14 +6,13 @@ import numpy as np
 import pytest
 
 from navkit.errors import ConfigError, InputError
-from navkit.stereo import (
-    DisparitySettings,
+from navkit.stereo import DisparitySettings, compute_disparity
+from navkit.stereo.disparity import (
     bad_pixel_rate,
-    compute_disparity,
+    fill_background,
     lr_consistency,
     warp_right_disparity,
 )
-from navkit.stereo.disparity import fill_background
 
 
 def _texture(shape, rng):

@@ -5,10 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from navkit.localization import build_map, evaluate_map, match_scan
+from navkit.localization import build_map, match_scan
+from navkit.localization.evaluate import evaluate_map
 from navkit.sensors import PinholeCamera, StereoRig
-from navkit.stereo import planar_camera_pose, stereo_wall_points
+from navkit.stereo import stereo_wall_points
 from navkit.stereo.rooms import ROOM_KINDS, room, sample_poses
+from navkit.stereo.triangulation import planar_camera_pose
 
 sim = pytest.importorskip("navkit.sim")
 
@@ -89,7 +91,7 @@ def test_rooms_are_well_formed():
         r = room(kind)
         sim.scene_from_dict(r.scene)  # the simulator accepts the description
         P = sample_poses(r, 50, np.random.default_rng(0))
-        from navkit.geometry import points_in_polygon
+        from navkit.geometry.polygons import points_in_polygon
 
         assert points_in_polygon(P[:, :2], r.outline).all()
 

@@ -9,12 +9,8 @@ from hypothesis import strategies as st
 
 from navkit.geometry import se3_apply
 from navkit.sensors import PinholeCamera, StereoRig
-from navkit.stereo import (
-    camera_to_world,
-    disparity_to_points,
-    planar_camera_pose,
-    triangulate_pixels,
-)
+from navkit.stereo import disparity_to_points
+from navkit.stereo.triangulation import camera_to_world, planar_camera_pose, triangulate_pixels
 
 
 def _project(P, f, cx, cy, b, doffs=0.0):

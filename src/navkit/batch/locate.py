@@ -105,7 +105,8 @@ def locate_input(
     from navkit.io.scan_sequence import read_scan_sequence
     from navkit.io.urls import local_copy, url_name
     from navkit.io.wallmap import read_wall_map
-    from navkit.localization import Localizer, evaluate_fixes, reported_poses
+    from navkit.localization import Localizer, evaluate_fixes
+    from navkit.localization.evaluation import reported_poses
     from navkit.viz.maps import plot_map
 
     # paths as they are; fsspec URLs (a map with its grid files, a CARMEN log) through private

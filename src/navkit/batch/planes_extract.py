@@ -183,7 +183,7 @@ def extract_planes_to(
 
     from navkit.io.atomic import write_json
     from navkit.io.images import write_image
-    from navkit.planes import plane_frame
+    from navkit.planes.segments import plane_frame
     from navkit.viz.planes import extraction_overlay, texture_to_uint8
 
     cam = camera or CameraOverride()

@@ -91,7 +91,8 @@ def build_cmd(
 
         from navkit.io.scan_sequence import read_scan_sequence
         from navkit.io.wallmap import read_map_truth, write_wall_map
-        from navkit.localization import MapSettings, build_map, build_map_from_scans, evaluate_map
+        from navkit.localization import MapSettings, build_map, build_map_from_scans
+        from navkit.localization.evaluate import evaluate_map
         from navkit.viz.maps import plot_map
 
         check_out_dir(out, overwrite)

@@ -159,7 +159,8 @@ def _write_disparity(
 
     from navkit.io.images import write_image, write_pfm
     from navkit.io.pointcloud import write_ply
-    from navkit.stereo import bad_pixel_rate, disparity_to_points
+    from navkit.stereo import disparity_to_points
+    from navkit.stereo.disparity import bad_pixel_rate
     from navkit.viz.maps import colorize_disparity
 
     write_pfm(
@@ -287,10 +288,11 @@ def simulate_cmd(
         from navkit.io.atomic import write_json
         from navkit.io.stereo import write_stereo_frames
         from navkit.sensors import PinholeCamera, StereoRig
-        from navkit.sim import render_stereo, scene_from_dict
-        from navkit.stereo import planar_camera_pose
+        from navkit.sim import render_stereo
+        from navkit.sim.scene_io import scene_from_dict
         from navkit.stereo.rooms import room as make_room
         from navkit.stereo.rooms import sample_poses
+        from navkit.stereo.triangulation import planar_camera_pose
 
         check_out_dir(out, overwrite)
         truth = make_room(room.value)

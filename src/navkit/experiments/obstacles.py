@@ -108,7 +108,7 @@ def scanners() -> dict[str, tuple[Any, float]]:
 
 def footprint(prim: Any) -> tuple[str, NDArray[np.float64]]:
     """True footprint of a primitive on the ground: ``("polygon", (4, 2))`` or ``("circle", (3,))``
-    (from :func:`navkit.sim.footprint`, the one home of primitive footprints)."""
+    (from :func:`navkit.sim.footprints.footprint`, the one home of primitive footprints)."""
     from navkit.sim.footprints import footprint as sim_footprint
 
     kind = type(prim).__name__
@@ -191,8 +191,10 @@ def run_experiment(
     rectangle over obstacle + shadows).
     """
     from navkit.geometry import se3_from_rt
-    from navkit.obstacles import ObstacleSettings, detect_obstacles, unsort_vertex_array
-    from navkit.sim import RangeNoise, render_scan
+    from navkit.obstacles import ObstacleSettings, detect_obstacles
+    from navkit.obstacles.detector import unsort_vertex_array
+    from navkit.sim import render_scan
+    from navkit.sim.scanners import RangeNoise
 
     scene = paper_scenes()[scene_name]
     scanner, height = scanners()[scanner_name]
@@ -348,7 +350,9 @@ def navkit_ground(
     points: NDArray[np.float32], settings: Any = None
 ) -> tuple[NDArray[np.bool_], Any, Any]:
     """navkit's per-point ground mask, detection and grid for a KITTI cloud."""
-    from navkit.obstacles import GROUND, Mounting, cloud_to_grid, detect_obstacles_in_grid
+    from navkit.obstacles import Mounting, detect_obstacles_in_grid
+    from navkit.obstacles.grids import cloud_to_grid
+    from navkit.obstacles.rules import GROUND
 
     grid = cloud_to_grid(points)
     det = detect_obstacles_in_grid(grid, Mounting(SENSOR_HEIGHT_KITTI), settings)
@@ -373,12 +377,9 @@ def car_recall(
     from scipy import ndimage
 
     from navkit import datasets
-    from navkit.obstacles import (
-        Mounting,
-        detect_obstacles_in_grid,
-        organized_to_grid,
-        shape_contains,
-    )
+    from navkit.obstacles import Mounting, detect_obstacles_in_grid
+    from navkit.obstacles.evaluate import shape_contains
+    from navkit.obstacles.grids import organized_to_grid
 
     folder = datasets.find("lidar/squeezeseg-kitti-raw")
     found = total = 0

@@ -161,7 +161,7 @@ def _carmen(path: Path, every: int, max_range: float) -> ScanSequence:
 def _stereo(path: Path, every: int, group: int) -> ScanSequence:
     from navkit.io.images import read_image
     from navkit.io.stereo import read_stereo_frames
-    from navkit.localization import stack_views
+    from navkit.localization.localizer import stack_views
     from navkit.stereo import stereo_wall_points
     from navkit.stereo.floorplan import FloorplanSettings, default_num_disparities, usable_depth
 

@@ -118,7 +118,7 @@ def read_scan_grid(
     rings, columns : int, optional
         Beam count and azimuth columns of an unorganised lidar cloud (default: recovered).
     ring_method : {"auto", "order", "elevation"}
-        How an unorganised cloud's rings are recovered (:func:`~navkit.obstacles.cloud_to_grid`).
+        How an unorganised cloud's rings are recovered (:func:`~navkit.obstacles.grids.cloud_to_grid`).
     intrinsics : (fx, fy, cx, cy), optional
         Pinhole intrinsics of a depth image (pixels); required for depth images.
     depth_scale : float
@@ -129,7 +129,7 @@ def read_scan_grid(
     FormatError, ConfigError
         Unreadable files, missing arrays, a depth image without intrinsics.
     """
-    from navkit.obstacles import cloud_to_grid, depth_to_grid, organized_to_grid
+    from navkit.obstacles.grids import cloud_to_grid, depth_to_grid, organized_to_grid
 
     path = Path(path)
     suffix = path.suffix.lower()

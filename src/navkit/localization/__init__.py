@@ -18,101 +18,36 @@ Stages, usable apart from NumPy arrays:
   gates, blending with odometry) or a :class:`LocalizationFailure`;
 - :mod:`~navkit.localization.evaluation` - a localized sequence scored against reference poses.
 
-``Fix`` is the Localizer's result; the matcher's own result is
+The package exports the online object, the settings and results and the entry functions
+(:func:`build_map`, :func:`match_scan`, :func:`locate_known_heading`, :func:`evaluate_fixes`);
+the stage functions are imported from their modules. ``Fix`` is the Localizer's result; the matcher's own result is
 :class:`navkit.localization.matcher.ScanMatch`.
 """
 
 from navkit.localization.correlation import (
     KnownHeadingFix,
     KnownHeadingSettings,
-    correlate_profiles,
     locate_known_heading,
-    robot_position,
 )
-from navkit.localization.evaluate import evaluate_map
-from navkit.localization.evaluation import evaluate_fixes, pose_errors, reported_poses
-from navkit.localization.field import LikelihoodField
-from navkit.localization.localizer import (
-    Fix,
-    LocalizationFailure,
-    Localizer,
-    LocalizerSettings,
-    stack_views,
-)
-from navkit.localization.mapping import (
-    Corner,
-    MapSettings,
-    WallMap,
-    build_map,
-    build_map_from_scans,
-    find_corners,
-    find_outline,
-    merge_segments,
-)
-from navkit.localization.matcher import (
-    Ambiguity,
-    MatcherSettings,
-    ScanMatch,
-    analyse_peak,
-    match_scan,
-    score_poses,
-)
-from navkit.localization.raster import rasterize, sample_segments
-from navkit.localization.refine import (
-    PoseRefinement,
-    RefineSettings,
-    refine_pose,
-    stereo_range_sigma,
-)
-from navkit.localization.walls import (
-    SegmentationSettings,
-    WallSegment,
-    merge_two,
-    ransac_walls,
-    segment_from_points,
-    split_and_merge,
-)
+from navkit.localization.evaluation import evaluate_fixes
+from navkit.localization.localizer import Fix, LocalizationFailure, Localizer, LocalizerSettings
+from navkit.localization.mapping import MapSettings, WallMap, build_map, build_map_from_scans
+from navkit.localization.matcher import MatcherSettings, ScanMatch, match_scan
 
 __all__ = [
-    "Ambiguity",
-    "Corner",
     "Fix",
     "KnownHeadingFix",
     "KnownHeadingSettings",
-    "LikelihoodField",
     "LocalizationFailure",
     "Localizer",
     "LocalizerSettings",
     "MapSettings",
     "MatcherSettings",
-    "PoseRefinement",
-    "RefineSettings",
     "ScanMatch",
-    "SegmentationSettings",
     "WallMap",
-    "WallSegment",
-    "analyse_peak",
     "build_map",
     "build_map_from_scans",
-    "correlate_profiles",
     "evaluate_fixes",
-    "evaluate_map",
-    "find_corners",
-    "find_outline",
     "locate_known_heading",
     "match_scan",
-    "merge_segments",
-    "merge_two",
-    "pose_errors",
-    "ransac_walls",
-    "rasterize",
-    "refine_pose",
-    "reported_poses",
-    "robot_position",
-    "sample_segments",
-    "score_poses",
-    "segment_from_points",
-    "split_and_merge",
-    "stack_views",
-    "stereo_range_sigma",
 ]

@@ -33,8 +33,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.signal import fftconvolve
 
 from navkit.errors import ConfigError, InputError
-from navkit.geometry import points_in_polygon
 from navkit.geometry._validate import as_points, check_settings
+from navkit.geometry.polygons import points_in_polygon
 from navkit.localization.field import LikelihoodField
 from navkit.localization.refine import (
     PoseRefinement,

@@ -32,8 +32,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from navkit.errors import ConfigError, FormatError, InputError
-from navkit.geometry import polygon_area, se2_apply, se2_from_xytheta, signed_area
+from navkit.geometry import se2_apply, se2_from_xytheta
 from navkit.geometry._validate import as_points, check_settings
+from navkit.geometry.polygons import polygon_area, signed_area
 from navkit.localization.field import LikelihoodField
 from navkit.localization.raster import rasterize, sample_segments
 from navkit.localization.walls import (

@@ -107,7 +107,7 @@ def rasterize(
         return ij[:, 1], ij[:, 0]
 
     if free_polygon is not None:
-        from navkit.geometry import points_in_polygon
+        from navkit.geometry.polygons import points_in_polygon
 
         yy, xx = np.mgrid[0:H, 0:W]
         centres = np.stack([xx.ravel() + 0.5, yy.ravel() + 0.5], axis=1) * resolution + lo

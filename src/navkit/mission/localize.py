@@ -23,7 +23,7 @@ estimate by the fix weight (the Localizer's blend); every attempt is logged as a
 Decisions: a rejected fix leaves the estimate (``recentre_on_rejected=False``: the mission's
 estimate is fused, not the matcher's). The fragment is stacked with the mission's own pose
 algebra (:func:`navkit.mission.pose2d.relative`), not
-:func:`navkit.localization.stack_views`: the two differ by ~1e-15 m, which the closed loop of
+:func:`navkit.localization.localizer.stack_views`: the two differ by ~1e-15 m, which the closed loop of
 gates and thresholds amplifies into different runs; this keeps the mission's figures those of
 the published runs. A fix weight of 0 turns that source of fixes off (no Localizer is built,
 no attempt is logged).

@@ -40,7 +40,8 @@ class SimRobot:
         timings: Timings | None = None,
     ) -> None:
         from navkit.sensors import PinholeCamera, StereoRig, VisualOdometryNoise
-        from navkit.sim import RangeNoise, SpinningLidar
+        from navkit.sim import SpinningLidar
+        from navkit.sim.scanners import RangeNoise
 
         s = settings
         self.scene, self.s, self.timings = scene, s, timings
@@ -75,7 +76,7 @@ class SimRobot:
     def move(self, v: float, omega: float) -> NDArray[np.float64]:
         """Drive one control period (exact unicycle arc); returns the VO increment ``(3,)``: the
         true body increment corrupted by :class:`~navkit.sensors.VisualOdometryNoise`'s model."""
-        from navkit.sim import unicycle_step
+        from navkit.sim.unicycle import unicycle_step
 
         m, rng = self.vo_model, self.rng
         new_truth = unicycle_step(self.truth, v, omega, self.s.robot.dt)
@@ -109,7 +110,8 @@ class SimRobot:
 
     def rgbd(self, t: float) -> Any:
         """An RGB-D frame (:class:`navkit.sim.SimRGBD`)."""
-        from navkit.sim import RangeNoise, render_rgbd
+        from navkit.sim import render_rgbd
+        from navkit.sim.scanners import RangeNoise
 
         C = self.s.camera
         T_wc = pose3(self.truth, self.ground()) @ self.T_bc

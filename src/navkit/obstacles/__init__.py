@@ -10,60 +10,28 @@ The eight stages (Pavlovsky 2016), vectorised over the scan grid::
 The online object: :class:`ObstacleMapper` fuses detections into a 2D obstacle map.
 Entry points: :func:`detect_obstacles` (a :class:`~navkit.sensors.RangeScan`),
 :func:`detect_obstacles_grid` (an organised grid of body-frame points),
-:func:`detect_obstacles_in_grid` (a :class:`ScanGrid` recovered by :func:`cloud_to_grid` from a
-spinning-lidar cloud, by :func:`organized_to_grid` or :func:`depth_to_grid`). Thresholds live in
-:class:`ObstacleSettings`; the sensor's mounting in :class:`Mounting`. The bounding shapes are the
-registry of :mod:`navkit.geometry.shapes` (re-exported here).
+:func:`detect_obstacles_in_grid` (a :class:`ScanGrid`, recovered from a spinning-lidar cloud, an
+organised cloud or a depth image by :mod:`navkit.obstacles.grids`). Thresholds live in
+:class:`ObstacleSettings`; the sensor's mounting in :class:`Mounting`.
+
+Everything else is imported from its module: the label values from :mod:`~navkit.obstacles.rules`,
+scoring against truth from :mod:`~navkit.obstacles.evaluate`, the bounding shapes from
+:mod:`navkit.geometry.shapes`.
 """
 
-from navkit.geometry.shapes import (
-    SHAPES,
-    Circle,
-    Ellipse,
-    Rectangle,
-    circle_a2,
-    circle_a3,
-    compute_shapes,
-    ellipse_a4,
-    ellipse_a5,
-    ellipse_a6,
-    hull_points,
-    min_circle_welzl,
-    mvee_khachiyan,
-    rect_a1,
-    register_shape,
-)
 from navkit.obstacles.detector import (
     Obstacle,
     ObstacleDetection,
     detect_obstacles,
     detect_obstacles_grid,
     detect_obstacles_in_grid,
-    unsort_vertex_array,
 )
-from navkit.obstacles.evaluate import (
-    GroundScores,
-    ground_scores,
-    score_obstacle_map,
-    shape_contains,
-)
-from navkit.obstacles.grids import ScanGrid, cloud_to_grid, depth_to_grid, organized_to_grid
+from navkit.obstacles.grids import ScanGrid
 from navkit.obstacles.mapper import MappedObstacle, MapperSettings, ObstacleGrid, ObstacleMapper
-from navkit.obstacles.mounting import Mounting, level_rotation_from_gravity
-from navkit.obstacles.rules import GROUND, OBSTACLE, SHADOW_BEHIND, SIDE_SHADOW, UNRELIABLE
-from navkit.obstacles.settings import DEFAULT_SHAPES, ObstacleSettings
+from navkit.obstacles.mounting import Mounting
+from navkit.obstacles.settings import ObstacleSettings
 
 __all__ = [
-    "DEFAULT_SHAPES",
-    "GROUND",
-    "OBSTACLE",
-    "SHADOW_BEHIND",
-    "SHAPES",
-    "SIDE_SHADOW",
-    "UNRELIABLE",
-    "Circle",
-    "Ellipse",
-    "GroundScores",
     "MappedObstacle",
     "MapperSettings",
     "Mounting",
@@ -72,28 +40,8 @@ __all__ = [
     "ObstacleGrid",
     "ObstacleMapper",
     "ObstacleSettings",
-    "Rectangle",
     "ScanGrid",
-    "circle_a2",
-    "circle_a3",
-    "cloud_to_grid",
-    "compute_shapes",
-    "depth_to_grid",
     "detect_obstacles",
     "detect_obstacles_grid",
     "detect_obstacles_in_grid",
-    "ellipse_a4",
-    "ellipse_a5",
-    "ellipse_a6",
-    "ground_scores",
-    "hull_points",
-    "level_rotation_from_gravity",
-    "min_circle_welzl",
-    "mvee_khachiyan",
-    "organized_to_grid",
-    "rect_a1",
-    "register_shape",
-    "score_obstacle_map",
-    "shape_contains",
-    "unsort_vertex_array",
 ]

@@ -1,5 +1,5 @@
 """Compiled (Numba) kernels of paper 1's stage 1: the scan grid from a cloud
-(:func:`navkit.obstacles.cloud_to_grid`) and the body-frame points of a grid.
+(:func:`navkit.obstacles.grids.cloud_to_grid`) and the body-frame points of a grid.
 
 Each kernel computes exactly what its NumPy twin computes (``TWINS`` below), in the same
 floating-point types and the same order of operations, so that classes, ids and masks are identical

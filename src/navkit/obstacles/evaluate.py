@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
-from navkit.geometry import points_in_polygon
+from navkit.geometry.polygons import points_in_polygon
 from navkit.obstacles.mapper import ObstacleGrid
 
 __all__ = [
@@ -156,7 +156,7 @@ def score_obstacle_map(
         The map (:meth:`navkit.obstacles.ObstacleMapper.grid`).
     footprints : sequence of footprints
         The truth, with attributes ``index``, ``name``, ``kind``, ``polygon`` ``(K, 2)``,
-        ``height`` and ``extent`` (:func:`navkit.sim.true_footprints`).
+        ``height`` and ``extent`` (:func:`navkit.sim.footprints.true_footprints`).
     seen_indices : set of int
         Primitives the lidar actually hit during the mission.
     min_height : float

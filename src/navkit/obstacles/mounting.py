@@ -19,7 +19,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from navkit.errors import ConfigError
-from navkit.geometry import quat_to_matrix, rotation_between, se3_from_rt
+from navkit.geometry import se3_from_rt
+from navkit.geometry.rotations import quat_to_matrix, rotation_between
 
 log = logging.getLogger(__name__)
 

@@ -5,7 +5,7 @@ depth clouds have no rings, so the paper's mesh over the ``(alpha_i, beta_j)`` g
 cannot be built. This module builds the mesh the data allow and runs the paper's stages 3-8 on it:
 
 1. **Recognise the input** (:func:`recognise_cloud`): a cloud whose rings can be recovered goes to
-   the scan path (:func:`~navkit.obstacles.cloud_to_grid`); a cloud without them to this one.
+   the scan path (:func:`~navkit.obstacles.grids.cloud_to_grid`); a cloud without them to this one.
 2. **The mesh**: a Delaunay triangulation in x-y (``scipy.spatial.Delaunay``) over the cloud
    thinned to its lowest point per cell, the cell being the data's median nearest-neighbour
    spacing (:func:`point_spacing`). Large clouds run in overlapping square tiles

@@ -113,7 +113,7 @@ def ground_plane(positions: ArrayLike, plane: str = "auto") -> GroundPlane:
     """The plane the path lies in.
 
     ``"xy" | "xz" | "yz"`` take the two coordinates as they are (origin 0). ``"auto"`` fits a
-    plane to the positions (total least squares, :func:`navkit.geometry.fit_plane`) and uses its
+    plane to the positions (total least squares, :func:`navkit.geometry.fitting.fit_plane`) and uses its
     in-plane basis, origin at the first position, so e.g. KITTI camera poses (y down, ground =
     x-z) and TUM poses in any frame give a planar path. The in-plane axes are oriented so the
     path is seen from above: up is taken as -y when the plane's normal is closest to y (camera
@@ -121,7 +121,7 @@ def ground_plane(positions: ArrayLike, plane: str = "auto") -> GroundPlane:
     the line's own direction and a perpendicular are used.
     """
     from navkit.errors import DegenerateGeometryError
-    from navkit.geometry import fit_plane
+    from navkit.geometry.fitting import fit_plane
 
     P = np.asarray(positions, dtype=np.float64)
     if P.ndim != 2 or P.shape[1] not in (2, 3) or len(P) == 0:

@@ -11,11 +11,11 @@ Pipeline (one module per stage)::
     map      -> merged, textured plane map                 (plane_map.py)
 
 Everything works on NumPy arrays; readers for files are in :mod:`navkit.io.rgbd` and
-:mod:`navkit.io.pointcloud`.
+:mod:`navkit.io.pointcloud`. The package exports the online object (:class:`PlaneOdometry`), the
+settings and results, and the entry functions (extraction, observation, two-frame motion); the
+stage functions (association, solvers, texture, dense alignment) are imported from their modules.
 """
 
-from navkit.planes.associate import AssociationSettings, associate, associate_global
-from navkit.planes.dense import DenseFrame, DenseResult, DenseSettings, dense_align
 from navkit.planes.extract import (
     CloudExtractionSettings,
     ExtractionSettings,
@@ -24,27 +24,13 @@ from navkit.planes.extract import (
 )
 from navkit.planes.frame import PlaneObservation, observe_points, observe_rgbd
 from navkit.planes.motion import MotionPrior, MotionSettings, estimate_motion
-from navkit.planes.odometry import DenseGates, FrameMotion, OdometrySettings, PlaneOdometry
+from navkit.planes.odometry import FrameMotion, OdometrySettings, PlaneOdometry
 from navkit.planes.plane_map import MapPlane, PlaneMap
-from navkit.planes.quaternion import euler_zxy_from_quat
-from navkit.planes.segments import ExtractionResult, PlaneSegment, plane_frame
-from navkit.planes.solve import (
-    MotionEstimate,
-    MotionFailure,
-    SolverSettings,
-    solve_one_plane,
-    solve_three_planes,
-    solve_two_planes,
-)
-from navkit.planes.texture import PlaneTexture, texture_from_camera, texture_from_rgbd, to_gray
+from navkit.planes.segments import ExtractionResult, PlaneSegment
+from navkit.planes.solve import MotionEstimate, MotionFailure
 
 __all__ = [
-    "AssociationSettings",
     "CloudExtractionSettings",
-    "DenseFrame",
-    "DenseGates",
-    "DenseResult",
-    "DenseSettings",
     "ExtractionResult",
     "ExtractionSettings",
     "FrameMotion",
@@ -58,22 +44,9 @@ __all__ = [
     "PlaneObservation",
     "PlaneOdometry",
     "PlaneSegment",
-    "PlaneTexture",
-    "SolverSettings",
-    "associate",
-    "associate_global",
-    "dense_align",
     "estimate_motion",
-    "euler_zxy_from_quat",
     "extract_planes_cloud",
     "extract_planes_organized",
     "observe_points",
     "observe_rgbd",
-    "plane_frame",
-    "solve_one_plane",
-    "solve_three_planes",
-    "solve_two_planes",
-    "texture_from_camera",
-    "texture_from_rgbd",
-    "to_gray",
 ]

@@ -25,8 +25,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
 
-from navkit.geometry import points_in_polygon
 from navkit.geometry._validate import check_settings
+from navkit.geometry.polygons import points_in_polygon
 from navkit.planes.extract_cloud import voxelize
 from navkit.planes.segments import PlaneSegment, plane_frame
 

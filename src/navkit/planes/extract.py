@@ -59,9 +59,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
-from navkit.geometry import Plane, canonical_plane
 from navkit.geometry._validate import check_settings
 from navkit.geometry.angles import acos, cos
+from navkit.geometry.fitting import Plane, canonical_plane
 from navkit.jit import kernels_enabled
 from navkit.planes.extract_cloud import CloudExtractionSettings, extract_planes_cloud
 from navkit.planes.segments import (
@@ -809,7 +809,7 @@ def _extract(
 def _canonical_planes(
     normal: NDArray[np.float64], rho: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """:func:`navkit.geometry.canonical_plane` of every row ``(K, 3)``, ``(K,)`` at once, the
+    """:func:`navkit.geometry.fitting.canonical_plane` of every row ``(K, 3)``, ``(K,)`` at once, the
     same bits on every CPU (the same IEEE operations in the same order: three products and two
     sums, a square root, two divisions). A zero or non-finite normal or a plane
     through the origin (``_orient``'s special cases) takes ``canonical_plane`` row by row."""

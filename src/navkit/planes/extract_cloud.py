@@ -37,8 +37,8 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from navkit.errors import InputError
-from navkit.geometry import Plane, canonical_plane
 from navkit.geometry._validate import check_coordinates, check_grid_size, check_settings
+from navkit.geometry.fitting import Plane, canonical_plane
 from navkit.geometry.linalg import rows_matmul
 from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points, plane_frame
 

@@ -14,7 +14,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
-from navkit.geometry import rotation_angle, se3_inverse
+from navkit.geometry import se3_inverse
+from navkit.geometry.rotations import rotation_angle
 
 __all__ = ["ate", "poses_at", "rpe", "umeyama_alignment"]
 

@@ -13,8 +13,9 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from navkit.geometry import Plane, canonical_plane, se3_from_rt
+from navkit.geometry import se3_from_rt
 from navkit.geometry._validate import check_settings
+from navkit.geometry.fitting import Plane, canonical_plane
 from navkit.geometry.linalg import rows_matmul
 from navkit.planes.associate import AssociationSettings, associate, associate_global
 from navkit.planes.frame import PlaneObservation
@@ -497,7 +498,7 @@ def _fill_from_prior(
     turned by ``q1`` (eq. 8) so the normals agree, the shift along the normal from eq. 2; the
     turn about the normal and the in-plane translation are the prior's.
     """
-    from navkit.geometry import quat_to_matrix
+    from navkit.geometry.rotations import quat_to_matrix
 
     Rp, tp = Tp[:3, :3], Tp[:3, 3]
     N1 = np.array([p.normal for p in p1])

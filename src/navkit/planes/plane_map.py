@@ -13,8 +13,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError, NavkitError
-from navkit.geometry import Plane, canonical_plane, points_in_polygon
+from navkit.geometry.fitting import Plane, canonical_plane
 from navkit.geometry.linalg import rows_matmul
+from navkit.geometry.polygons import points_in_polygon
 from navkit.planes.frame import PlaneObservation
 from navkit.planes.segments import ExtractionResult, PlaneSegment, outline_from_points
 from navkit.planes.texture import PlaneTexture

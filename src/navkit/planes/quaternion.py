@@ -22,14 +22,14 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from navkit.geometry import (
+from navkit.geometry._validate import as_quaternions
+from navkit.geometry.rotations import (
     quat_conjugate,
     quat_from_axis_angle,
     quat_multiply,
     quat_rotate,
     rotation_between,
 )
-from navkit.geometry._validate import as_quaternions
 
 __all__ = [
     "OPTICAL_AXIS",

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.geometry import Plane
+from navkit.geometry.fitting import Plane
 
 __all__ = ["ExtractionResult", "PlaneSegment", "outline_from_points", "plane_frame"]
 
@@ -127,7 +127,7 @@ def outline_of_closed(
         return np.zeros((0, 2)), area
     c = cv2.approxPolyDP(_largest_contour(contours), 1.0, True)
     # raster (x, y) = (u, v); OpenCV's oriented area is > 0 for a counter-clockwise polygon in
-    # (u, v) (checked against navkit.geometry.signed_area): the others are reversed
+    # (u, v) (checked against navkit.geometry.polygons.signed_area): the others are reversed
     if len(c) >= 3 and cv2.contourArea(c, oriented=True) < 0:
         c = c[::-1]
     poly = (c.reshape(-1, 2).astype(np.float64) + 0.5) * cell + lo

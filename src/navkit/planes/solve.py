@@ -32,8 +32,10 @@ from numpy.typing import NDArray
 
 from navkit.domains import POSITIVE, domain_field
 from navkit.errors import ConfigError, NavkitError
-from navkit.geometry import Plane, matrix_to_quat, quat_to_matrix, se3_from_rt
+from navkit.geometry import se3_from_rt
 from navkit.geometry._validate import check_settings
+from navkit.geometry.fitting import Plane
+from navkit.geometry.rotations import matrix_to_quat, quat_to_matrix
 from navkit.planes.align import Search1D, Search2D, search_1d, search_2d
 from navkit.planes.quaternion import (
     compose_q3_q1,

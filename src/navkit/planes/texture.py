@@ -25,8 +25,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import InputError
-from navkit.geometry import Plane, points_in_polygon
+from navkit.geometry.fitting import Plane
 from navkit.geometry.linalg import rows_matmul
+from navkit.geometry.polygons import points_in_polygon
 from navkit.planes.segments import PlaneSegment, plane_frame
 from navkit.sensors import PinholeCamera
 

@@ -274,7 +274,8 @@ class ObstaclesStage:
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
         from navkit.io.atomic import atomic_path, write_json
-        from navkit.obstacles import cloud_to_grid, detect_obstacles_in_grid
+        from navkit.obstacles import detect_obstacles_in_grid
+        from navkit.obstacles.grids import cloud_to_grid
 
         c = self.cfg
         src = f"{msg.topic}@{msg.stamp_ns}"

@@ -93,10 +93,10 @@ def _lidar_cloud() -> None:
     from navkit.obstacles import (
         Mounting,
         ObstacleSettings,
-        cloud_to_grid,
         detect_obstacles,
         detect_obstacles_in_grid,
     )
+    from navkit.obstacles.grids import cloud_to_grid
     from navkit.sim import Box, Ground, Scene, SpinningLidar, TiltingScanner, render_scan
 
     boxes = [((5, 0, 0.5), (1, 1, 1)), ((0, 6, 0.8), (2, 1, 1.6)), ((-4, -4, 0.6), (1, 3, 1.2))]

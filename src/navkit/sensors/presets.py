@@ -4,7 +4,7 @@ A preset fills in what a user would otherwise look up in a data sheet: the numbe
 azimuth columns of a spinning lidar (so its cloud's scan grid is recovered without guessing), the
 frame its points are in, the intrinsics and depth scale of a depth camera, and the height it is
 usually mounted at. The typical height is **not** used as the sensor height: when no height is
-given, navkit measures it from the ground (:func:`navkit.obstacles.estimate_sensor_height`) and
+given, navkit measures it from the ground (:func:`navkit.obstacles.mounting.estimate_sensor_height`) and
 uses ``height_range_m`` to tell whether that measurement is plausible; only when the ground
 cannot be found does it fall back to ``typical_height_m``, with a warning.
 
@@ -45,7 +45,7 @@ class SensorPreset:
     columns : int or None
         Azimuth columns per revolution (None: recovered from the data).
     ring_method : str
-        How :func:`~navkit.obstacles.cloud_to_grid` recovers the rings.
+        How :func:`~navkit.obstacles.grids.cloud_to_grid` recovers the rings.
     elevation_deg : (lowest, highest)
         Vertical field of view (deg).
     max_range_m : float

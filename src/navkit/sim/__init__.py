@@ -7,58 +7,28 @@ range scans (:func:`render_scan` with a :class:`TiltingScanner` or :class:`Spinn
 frames (:func:`render_rgbd`) and rectified stereo pairs (:func:`render_stereo`). Each render returns
 the truth: which primitive every ray hit (ground / obstacle labels), true points, the exact poses.
 :meth:`Scene.true_planes` gives the planar faces. :func:`simulate_unicycle` drives a robot.
+The helpers (scanner noise in :mod:`~navkit.sim.scanners`, obstacle footprints in
+:mod:`~navkit.sim.footprints`, scene (de)serialisation in :mod:`~navkit.sim.scene_io`, ray hits in
+:mod:`~navkit.sim.scene`) are imported from their modules.
 
 Frames: world z up; ``T_a_b`` maps frame b to frame a; scanners x forward, y left, z up; cameras
 OpenCV optical (x right, y down, z forward).
 """
 
-from navkit.sim.footprints import Footprint, footprint, true_footprints
-from navkit.sim.primitives import (
-    T_MIN,
-    Box,
-    Cylinder,
-    Ground,
-    Hemisphere,
-    Primitive,
-    Prism,
-    Sphere,
-    Wall,
-)
-from navkit.sim.render import (
-    SimRGBD,
-    SimScan,
-    SimStereo,
-    body_pose_under,
-    render_rgbd,
-    render_scan,
-    render_stereo,
-    shade,
-)
-from navkit.sim.scanners import RangeNoise, SpinningLidar, TiltingScanner
-from navkit.sim.scene import RayHits, Scene
-from navkit.sim.scene_io import (
-    builtin_scene_path,
-    builtin_scenes,
-    load_scene,
-    scene_from_dict,
-    scene_to_dict,
-    scene_to_toml,
-)
-from navkit.sim.texture import TEXTURE_KINDS, Texture
-from navkit.sim.unicycle import simulate_unicycle, unicycle_step
+from navkit.sim.primitives import Box, Cylinder, Ground, Hemisphere, Prism, Sphere, Wall
+from navkit.sim.render import SimRGBD, SimScan, SimStereo, render_rgbd, render_scan, render_stereo
+from navkit.sim.scanners import SpinningLidar, TiltingScanner
+from navkit.sim.scene import Scene
+from navkit.sim.scene_io import builtin_scene_path, builtin_scenes, load_scene
+from navkit.sim.texture import Texture
+from navkit.sim.unicycle import simulate_unicycle
 
 __all__ = [
-    "TEXTURE_KINDS",
-    "T_MIN",
     "Box",
     "Cylinder",
-    "Footprint",
     "Ground",
     "Hemisphere",
-    "Primitive",
     "Prism",
-    "RangeNoise",
-    "RayHits",
     "Scene",
     "SimRGBD",
     "SimScan",
@@ -68,19 +38,11 @@ __all__ = [
     "Texture",
     "TiltingScanner",
     "Wall",
-    "body_pose_under",
     "builtin_scene_path",
     "builtin_scenes",
-    "footprint",
     "load_scene",
     "render_rgbd",
     "render_scan",
     "render_stereo",
-    "scene_from_dict",
-    "scene_to_dict",
-    "scene_to_toml",
-    "shade",
     "simulate_unicycle",
-    "true_footprints",
-    "unicycle_step",
 ]

@@ -1,7 +1,7 @@
 """Closed-loop simulation of paper 4's return to the operator (owned by the path area).
 
-A simulated unicycle (:func:`navkit.sim.unicycle_step`) is steered by
-:class:`navkit.path.ReturnController`, which sees only the robot's *visual-odometry estimate* of
+A simulated unicycle (:func:`navkit.sim.unicycle.unicycle_step`) is steered by
+:class:`navkit.path.control.ReturnController`, which sees only the robot's *visual-odometry estimate* of
 its pose; the VO error model of :class:`navkit.sensors.VisualOdometryNoise` corrupts every step's
 body-frame increment (distance scaled by ``1 + scale_bias + N(0, scale_sigma)``, heading change
 plus ``heading_bias_per_m * distance + N(0, heading_sigma)``), as in ``corrupt`` but online, so

@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError, InputError
-from navkit.geometry import Plane, canonical_plane
+from navkit.geometry.fitting import Plane, canonical_plane
 from navkit.geometry.linalg import rows_dot, rows_norm
 from navkit.sim.primitives import Ground, Primitive
 

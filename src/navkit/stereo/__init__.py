@@ -7,45 +7,21 @@
   -> world (eq. 2);
 - :mod:`~navkit.stereo.floorplan` - wall points of the floor plan (height band, projection).
 
-Room maps and localization from these points live in :mod:`navkit.localization`.
+The package exports the settings, the disparity result and the three entry functions
+(:func:`compute_disparity`, :func:`disparity_to_points`, :func:`stereo_wall_points`); the stage
+helpers are imported from their modules. Room maps and localization from these points live in
+:mod:`navkit.localization`.
 """
 
-from navkit.stereo.disparity import (
-    DisparityResult,
-    DisparitySettings,
-    bad_pixel_rate,
-    compute_disparity,
-    lr_consistency,
-    warp_right_disparity,
-)
-from navkit.stereo.floorplan import (
-    FloorplanSettings,
-    stereo_wall_points,
-    thin_points,
-    wall_points_body,
-    wall_points_world,
-)
-from navkit.stereo.triangulation import (
-    camera_to_world,
-    disparity_to_points,
-    planar_camera_pose,
-    triangulate_pixels,
-)
+from navkit.stereo.disparity import DisparityResult, DisparitySettings, compute_disparity
+from navkit.stereo.floorplan import FloorplanSettings, stereo_wall_points
+from navkit.stereo.triangulation import disparity_to_points
 
 __all__ = [
     "DisparityResult",
     "DisparitySettings",
     "FloorplanSettings",
-    "bad_pixel_rate",
-    "camera_to_world",
     "compute_disparity",
     "disparity_to_points",
-    "lr_consistency",
-    "planar_camera_pose",
     "stereo_wall_points",
-    "thin_points",
-    "triangulate_pixels",
-    "wall_points_body",
-    "wall_points_world",
-    "warp_right_disparity",
 ]

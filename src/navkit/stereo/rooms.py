@@ -1,6 +1,6 @@
 """Test rooms for the stereo map and localization evaluation, with their true floor plans.
 
-Each room is returned as a scene *description* (the dictionary :func:`navkit.sim.scene_from_dict`
+Each room is returned as a scene *description* (the dictionary :func:`navkit.sim.scene_io.scene_from_dict`
 reads - this module does not import the simulator) plus its truth: the inner faces of the walls
 as 2D segments and the true corners. Walls are textured with value noise (different seed per
 wall, so stereo matching has texture and no two walls look alike); the floor is textured too.
@@ -32,7 +32,7 @@ class RoomTruth:
     Attributes
     ----------
     scene : dict
-        For :func:`navkit.sim.scene_from_dict`.
+        For :func:`navkit.sim.scene_io.scene_from_dict`.
     walls : (K, 2, 2) array
         Inner wall faces as segments ``[[x0, y0], [x1, y1]]``, metres.
     corners : (C, 2) array
@@ -169,7 +169,7 @@ def sample_poses(
 
     Rejection sampling in the bounding box (vectorised per batch); headings uniform.
     """
-    from navkit.geometry import points_in_polygon
+    from navkit.geometry.polygons import points_in_polygon
 
     lo, hi = truth.outline.min(axis=0), truth.outline.max(axis=0)
     S, E = truth.walls[:, 0], truth.walls[:, 1]

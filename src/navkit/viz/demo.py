@@ -130,7 +130,8 @@ def _world(r: _Shoot) -> str:
 
 
 def _lidar(r: _Shoot) -> str:
-    from navkit.sim import RangeNoise, SpinningLidar, render_scan
+    from navkit.sim import SpinningLidar, render_scan
+    from navkit.sim.scanners import RangeNoise
     from navkit.viz import sensors as viz
 
     L = r.settings.lidar
@@ -146,7 +147,8 @@ def _lidar(r: _Shoot) -> str:
 
 
 def _scanner(r: _Shoot) -> str:
-    from navkit.sim import RangeNoise, TiltingScanner, render_scan
+    from navkit.sim import TiltingScanner, render_scan
+    from navkit.sim.scanners import RangeNoise
     from navkit.viz import sensors as viz
 
     S = r.settings.scanner
@@ -169,7 +171,8 @@ def _rgbd(r: _Shoot) -> str:
     import numpy as np
 
     from navkit.io.images import write_depth, write_image
-    from navkit.sim import RangeNoise, render_rgbd
+    from navkit.sim import render_rgbd
+    from navkit.sim.scanners import RangeNoise
     from navkit.viz import sensors as viz
 
     C = r.settings.camera

@@ -78,7 +78,7 @@ def _cmap(name: str, bad: tuple[float, float, float]) -> Any:
 
 def _footprint(p: Any) -> NDArray[np.float64] | None:
     """Closed polygon ``(K, 2)`` of a primitive's footprint (a wall: its base line), or None for
-    circles / the ground (from :func:`navkit.sim.footprint`)."""
+    circles / the ground (from :func:`navkit.sim.footprints.footprint`)."""
     from navkit.sim.footprints import footprint
 
     fp = footprint(p)
