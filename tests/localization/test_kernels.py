@@ -82,7 +82,7 @@ def test_global_search_tables_sums_and_leaves_identical(rng):
     tables (single rotations and rotation groups), the integer sums of nodes at every level,
     the children of a batch of nodes with their sums (all of them, and those above a pruning
     threshold), and the depth-first search's best leaf and collected leaves in order."""
-    from navkit.localization import LikelihoodField
+    from navkit.localization.field import LikelihoodField
     from navkit.localization.search import _Search
 
     walls = np.concatenate(

@@ -11,7 +11,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.geometry import Plane
+from navkit.geometry.fitting import Plane
 from navkit.planes.extract import (
     _Border,
     _outline_kernels,
