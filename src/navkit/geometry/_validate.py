@@ -161,7 +161,8 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
     annotated ``bool`` must hold a bool; no number may exceed :data:`MAX_SETTING_MAGNITUDE` in
     magnitude. A field declared with a :class:`navkit.domains.Domain` (``field(metadata=
     {"domain": ...})``, :func:`navkit.domains.domain_field`) must lie in it - the same check as
-    the CLI's options; other ranges are checked by each class's own ``__post_init__``.
+    the CLI's options, and the domain decides finiteness (its ``allow_inf``); rules that are no
+    range (odd sizes, one field bounded by another) are checked by each class's ``__post_init__``.
 
     Raises
     ------
@@ -200,6 +201,11 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
                 field=f.name,
                 expected="an integer" if base == "int" else "a number",
             )
+        domain = f.metadata.get(DOMAIN_KEY)
+        if domain is not None and f.name not in allow_inf:
+            # the declared domain decides finiteness too (``allow_inf``: "inf disables")
+            domain.check(value, f.name, source=cls, error=ConfigError)
+            continue
         if base == "float" and not np.isfinite(value):
             if np.isinf(value) and f.name in allow_inf:
                 continue
@@ -209,7 +215,6 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
                 field=f.name,
                 expected="a finite number" + (" or inf" if f.name in allow_inf else ""),
             )
-        domain = f.metadata.get(DOMAIN_KEY)
         if domain is not None:
             domain.check(value, f.name, source=cls, error=ConfigError)
             continue
