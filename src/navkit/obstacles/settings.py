@@ -113,9 +113,7 @@ class ObstacleSettings:
     c2: float = domain_field(0.5, Domain(lo=0.0, hi=1.0, hi_open=True, note="a cosine"))
     jump_height_m: float = domain_field(0.3, POSITIVE)
     jump_range_fraction: float = domain_field(0.01, NON_NEGATIVE)
-    jump_range_ratio: float = domain_field(
-        0.2, Domain(lo=0.0, lo_open=True, allow_inf=True)
-    )
+    jump_range_ratio: float = domain_field(0.2, Domain(lo=0.0, lo_open=True, allow_inf=True))
     chain_min_height_m: float = domain_field(0.2, NON_NEGATIVE)
     normal_support_m: float = domain_field(1.0, NON_NEGATIVE)
     normal_support: int = domain_field(0, NON_NEGATIVE_INT)

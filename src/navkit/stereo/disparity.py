@@ -140,9 +140,7 @@ class DisparitySettings:
     uniqueness: int = domain_field(10, Domain(integer=True, lo=0, hi=100, note="percent"))
     speckle_window: int = domain_field(100, Domain(integer=True, lo=0, note="pixels, 0 = off"))
     speckle_range: int = domain_field(2, Domain(integer=True, lo=0, note="pixels"))
-    pre_filter_cap: int = domain_field(
-        63, Domain(integer=True, lo=1, note="bm clamps it to 63")
-    )
+    pre_filter_cap: int = domain_field(63, Domain(integer=True, lo=1, note="bm clamps it to 63"))
     lr_check: bool = True
     lr_method: LRMethod = "warp"
     lr_max_diff: float = domain_field(1.0, Domain(lo=0.0, note="pixels"))
