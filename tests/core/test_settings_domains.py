@@ -23,9 +23,7 @@ PENDING: frozenset[str] = frozenset(
         "CloudExtractionSettings",
         "FloorplanSettings",
         "MapperSettings",
-        "MotionSettings",
         "ReturnTripSettings",
-        "SolverSettings",
     }
 )
 
