@@ -21,7 +21,6 @@ PENDING: frozenset[str] = frozenset(
     {
         "AssociationSettings",
         "CloudExtractionSettings",
-        "FloorplanSettings",
         "MapperSettings",
         "ReturnTripSettings",
     }
@@ -152,6 +151,9 @@ _RULES = {
     ("DisparitySettings", "subpixel_window"): lambda v: v % 2 == 1,
     # a depth range needs min_depth < max_depth (inf by default)
     ("DenseSettings", "min_depth"): lambda v: True,
+    # a height band needs min_height < max_height (0.3 .. 2 m by default)
+    ("FloorplanSettings", "min_height"): lambda v: v < 2.0,
+    ("FloorplanSettings", "max_height"): lambda v: v > 0.3,
 }
 
 
