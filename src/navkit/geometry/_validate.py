@@ -161,7 +161,10 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
     annotated ``bool`` must hold a bool; no number may exceed :data:`MAX_SETTING_MAGNITUDE` in
     magnitude. A field declared with a :class:`navkit.domains.Domain` (``field(metadata=
     {"domain": ...})``, :func:`navkit.domains.domain_field`) must lie in it - the same check as
-    the CLI's options; other ranges are checked by each class's own ``__post_init__``.
+    the CLI's options, and the domain decides finiteness (its ``allow_inf``); rules that are no
+    range (odd sizes, one field bounded by another) are checked by each class's ``__post_init__``.
+    A field annotated ``tuple[int, ...]`` (or ``float``) with a domain holds a list of such
+    numbers, each in it (the error names the entry: ``levels[1]``).
 
     Raises
     ------
@@ -190,6 +193,27 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
                     expected="true or false",
                 )
             continue
+        domain = f.metadata.get(DOMAIN_KEY)
+        element = base[len("tuple[") : -len(",...]")] if base.endswith(",...]") else None
+        if domain is not None and element in _NUMBER_TYPES:
+            # a tuple of numbers (pyramid levels): every entry in the declared domain
+            if not isinstance(value, (tuple, list)):
+                raise ConfigError(
+                    f"is {value!r} ({type(value).__name__})",
+                    source=cls,
+                    field=f.name,
+                    expected=f"a list of numbers, each {domain.describe()}",
+                )
+            for i, v in enumerate(value):
+                if isinstance(v, (bool, np.bool_)) or not isinstance(v, _NUMBER_TYPES[element]):
+                    raise ConfigError(
+                        f"is {v!r} ({type(v).__name__})",
+                        source=cls,
+                        field=f"{f.name}[{i}]",
+                        expected=domain.describe(),
+                    )
+                domain.check(v, f"{f.name}[{i}]", source=cls, error=ConfigError)
+            continue
         kinds = _NUMBER_TYPES.get(base)
         if kinds is None:
             continue
@@ -200,6 +224,10 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
                 field=f.name,
                 expected="an integer" if base == "int" else "a number",
             )
+        if domain is not None and f.name not in allow_inf:
+            # the declared domain decides finiteness too (``allow_inf``: "inf disables")
+            domain.check(value, f.name, source=cls, error=ConfigError)
+            continue
         if base == "float" and not np.isfinite(value):
             if np.isinf(value) and f.name in allow_inf:
                 continue
@@ -209,7 +237,6 @@ def check_settings(obj: object, *, allow_inf: tuple[str, ...] = ()) -> None:
                 field=f.name,
                 expected="a finite number" + (" or inf" if f.name in allow_inf else ""),
             )
-        domain = f.metadata.get(DOMAIN_KEY)
         if domain is not None:
             domain.check(value, f.name, source=cls, error=ConfigError)
             continue

@@ -32,7 +32,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.signal import fftconvolve
 
-from navkit.errors import ConfigError, InputError
+from navkit.domains import POSITIVE, Domain, domain_field
+from navkit.errors import InputError
 from navkit.geometry._validate import as_points, check_settings
 from navkit.geometry.polygons import points_in_polygon
 from navkit.localization.field import LikelihoodField
@@ -129,6 +130,10 @@ def robot_position(
     return np.stack([dx, dy], axis=-1)
 
 
+#: A share of the fragment (occluded, unseen) above which a fix is refused; >= 1 = off.
+_SHARE = Domain(lo=0.0, note="a fraction, >= 1 = off")
+
+
 @dataclass(frozen=True)
 class KnownHeadingSettings:
     """Ambiguity rules and refinement of :func:`locate_known_heading`.
@@ -166,29 +171,19 @@ class KnownHeadingSettings:
         The final point-to-line refinement (when the map's walls are given).
     """
 
-    peak_tolerance: float = 0.05
-    ambiguity_extent: float = 0.5
-    second_peak_ratio: float = 0.9
-    exclusion_radius: float = 1.0
-    min_score: float = 0.3
-    max_occluded: float = 0.05
-    max_unseen: float = 0.15
+    peak_tolerance: float = domain_field(
+        0.05, Domain(lo=0.0, hi=1.0, lo_open=True, hi_open=True, note="a fraction of the best")
+    )
+    ambiguity_extent: float = domain_field(0.5, POSITIVE)
+    second_peak_ratio: float = domain_field(0.9, Domain(lo=0.0, hi=1.0, lo_open=True))
+    exclusion_radius: float = domain_field(1.0, POSITIVE)
+    min_score: float = domain_field(0.3, Domain(lo=0.0, hi=1.0, note="a score, 0 = accept all"))
+    max_occluded: float = domain_field(0.05, _SHARE)
+    max_unseen: float = domain_field(0.15, _SHARE)
     refine: RefineSettings = field(default_factory=RefineSettings)
 
     def __post_init__(self) -> None:
         check_settings(self)
-        if not 0 < self.peak_tolerance < 1:
-            raise ConfigError(
-                f"is {self.peak_tolerance}", field="peak_tolerance", expected="in (0, 1)"
-            )
-        if not 0 < self.second_peak_ratio <= 1:
-            raise ConfigError(
-                f"is {self.second_peak_ratio}", field="second_peak_ratio", expected="in (0, 1]"
-            )
-        for name in ("ambiguity_extent", "exclusion_radius"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"is {v}", field=name, expected="a positive number of metres")
 
 
 @dataclass(frozen=True)

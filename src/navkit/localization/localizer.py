@@ -47,6 +47,7 @@ from typing import Any, ClassVar
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from navkit.domains import POSITIVE, Domain, domain_field
 from navkit.errors import ConfigError, InputError, NavkitError
 from navkit.geometry import (
     se2_compose,
@@ -55,7 +56,7 @@ from navkit.geometry import (
     se2_to_xytheta,
     wrap_angle,
 )
-from navkit.geometry._validate import as_points
+from navkit.geometry._validate import as_points, check_settings
 from navkit.localization._settings import settings_from_dict
 from navkit.localization.correlation import (
     KnownHeadingFix,
@@ -124,16 +125,16 @@ class LocalizerSettings:
         Centre the next tracking window on a rejected candidate (see the module docstring).
     """
 
-    sigma: float = 0.1
-    resolution: float | None = None
+    sigma: float = domain_field(0.1, POSITIVE)
+    resolution: float | None = domain_field(None, POSITIVE)
     matcher: MatcherSettings = field(default_factory=MatcherSettings)
     known_heading: KnownHeadingSettings = field(default_factory=KnownHeadingSettings)
     refine: bool = False
     refinement: RefineSettings = field(default_factory=RefineSettings)
-    range_sigma_coefficient: float = 0.0
-    min_points: int = 3
-    fix_weight: float = 1.0
-    gate_m: float | None = None
+    range_sigma_coefficient: float = domain_field(0.0, Domain(lo=0.0, note="1/m, 0 = laser"))
+    min_points: int = domain_field(3, Domain(integer=True, lo=3, note="a 2D pose needs 3"))
+    fix_weight: float = domain_field(1.0, Domain(lo=0.0, hi=1.0, lo_open=True))
+    gate_m: float | None = domain_field(None, POSITIVE)
     recentre_on_rejected: bool = True
 
     @classmethod
@@ -144,27 +145,7 @@ class LocalizerSettings:
         return settings_from_dict(cls, data, source, "localizer")
 
     def __post_init__(self) -> None:
-        def positive(name: str, v: float) -> None:
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"is {v}", field=name, expected="a finite positive number")
-
-        positive("sigma", self.sigma)
-        if self.resolution is not None:
-            positive("resolution", self.resolution)
-        if self.gate_m is not None:
-            positive("gate_m", self.gate_m)
-        if not (np.isfinite(self.range_sigma_coefficient) and self.range_sigma_coefficient >= 0):
-            raise ConfigError(
-                f"is {self.range_sigma_coefficient}",
-                field="range_sigma_coefficient",
-                expected="a finite number >= 0 (1/m)",
-            )
-        if not (np.isfinite(self.fix_weight) and 0 < self.fix_weight <= 1):
-            raise ConfigError(f"is {self.fix_weight}", field="fix_weight", expected="in (0, 1]")
-        if int(self.min_points) != self.min_points or self.min_points < 3:
-            raise ConfigError(
-                f"is {self.min_points}", field="min_points", expected="an integer >= 3"
-            )
+        check_settings(self)
         for name, cls in (
             ("matcher", MatcherSettings),
             ("known_heading", KnownHeadingSettings),

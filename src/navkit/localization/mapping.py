@@ -31,7 +31,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from navkit.errors import ConfigError, FormatError, InputError
+from navkit.domains import NON_NEGATIVE, POSITIVE, Domain, domain_field
+from navkit.errors import FormatError, InputError
 from navkit.geometry import se2_apply, se2_from_xytheta
 from navkit.geometry._validate import as_points, check_settings
 from navkit.geometry.polygons import polygon_area, signed_area
@@ -64,6 +65,9 @@ log = logging.getLogger(__name__)
 
 #: Finest occupancy grid cell accepted, metres.
 MIN_RESOLUTION = 1e-3
+
+#: A share of another wall's support (or density) below which a wall is dropped; 0 = off.
+_FRACTION_OFF = Domain(lo=0.0, note="a fraction, 0 = off")
 
 MAP_FORMAT = "navkit-wall-map"
 MAP_VERSION = 1
@@ -121,21 +125,25 @@ class MapSettings:
     """
 
     segmentation: SegmentationSettings = field(default_factory=SegmentationSettings)
-    merge_angle_deg: float = 5.0
-    merge_distance: float = 0.1
-    merge_gap: float = 0.3
-    corner_min_angle_deg: float = 30.0
-    corner_reach: float = 0.4
-    doorway_max: float = 1.5
-    resolution: float = 0.05
-    min_wall_length: float = 0.3
-    min_relative_support: float = 0.05
-    shadow_distance: float = 0.25
-    min_strongest_support: float = 0.03
-    shadow_support: float = 0.1
-    min_relative_density: float = 0.2
-    range_sigma_coefficient: float = 0.0
-    sigma_floor: float = 0.01
+    merge_angle_deg: float = domain_field(
+        5.0, Domain(lo=0.0, hi=90.0, lo_open=True, hi_open=True, note="degrees")
+    )
+    merge_distance: float = domain_field(0.1, POSITIVE)
+    merge_gap: float = domain_field(0.3, POSITIVE)
+    corner_min_angle_deg: float = domain_field(30.0, Domain(lo=0.0, hi=90.0, note="degrees"))
+    corner_reach: float = domain_field(0.4, POSITIVE)
+    doorway_max: float = domain_field(1.5, Domain(lo=0.0, note="metres, 0 = no doorways"))
+    resolution: float = domain_field(
+        0.05, Domain(lo=MIN_RESOLUTION, note="metres; finer than 1 mm is a typo")
+    )
+    min_wall_length: float = domain_field(0.3, POSITIVE)
+    min_relative_support: float = domain_field(0.05, _FRACTION_OFF)
+    shadow_distance: float = domain_field(0.25, NON_NEGATIVE)
+    min_strongest_support: float = domain_field(0.03, _FRACTION_OFF)
+    shadow_support: float = domain_field(0.1, _FRACTION_OFF)
+    min_relative_density: float = domain_field(0.2, _FRACTION_OFF)
+    range_sigma_coefficient: float = domain_field(0.0, Domain(lo=0.0, note="1/m, 0 = laser"))
+    sigma_floor: float = domain_field(0.01, NON_NEGATIVE)
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], source: str = "settings") -> MapSettings:
@@ -147,26 +155,6 @@ class MapSettings:
 
     def __post_init__(self) -> None:
         check_settings(self)
-        for name in (
-            "merge_distance",
-            "merge_gap",
-            "corner_reach",
-            "resolution",
-            "min_wall_length",
-        ):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"is {v}", field=name, expected="a positive number of metres")
-        if self.resolution < MIN_RESOLUTION:
-            raise ConfigError(
-                f"is {self.resolution}",
-                field="resolution",
-                expected=f"at least {MIN_RESOLUTION} m (a room map finer than 1 mm is a typo)",
-            )
-        if not 0 < self.merge_angle_deg < 90:
-            raise ConfigError(
-                f"is {self.merge_angle_deg}", field="merge_angle_deg", expected="in (0, 90)"
-            )
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from navkit.errors import ConfigError, InputError
+from navkit.domains import NON_NEGATIVE, POSITIVE, POSITIVE_INT, Domain, domain_field
+from navkit.errors import InputError
 from navkit.geometry import wrap_angle
 from navkit.geometry._validate import as_points, as_vectors, check_coordinates, check_settings
 from navkit.jit import kernels_enabled
@@ -66,6 +67,10 @@ from navkit.localization.search import (
 __all__ = ["Ambiguity", "MatcherSettings", "ScanMatch", "analyse_peak", "match_scan", "score_poses"]
 
 log = logging.getLogger(__name__)
+
+
+#: A search angle (window, step), degrees.
+_DEGREES_POSITIVE = Domain(lo=0.0, lo_open=True, note="degrees")
 
 
 @dataclass(frozen=True)
@@ -110,41 +115,25 @@ class MatcherSettings:
         resolution (the coarse field over-rates poses by at most one coarse cell of offset).
     """
 
-    linear_window: float = 1.0
-    angular_window_deg: float = 20.0
-    angular_step_deg: float | None = None
-    point_spacing: float = 0.1
-    max_candidates: int = 20_000_000
+    linear_window: float = domain_field(1.0, POSITIVE)
+    angular_window_deg: float = domain_field(20.0, _DEGREES_POSITIVE)
+    angular_step_deg: float | None = domain_field(None, _DEGREES_POSITIVE)
+    point_spacing: float = domain_field(0.1, POSITIVE)
+    max_candidates: int = domain_field(20_000_000, POSITIVE_INT)
     refine: bool = True
-    peak_tolerance: float = 0.05
-    ambiguity_extent: float = 0.5
-    ambiguity_window: float = 1.5
-    second_peak_ratio: float = 0.9
-    exclusion_radius: float = 1.0
-    exclusion_angle_deg: float = 15.0
-    min_score: float = 0.3
-    global_resolution: float = 0.2
+    peak_tolerance: float = domain_field(
+        0.05, Domain(lo=0.0, hi=1.0, lo_open=True, hi_open=True, note="a fraction of the best")
+    )
+    ambiguity_extent: float = domain_field(0.5, NON_NEGATIVE)
+    ambiguity_window: float = domain_field(1.5, POSITIVE)
+    second_peak_ratio: float = domain_field(0.9, Domain(lo=0.0, hi=1.0, lo_open=True))
+    exclusion_radius: float = domain_field(1.0, POSITIVE)
+    exclusion_angle_deg: float = domain_field(15.0, Domain(lo=0.0, note="degrees"))
+    min_score: float = domain_field(0.3, Domain(lo=0.0, hi=1.0, note="a score, 0 = accept all"))
+    global_resolution: float = domain_field(0.2, POSITIVE)
 
     def __post_init__(self) -> None:
         check_settings(self)
-        for name in (
-            "linear_window",
-            "angular_window_deg",
-            "point_spacing",
-            "ambiguity_window",
-            "exclusion_radius",
-        ):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"is {v}", field=name, expected="a positive number")
-        if not 0 < self.peak_tolerance < 1:
-            raise ConfigError(
-                f"is {self.peak_tolerance}", field="peak_tolerance", expected="in (0, 1)"
-            )
-        if not 0 < self.second_peak_ratio <= 1:
-            raise ConfigError(
-                f"is {self.second_peak_ratio}", field="second_peak_ratio", expected="in (0, 1]"
-            )
 
 
 _DEFAULT_SETTINGS = MatcherSettings()  # frozen: built (and checked) once, not per fix

@@ -34,7 +34,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from navkit.errors import ConfigError, InputError
+from navkit.domains import NON_NEGATIVE, POSITIVE, POSITIVE_INT, Domain, domain_field
+from navkit.errors import InputError
 from navkit.geometry._validate import as_points, check_settings
 from navkit.localization.walls import WallSegment
 
@@ -79,30 +80,20 @@ class RefineSettings:
         Metres; ... or when the standard error along the weakest direction exceeds this.
     """
 
-    max_distance: float = 0.3
-    end_margin: float = 0.3
-    sigma_floor: float = 0.01
-    huber: float = 2.0
-    iterations: int = 15
-    tolerance: float = 1e-5
-    max_step: float = 0.5
-    degenerate_ratio: float = 0.03
-    degenerate_sigma: float = 0.05
+    max_distance: float = domain_field(0.3, POSITIVE)
+    end_margin: float = domain_field(0.3, NON_NEGATIVE)
+    sigma_floor: float = domain_field(0.01, POSITIVE)
+    huber: float = domain_field(2.0, POSITIVE)
+    iterations: int = domain_field(15, POSITIVE_INT)
+    tolerance: float = domain_field(1e-5, POSITIVE)
+    max_step: float = domain_field(0.5, POSITIVE)
+    degenerate_ratio: float = domain_field(
+        0.03, Domain(lo=0.0, hi=1.0, hi_open=True, note="a fraction")
+    )
+    degenerate_sigma: float = domain_field(0.05, NON_NEGATIVE)
 
     def __post_init__(self) -> None:
         check_settings(self)
-        for name in ("max_distance", "sigma_floor", "huber", "tolerance", "max_step"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"is {v}", field=name, expected="a positive number")
-        if self.end_margin < 0:
-            raise ConfigError(f"is {self.end_margin}", field="end_margin", expected=">= 0 metres")
-        if self.iterations < 1:
-            raise ConfigError(f"is {self.iterations}", field="iterations", expected=">= 1")
-        if not 0 <= self.degenerate_ratio < 1:
-            raise ConfigError(
-                f"is {self.degenerate_ratio}", field="degenerate_ratio", expected="in [0, 1)"
-            )
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,15 @@ from itertools import pairwise
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from navkit.errors import ConfigError
+from navkit.domains import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_INT,
+    POSITIVE,
+    POSITIVE_INT,
+    SEED,
+    Domain,
+    domain_field,
+)
 from navkit.geometry._validate import as_points, check_settings
 
 __all__ = [
@@ -74,26 +82,20 @@ class SegmentationSettings:
         suppresses ghost walls made of stereo outliers in large clouds (default 3 %).
     """
 
-    split_distance: float = 0.05
-    gap: float = 0.3
-    gap_per_metre: float = 0.05
-    min_points: int = 8
-    min_length: float = 0.3
-    merge_rms: float = 0.02
-    ransac_iterations: int = 256
-    max_walls: int = 64
-    seed: int = 0
-    absorb_factor: float = 3.0
-    min_fraction: float = 0.03
+    split_distance: float = domain_field(0.05, POSITIVE)
+    gap: float = domain_field(0.3, POSITIVE)
+    gap_per_metre: float = domain_field(0.05, Domain(lo=0.0, note="m/m of range"))
+    min_points: int = domain_field(8, Domain(integer=True, lo=2, note="a line needs 2"))
+    min_length: float = domain_field(0.3, POSITIVE)
+    merge_rms: float = domain_field(0.02, POSITIVE)
+    ransac_iterations: int = domain_field(256, POSITIVE_INT)
+    max_walls: int = domain_field(64, NON_NEGATIVE_INT)
+    seed: int = domain_field(0, SEED)
+    absorb_factor: float = domain_field(3.0, NON_NEGATIVE)
+    min_fraction: float = domain_field(0.03, Domain(lo=0.0, hi=1.0, note="a fraction"))
 
     def __post_init__(self) -> None:
         check_settings(self)
-        for name in ("split_distance", "gap", "min_length", "merge_rms"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"is {v}", field=name, expected="a positive number of metres")
-        if self.min_points < 2:
-            raise ConfigError(f"is {self.min_points}", field="min_points", expected=">= 2")
 
 
 @dataclass(frozen=True)

@@ -5,12 +5,23 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+from navkit.domains import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_INT,
+    POSITIVE,
+    POSITIVE_INT,
+    Domain,
+    domain_field,
+)
 from navkit.errors import ConfigError
 from navkit.geometry._validate import check_settings
 
 __all__ = ["DEFAULT_SHAPES", "ObstacleSettings"]
 
 DEFAULT_SHAPES = ("A1", "A2", "A3", "A4", "A5", "A6", "MEC", "MVEE")
+
+#: A slope or tilt threshold, degrees: 0 and 90 would make every face (or none) steep.
+_DEGREES_OPEN = Domain(lo=0.0, hi=90.0, lo_open=True, hi_open=True, note="degrees")
 
 
 @dataclass(frozen=True)
@@ -97,61 +108,35 @@ class ObstacleSettings:
         Shapes recomputed over the obstacle together with its shadows: the paper's A7.
     """
 
-    c0_deg: float = 20.0
-    c1_deg: float | None = None
-    c2: float = 0.5
-    jump_height_m: float = 0.3
-    jump_range_fraction: float = 0.01
-    jump_range_ratio: float = 0.2
-    chain_min_height_m: float = 0.2
-    normal_support_m: float = 1.0
-    normal_support: int = 0
-    merge_distance_m: float = 0.5
-    merge_gap_cells: int = 2
-    min_obstacle_triangles: int = 4
-    min_obstacle_height_m: float = 0.2
+    c0_deg: float = domain_field(20.0, _DEGREES_OPEN)
+    c1_deg: float | None = domain_field(None, _DEGREES_OPEN)
+    c2: float = domain_field(0.5, Domain(lo=0.0, hi=1.0, hi_open=True, note="a cosine"))
+    jump_height_m: float = domain_field(0.3, POSITIVE)
+    jump_range_fraction: float = domain_field(0.01, NON_NEGATIVE)
+    jump_range_ratio: float = domain_field(0.2, Domain(lo=0.0, lo_open=True, allow_inf=True))
+    chain_min_height_m: float = domain_field(0.2, NON_NEGATIVE)
+    normal_support_m: float = domain_field(1.0, NON_NEGATIVE)
+    normal_support: int = domain_field(0, NON_NEGATIVE_INT)
+    merge_distance_m: float = domain_field(0.5, NON_NEGATIVE)
+    merge_gap_cells: int = domain_field(2, NON_NEGATIVE_INT)
+    min_obstacle_triangles: int = domain_field(4, POSITIVE_INT)
+    min_obstacle_height_m: float = domain_field(0.2, NON_NEGATIVE)
     ground_refine: bool = True
-    ground_band_m: float = 0.1
-    ground_above_m: float = 0.3
-    ground_cell_m: float = 2.0
+    ground_band_m: float = domain_field(0.1, NON_NEGATIVE)
+    ground_above_m: float = domain_field(0.3, POSITIVE)
+    ground_cell_m: float = domain_field(2.0, POSITIVE)
     wrap_azimuth: bool | None = None
     build_map: bool = True
     shapes: tuple[str, ...] = DEFAULT_SHAPES
     guaranteed_shapes: tuple[str, ...] = ("A1", "MEC")
 
     def __post_init__(self) -> None:
-        check_settings(self, allow_inf=("jump_range_ratio",))
+        check_settings(self)
 
         def check(name: str, ok: bool, expected: str) -> None:
             if not ok:
                 raise ConfigError(f"= {getattr(self, name)!r}", field=name, expected=expected)
 
-        check("c0_deg", 0.0 < self.c0_deg < 90.0, "degrees in (0, 90)")
-        check(
-            "c1_deg", self.c1_deg is None or 0.0 < self.c1_deg < 90.0, "None or degrees in (0, 90)"
-        )
-        check("c2", 0.0 <= self.c2 < 1.0, "a cosine in [0, 1)")
-        check("jump_height_m", self.jump_height_m > 0, "metres > 0")
-        check("jump_range_fraction", self.jump_range_fraction >= 0, "a fraction >= 0")
-        check("jump_range_ratio", self.jump_range_ratio > 0, "a fraction > 0 (inf disables)")
-        check("chain_min_height_m", self.chain_min_height_m >= 0, "metres >= 0")
-        check("normal_support_m", self.normal_support_m >= 0, "metres >= 0")
-        check(
-            "normal_support",
-            int(self.normal_support) == self.normal_support and self.normal_support >= 0,
-            "an integer >= 0",
-        )
-        check("merge_distance_m", self.merge_distance_m >= 0, "metres >= 0")
-        check(
-            "merge_gap_cells",
-            int(self.merge_gap_cells) == self.merge_gap_cells and self.merge_gap_cells >= 0,
-            "an integer >= 0",
-        )
-        check("min_obstacle_triangles", self.min_obstacle_triangles >= 1, "an integer >= 1")
-        check("ground_band_m", self.ground_band_m >= 0, "metres >= 0")
-        check("ground_above_m", self.ground_above_m > 0, "metres > 0")
-        check("ground_cell_m", self.ground_cell_m > 0, "metres > 0")
-        check("min_obstacle_height_m", self.min_obstacle_height_m >= 0, "metres >= 0")
         object.__setattr__(self, "shapes", tuple(self.shapes))
         object.__setattr__(self, "guaranteed_shapes", tuple(self.guaranteed_shapes))
         from navkit.geometry.shapes import SHAPES

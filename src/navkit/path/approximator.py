@@ -36,7 +36,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from navkit.errors import ConfigError, InputError
+from navkit.domains import NON_NEGATIVE, POSITIVE, Domain, domain_field
+from navkit.errors import InputError
 from navkit.geometry._validate import MAX_COORDINATE_M, check_coordinates, check_settings
 from navkit.jit import kernels_enabled
 from navkit.path.fitting import (
@@ -120,35 +121,21 @@ class ApproximatorSettings:
         ``tolerance``; when it does, the segment is frozen earlier. In ``(0, 1]``.
     """
 
-    tolerance: float = 0.05
+    tolerance: float = domain_field(0.05, POSITIVE)
     variant: str = "endpoints"
     remove_loops: bool = True
-    loop_precision: float = 1e-4
-    min_loop_length: float = 1e-3
-    min_step: float = 1e-9
-    fit_margin: float = 0.9
+    loop_precision: float = domain_field(1e-4, POSITIVE)
+    min_loop_length: float = domain_field(1e-3, NON_NEGATIVE)
+    min_step: float = domain_field(1e-9, NON_NEGATIVE)
+    fit_margin: float = domain_field(0.9, Domain(lo=0.0, hi=1.0, lo_open=True, note="a fraction"))
     geometric_test: bool = True
-    max_segment_points: int = 2000
+    max_segment_points: int = domain_field(
+        2000, Domain(integer=True, lo=3, note="a cubic segment's fit needs 3")
+    )
 
     def __post_init__(self) -> None:
         check_settings(self)
-        if not (np.isfinite(self.tolerance) and self.tolerance > 0):
-            raise ConfigError(
-                f"is {self.tolerance}", field="tolerance", expected="a positive distance in metres"
-            )
         check_variant(self.variant)
-        if not 0 < self.fit_margin <= 1:
-            raise ConfigError(
-                f"is {self.fit_margin}", field="fit_margin", expected="a fraction in (0, 1]"
-            )
-        if not self.max_segment_points >= 3:
-            raise ConfigError(
-                f"is {self.max_segment_points}",
-                field="max_segment_points",
-                expected="an integer >= 3",
-            )
-        if not self.min_step >= 0:
-            raise ConfigError(f"is {self.min_step}", field="min_step", expected=">= 0 metres")
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,14 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from navkit.domains import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_INT,
+    POSITIVE,
+    POSITIVE_INT,
+    Domain,
+    domain_field,
+)
 from navkit.errors import ConfigError
 from navkit.geometry._validate import check_settings
 from navkit.planes.noise import DepthNoise, brightness_sigma
@@ -87,18 +95,29 @@ class DenseSettings:
         (the target images stay whole).
     """
 
-    levels: tuple[int, ...] = (3, 2, 1)
-    iterations: tuple[int, ...] = (10, 8, 5)
-    photometric_weight: float = 0.5
+    levels: tuple[int, ...] = domain_field(
+        (3, 2, 1), Domain(integer=True, lo=0, hi=15, note="pyramid levels, input size / 2**l")
+    )
+    iterations: tuple[int, ...] = domain_field((10, 8, 5), NON_NEGATIVE_INT)
+    photometric_weight: float = domain_field(0.5, Domain(lo=0.0, note="0 = geometry only"))
     noise: DepthNoise = field(default_factory=DepthNoise)
-    max_depth_diff_sigmas: float = 12.0
-    huber: float = 1.345
-    min_depth: float = 0.0
-    max_depth: float = float("inf")
-    finest_stride: int = 2
+    max_depth_diff_sigmas: float = domain_field(12.0, POSITIVE)
+    huber: float = domain_field(1.345, POSITIVE)
+    min_depth: float = domain_field(0.0, NON_NEGATIVE)
+    max_depth: float = domain_field(
+        float("inf"), Domain(lo=0.0, lo_open=True, allow_inf=True, note="metres, inf = no limit")
+    )
+    finest_stride: int = domain_field(2, POSITIVE_INT)
 
     def __post_init__(self) -> None:
-        check_settings(self, allow_inf=("max_depth",))
+        check_settings(self)
+        if not self.min_depth < self.max_depth:
+            raise ConfigError(
+                f"min_depth {self.min_depth} >= max_depth {self.max_depth}",
+                source="DenseSettings",
+                field="max_depth",
+                expected="a depth range with min_depth < max_depth",
+            )
         if len(self.levels) != len(self.iterations) or not self.levels:
             raise ConfigError(
                 f"{len(self.levels)} levels and {len(self.iterations)} iteration counts",

@@ -58,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from navkit.domains import NON_NEGATIVE, POSITIVE, POSITIVE_INT, Domain, domain_field
 from navkit.errors import InputError
 from navkit.geometry._validate import check_settings
 from navkit.geometry.angles import acos, cos
@@ -121,23 +122,21 @@ class ExtractionSettings:
         per-pixel test of the interior patches (most of a frame with large planes).
     """
 
-    cell: int = 20
-    min_fill: float = 0.6
-    rms_base: float = 0.002
-    rms_quadratic: float = 0.0025
-    angle_deg: float = 12.0
-    distance_factor: float = 3.0
-    min_cells: int = 4
-    inlier_factor: float = 3.0
-    outline_cell: float = 0.02
+    cell: int = domain_field(20, Domain(integer=True, lo=3, note="pixels"))
+    min_fill: float = domain_field(0.6, Domain(lo=0.0, hi=1.0, note="a fraction"))
+    rms_base: float = domain_field(0.002, POSITIVE)
+    rms_quadratic: float = domain_field(0.0025, NON_NEGATIVE)
+    angle_deg: float = domain_field(
+        12.0, Domain(lo=0.0, hi=90.0, lo_open=True, hi_open=True, note="degrees")
+    )
+    distance_factor: float = domain_field(3.0, POSITIVE)
+    min_cells: int = domain_field(4, POSITIVE_INT)
+    inlier_factor: float = domain_field(3.0, POSITIVE)
+    outline_cell: float = domain_field(0.02, POSITIVE)
     refine: str = "boundary"
 
     def __post_init__(self) -> None:
         check_settings(self)
-        if int(self.cell) < 3:
-            raise InputError(f"is {self.cell}", field="cell", expected="an integer >= 3")
-        if not 0 < self.angle_deg < 90:
-            raise InputError(f"is {self.angle_deg}", field="angle_deg", expected="0 < angle < 90")
         if self.refine not in _REFINE_MODES:
             raise InputError(
                 f"is {self.refine!r}", field="refine", expected=" or ".join(_REFINE_MODES)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from navkit.domains import NON_NEGATIVE_INT, Domain, domain_field
 from navkit.geometry import se3_from_rt
 from navkit.geometry._validate import check_settings
 from navkit.geometry.fitting import Plane, canonical_plane
@@ -50,9 +51,9 @@ class MotionSettings:
 
     association: AssociationSettings = field(default_factory=AssociationSettings)
     solver: SolverSettings = field(default_factory=SolverSettings)
-    min_plane_points: int = 2000
+    min_plane_points: int = domain_field(2000, NON_NEGATIVE_INT)
     """Smallest plane (points) used for motion in an organised frame (depth image, scan grid)."""
-    min_cloud_plane_points: int = 500
+    min_cloud_plane_points: int = domain_field(500, NON_NEGATIVE_INT)
     """The same for unorganised clouds (``points`` of shape ``(N, 3)``). Their extraction
     works on a voxel grid, so a wall far from the scanner keeps few points: the one wall that
     fixes the third direction between the PCL room scans has about 700."""
@@ -60,14 +61,14 @@ class MotionSettings:
     """Without a prior, also try :func:`~navkit.planes.associate.associate_global` (large
     motions); its >= 3-plane solution replaces the gated one when it puts more of frame 2's
     points onto frame 1's (:func:`point_fit`)."""
-    max_depth_violation: float = 0.35
+    max_depth_violation: float = domain_field(0.35, Domain(lo=0.0, hi=1.0, note="a fraction"))
     """A motion whose degrees of freedom came from texture (1 or 2 plane directions) is rejected
     (:class:`MotionFailure` naming them) when more than this fraction of the tested off-plane
     points of frame 2 land in frame 1's free space (:func:`depth_consistency`). Measured on the
     real slambook pairs: 0.12-0.16 under the reference poses (Kinect noise, mixed pixels at
     depth edges, reference error), 0.54-0.97 for wrong motions (13 cm to 1.1 m off); a random
     misplacement of the scene puts about half of the points in front of the visible surface."""
-    min_depth_points: int = 500
+    min_depth_points: int = domain_field(500, NON_NEGATIVE_INT)
     """Fewest off-plane points needed for the depth check to decide (otherwise it is skipped:
     a scene of only the matched planes has nothing else to check)."""
 

@@ -44,7 +44,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from navkit.errors import ConfigError, NavkitError
+from navkit.domains import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_INT,
+    POSITIVE,
+    POSITIVE_INT,
+    Domain,
+    domain_field,
+)
+from navkit.errors import NavkitError
 from navkit.geometry import se3_inverse
 from navkit.geometry._validate import check_settings
 from navkit.planes.dense import DenseFrame, DenseResult, DenseSettings, dense_align, rigid
@@ -180,33 +188,25 @@ class OdometrySettings:
     """
 
     motion: MotionSettings = field(default_factory=MotionSettings)
-    merge_angle_deg: float = 8.0
-    merge_distance: float = 0.08
-    merge_margin: float = 0.2
-    map_nu: float = 0.01
-    map_points: int = 3000
-    min_map_plane_points: int = 3000
+    merge_angle_deg: float = domain_field(8.0, Domain(lo=0.0, hi=90.0, note="degrees"))
+    merge_distance: float = domain_field(0.08, NON_NEGATIVE)
+    merge_margin: float = domain_field(0.2, NON_NEGATIVE)
+    map_nu: float = domain_field(0.01, POSITIVE)
+    map_points: int = domain_field(3000, POSITIVE_INT)
+    min_map_plane_points: int = domain_field(3000, NON_NEGATIVE_INT)
     frame_to_map: bool = True
-    map_texture_pixels: int = 400
+    map_texture_pixels: int = domain_field(400, POSITIVE_INT)
     dense: DenseSettings | None = field(default_factory=DenseSettings)
     gates: DenseGates = field(default_factory=lambda: DenseGates())
-    keyframe_overlap: float = 0.85
-    revisit_distance: float = 0.15
-    revisit_angle_deg: float = 10.0
-    max_keyframes: int = 200
-    max_history: int = 0
-    max_map_planes: int = 0
+    keyframe_overlap: float = domain_field(0.85, Domain(lo=0.0, hi=1.0, note="a fraction"))
+    revisit_distance: float = domain_field(0.15, NON_NEGATIVE)
+    revisit_angle_deg: float = domain_field(10.0, Domain(lo=0.0, hi=180.0, note="degrees"))
+    max_keyframes: int = domain_field(200, POSITIVE_INT)
+    max_history: int = domain_field(0, Domain(integer=True, lo=0, note="0 = all"))
+    max_map_planes: int = domain_field(0, Domain(integer=True, lo=0, note="0 = all"))
 
     def __post_init__(self) -> None:
         check_settings(self)
-        for name in ("max_history", "max_map_planes"):
-            if getattr(self, name) < 0:
-                raise ConfigError(
-                    f"is {getattr(self, name)}",
-                    source="OdometrySettings",
-                    field=name,
-                    expected="0 (unbounded) or a positive count",
-                )
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.domains import POSITIVE, domain_field
+from navkit.domains import NON_NEGATIVE, NON_NEGATIVE_INT, POSITIVE, Domain, domain_field
 from navkit.errors import ConfigError, NavkitError
 from navkit.geometry import se3_from_rt
 from navkit.geometry._validate import check_settings
@@ -97,14 +97,16 @@ class SolverSettings:
         normals) or ``"rho"`` (the paper's literal ``N1 . dT = rho1 - rho2``).
     """
 
-    parallel_deg: float = 15.0
+    parallel_deg: float = domain_field(15.0, Domain(lo=0.0, hi=90.0, note="degrees"))
     nu: float = domain_field(0.01, POSITIVE)
-    max_shift: float = 0.6
-    max_turn_deg: float = 90.0
-    min_overlap: int = 400
-    min_contrast: float = 0.01
-    min_distinctness: float = 0.1
-    min_peak: float = 0.3
+    max_shift: float = domain_field(0.6, NON_NEGATIVE)
+    max_turn_deg: float = domain_field(90.0, Domain(lo=0.0, hi=180.0, note="degrees"))
+    min_overlap: int = domain_field(400, NON_NEGATIVE_INT)
+    min_contrast: float = domain_field(0.01, Domain(lo=0.0, hi=1.0, note="brightness std"))
+    min_distinctness: float = domain_field(0.1, NON_NEGATIVE)
+    min_peak: float = domain_field(
+        0.3, Domain(lo=-1.0, hi=1.0, note="a correlation, negative = accept anticorrelated")
+    )
     translation: str = "centroid"
 
     def __post_init__(self) -> None:

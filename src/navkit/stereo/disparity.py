@@ -40,6 +40,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from navkit.domains import IMAGE_SIDE, Domain, domain_field
 from navkit.errors import ConfigError, InputError
 from navkit.geometry._validate import check_settings
 from navkit.jit import kernels_enabled
@@ -59,6 +60,9 @@ log = logging.getLogger(__name__)
 
 Matcher = Literal["sgbm", "sgbm3way", "hh", "bm"]
 LRMethod = Literal["warp", "rematch"]
+
+#: No disparity (nor window) exceeds the widest image navkit reads, pixels.
+_MAX_DISPARITY = int(IMAGE_SIDE.hi or 100_000)  # pixels: the widest image navkit reads
 
 
 @dataclass(frozen=True)
@@ -116,23 +120,37 @@ class DisparitySettings:
     """
 
     matcher: Matcher = "sgbm"
-    min_disparity: int = 0
-    num_disparities: int = 128
-    block_size: int = 5
-    p1: int | None = None
-    p2: int | None = None
-    uniqueness: int = 10
-    speckle_window: int = 100
-    speckle_range: int = 2
-    pre_filter_cap: int = 63
+    min_disparity: int = domain_field(
+        0,
+        Domain(
+            integer=True,
+            lo=-_MAX_DISPARITY,
+            hi=_MAX_DISPARITY,
+            note="pixels; negative when the rectification shifts the right image",
+        ),
+    )
+    num_disparities: int = domain_field(
+        128, Domain(integer=True, lo=16, hi=_MAX_DISPARITY, multiple_of=16, note="pixels")
+    )
+    block_size: int = domain_field(
+        5, Domain(integer=True, lo=1, hi=51, note="pixels, odd; >= 5 for bm")
+    )
+    p1: int | None = domain_field(None, Domain(integer=True, lo=0, note="0 = OpenCV's default"))
+    p2: int | None = domain_field(None, Domain(integer=True, lo=0, note="0 = OpenCV's default"))
+    uniqueness: int = domain_field(10, Domain(integer=True, lo=0, hi=100, note="percent"))
+    speckle_window: int = domain_field(100, Domain(integer=True, lo=0, note="pixels, 0 = off"))
+    speckle_range: int = domain_field(2, Domain(integer=True, lo=0, note="pixels"))
+    pre_filter_cap: int = domain_field(63, Domain(integer=True, lo=1, note="bm clamps it to 63"))
     lr_check: bool = True
     lr_method: LRMethod = "warp"
-    lr_max_diff: float = 1.0
+    lr_max_diff: float = domain_field(1.0, Domain(lo=0.0, note="pixels"))
     fill: Literal["none", "background"] = "none"
-    min_texture: float = 2.0
+    min_texture: float = domain_field(2.0, Domain(lo=0.0, note="grey levels, 0 = off"))
     subpixel: Literal["parabola", "lk"] = "parabola"
-    subpixel_window: int = 7
-    subpixel_smooth: int = 15
+    subpixel_window: int = domain_field(7, Domain(integer=True, lo=3, hi=31, note="pixels, odd"))
+    subpixel_smooth: int = domain_field(
+        15, Domain(integer=True, lo=0, hi=_MAX_DISPARITY, note="pixels, 0 = no averaging")
+    )
 
     def __post_init__(self) -> None:
         check_settings(self)
@@ -140,16 +158,18 @@ class DisparitySettings:
             raise ConfigError(
                 f"is {self.matcher!r}", field="matcher", expected="sgbm, sgbm3way, hh or bm"
             )
-        if self.num_disparities <= 0 or self.num_disparities % 16:
-            raise ConfigError(
-                f"is {self.num_disparities}",
-                field="num_disparities",
-                expected="a positive multiple of 16",
-            )
+        # rules beyond the declared ranges: OpenCV's windows are odd, and its block matcher's
+        # window is at least 5 pixels
         lo = 5 if self.matcher == "bm" else 1
-        if self.block_size % 2 == 0 or not lo <= self.block_size <= 51:
+        if self.block_size % 2 == 0 or self.block_size < lo:
             raise ConfigError(
-                f"is {self.block_size}", field="block_size", expected=f"odd, {lo}..51"
+                f"is {self.block_size}",
+                field="block_size",
+                expected=f"odd and in [{lo}, 51] for matcher {self.matcher!r}",
+            )
+        if self.subpixel_window % 2 == 0:
+            raise ConfigError(
+                f"is {self.subpixel_window}", field="subpixel_window", expected="odd, in [3, 31]"
             )
         if self.lr_method not in ("warp", "rematch"):
             raise ConfigError(
@@ -159,12 +179,6 @@ class DisparitySettings:
             raise ConfigError(f"is {self.fill!r}", field="fill", expected="none or background")
         if self.subpixel not in ("parabola", "lk"):
             raise ConfigError(f"is {self.subpixel!r}", field="subpixel", expected="parabola or lk")
-        if self.subpixel_window % 2 == 0 or not 3 <= self.subpixel_window <= 31:
-            raise ConfigError(
-                f"is {self.subpixel_window}", field="subpixel_window", expected="odd, 3..31"
-            )
-        if self.lr_max_diff < 0:
-            raise ConfigError(f"is {self.lr_max_diff}", field="lr_max_diff", expected=">= 0 pixels")
 
 
 @dataclass(frozen=True)

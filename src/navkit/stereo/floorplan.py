@@ -17,6 +17,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from navkit.domains import POSITIVE, Domain, domain_field
 from navkit.errors import ConfigError, InputError
 from navkit.geometry import R_BODY_FROM_OPTICAL, se3_apply
 from navkit.geometry._validate import check_settings
@@ -33,6 +34,11 @@ __all__ = [
     "wall_points_body",
     "wall_points_world",
 ]
+
+
+#: A height above the floor (z = 0), metres; negative below it (a floor lower than the
+#: reference, a camera looking down a step).
+_HEIGHT = Domain(note="metres above the floor, negative below it")
 
 
 @dataclass(frozen=True)
@@ -63,14 +69,14 @@ class FloorplanSettings:
         pixel locking, a per-wall depth bias of up to several centimetres.
     """
 
-    min_height: float = 0.3
-    max_height: float = 2.0
-    max_depth: float = 8.0
-    cell: float = 0.02
-    max_depth_error: float = 0.25
-    disparity_sigma: float = 0.25
-    max_disparity_step: float = 1.0
-    min_depth: float = 0.5
+    min_height: float = domain_field(0.3, _HEIGHT)
+    max_height: float = domain_field(2.0, _HEIGHT)
+    max_depth: float = domain_field(8.0, POSITIVE)
+    cell: float = domain_field(0.02, POSITIVE)
+    max_depth_error: float = domain_field(0.25, POSITIVE)
+    disparity_sigma: float = domain_field(0.25, Domain(lo=0.0, lo_open=True, note="pixels"))
+    max_disparity_step: float = domain_field(1.0, Domain(lo=0.0, note="pixels"))
+    min_depth: float = domain_field(0.5, POSITIVE)
     subpixel: Literal["lk", "parabola"] = "lk"
 
     def __post_init__(self) -> None:
@@ -80,10 +86,6 @@ class FloorplanSettings:
                 f"{self.min_height} .. {self.max_height}",
                 field="min_height/max_height",
                 expected="min_height < max_height",
-            )
-        if not (self.max_depth > 0 and self.cell > 0):
-            raise ConfigError(
-                "max_depth and cell must be positive", field="max_depth/cell", expected="> 0 metres"
             )
 
 
