@@ -186,6 +186,38 @@ def test_cloud_in_velodyne_with_odometry_of_the_base_is_placed_by_tf(tmp_path):
         assert np.hypot(*(mine.mean(0) - (cx, cy))) < 0.6
 
 
+def test_results_mcap_carries_the_tf_tree(tmp_path):
+    """results.mcap passes the bag's /tf and /tf_static through and publishes the odometry's
+    odom -> base_footprint: the points and shapes (velodyne) and the obstacle map (odom) link to
+    map (no localization: map = odom, a static identity), and the tree read back places the
+    lidar where it was (interpolated between 20 Hz odometry and 50 Hz turret samples: 1 mm)."""
+    pytest.importorskip("rosbags")
+    pytest.importorskip("mcap")
+    from tests.runtime.test_runtime_robot import results_tf
+
+    bag = tmp_path / "tf_bag"
+    _write_bag(bag, with_tf=True)
+    _occupied_centres(bag, tmp_path / "run")
+    tree, frames = results_tf(tmp_path / "run" / "results.mcap")
+    assert frames["/navkit/obstacles/points"] == {"velodyne"}
+    assert frames["/navkit/obstacles/shapes"] == {"velodyne"}
+    assert frames["/navkit/obstacle_map"] == {"odom"}
+    used = set().union(*frames.values()) | set(tree.parent) | set(tree.parent.values())
+    for f in used:
+        assert tree.can_transform("map", f), (f, tree.parent)
+    assert tree.parent == {
+        "velodyne": "base_link",
+        "base_link": "base_footprint",
+        "base_footprint": "odom",
+        "odom": "map",
+    }
+    np.testing.assert_allclose(tree.lookup("map", "odom", 0), np.eye(4))
+    for k in range(10):
+        t = 0.025 + 0.2 * k
+        got = tree.lookup("odom", "velodyne", 1_000_000_000 + round(t * 1e9))
+        np.testing.assert_allclose(got, T_odom_velodyne(t), atol=1e-3)
+
+
 def test_without_tf_the_same_clouds_are_misplaced(tmp_path):
     """The control: the same bag without /tf and /tf_static puts the odometry's base_footprint
     where the sensor is (warned), and the boxes land off their places."""

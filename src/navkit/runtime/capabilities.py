@@ -187,7 +187,8 @@ def obstacle_lines(
             items += [(f"shape/A7:{n}", shp, A7_COLOR) for n, shp in ob.guaranteed.items()]
         for ns, shp, color in items:
             xy = shp.outline(36)
-            P = np.c_[xy, np.full(len(xy), z)]
+            P = np.empty((len(xy), 3))
+            P[:, :2], P[:, 2] = xy, z
             if T is not None:
                 P = P @ T[:3, :3].T + T[:3, 3]
             lines.append(Polyline(ns, ob.id, P, color))
@@ -232,6 +233,52 @@ class ObstaclesStage:
         self.mapper: Any = None
         self.map_frame = "map"
         self.n = 0
+        self.files: Any = None  # the writer thread of the per-frame files (not pickled)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["files"] = None
+        return state
+
+    def flush(self) -> None:
+        """Wait until every per-frame file is written (before a checkpoint, at the end)."""
+        if self.files is not None:
+            self.files.drain()
+
+    def close(self) -> None:
+        """Stop the writer thread (after :meth:`flush`)."""
+        if self.files is not None:
+            files, self.files = self.files, None
+            files.close()
+
+    def _write_frame(self, seq: int, msg: Message, labels: Any, det: Any) -> None:
+        """Queue the frame's ``labels.npy`` + ``obstacles.json`` (as ``navkit obstacles
+        detect`` writes them) for the writer thread."""
+        from navkit.runtime.files import FileWriter
+
+        if self.files is None:
+            self.files = FileWriter()
+        d = self.out / f"{seq:06d}"
+        topic, stamp = msg.topic, msg.stamp_ns
+
+        def job() -> None:
+            from navkit.io.atomic import atomic_path, atomic_write
+            from navkit.runtime.files import dumps_json
+
+            d.mkdir(parents=True, exist_ok=True)
+            with atomic_path(d / "labels.npy") as tmp:
+                np.save(tmp, labels)
+            doc = {
+                "topic": topic,
+                "stamp_ns": stamp,
+                "frame": "body (x forward, y left, z up, origin on the ground under the sensor)",
+                "sensor": det.sensor_origin,
+                "obstacles": [ob.to_dict() for ob in det.obstacles],
+            }
+            with atomic_write(d / "obstacles.json") as fh:
+                fh.write(dumps_json(doc, indent=None) + "\n")
+
+        self.files.submit(job)
 
     def _set_height(self, points: NDArray[np.float64], src: str) -> None:
         """The run's sensor height, once: given, or measured on this cloud's ground (as
@@ -273,7 +320,6 @@ class ObstaclesStage:
         return obstacle_map_output(self.mapper, stamp_ns, self.map_frame)
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
-        from navkit.io.atomic import atomic_path, write_json
         from navkit.obstacles import cloud_to_grid, detect_obstacles_in_grid
 
         c = self.cfg
@@ -297,34 +343,21 @@ class ObstaclesStage:
             )
         ]
         z = -self.mounting.height_m  # shapes lie on the ground, in the level body frame
-        lines = obstacle_lines(det.obstacles, z)
+        lines = obstacle_lines(det.obstacles, z, names=c.shapes)
         outs.append(
             Output("/navkit/obstacles/shapes", "markers", msg.stamp_ns, msg.frame_id, lines)
         )
+        lo = int(labels.min()) if labels.size else 0  # per-class counts, without a sort
+        counts = np.bincount(labels.astype(np.int64) - lo)
         record: dict[str, Any] = {
             "seq": seq,
             "n_points": int(labels.size),
             "n_obstacles": len(det.obstacles),
-            "counts": {
-                str(k): int(v) for k, v in zip(*np.unique(labels, return_counts=True), strict=True)
-            },
+            "counts": {str(k + lo): int(v) for k, v in enumerate(counts.tolist()) if v},
             "triangles": det.counts,
         }
         if self.write_frames:
-            d = self.out / f"{seq:06d}"
-            d.mkdir(parents=True, exist_ok=True)
-            with atomic_path(d / "labels.npy") as tmp:
-                np.save(tmp, labels)
-            write_json(
-                d / "obstacles.json",
-                {
-                    "topic": msg.topic,
-                    "stamp_ns": msg.stamp_ns,
-                    "frame": "body (x forward, y left, z up, origin on the ground under the sensor)",
-                    "sensor": det.sensor_origin,
-                    "obstacles": [ob.to_dict() for ob in det.obstacles],
-                },
-            )
+            self._write_frame(seq, msg, labels, det)
         T = (
             poses.sensor_pose(self.pose_topic, msg.stamp_ns, msg.frame_id)
             if self.with_map
@@ -338,6 +371,7 @@ class ObstaclesStage:
         return StageResult(outs, record)
 
     def finish(self, out: Path, stamp_ns: int) -> StageResult:
+        self.close()
         height = {} if self.height is None else {"sensor_height": self.height.to_dict()}
         if self.mapper is None:
             return StageResult(record={"frames": self.n, **height})
@@ -496,6 +530,90 @@ class LaserLocalizationStage:
         self.n = self.n_ok = self.n_success = self.n_ref = 0
         self.out = out / "localization"
         self.published_map = False
+        self.root = ""  # the frame map is linked to (the odometry's), and the last correction
+        self.T_map_root: NDArray[np.float64] | None = None
+
+    def _covariance(self, fix: Any, pts: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``(3, 3)`` covariance of the fix's ``(x, y, theta)`` (m^2, rad^2): the point-to-line
+        refinement's when it ran and is finite; else the match's own, from its peak analysis:
+        x, y the score-weighted covariance of the near-optimal translations
+        (``Ambiguity.covariance``), floored by the search cell's quantisation (``res^2 / 12``);
+        theta the quantisation of the heading step (Olson's rule: the 95th-percentile range
+        point moves one cell, ``step = res / r95``; ``step^2 / 12``)."""
+        cov = fix.covariance
+        if cov is not None and np.all(np.isfinite(cov)):
+            return np.asarray(cov, dtype=np.float64)
+        res = float(getattr(self.wall_map, "resolution", 0.05) or 0.05)
+        out = np.zeros((3, 3))
+        peak = getattr(getattr(fix.match, "ambiguity", None), "covariance", None)
+        if peak is not None and np.all(np.isfinite(peak)):
+            out[:2, :2] = peak
+        out[:2, :2] += np.eye(2) * res**2 / 12
+        r95 = float(np.percentile(np.hypot(pts[:, 0], pts[:, 1]), 95)) if len(pts) else 0.0
+        step = res / r95 if r95 > res else np.radians(1.0)
+        out[2, 2] = step**2 / 12
+        return out
+
+    def _base_frame(self, poses: PoseBuffer, sensor: str, stamp_ns: int) -> str:
+        """The robot's frame: the odometry's child frame, else ``base_link`` /
+        ``base_footprint``, when the TF tree connects it to the sensor; else the sensor."""
+        cands = (poses.children.get(self.odom_topic, "") if self.odom_topic else "",)
+        for base in (*cands, "base_link", "base_footprint"):
+            base = base.lstrip("/")
+            if base and base != sensor and poses.tf.can_transform(sensor, base):
+                return base
+        return sensor
+
+    def _robot(
+        self,
+        msg: Message,
+        poses: PoseBuffer,
+        pose: NDArray[np.float64],
+        cov3: NDArray[np.float64],
+        rec: dict[str, Any],
+    ) -> list[Output]:
+        """A fix's outputs: ``map -> root`` of the sensor's odometry tree (the AMCL form,
+        :func:`~navkit.runtime.tf.planar_correction`), the robot's frame in ``map``
+        (``PoseWithCovarianceStamped``) and the sensor's (``PoseStamped``)."""
+        from navkit.runtime.tf import planar_correction, planar_covariance_6x6
+
+        stamp, sensor = msg.stamp_ns, msg.frame_id.lstrip("/")
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        T_fix = np.eye(4)
+        T_fix[:2, :2] = [[c, -s], [s, c]]
+        T_fix[:2, 3] = pose[:2]
+        T_root_sensor = (
+            poses.sensor_pose(self.odom_topic, stamp, sensor) if self.odom_topic else None
+        )
+        if T_root_sensor is not None:
+            root = poses.frames.get(self.odom_topic, "").lstrip("/") or "odom"
+        else:  # no odometry: the top of the sensor's own TF tree (the sensor itself without)
+            root = poses.tf._chain(sensor)[-1] if sensor else ""
+            T_root_sensor = poses.tf.lookup(root, sensor, stamp) if root else None
+            if T_root_sensor is None:
+                root, T_root_sensor = sensor, np.eye(4)
+        T_map_root = planar_correction(T_fix, T_root_sensor)
+        T_map_sensor = T_map_root @ T_root_sensor
+        base = self._base_frame(poses, sensor, stamp)
+        T_sensor_base = poses.tf.lookup(sensor, base, stamp) if base != sensor else None
+        T_map_base = T_map_sensor if T_sensor_base is None else T_map_sensor @ T_sensor_base
+        lever = T_map_base[:2, 3] - T_map_sensor[:2, 3]
+        cov6 = planar_covariance_6x6(cov3, lever)
+        b = planar(T_map_base)
+        rec.update(
+            base_frame=base,
+            base=[float(v) for v in b],
+            sigma_xy_m=float(np.sqrt(max(cov6[0, 0] + cov6[1, 1], 0.0))),
+            sigma_theta_deg=float(np.degrees(np.sqrt(max(cov6[5, 5], 0.0)))),
+        )
+        outs = [
+            Output("/navkit/localization/pose", "pose_cov", stamp, "map", (T_map_base, cov6)),
+            Output("/navkit/localization/sensor_pose", "pose", stamp, "map", T_map_sensor),
+        ]
+        if root:
+            self.root, self.T_map_root = root, T_map_root
+            outs.append(Output("/tf", "tf", stamp, "map", [(root, T_map_root)]))
+        return outs
 
     def _odometry_delta(self, odom: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
         """Body-frame increment since the previous scan's odometry (None: unknown)."""
@@ -524,9 +642,16 @@ class LaserLocalizationStage:
                     wall_lines(self.wall_map.walls, self.wall_map.corners),
                 )
             )
-        To = poses.at(self.odom_topic, msg.stamp_ns) if self.odom_topic else None
+        # the odometry of the scan's frame (carried from the topic's child through the TF tree:
+        # a laser ahead of base_link moves sideways when the base turns)
+        To = (
+            poses.sensor_pose(self.odom_topic, msg.stamp_ns, msg.frame_id)
+            if self.odom_topic
+            else None
+        )
         delta = self._odometry_delta(planar(To) if To is not None else None)
-        r = self.localizer.register(scan.points(self.cfg.max_range_m), odometry_delta=delta)
+        pts = scan.points(self.cfg.max_range_m)
+        r = self.localizer.register(pts, odometry_delta=delta)
         ok = isinstance(r, Fix)
         pose = r.pose if isinstance(r, Fix) else r.candidate
         rec: dict[str, Any] = {
@@ -539,15 +664,21 @@ class LaserLocalizationStage:
         }
         if ok:
             rec.update(x=float(pose[0]), y=float(pose[1]), theta=float(pose[2]))
-            c, s = np.cos(pose[2]), np.sin(pose[2])
-            T = np.eye(4)
-            T[:2, :2] = [[c, -s], [s, c]]
-            T[:2, 3] = pose[:2]
-            outs.append(Output("/navkit/localization/pose", "pose", msg.stamp_ns, "map", T))
-        elif np.all(np.isfinite(pose)):
-            rec["candidate"] = [float(v) for v in pose]
+            cov3 = self._covariance(r, pts)
+            outs += self._robot(msg, poses, pose, cov3, rec)
+        else:
+            if np.all(np.isfinite(pose)):
+                rec["candidate"] = [float(v) for v in pose]
+            if self.T_map_root is not None:  # as AMCL: the last correction, re-stamped
+                outs.append(
+                    Output("/tf", "tf", msg.stamp_ns, "map", [(self.root, self.T_map_root)])
+                )
         self.n_ok += ok
-        Tr = poses.at(self.ref_topic, msg.stamp_ns) if self.ref_topic else None
+        Tr = (
+            poses.sensor_pose(self.ref_topic, msg.stamp_ns, msg.frame_id)
+            if self.ref_topic
+            else None
+        )
         self.n_ref += Tr is not None
         if Tr is not None and np.all(np.isfinite(pose)):
             ref = planar(Tr)
