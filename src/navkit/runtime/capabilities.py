@@ -253,32 +253,21 @@ class ObstaclesStage:
 
     def _write_frame(self, seq: int, msg: Message, labels: Any, det: Any) -> None:
         """Queue the frame's ``labels.npy`` + ``obstacles.json`` (as ``navkit obstacles
-        detect`` writes them) for the writer thread."""
+        detect`` writes them) for the writer process (:mod:`navkit.runtime.files`)."""
         from navkit.runtime.files import FileWriter
 
         if self.files is None:
             self.files = FileWriter()
         d = self.out / f"{seq:06d}"
-        topic, stamp = msg.topic, msg.stamp_ns
-
-        def job() -> None:
-            from navkit.io.atomic import atomic_path, atomic_write
-            from navkit.runtime.files import dumps_json
-
-            d.mkdir(parents=True, exist_ok=True)
-            with atomic_path(d / "labels.npy") as tmp:
-                np.save(tmp, labels)
-            doc = {
-                "topic": topic,
-                "stamp_ns": stamp,
-                "frame": "body (x forward, y left, z up, origin on the ground under the sensor)",
-                "sensor": det.sensor_origin,
-                "obstacles": [ob.to_dict() for ob in det.obstacles],
-            }
-            with atomic_write(d / "obstacles.json") as fh:
-                fh.write(dumps_json(doc, indent=None) + "\n")
-
-        self.files.submit(job)
+        self.files.submit("npy", d / "labels.npy", labels)
+        doc = {
+            "topic": msg.topic,
+            "stamp_ns": msg.stamp_ns,
+            "frame": "body (x forward, y left, z up, origin on the ground under the sensor)",
+            "sensor": det.sensor_origin,
+            "obstacles": [ob.to_dict() for ob in det.obstacles],
+        }
+        self.files.submit("json", d / "obstacles.json", doc)
 
     def _set_height(self, points: NDArray[np.float64], src: str) -> None:
         """The run's sensor height, once: given, or measured on this cloud's ground (as

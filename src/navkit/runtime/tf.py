@@ -15,6 +15,7 @@ of a ``nav_msgs/Odometry``) to the frame of a sensor message (e.g. a ``PointClou
 
 from __future__ import annotations
 
+import bisect
 import logging
 from collections import deque
 from typing import Any
@@ -56,7 +57,7 @@ def pose_at(buf: Any, stamp_ns: int) -> NDArray[np.float64]:
     where a stamp matches, interpolated between neighbours (:func:`interpolate_pose`), held at the
     first / last pose outside the buffer's span."""
     stamps = [s for s, _ in buf]
-    i = int(np.searchsorted(stamps, stamp_ns))
+    i = bisect.bisect_left(stamps, stamp_ns)
     if i < len(stamps) and stamps[i] == stamp_ns:
         return buf[i][1]  # type: ignore[no-any-return]
     if i == 0:
