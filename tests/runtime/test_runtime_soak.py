@@ -205,7 +205,7 @@ def test_plane_odometry_memory_is_bounded(tmp_path):
     assert len(traj.timestamps) == n
     pub = [
         r.message.pose.position
-        for r in read_messages(tmp_path / "run" / "results.mcap", ["/navkit/planes/pose"])
+        for r in read_messages(tmp_path / "run" / "results.mcap", ["/navkit/planes/sensor_pose"])
     ]
     np.testing.assert_allclose(traj.poses[:, :3, 3], [[p.x, p.y, p.z] for p in pub], atol=1e-9)
     # the same frames through an object that keeps everything (only max_history differs)

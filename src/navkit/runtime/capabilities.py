@@ -96,6 +96,8 @@ class PoseBuffer:
         self.children: dict[str, str] = {}
         self.tf = TransformTree(maxlen)
         self.warned: set[tuple[str, str]] = set()
+        # the tree results.mcap carries (the run's TfPublisher's), when there is one
+        self.published: TransformTree | None = None
 
     def add_tf(self, msg: Message) -> None:
         """One transform of a ``tf`` message (static when its topic is ``/tf_static``)."""
@@ -785,6 +787,7 @@ class PlanesStage:
         # line this stage wrote (a resumed run truncates what a killed run wrote after it)
         self.traj_bytes = 0
         self.last_stamp_ns: int | None = None
+        self.anchored = False  # the static root -> planes_odom was published
 
     def _append_pose(self, stamp_ns: int, T: NDArray[np.float64]) -> None:
         """One TUM line (``t tx ty tz qx qy qz qw``, as :func:`navkit.io.trajectory.write_tum`);
@@ -822,9 +825,46 @@ class PlanesStage:
         paired = c is not None and abs(c.stamp_ns - d.stamp_ns) <= tol
         if not paired and self.topics.color and msg.kind == "depth":
             return StageResult()  # wait for the colour of this depth frame
-        return self._frame(d, c if paired else None)
+        return self._frame(d, c if paired else None, poses)
 
-    def _frame(self, d: Message, c: Message | None) -> StageResult:
+    def _robot(self, d: Message, poses: PoseBuffer, T: NDArray[np.float64]) -> list[Output]:
+        """The frame's transforms and the robot's pose: ``planes_odom -> camera`` on ``/tf``
+        when the recording's TF tree has no parent for the camera; else, once, a static
+        ``root -> planes_odom`` that puts the odometry's origin where the tree had the camera
+        at the first frame (the camera keeps its parent: one parent per frame). The robot
+        (``base_link`` / ``base_footprint`` when the tree connects it to the camera, else the
+        camera) in ``planes_odom`` as ``PoseWithCovarianceStamped``: PlaneOdometry's result
+        carries no covariance, so it is marked not estimated (element 0 = -1, as
+        ``sensor_msgs/Imu`` marks a missing covariance)."""
+        stamp, cam = d.stamp_ns, d.frame_id.lstrip("/")
+        outs: list[Output] = []
+        base = cam
+        tree = poses.published if poses.published is not None else poses.tf
+        if cam:
+            if cam not in tree.parent:
+                outs.append(Output("/tf", "tf", stamp, "planes_odom", [(cam, T)]))
+            elif not self.anchored:
+                root = tree._chain(cam)[-1]
+                T_root_cam = tree.lookup(root, cam, stamp)
+                if T_root_cam is not None:
+                    self.anchored = True
+                    T_root_po = T_root_cam @ np.linalg.inv(T)
+                    outs.append(
+                        Output("/tf_static", "tf", stamp, root, [("planes_odom", T_root_po)])
+                    )
+            base = next(
+                (b for b in ("base_link", "base_footprint") if poses.tf.can_transform(cam, b)),
+                cam,
+            )
+        T_cam_base = poses.tf.lookup(cam, base, stamp) if base != cam else None
+        T_base = T if T_cam_base is None else T @ T_cam_base
+        cov = np.zeros((6, 6))
+        cov[0, 0] = -1.0
+        outs.append(Output("/navkit/planes/pose", "pose_cov", stamp, "planes_odom", (T_base, cov)))
+        outs.append(Output("/navkit/planes/sensor_pose", "pose", stamp, "planes_odom", T))
+        return outs
+
+    def _frame(self, d: Message, c: Message | None, poses: PoseBuffer) -> StageResult:
         from navkit.planes import observe_rgbd
         from navkit.sensors import PinholeCamera, RGBDFrame
 
@@ -843,7 +883,7 @@ class PlanesStage:
         self.n += 1
         self.n_ok += str(r.status).startswith(("ok", "first"))
         self._append_pose(d.stamp_ns, r.T_world_frame)
-        outs = [Output("/navkit/planes/pose", "pose", d.stamp_ns, "planes_odom", r.T_world_frame)]
+        outs = self._robot(d, poses, r.T_world_frame)
         lines = []
         R, t = r.T_world_frame[:3, :3], r.T_world_frame[:3, 3]
         for k, seg in enumerate(obs.extraction.segments):

@@ -471,6 +471,7 @@ def run_recording(
         (out / "frames.jsonl").unlink(missing_ok=True)
         (out / "results.mcap").unlink(missing_ok=True)
         state = _State(stages=build_stages(pipe, out), tf_out=_tf_publisher(pipe))
+        state.poses.published = state.tf_out.tree
     write_text(out / "settings.toml", _settings_toml(pipe))
     run = _Run(pipe, out, logger, state)
     duration = max((source.end_ns - source.start_ns) * 1e-9, 0.0)
