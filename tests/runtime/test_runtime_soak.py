@@ -173,8 +173,8 @@ def test_plane_odometry_memory_is_bounded(tmp_path):
     sizes = []
     original = PlanesStage._frame
 
-    def spy(self, d, c):  # the stage's structures after every frame
-        res = original(self, d, c)
+    def spy(self, d, c, poses):  # the stage's structures after every frame
+        res = original(self, d, c, poses)
         o = self.odo
         sizes.append(
             (

@@ -107,7 +107,7 @@ class FileWriter:
         ctx = mp.get_context("fork" if "fork" in methods else "spawn")
         self._jobs = ctx.JoinableQueue(maxsize=maxsize)
         self._errors = ctx.Queue()
-        self._proc = ctx.Process(
+        self._proc = ctx.Process(  # type: ignore[attr-defined]
             target=_serve, args=(self._jobs, self._errors), name="navkit-files", daemon=True
         )
         self._proc.start()
