@@ -11,8 +11,8 @@ next message. Decision: a process, not a thread: encoding a KITTI frame's ``obst
   writer, records the file in the caller's output transaction
   (:func:`navkit.io.atomic.output_transaction`) before queueing it, so a failed command still
   removes it.
-- The queue holds at most ``maxsize`` jobs: a loop faster than the disk waits (memory stays
-  bounded).
+- At most ``maxsize`` files are queued: a loop faster than the disk waits (memory stays
+  bounded). A writer process that dies is an error at the next wait, never a hang.
 - :meth:`FileWriter.drain` waits until every queued file is written and raises the first error
   (:class:`~navkit.errors.InputError` naming the file); the run drains before every checkpoint
   and at the end, so a checkpoint never counts a file that is not on disk.
@@ -80,20 +80,23 @@ def _write_atomic(path: str, data: bytes) -> None:
         raise
 
 
-def _serve(jobs: Any, errors: Any) -> None:
-    """The writer process: ``(kind, path, payload)`` jobs until ``None``."""
+def _serve(jobs: Any, done: Any) -> None:
+    """The writer process: ``(kind, path, payload)`` jobs until ``None``; one ``(path, error
+    or None)`` reply per job. It ignores SIGINT: Ctrl-C in a terminal reaches the whole process
+    group, and the run, not its writer, decides how to stop (it drains the writer first)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     while True:
         job = jobs.get()
+        if job is None:
+            return
+        kind, path, payload = job
         try:
-            if job is None:
-                return
-            kind, path, payload = job
-            try:
-                _write_atomic(path, encode(kind, payload))
-            except Exception as exc:
-                errors.put((path, f"{type(exc).__name__}: {exc}"))
-        finally:
-            jobs.task_done()
+            _write_atomic(path, encode(kind, payload))
+            done.put((path, None))
+        except Exception as exc:
+            done.put((path, f"{type(exc).__name__}: {exc}"))
 
 
 class FileWriter:
@@ -105,17 +108,20 @@ class FileWriter:
         # child only encodes JSON / NumPy and writes files, touching none of the parent's threads
         methods = mp.get_all_start_methods()
         ctx = mp.get_context("fork" if "fork" in methods else "spawn")
-        self._jobs = ctx.JoinableQueue(maxsize=maxsize)
-        self._errors = ctx.Queue()
+        self.maxsize = maxsize
+        self._jobs = ctx.Queue()
+        self._done = ctx.Queue()
+        self._pending = 0
+        self._error: tuple[str, str] | None = None
         self._proc = ctx.Process(  # type: ignore[attr-defined]
-            target=_serve, args=(self._jobs, self._errors), name="navkit-files", daemon=True
+            target=_serve, args=(self._jobs, self._done), name="navkit-files", daemon=True
         )
         self._proc.start()
 
     def submit(self, kind: str, path: Path, payload: Any) -> None:
-        """Queue one file (``kind`` ``"json"`` or ``"npy"``); waits while the queue is full.
-        The file (and its folder) is recorded in the caller's output transaction here; the
-        writer creates the folder."""
+        """Queue one file (``kind`` ``"json"`` or ``"npy"``); waits while ``maxsize`` files are
+        queued. The file (and its folder) is recorded in the caller's output transaction here;
+        the writer creates the folder."""
         from navkit.io.atomic import current_transaction
 
         path = Path(path)
@@ -123,9 +129,26 @@ class FileWriter:
         if txn is not None:
             txn.watch_dir(path.parent)
             txn.before_replace(path)
-        if not self._proc.is_alive():
-            self._raise(f"the writer process ended (exit code {self._proc.exitcode})")
+        while self._pending >= self.maxsize:
+            self._wait_one()
         self._jobs.put((kind, str(path), payload))
+        self._pending += 1
+
+    def _wait_one(self) -> None:
+        """Take one reply; a writer that died is an error, never a wait forever."""
+        import queue
+
+        while True:
+            try:
+                path, err = self._done.get(timeout=1.0)
+                break
+            except queue.Empty:
+                if not self._proc.is_alive():
+                    self._pending = 0
+                    self._raise(f"the writer process ended (exit code {self._proc.exitcode})")
+        self._pending -= 1
+        if err is not None and self._error is None:
+            self._error = (path, err)
 
     def _raise(self, reason: str, path: Any = None) -> None:
         from navkit.errors import InputError
@@ -138,10 +161,10 @@ class FileWriter:
 
     def drain(self) -> None:
         """Wait until every queued file is written; raise the first error one hit."""
-        if self._proc.is_alive():
-            self._jobs.join()
-        if not self._errors.empty():
-            path, reason = self._errors.get()
+        while self._pending:
+            self._wait_one()
+        if self._error is not None:
+            (path, reason), self._error = self._error, None
             self._raise(reason, path)
 
     def close(self) -> None:
