@@ -1,5 +1,5 @@
-"""The run's fast paths equal their references: the MarkerArray serialised with NumPy is byte
-for byte rosbags' serialisation of the same message, and the obstacle map's vectorised update
+"""The run's fast paths equal their references: the MarkerArray and the classified
+PointCloud2 serialised with NumPy are byte for byte rosbags' serialisation of the same message, and the obstacle map's vectorised update
 (:meth:`ObstacleMapper.add_scan`) counts exactly what :meth:`ObstacleMapper.add_points` counts on
 :func:`scan_points_2d`'s points (up to the rounding of points on a cell edge)."""
 
@@ -41,6 +41,22 @@ def test_line_list_cdr_is_rosbags_serialisation(n_lines):
         )
         assert mk.type == 5 and len(mk.points) == 2 * n_seg == len(mk.colors)
     assert read_messages  # the module's reader decodes the same bytes (test_runtime_bags)
+
+
+@pytest.mark.parametrize("n", [0, 1, 1000])
+def test_classified_cloud_cdr_is_rosbags_serialisation(n):
+    pytest.importorskip("rosbags")
+    from navkit.io.results_mcap import _builder, classified_cloud_cdr
+
+    rng = np.random.default_rng(n)
+    P = rng.normal(size=(n, 3)) * 30
+    P[::7] = np.nan  # no-return points travel as NaN
+    cls = rng.integers(-4, 1, n).astype(np.int8)
+    b = _builder()
+    for stamp, frame in ((0, ""), (1_234_567_890_123, "velodyne"), (9, "abc")):
+        msg = b.build("classified_cloud", stamp, frame, (P, cls))
+        want = bytes(b.ts.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2"))
+        assert classified_cloud_cdr(stamp, frame, P, cls) == want
 
 
 def test_vectorised_map_update_counts_like_add_points():

@@ -18,6 +18,7 @@ mission use: ``obstacles.detect_obstacles_in_grid`` + ``obstacles.ObstacleMapper
 from __future__ import annotations
 
 import logging
+import math
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -168,6 +169,30 @@ class PoseBuffer:
 
 
 # --------------------------------------------------------------------------- obstacles
+def _outlines(shapes: list[Any], n: int = 36) -> list[NDArray[np.float64]]:
+    """``shape.outline(n)`` of each shape; ellipses (A6, MVEE) all at once from the same
+    formula (``Ellipse.outline``: the same numbers, without a NumPy call chain per shape)."""
+    from navkit.geometry.shapes import Ellipse
+
+    out: list[Any] = [None] * len(shapes)
+    ell = [i for i, shp in enumerate(shapes) if type(shp) is Ellipse]
+    if ell:
+        t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+        ct, st = np.cos(t), np.sin(t)
+        E = [shapes[i] for i in ell]
+        x, y, a, b = (np.array([getattr(e, k) for e in E])[:, None] for k in "xyab")
+        c = np.array([math.cos(e.angle) for e in E])[:, None]
+        s = np.array([math.sin(e.angle) for e in E])[:, None]
+        u, v = a * ct, b * st
+        X, Y = x + c * u - s * v, y + s * u + c * v
+        for k, i in enumerate(ell):
+            out[i] = np.column_stack([X[k], Y[k]])
+    for i, shp in enumerate(shapes):
+        if out[i] is None:
+            out[i] = shp.outline(n)
+    return out
+
+
 def obstacle_lines(
     obstacles: Any,
     z: float = 0.0,
@@ -178,33 +203,34 @@ def obstacle_lines(
     (``shape/A7:<name>``) of detected obstacles at height ``z`` of their (level body) frame;
     ``T`` (4, 4), optional, maps them into another frame; ``names``, optional, keeps only these
     shapes (``"A7"`` keeps every A7 outline)."""
-    lines = []
+    items = []
     for ob in obstacles:
-        items = [
-            (f"shape/{n}", shp, SHAPE_COLORS.get(n, (1, 1, 1, 1)))
+        items += [
+            (ob.id, f"shape/{n}", shp, SHAPE_COLORS.get(n, (1, 1, 1, 1)))
             for n, shp in ob.shapes.items()
             if names is None or n in names
         ]
         if names is None or "A7" in names:
-            items += [(f"shape/A7:{n}", shp, A7_COLOR) for n, shp in ob.guaranteed.items()]
-        for ns, shp, color in items:
-            xy = shp.outline(36)
-            P = np.empty((len(xy), 3))
-            P[:, :2], P[:, 2] = xy, z
-            if T is not None:
-                P = P @ T[:3, :3].T + T[:3, 3]
-            lines.append(Polyline(ns, ob.id, P, color))
+            items += [(ob.id, f"shape/A7:{n}", shp, A7_COLOR) for n, shp in ob.guaranteed.items()]
+    lines = []
+    for (oid, ns, _, color), xy in zip(items, _outlines([it[2] for it in items]), strict=True):
+        P = np.empty((len(xy), 3))
+        P[:, :2], P[:, 2] = xy, z
+        if T is not None:
+            P = P @ T[:3, :3].T + T[:3, 3]
+        lines.append(Polyline(ns, oid, P, color))
     return lines
 
 
 def obstacle_map_output(mapper: Any, stamp_ns: int, frame_id: str) -> Output:
     """An :class:`~navkit.obstacles.ObstacleMapper`'s grid as ``/navkit/obstacle_map``
     (-1 never seen, 0 seen free, 100 occupied)."""
-    g = mapper.grid()
-    occ = np.full(g.shape, -1, dtype=np.int8)
-    occ[g.seen > 0] = 0
-    occ[g.occupied] = 100
-    return Output("/navkit/obstacle_map", "grid", stamp_ns, frame_id, (occ, g.resolution, g.origin))
+    occ = np.where(mapper.seen > 0, np.int8(0), np.int8(-1))  # no snapshot copies of the counts
+    occ[mapper.occupied] = 100
+    origin = np.array(mapper.origin, dtype=np.float64)
+    return Output(
+        "/navkit/obstacle_map", "grid", stamp_ns, frame_id, (occ, mapper.resolution, origin)
+    )
 
 
 class ObstaclesStage:
