@@ -11,6 +11,14 @@ odometry; 20 frames with ``--quick``, else 100).
 Rerun overhead: the same run with the null logger and with ``RerunLogger(save=...)`` (headless
 ``.rrd``), alternated, median of the wall times; the ratio is the overhead (the issue's bound:
 < 1.10).
+
+Obstacles in ``run`` against the detector alone (:func:`obstacles_cost`; the bound: 1.2): the
+SemanticKITTI clouds looped to 10 Hz frames with their poses (obstacles + obstacle map, the
+per-frame files on), beside ``cloud_to_grid`` + ``detect_obstacles_in_grid`` on the same clouds
+with the run's mounting, alternated in one process. Printed: the capability's work per cloud
+(handling + serialising and writing its outputs) / the detector's, and the whole loop's wall
+time per cloud (reading, decoding, path, TF, the files' writer thread) / the detector's.
+``python -m benchmarks.bench_runtime`` prints the ratios alone.
 """
 
 from __future__ import annotations
@@ -86,6 +94,113 @@ def _overhead(
     )
 
 
+class _LoopedClouds:
+    """A KITTI folder's clouds and poses repeated ``loops`` times at 10 Hz (a Source)."""
+
+    def __init__(self, folder: Path, loops: int) -> None:
+        from navkit.runtime.sources import open_source
+
+        src = open_source(folder)
+        self.items = [msgs for _, msgs in src.messages()]
+        self.loops = loops
+        self.name = f"{folder} x{loops}"
+        self.topics = dict(src.topics)
+        self.start_ns = 0
+        self.n_items = len(self.items) * loops
+        self.end_ns = (self.n_items - 1) * 100_000_000
+
+    def messages(self, skip: int = 0) -> Any:
+        from dataclasses import replace
+
+        for k in range(skip, self.n_items):
+            st = k * 100_000_000
+            yield k, [replace(m, stamp_ns=st) for m in self.items[k % len(self.items)]]
+
+
+def obstacles_cost(loops: int = 10, repeats: int = 3) -> tuple[list[Row], dict[str, float]]:
+    """``navkit run``'s obstacles per cloud against the detector alone (module docstring)."""
+    from navkit import datasets
+    from navkit.obstacles import detect_obstacles_in_grid
+    from navkit.obstacles.grids import cloud_to_grid
+    from navkit.obstacles.mounting import Mounting, choose_sensor_height
+
+    kitti = datasets.find("lidar/semantickitti-seq00")
+    src = _LoopedClouds(kitti, loops)
+    clouds = [m.data for msgs in src.items for m in msgs if m.kind == "cloud"]
+    tmp = Path(tempfile.mkdtemp(prefix="bench_runtime_obst_"))
+    cfg = {"run": {"capabilities": ["obstacles", "obstacle_map", "path"]}}
+    det_ms, stage_ms, loop_ms = [], [], []
+    det_cpu, stage_cpu, loop_cpu, files_cpu = [], [], [], []
+    try:
+        for _ in range(repeats):
+            import resource
+
+            ch0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            c0 = time.process_time()
+            s, wall = _run(src, tmp / "run", cfg)
+            cpu = time.process_time() - c0
+            ch1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            o = s["capabilities"]["obstacles"]
+            stage_ms.append(o["ms_per_frame"])
+            stage_cpu.append(o["cpu_ms_per_frame"])
+            loop_ms.append(1e3 * wall / o["frames"])
+            loop_cpu.append(1e3 * cpu / o["frames"])
+            files_cpu.append(
+                1e3 * (ch1.ru_utime + ch1.ru_stime - ch0.ru_utime - ch0.ru_stime) / o["frames"]
+            )
+            t0, c0 = time.perf_counter(), time.process_time()
+            # as navkit obstacles detect: the height measured once, on the first cloud
+            g = cloud_to_grid(clouds[0])
+            h = choose_sensor_height(g.points, np.eye(3), given_m=None, source="bench")
+            mounting = Mounting(height_m=h.height_m)
+            for _ in range(loops):
+                for P in clouds:
+                    detect_obstacles_in_grid(cloud_to_grid(P), mounting)
+            det_ms.append(1e3 * (time.perf_counter() - t0) / (loops * len(clouds)))
+            det_cpu.append(1e3 * (time.process_time() - c0) / (loops * len(clouds)))
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    d, st, lp = (float(np.median(x)) for x in (det_ms, stage_ms, loop_ms))
+    dc, sc, lc, fc = (float(np.median(x)) for x in (det_cpu, stage_cpu, loop_cpu, files_cpu))
+    figs = {
+        "detector_cpu_ms": dc,
+        "stage_cpu_ms": sc,
+        "loop_cpu_ms": lc,
+        "files_cpu_ms": fc,
+        "stage_cpu_ratio": sc / dc,
+        "loop_cpu_ratio": (lc + fc) / dc,
+        "detector_ms": d,
+        "stage_ms": st,
+        "loop_ms": lp,
+        "stage_ratio": st / d,
+        "loop_ratio": lp / d,
+    }
+    note = f"SemanticKITTI seq00, {len(clouds)} clouds x {loops} at 10 Hz, median of {repeats}"
+    rows = [
+        Row(
+            "runtime",
+            "obstacles in run / detector alone (per cloud)",
+            "ms per cloud",
+            st,
+            peer=d,
+            peer_name="detector alone",
+            ratio=st / d,
+            note=note + "; bound 1.2",
+        ),
+        Row(
+            "runtime",
+            "whole run loop / detector alone (per cloud)",
+            "ms per cloud",
+            lp,
+            peer=d,
+            peer_name="detector alone",
+            ratio=lp / d,
+            note=note,
+        ),
+    ]
+    return rows, figs
+
+
 def run(quick: bool = False) -> list[Row]:
     from navkit import datasets
 
@@ -131,4 +246,25 @@ def run(quick: bool = False) -> list[Row]:
         )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+    rows += obstacles_cost(loops=5 if quick else 10, repeats=2 if quick else 3)[0]
     return rows
+
+
+if __name__ == "__main__":
+    import os
+
+    from navkit.jit import implementation
+
+    _, f = obstacles_cost()
+    print(f"kernels: {implementation()} (NAVKIT_JIT={os.environ.get('NAVKIT_JIT', '')})")
+    print(
+        f"CPU: detector alone {f['detector_cpu_ms']:.1f} ms per cloud; obstacles in run "
+        f"{f['stage_cpu_ms']:.1f} ms (ratio {f['stage_cpu_ratio']:.2f}); whole run "
+        f"{f['loop_cpu_ms']:.1f} ms + files process {f['files_cpu_ms']:.1f} ms "
+        f"(ratio {f['loop_cpu_ratio']:.2f})"
+    )
+    print(
+        f"wall: detector alone {f['detector_ms']:.1f} ms per cloud; obstacles in run "
+        f"{f['stage_ms']:.1f} ms (ratio {f['stage_ratio']:.2f}); whole run loop "
+        f"{f['loop_ms']:.1f} ms (ratio {f['loop_ratio']:.2f})"
+    )

@@ -172,3 +172,77 @@ def write_carmen_bag(log_path: Path, dest: Path, ros1: bool, every: int = 1) -> 
             )
             w.write("/scan", st, scan)
     return len(sel)
+
+
+def transform_msg(w: _BagWriter, stamp_ns: int, parent: str, child: str, T: np.ndarray):
+    """A ``geometry_msgs/TransformStamped`` ``T_parent_child``."""
+    from scipy.spatial.transform import Rotation
+
+    M = w.ts.types
+    q = Rotation.from_matrix(T[:3, :3]).as_quat()
+    return M["geometry_msgs/msg/TransformStamped"](
+        header=w.header(stamp_ns, parent),
+        child_frame_id=child,
+        transform=M["geometry_msgs/msg/Transform"](
+            translation=M["geometry_msgs/msg/Vector3"](x=T[0, 3], y=T[1, 3], z=T[2, 3]),
+            rotation=M["geometry_msgs/msg/Quaternion"](x=q[0], y=q[1], z=q[2], w=q[3]),
+        ),
+    )
+
+
+def planar_pose(x: float, y: float, th: float, z: float = 0.0) -> np.ndarray:
+    T = np.eye(4)
+    T[:2, :2] = [[np.cos(th), -np.sin(th)], [np.sin(th), np.cos(th)]]
+    T[:3, 3] = x, y, z
+    return T
+
+
+def write_robot_bag(log_path: Path, dest: Path, T_base_laser: np.ndarray, ros1: bool = False):
+    """A CARMEN log as a robot records it: ``/scan`` in frame ``laser`` mounted at
+    ``T_base_laser`` on ``base_link`` (``/tf_static``), wheel odometry of ``base_link`` on
+    ``/odom`` (``nav_msgs/Odometry``) and ``/tf`` (odom -> base_link), the corrected pose of
+    ``base_link`` on ``/ground_truth`` (map -> base_link). The log's poses are the laser's: the
+    base is ``T_laser inv(T_base_laser)`` (the laser at the mounting's height). Returns the
+    scans' stamps (ns) and the true ``T_map_base`` of each."""
+    from navkit.io.carmen import read_carmen
+
+    lg = read_carmen(log_path)
+    n = lg.ranges.shape[1]
+    h = float(T_base_laser[2, 3])
+    inv = np.linalg.inv(T_base_laser)
+    stamps, truth = [], []
+    with _BagWriter(dest, ros1) as w:
+        M = w.ts.types
+        TF = M["tf2_msgs/msg/TFMessage"]
+        t0 = round(lg.timestamps[0] * 1e9)
+        w.write(
+            "/tf_static",
+            t0,
+            TF(transforms=[transform_msg(w, t0, "base_link", "laser", T_base_laser)]),
+        )
+        for k in range(len(lg)):
+            st = round(lg.timestamps[k] * 1e9)
+            T_odom_base = planar_pose(*lg.odom_poses[k], z=h) @ inv
+            T_map_base = planar_pose(*lg.poses[k], z=h) @ inv
+            w.write("/odom", st, w.odometry(st, "odom", "base_link", T_odom_base))
+            w.write(
+                "/tf", st, TF(transforms=[transform_msg(w, st, "odom", "base_link", T_odom_base)])
+            )
+            w.write("/ground_truth", st, w.odometry(st, "map", "base_link", T_map_base))
+            r = np.where(np.isfinite(lg.ranges[k]), lg.ranges[k], np.inf).astype(np.float32)
+            scan = M["sensor_msgs/msg/LaserScan"](
+                header=w.header(st, "laser"),
+                angle_min=float(lg.bearings[0]),
+                angle_max=float(lg.bearings[-1]),
+                angle_increment=float((lg.bearings[-1] - lg.bearings[0]) / (n - 1)),
+                time_increment=0.0,
+                scan_time=0.0,
+                range_min=0.0,
+                range_max=81.0,
+                ranges=r,
+                intensities=np.zeros(0, np.float32),
+            )
+            w.write("/scan", st, scan)
+            stamps.append(st)
+            truth.append(T_map_base)
+    return np.array(stamps), np.array(truth)

@@ -116,9 +116,20 @@ def test_results_mcap_kitti(kitti, cli):
     assert shapes[0].msgtype == "visualization_msgs/msg/MarkerArray"
     assert shapes[0].message.markers[0].action == 3  # DELETEALL, then the outlines
     n_obst = [r["n_obstacles"] for r in _records(out, "obstacles")]
+    from navkit.runtime.capabilities import SHAPE_COLORS
+
     for m, n in zip(shapes, n_obst, strict=True):
-        ids = {(mk.ns, mk.id) for mk in m.message.markers[1:]}
-        assert len({i for _, i in ids}) == n
+        # one LINE_LIST: A1 (a rectangle, 4 segments) and A6 of every obstacle, coloured per
+        # vertex by shape
+        assert len(m.message.markers) == 2 and m.message.markers[1].type == 5
+        mk = m.message.markers[1]
+        assert mk.header.frame_id == "velodyne" and len(mk.points) == len(mk.colors)
+        assert len(mk.points) % 2 == 0
+        rgba = np.array([[c.r, c.g, c.b, c.a] for c in mk.colors])
+        a1 = np.all(np.isclose(rgba, SHAPE_COLORS["A1"]), axis=1)
+        a6 = np.all(np.isclose(rgba, SHAPE_COLORS["A6"]), axis=1)
+        assert (a1 | a6).all()
+        assert a1.sum() == 2 * 4 * n  # two ends per segment
     grid = by_topic["/navkit/obstacle_map"][-1]
     assert grid.msgtype == "nav_msgs/msg/OccupancyGrid" and grid.message.header.frame_id == "odom"
     info = grid.message.info
@@ -139,6 +150,7 @@ def test_results_mcap_kitti(kitti, cli):
         summary = reader.get_summary()
         assert summary is not None and summary.statistics.message_count == len(msgs)
         assert {s.name for s in summary.schemas.values()} == {
+            "tf2_msgs/msg/TFMessage",
             "sensor_msgs/msg/PointCloud2",
             "visualization_msgs/msg/MarkerArray",
             "nav_msgs/msg/OccupancyGrid",
@@ -269,7 +281,7 @@ def test_localization_scores_like_map_locate(carmen):
     ]
     # only accepted fixes are poses (a LocalizationFailure is a record, never a result)
     assert len(poses) == round(run["ok_rate"] * n)
-    assert poses[0].msgtype == "geometry_msgs/msg/PoseStamped"
+    assert poses[0].msgtype == "geometry_msgs/msg/PoseWithCovarianceStamped"
     assert {p.message.header.frame_id for p in poses} == {"map"}
     stamps = [p.log_time_ns for p in poses]
     assert stamps == sorted(stamps)
@@ -384,12 +396,12 @@ def test_kill_and_resume(carmen, tmp_path):
     resumed = _records(out, "localization")
     assert [_strip(x) for x in resumed] == [_strip(x) for x in full]
     a = [
-        (m.log_time_ns, m.message.pose.position.x, m.message.pose.position.y)
+        (m.log_time_ns, m.message.pose.pose.position.x, m.message.pose.pose.position.y)
         for m in read_messages(out / "results.mcap")
         if m.topic == "/navkit/localization/pose"
     ]
     b = [
-        (m.log_time_ns, m.message.pose.position.x, m.message.pose.position.y)
+        (m.log_time_ns, m.message.pose.pose.position.x, m.message.pose.pose.position.y)
         for m in read_messages(d / "run" / "results.mcap")
         if m.topic == "/navkit/localization/pose"
     ]
@@ -447,7 +459,7 @@ def test_ctrl_c_and_resume(carmen, tmp_path):
 
     def poses(folder: Path) -> list[tuple[int, float, float]]:
         return [
-            (m.log_time_ns, m.message.pose.position.x, m.message.pose.position.y)
+            (m.log_time_ns, m.message.pose.pose.position.x, m.message.pose.pose.position.y)
             for m in read_messages(folder / "results.mcap")
             if m.topic == "/navkit/localization/pose"
         ]

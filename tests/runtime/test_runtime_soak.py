@@ -173,8 +173,8 @@ def test_plane_odometry_memory_is_bounded(tmp_path):
     sizes = []
     original = PlanesStage._frame
 
-    def spy(self, d, c):  # the stage's structures after every frame
-        res = original(self, d, c)
+    def spy(self, d, c, poses):  # the stage's structures after every frame
+        res = original(self, d, c, poses)
         o = self.odo
         sizes.append(
             (
@@ -205,7 +205,7 @@ def test_plane_odometry_memory_is_bounded(tmp_path):
     assert len(traj.timestamps) == n
     pub = [
         r.message.pose.position
-        for r in read_messages(tmp_path / "run" / "results.mcap", ["/navkit/planes/pose"])
+        for r in read_messages(tmp_path / "run" / "results.mcap", ["/navkit/planes/sensor_pose"])
     ]
     np.testing.assert_allclose(traj.poses[:, :3, 3], [[p.x, p.y, p.z] for p in pub], atol=1e-9)
     # the same frames through an object that keeps everything (only max_history differs)

@@ -121,6 +121,32 @@ def test_rgbd_folder_plane_odometry(data_path, tmp_path):
     recs = [json.loads(x) for x in (tmp_path / "o" / "frames.jsonl").read_text().splitlines()]
     first = next(r for r in recs if r["capability"] == "planes")
     assert (first["status"], first["source"]) == ("tracked", "first")
+    # the TF tree of results.mcap: the folder's ground truth (world -> camera) is the camera's
+    # parent, planes_odom hangs (static) where the truth had the camera at the first frame, and
+    # world links to map; without a base in the folder the robot's pose is the camera's
+    from navkit.io.results_mcap import read_messages
+    from tests.runtime.test_runtime_robot import results_tf
+
+    res = tmp_path / "o" / "results.mcap"
+    tree, frames = results_tf(res)
+    assert tree.parent == {"camera": "world", "planes_odom": "world", "world": "map"}
+    assert frames["/navkit/planes/pose"] == frames["/navkit/planes/outlines"] == {"planes_odom"}
+    pub = list(read_messages(res, ["/navkit/planes/pose"]))
+    xyz = [
+        [
+            m.message.pose.pose.position.x,
+            m.message.pose.pose.position.y,
+            m.message.pose.pose.position.z,
+        ]
+        for m in pub
+    ]
+    np.testing.assert_allclose(xyz, want[:, :3, 3], atol=1e-6)
+    st0 = pub[0].log_time_ns  # at the first frame the odometry's camera is the tree's camera
+    np.testing.assert_allclose(
+        tree.lookup("world", "planes_odom", st0) @ want[0],
+        tree.lookup("world", "camera", st0),
+        atol=1e-6,
+    )
 
 
 class _PosesAt10Hz:

@@ -186,6 +186,38 @@ def test_cloud_in_velodyne_with_odometry_of_the_base_is_placed_by_tf(tmp_path):
         assert np.hypot(*(mine.mean(0) - (cx, cy))) < 0.6
 
 
+def test_results_mcap_carries_the_tf_tree(tmp_path):
+    """results.mcap passes the bag's /tf and /tf_static through and publishes the odometry's
+    odom -> base_footprint: the points and shapes (velodyne) and the obstacle map (odom) link to
+    map (no localization: map = odom, a static identity), and the tree read back places the
+    lidar where it was (interpolated between 20 Hz odometry and 50 Hz turret samples: 1 mm)."""
+    pytest.importorskip("rosbags")
+    pytest.importorskip("mcap")
+    from tests.runtime.test_runtime_robot import results_tf
+
+    bag = tmp_path / "tf_bag"
+    _write_bag(bag, with_tf=True)
+    _occupied_centres(bag, tmp_path / "run")
+    tree, frames = results_tf(tmp_path / "run" / "results.mcap")
+    assert frames["/navkit/obstacles/points"] == {"velodyne"}
+    assert frames["/navkit/obstacles/shapes"] == {"velodyne"}
+    assert frames["/navkit/obstacle_map"] == {"odom"}
+    used = set().union(*frames.values()) | set(tree.parent) | set(tree.parent.values())
+    for f in used:
+        assert tree.can_transform("map", f), (f, tree.parent)
+    assert tree.parent == {
+        "velodyne": "base_link",
+        "base_link": "base_footprint",
+        "base_footprint": "odom",
+        "odom": "map",
+    }
+    np.testing.assert_allclose(tree.lookup("map", "odom", 0), np.eye(4))
+    for k in range(10):
+        t = 0.025 + 0.2 * k
+        got = tree.lookup("odom", "velodyne", 1_000_000_000 + round(t * 1e9))
+        np.testing.assert_allclose(got, T_odom_velodyne(t), atol=1e-3)
+
+
 def test_without_tf_the_same_clouds_are_misplaced(tmp_path):
     """The control: the same bag without /tf and /tf_static puts the odometry's base_footprint
     where the sensor is (warned), and the boxes land off their places."""
@@ -196,3 +228,86 @@ def test_without_tf_the_same_clouds_are_misplaced(tmp_path):
     xy, _ = _occupied_centres(bag, tmp_path / "run")
     assert len(xy) > 0
     assert _inside(xy, 0.1).mean() < 0.5
+
+
+_INTERRUPT = r"""
+import os, signal, sys
+from navkit.runtime import run_recording
+from navkit.runtime.run import RunInterrupted
+from navkit.runtime.sources import open_source
+
+bag, out, k = sys.argv[1], sys.argv[2], int(sys.argv[3])
+src = open_source(bag)
+messages = src.messages
+
+
+def interrupted(skip=0):
+    for item, msgs in messages(skip):
+        if item == k:  # Ctrl-C in a terminal: SIGINT to the whole process group
+            os.killpg(0, signal.SIGINT)
+        yield item, msgs
+
+
+src.messages = interrupted
+cfg = {"run": {"checkpoint_every": 1000}, "obstacles": {"map_half_extent_m": 15.0}}
+try:
+    run_recording(src, out, cfg)
+except RunInterrupted:
+    sys.exit(130)
+"""
+
+
+def test_ctrl_c_with_the_obstacles_writer_and_resume(tmp_path):
+    """Ctrl-C reaches the run and its per-frame file writer (one process group): the writer
+    ignores it, the run drains it into its checkpoint, and --resume gives the files, records
+    and results of an uninterrupted run."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    pytest.importorskip("rosbags")
+    pytest.importorskip("mcap")
+    from navkit.io.results_mcap import read_messages
+    from navkit.runtime import run_recording
+
+    repo = Path(__file__).resolve().parents[2]
+    bag = tmp_path / "tf_bag"
+    _write_bag(bag, with_tf=True)
+    cfg = {"run": {"checkpoint_every": 1000}, "obstacles": {"map_half_extent_m": 15.0}}
+    run_recording(bag, tmp_path / "full", cfg)
+    out = tmp_path / "interrupted"
+    env = {**os.environ, "PYTHONPATH": f"{repo / 'src'}{os.pathsep}{repo}"}
+    r = subprocess.run(
+        [sys.executable, "-c", _INTERRUPT, str(bag), str(out), "80"],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        start_new_session=True,  # its own process group: the SIGINT stays in it
+    )
+    assert r.returncode == 130, r.stderr
+    recs = [json.loads(x) for x in (out / "frames.jsonl").read_text().splitlines()]
+    done = [x for x in recs if x["capability"] == "obstacles"]
+    assert 1 <= len(done) < 10
+    for x in done:  # the checkpoint waited for the writer: every frame's files are there
+        d = out / "obstacles" / f"{x['seq']:06d}"
+        assert (d / "labels.npy").is_file() and (d / "obstacles.json").is_file()
+    run_recording(bag, out, cfg, resume=True)
+
+    def strip(rec):
+        return {k: v for k, v in rec.items() if k not in ("ms", "item")}
+
+    def records(folder):
+        return [strip(json.loads(x)) for x in (folder / "frames.jsonl").read_text().splitlines()]
+
+    assert records(out) == records(tmp_path / "full")
+    for k in range(10):
+        for name in ("labels.npy", "obstacles.json"):
+            a = (out / "obstacles" / f"{k:06d}" / name).read_bytes()
+            assert a == (tmp_path / "full" / "obstacles" / f"{k:06d}" / name).read_bytes()
+    raw = [(m.topic, m.log_time_ns) for m in read_messages(out / "results.mcap")]
+    assert raw == [
+        (m.topic, m.log_time_ns) for m in read_messages(tmp_path / "full" / "results.mcap")
+    ]

@@ -18,6 +18,7 @@ mission use: ``obstacles.detect_obstacles_in_grid`` + ``obstacles.ObstacleMapper
 from __future__ import annotations
 
 import logging
+import math
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -96,6 +97,8 @@ class PoseBuffer:
         self.children: dict[str, str] = {}
         self.tf = TransformTree(maxlen)
         self.warned: set[tuple[str, str]] = set()
+        # the tree results.mcap carries (the run's TfPublisher's), when there is one
+        self.published: TransformTree | None = None
 
     def add_tf(self, msg: Message) -> None:
         """One transform of a ``tf`` message (static when its topic is ``/tf_static``)."""
@@ -166,6 +169,30 @@ class PoseBuffer:
 
 
 # --------------------------------------------------------------------------- obstacles
+def _outlines(shapes: list[Any], n: int = 36) -> list[NDArray[np.float64]]:
+    """``shape.outline(n)`` of each shape; ellipses (A6, MVEE) all at once from the same
+    formula (``Ellipse.outline``: the same numbers, without a NumPy call chain per shape)."""
+    from navkit.geometry.shapes import Ellipse
+
+    out: list[Any] = [None] * len(shapes)
+    ell = [i for i, shp in enumerate(shapes) if type(shp) is Ellipse]
+    if ell:
+        t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+        ct, st = np.cos(t), np.sin(t)
+        E = [shapes[i] for i in ell]
+        x, y, a, b = (np.array([getattr(e, k) for e in E])[:, None] for k in "xyab")
+        c = np.array([math.cos(e.angle) for e in E])[:, None]
+        s = np.array([math.sin(e.angle) for e in E])[:, None]
+        u, v = a * ct, b * st
+        X, Y = x + c * u - s * v, y + s * u + c * v
+        for k, i in enumerate(ell):
+            out[i] = np.column_stack([X[k], Y[k]])
+    for i, shp in enumerate(shapes):
+        if out[i] is None:
+            out[i] = shp.outline(n)
+    return out
+
+
 def obstacle_lines(
     obstacles: Any,
     z: float = 0.0,
@@ -176,32 +203,34 @@ def obstacle_lines(
     (``shape/A7:<name>``) of detected obstacles at height ``z`` of their (level body) frame;
     ``T`` (4, 4), optional, maps them into another frame; ``names``, optional, keeps only these
     shapes (``"A7"`` keeps every A7 outline)."""
-    lines = []
+    items = []
     for ob in obstacles:
-        items = [
-            (f"shape/{n}", shp, SHAPE_COLORS.get(n, (1, 1, 1, 1)))
+        items += [
+            (ob.id, f"shape/{n}", shp, SHAPE_COLORS.get(n, (1, 1, 1, 1)))
             for n, shp in ob.shapes.items()
             if names is None or n in names
         ]
         if names is None or "A7" in names:
-            items += [(f"shape/A7:{n}", shp, A7_COLOR) for n, shp in ob.guaranteed.items()]
-        for ns, shp, color in items:
-            xy = shp.outline(36)
-            P = np.c_[xy, np.full(len(xy), z)]
-            if T is not None:
-                P = P @ T[:3, :3].T + T[:3, 3]
-            lines.append(Polyline(ns, ob.id, P, color))
+            items += [(ob.id, f"shape/A7:{n}", shp, A7_COLOR) for n, shp in ob.guaranteed.items()]
+    lines = []
+    for (oid, ns, _, color), xy in zip(items, _outlines([it[2] for it in items]), strict=True):
+        P = np.empty((len(xy), 3))
+        P[:, :2], P[:, 2] = xy, z
+        if T is not None:
+            P = P @ T[:3, :3].T + T[:3, 3]
+        lines.append(Polyline(ns, oid, P, color))
     return lines
 
 
 def obstacle_map_output(mapper: Any, stamp_ns: int, frame_id: str) -> Output:
     """An :class:`~navkit.obstacles.ObstacleMapper`'s grid as ``/navkit/obstacle_map``
     (-1 never seen, 0 seen free, 100 occupied)."""
-    g = mapper.grid()
-    occ = np.full(g.shape, -1, dtype=np.int8)
-    occ[g.seen > 0] = 0
-    occ[g.occupied] = 100
-    return Output("/navkit/obstacle_map", "grid", stamp_ns, frame_id, (occ, g.resolution, g.origin))
+    occ = np.where(mapper.seen > 0, np.int8(0), np.int8(-1))  # no snapshot copies of the counts
+    occ[mapper.occupied] = 100
+    origin = np.array(mapper.origin, dtype=np.float64)
+    return Output(
+        "/navkit/obstacle_map", "grid", stamp_ns, frame_id, (occ, mapper.resolution, origin)
+    )
 
 
 class ObstaclesStage:
@@ -232,6 +261,41 @@ class ObstaclesStage:
         self.mapper: Any = None
         self.map_frame = "map"
         self.n = 0
+        self.files: Any = None  # the writer thread of the per-frame files (not pickled)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        state["files"] = None
+        return state
+
+    def flush(self) -> None:
+        """Wait until every per-frame file is written (before a checkpoint, at the end)."""
+        if self.files is not None:
+            self.files.drain()
+
+    def close(self) -> None:
+        """Stop the writer thread (after :meth:`flush`)."""
+        if self.files is not None:
+            files, self.files = self.files, None
+            files.close()
+
+    def _write_frame(self, seq: int, msg: Message, labels: Any, det: Any) -> None:
+        """Queue the frame's ``labels.npy`` + ``obstacles.json`` (as ``navkit obstacles
+        detect`` writes them) for the writer process (:mod:`navkit.runtime.files`)."""
+        from navkit.runtime.files import FileWriter
+
+        if self.files is None:
+            self.files = FileWriter()
+        d = self.out / f"{seq:06d}"
+        self.files.submit("npy", d / "labels.npy", labels)
+        doc = {
+            "topic": msg.topic,
+            "stamp_ns": msg.stamp_ns,
+            "frame": "body (x forward, y left, z up, origin on the ground under the sensor)",
+            "sensor": det.sensor_origin,
+            "obstacles": [ob.to_dict() for ob in det.obstacles],
+        }
+        self.files.submit("json", d / "obstacles.json", doc)
 
     def _set_height(self, points: NDArray[np.float64], src: str) -> None:
         """The run's sensor height, once: given, or measured on this cloud's ground (as
@@ -273,7 +337,6 @@ class ObstaclesStage:
         return obstacle_map_output(self.mapper, stamp_ns, self.map_frame)
 
     def handle(self, msg: Message, poses: PoseBuffer) -> StageResult:
-        from navkit.io.atomic import atomic_path, write_json
         from navkit.obstacles import detect_obstacles_in_grid
         from navkit.obstacles.grids import cloud_to_grid
 
@@ -298,34 +361,21 @@ class ObstaclesStage:
             )
         ]
         z = -self.mounting.height_m  # shapes lie on the ground, in the level body frame
-        lines = obstacle_lines(det.obstacles, z)
+        lines = obstacle_lines(det.obstacles, z, names=c.shapes)
         outs.append(
             Output("/navkit/obstacles/shapes", "markers", msg.stamp_ns, msg.frame_id, lines)
         )
+        lo = int(labels.min()) if labels.size else 0  # per-class counts, without a sort
+        counts = np.bincount(labels.astype(np.int64) - lo)
         record: dict[str, Any] = {
             "seq": seq,
             "n_points": int(labels.size),
             "n_obstacles": len(det.obstacles),
-            "counts": {
-                str(k): int(v) for k, v in zip(*np.unique(labels, return_counts=True), strict=True)
-            },
+            "counts": {str(k + lo): int(v) for k, v in enumerate(counts.tolist()) if v},
             "triangles": det.counts,
         }
         if self.write_frames:
-            d = self.out / f"{seq:06d}"
-            d.mkdir(parents=True, exist_ok=True)
-            with atomic_path(d / "labels.npy") as tmp:
-                np.save(tmp, labels)
-            write_json(
-                d / "obstacles.json",
-                {
-                    "topic": msg.topic,
-                    "stamp_ns": msg.stamp_ns,
-                    "frame": "body (x forward, y left, z up, origin on the ground under the sensor)",
-                    "sensor": det.sensor_origin,
-                    "obstacles": [ob.to_dict() for ob in det.obstacles],
-                },
-            )
+            self._write_frame(seq, msg, labels, det)
         T = (
             poses.sensor_pose(self.pose_topic, msg.stamp_ns, msg.frame_id)
             if self.with_map
@@ -339,6 +389,7 @@ class ObstaclesStage:
         return StageResult(outs, record)
 
     def finish(self, out: Path, stamp_ns: int) -> StageResult:
+        self.close()
         height = {} if self.height is None else {"sensor_height": self.height.to_dict()}
         if self.mapper is None:
             return StageResult(record={"frames": self.n, **height})
@@ -497,6 +548,90 @@ class LaserLocalizationStage:
         self.n = self.n_ok = self.n_success = self.n_ref = 0
         self.out = out / "localization"
         self.published_map = False
+        self.root = ""  # the frame map is linked to (the odometry's), and the last correction
+        self.T_map_root: NDArray[np.float64] | None = None
+
+    def _covariance(self, fix: Any, pts: NDArray[np.float64]) -> NDArray[np.float64]:
+        """``(3, 3)`` covariance of the fix's ``(x, y, theta)`` (m^2, rad^2): the point-to-line
+        refinement's when it ran and is finite; else the match's own, from its peak analysis:
+        x, y the score-weighted covariance of the near-optimal translations
+        (``Ambiguity.covariance``), floored by the search cell's quantisation (``res^2 / 12``);
+        theta the quantisation of the heading step (Olson's rule: the 95th-percentile range
+        point moves one cell, ``step = res / r95``; ``step^2 / 12``)."""
+        cov = fix.covariance
+        if cov is not None and np.all(np.isfinite(cov)):
+            return np.asarray(cov, dtype=np.float64)
+        res = float(getattr(self.wall_map, "resolution", 0.05) or 0.05)
+        out = np.zeros((3, 3))
+        peak = getattr(getattr(fix.match, "ambiguity", None), "covariance", None)
+        if peak is not None and np.all(np.isfinite(peak)):
+            out[:2, :2] = peak
+        out[:2, :2] += np.eye(2) * res**2 / 12
+        r95 = float(np.percentile(np.hypot(pts[:, 0], pts[:, 1]), 95)) if len(pts) else 0.0
+        step = res / r95 if r95 > res else np.radians(1.0)
+        out[2, 2] = step**2 / 12
+        return out
+
+    def _base_frame(self, poses: PoseBuffer, sensor: str, stamp_ns: int) -> str:
+        """The robot's frame: the odometry's child frame, else ``base_link`` /
+        ``base_footprint``, when the TF tree connects it to the sensor; else the sensor."""
+        cands = (poses.children.get(self.odom_topic, "") if self.odom_topic else "",)
+        for base in (*cands, "base_link", "base_footprint"):
+            base = base.lstrip("/")
+            if base and base != sensor and poses.tf.can_transform(sensor, base):
+                return base
+        return sensor
+
+    def _robot(
+        self,
+        msg: Message,
+        poses: PoseBuffer,
+        pose: NDArray[np.float64],
+        cov3: NDArray[np.float64],
+        rec: dict[str, Any],
+    ) -> list[Output]:
+        """A fix's outputs: ``map -> root`` of the sensor's odometry tree (the AMCL form,
+        :func:`~navkit.runtime.tf.planar_correction`), the robot's frame in ``map``
+        (``PoseWithCovarianceStamped``) and the sensor's (``PoseStamped``)."""
+        from navkit.runtime.tf import planar_correction, planar_covariance_6x6
+
+        stamp, sensor = msg.stamp_ns, msg.frame_id.lstrip("/")
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        T_fix = np.eye(4)
+        T_fix[:2, :2] = [[c, -s], [s, c]]
+        T_fix[:2, 3] = pose[:2]
+        T_root_sensor = (
+            poses.sensor_pose(self.odom_topic, stamp, sensor) if self.odom_topic else None
+        )
+        if T_root_sensor is not None:
+            root = poses.frames.get(self.odom_topic, "").lstrip("/") or "odom"
+        else:  # no odometry: the top of the sensor's own TF tree (the sensor itself without)
+            root = poses.tf._chain(sensor)[-1] if sensor else ""
+            T_root_sensor = poses.tf.lookup(root, sensor, stamp) if root else None
+            if T_root_sensor is None:
+                root, T_root_sensor = sensor, np.eye(4)
+        T_map_root = planar_correction(T_fix, T_root_sensor)
+        T_map_sensor = T_map_root @ T_root_sensor
+        base = self._base_frame(poses, sensor, stamp)
+        T_sensor_base = poses.tf.lookup(sensor, base, stamp) if base != sensor else None
+        T_map_base = T_map_sensor if T_sensor_base is None else T_map_sensor @ T_sensor_base
+        lever = T_map_base[:2, 3] - T_map_sensor[:2, 3]
+        cov6 = planar_covariance_6x6(cov3, lever)
+        b = planar(T_map_base)
+        rec.update(
+            base_frame=base,
+            base=[float(v) for v in b],
+            sigma_xy_m=float(np.sqrt(max(cov6[0, 0] + cov6[1, 1], 0.0))),
+            sigma_theta_deg=float(np.degrees(np.sqrt(max(cov6[5, 5], 0.0)))),
+        )
+        outs = [
+            Output("/navkit/localization/pose", "pose_cov", stamp, "map", (T_map_base, cov6)),
+            Output("/navkit/localization/sensor_pose", "pose", stamp, "map", T_map_sensor),
+        ]
+        if root:
+            self.root, self.T_map_root = root, T_map_root
+            outs.append(Output("/tf", "tf", stamp, "map", [(root, T_map_root)]))
+        return outs
 
     def _odometry_delta(self, odom: NDArray[np.float64] | None) -> NDArray[np.float64] | None:
         """Body-frame increment since the previous scan's odometry (None: unknown)."""
@@ -525,9 +660,16 @@ class LaserLocalizationStage:
                     wall_lines(self.wall_map.walls, self.wall_map.corners),
                 )
             )
-        To = poses.at(self.odom_topic, msg.stamp_ns) if self.odom_topic else None
+        # the odometry of the scan's frame (carried from the topic's child through the TF tree:
+        # a laser ahead of base_link moves sideways when the base turns)
+        To = (
+            poses.sensor_pose(self.odom_topic, msg.stamp_ns, msg.frame_id)
+            if self.odom_topic
+            else None
+        )
         delta = self._odometry_delta(planar(To) if To is not None else None)
-        r = self.localizer.update(scan.points(self.cfg.max_range_m), odometry_delta=delta)
+        pts = scan.points(self.cfg.max_range_m)
+        r = self.localizer.update(pts, odometry_delta=delta)
         ok = isinstance(r, Fix)
         pose = r.pose if isinstance(r, Fix) else r.candidate
         rec: dict[str, Any] = {
@@ -540,15 +682,21 @@ class LaserLocalizationStage:
         }
         if ok:
             rec.update(x=float(pose[0]), y=float(pose[1]), theta=float(pose[2]))
-            c, s = np.cos(pose[2]), np.sin(pose[2])
-            T = np.eye(4)
-            T[:2, :2] = [[c, -s], [s, c]]
-            T[:2, 3] = pose[:2]
-            outs.append(Output("/navkit/localization/pose", "pose", msg.stamp_ns, "map", T))
-        elif np.all(np.isfinite(pose)):
-            rec["candidate"] = [float(v) for v in pose]
+            cov3 = self._covariance(r, pts)
+            outs += self._robot(msg, poses, pose, cov3, rec)
+        else:
+            if np.all(np.isfinite(pose)):
+                rec["candidate"] = [float(v) for v in pose]
+            if self.T_map_root is not None:  # as AMCL: the last correction, re-stamped
+                outs.append(
+                    Output("/tf", "tf", msg.stamp_ns, "map", [(self.root, self.T_map_root)])
+                )
         self.n_ok += ok
-        Tr = poses.at(self.ref_topic, msg.stamp_ns) if self.ref_topic else None
+        Tr = (
+            poses.sensor_pose(self.ref_topic, msg.stamp_ns, msg.frame_id)
+            if self.ref_topic
+            else None
+        )
         self.n_ref += Tr is not None
         if Tr is not None and np.all(np.isfinite(pose)):
             ref = planar(Tr)
@@ -666,6 +814,7 @@ class PlanesStage:
         # line this stage wrote (a resumed run truncates what a killed run wrote after it)
         self.traj_bytes = 0
         self.last_stamp_ns: int | None = None
+        self.anchored = False  # the static root -> planes_odom was published
 
     def _append_pose(self, stamp_ns: int, T: NDArray[np.float64]) -> None:
         """One TUM line (``t tx ty tz qx qy qz qw``, as :func:`navkit.io.trajectory.write_tum`);
@@ -703,9 +852,46 @@ class PlanesStage:
         paired = c is not None and abs(c.stamp_ns - d.stamp_ns) <= tol
         if not paired and self.topics.color and msg.kind == "depth":
             return StageResult()  # wait for the colour of this depth frame
-        return self._frame(d, c if paired else None)
+        return self._frame(d, c if paired else None, poses)
 
-    def _frame(self, d: Message, c: Message | None) -> StageResult:
+    def _robot(self, d: Message, poses: PoseBuffer, T: NDArray[np.float64]) -> list[Output]:
+        """The frame's transforms and the robot's pose: ``planes_odom -> camera`` on ``/tf``
+        when the recording's TF tree has no parent for the camera; else, once, a static
+        ``root -> planes_odom`` that puts the odometry's origin where the tree had the camera
+        at the first frame (the camera keeps its parent: one parent per frame). The robot
+        (``base_link`` / ``base_footprint`` when the tree connects it to the camera, else the
+        camera) in ``planes_odom`` as ``PoseWithCovarianceStamped``: PlaneOdometry's result
+        carries no covariance, so it is marked not estimated (element 0 = -1, as
+        ``sensor_msgs/Imu`` marks a missing covariance)."""
+        stamp, cam = d.stamp_ns, d.frame_id.lstrip("/")
+        outs: list[Output] = []
+        base = cam
+        tree = poses.published if poses.published is not None else poses.tf
+        if cam:
+            if cam not in tree.parent:
+                outs.append(Output("/tf", "tf", stamp, "planes_odom", [(cam, T)]))
+            elif not self.anchored:
+                root = tree._chain(cam)[-1]
+                T_root_cam = tree.lookup(root, cam, stamp)
+                if T_root_cam is not None:
+                    self.anchored = True
+                    T_root_po = T_root_cam @ np.linalg.inv(T)
+                    outs.append(
+                        Output("/tf_static", "tf", stamp, root, [("planes_odom", T_root_po)])
+                    )
+            base = next(
+                (b for b in ("base_link", "base_footprint") if poses.tf.can_transform(cam, b)),
+                cam,
+            )
+        T_cam_base = poses.tf.lookup(cam, base, stamp) if base != cam else None
+        T_base = T if T_cam_base is None else T @ T_cam_base
+        cov = np.zeros((6, 6))
+        cov[0, 0] = -1.0
+        outs.append(Output("/navkit/planes/pose", "pose_cov", stamp, "planes_odom", (T_base, cov)))
+        outs.append(Output("/navkit/planes/sensor_pose", "pose", stamp, "planes_odom", T))
+        return outs
+
+    def _frame(self, d: Message, c: Message | None, poses: PoseBuffer) -> StageResult:
         from navkit.planes import FrameMotion, observe_rgbd
         from navkit.sensors import PinholeCamera, RGBDFrame
 
@@ -725,7 +911,7 @@ class PlanesStage:
         self.n += 1
         self.n_ok += isinstance(r, FrameMotion)
         self._append_pose(d.stamp_ns, T)
-        outs = [Output("/navkit/planes/pose", "pose", d.stamp_ns, "planes_odom", T)]
+        outs = self._robot(d, poses, T)
         lines = []
         R, t = T[:3, :3], T[:3, 3]
         for k, seg in enumerate(obs.extraction.segments):

@@ -80,6 +80,11 @@ class ObstaclesConfig:
     drive); a cell is an obstacle when ``map_min_hits`` scans saw one there and at least
     ``map_min_ratio`` of the scans that saw the cell. Obstacles farther than ``map_max_range_m``
     from the sensor are not fused. The grid is published every ``map_every`` clouds.
+    ``shapes``: the bounding shapes published per obstacle on ``/navkit/obstacles/shapes``
+    (names among A1-A6, MEC, MVEE; ``"A7"``: the guaranteed outlines). Decision: A1 and A6 by
+    default, as the mission publishes them: all of them are ten outlines per obstacle (~650 a
+    KITTI frame), whose outlines alone cost a third of the detector; every shape is in
+    ``obstacles.json``.
     """
 
     sensor_height_m: float | None = None
@@ -95,6 +100,7 @@ class ObstaclesConfig:
     map_min_ratio: float = 0.3
     map_max_range_m: float = 30.0
     map_every: int = 10
+    shapes: tuple[str, ...] = ("A1", "A6")
 
 
 @dataclass(frozen=True)

@@ -75,6 +75,9 @@ def render_results(
                     markers[m.topic] = m.message
         elif m.msgtype.endswith("/Path"):
             paths[m.topic] = m.message
+        elif m.msgtype.endswith("PoseWithCovarianceStamped"):
+            p = m.message.pose.pose.position
+            poses.setdefault(m.topic, []).append((p.x, p.y))
         elif m.msgtype.endswith("PoseStamped"):
             p = m.message.pose.position
             poses.setdefault(m.topic, []).append((p.x, p.y))
@@ -112,9 +115,26 @@ def render_results(
                     label=CLASS_NAMES[k],
                     rasterized=True,
                 )
+    from matplotlib.collections import LineCollection
+
+    from navkit.runtime.capabilities import A7_COLOR, SHAPE_COLORS
+
+    keep = [SHAPE_COLORS[n] for n in shapes if n in SHAPE_COLORS]
+    keep += [A7_COLOR] if "A7" in shapes else []
     for topic, arr in markers.items():
         for mk in arr.markers:
             if mk.action == 3 or not len(mk.points):
+                continue
+            if mk.type == 5:  # LINE_LIST: segment ends in pairs, a colour per vertex
+                P = np.array([[p.x, p.y] for p in mk.points]).reshape(-1, 2, 2)
+                C = np.array([[c.r, c.g, c.b, c.a] for c in mk.colors]).reshape(-1, 2, 4)[:, 0]
+                if mk.ns == "shape":  # the bounding shapes named, by their colours
+                    sel = np.zeros(len(C), bool)
+                    for rgba in keep:
+                        sel |= np.all(np.isclose(C, rgba, atol=1e-6), axis=1)
+                    P, C = P[sel], C[sel]
+                lw = 0.8 if "walls" in topic else 1.0
+                ax.add_collection(LineCollection(list(P), colors=C[:, :3], linewidths=lw))
                 continue
             if mk.ns.startswith("shape/") and mk.ns[len("shape/") :] not in shapes:
                 continue

@@ -47,8 +47,8 @@ __all__ = ["STATE_DIR", "NullLogger", "RunInterrupted", "interrupted_state", "ru
 log = logging.getLogger(__name__)
 
 STATE_DIR = ".navkit-run"
-# 3: per-capability frame counts and stamps in the statistics
-CHECKPOINT_VERSION = 3
+# 4: the published TF tree in the state
+CHECKPOINT_VERSION = 4
 
 
 class RunInterrupted(Exception):
@@ -133,6 +133,8 @@ class _Stats:
 
     n: int = 0
     seconds: float = 0.0
+    cpu_seconds: float = 0.0  # CPU time of the loop's thread (a loaded machine's wall time
+    # counts the other processes' turns too)
     frames: int = 0
     first_ns: int | None = None
     last_ns: int | None = None
@@ -159,6 +161,7 @@ class _Stats:
             "seconds": self.seconds,
             "ms_per_message": 1e3 * self.seconds / max(self.n, 1),
             "ms_per_frame": None if per_frame is None else 1e3 * per_frame,
+            "cpu_ms_per_frame": 1e3 * self.cpu_seconds / self.frames if self.frames else None,
             "sensor_period_s": period,
             "real_time_factor": period / per_frame if period and per_frame else None,
         }
@@ -177,6 +180,7 @@ class _State:
     last_ns: int | None = None
     n_messages: int = 0
     failures: int = 0
+    tf_out: Any = None  # navkit.runtime.tf.TfPublisher: the TF tree written to results.mcap
 
 
 class _Run:
@@ -195,18 +199,37 @@ class _Run:
     def _segment(self, k: int) -> Path:
         return self.seg_dir / f"segment-{k:05d}.mcap"
 
-    def emit(self, res: StageResult, cap: str, msg: Message | None, item: int) -> None:
+    def write(self, outputs: list[Output]) -> None:
+        """Write outputs to results.mcap and the viewer; before an output in a frame not yet
+        linked to ``map`` the TF tree gets its link (:meth:`TfPublisher.link`), and transforms
+        (kind ``tf``) join the published tree."""
         from navkit.io.results_mcap import ROS_TYPES
 
+        tf_out = self.s.tf_out
         t0 = time.perf_counter()
-        for o in res.outputs:
+        todo: list[Output] = []
+        for o in outputs:
+            if o.kind == "tf":
+                for child, T in o.data:
+                    tf_out.add(o.topic, o.frame_id, child, o.stamp_ns, T)
+            else:
+                todo += tf_out.link(o.frame_id, o.stamp_ns)
+            todo.append(o)
+        for o in todo:
             if o.kind in ROS_TYPES:  # textured planes are for the viewer only
                 self.writer.write(o.topic, o.kind, o.stamp_ns, o.frame_id, o.data)
         t1 = time.perf_counter()
-        for o in res.outputs:
+        for o in todo:
+            if o.kind == "tf":
+                continue
+            if o.kind == "pose_cov":
+                o = Output(o.topic, "pose", o.stamp_ns, o.frame_id, o.data[0])
             self.logger.log_output(o)
         self.log_seconds += time.perf_counter() - t1
         self.write_seconds += t1 - t0
+
+    def emit(self, res: StageResult, cap: str, msg: Message | None, item: int) -> None:
+        self.write(res.outputs)
         if res.record is not None:
             line: dict[str, Any] = {"capability": cap, "item": item}
             if msg is not None:
@@ -216,20 +239,24 @@ class _Run:
 
     def process(self, msg: Message, item: int) -> None:
         for stage in route(self.pipe, self.s.stages, msg):
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), time.thread_time()
             try:
                 res = stage.handle(msg, self.s.poses)
             except InputError as exc:  # a bad frame is reported, never written as a result
                 self.s.failures += 1
                 log.warning("%s: %s at %d ns failed: %s", stage.name, msg.topic, msg.stamp_ns, exc)
                 res = StageResult(record={"failed": str(exc)})
+            # the capability's work: handling the message and serialising its outputs (the
+            # viewer's time excluded, counted apart)
+            log0 = self.log_seconds
+            self.emit(res, stage.name, msg, item)
             dt = time.perf_counter() - t0
             st = self.s.stats.setdefault(stage.name, _Stats())
             st.n += 1
-            st.seconds += dt
+            st.seconds += dt - (self.log_seconds - log0)
+            st.cpu_seconds += time.thread_time() - c0
             if msg.kind in FRAME_KINDS:
                 st.add_frame(msg.stamp_ns)
-            self.emit(res, stage.name, msg, item)
 
     def ready(self, msg: Message) -> bool:
         poses = self.s.poses
@@ -257,9 +284,15 @@ class _Run:
         self.log_seconds += time.perf_counter() - t0
         if msg.kind == "tf":
             s.poses.add_tf(msg)
+            # passed through to results.mcap as it came (topic, stamp, frames)
+            tf = [(msg.child_frame_id, msg.data)]
+            self.write([Output(msg.topic, "tf", msg.stamp_ns, msg.frame_id, tf)])
             self.drain(item)
         elif msg.kind == "pose":
             s.poses.add(msg)
+            self.write(
+                s.tf_out.pose(msg.topic, msg.stamp_ns, msg.frame_id, msg.child_frame_id, msg.data)
+            )
             self.process(msg, item)
             self.drain(item)
         elif not route(self.pipe, s.stages, msg):
@@ -279,6 +312,7 @@ class _Run:
         """Close the current segment, make everything durable, save the state, start a segment."""
         from navkit.io.results_mcap import ResultsWriter
 
+        self.flush_files()
         self.writer.close()
         self.frames.flush()
         os.fsync(self.frames.fileno())
@@ -298,9 +332,33 @@ class _Run:
         os.replace(tmp, target)
         self.writer = ResultsWriter(self._segment(self.s.segments), chunked=False)
 
+    def flush_files(self) -> None:
+        """Wait for the stages' per-frame files (written by their writer threads)."""
+        for stage in self.s.stages.values():
+            if hasattr(stage, "flush"):
+                stage.flush()
+
     def close(self) -> None:
-        self.writer.close()
-        self.frames.close()
+        try:
+            for stage in self.s.stages.values():
+                if hasattr(stage, "close"):
+                    stage.close()
+        finally:
+            self.writer.close()
+            self.frames.close()
+
+
+def _tf_publisher(pipe: Pipeline) -> Any:
+    """The TF tree of results.mcap: the pose topics that publish their edges (the reference
+    too, unless localization runs: then ``map`` is the localization's)."""
+    from navkit.runtime.tf import TfPublisher
+
+    t = pipe.topics
+    loc = "localization" in pipe.capabilities
+    topics = tuple(
+        x for x in (t.odometry, t.pose, t.reference) if x and not (loc and x == t.reference)
+    )
+    return TfPublisher(topics, link_map=not loc)
 
 
 def _jsonable(o: Any) -> Any:
@@ -412,7 +470,8 @@ def run_recording(
         shutil.rmtree(out / STATE_DIR, ignore_errors=True)
         (out / "frames.jsonl").unlink(missing_ok=True)
         (out / "results.mcap").unlink(missing_ok=True)
-        state = _State(stages=build_stages(pipe, out))
+        state = _State(stages=build_stages(pipe, out), tf_out=_tf_publisher(pipe))
+        state.poses.published = state.tf_out.tree
     write_text(out / "settings.toml", _settings_toml(pipe))
     run = _Run(pipe, out, logger, state)
     duration = max((source.end_ns - source.start_ns) * 1e-9, 0.0)

@@ -15,6 +15,7 @@ of a ``nav_msgs/Odometry``) to the frame of a sensor message (e.g. a ``PointClou
 
 from __future__ import annotations
 
+import bisect
 import logging
 from collections import deque
 from typing import Any
@@ -22,7 +23,14 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["TransformTree", "interpolate_pose", "pose_at"]
+__all__ = [
+    "TfPublisher",
+    "TransformTree",
+    "interpolate_pose",
+    "planar_correction",
+    "planar_covariance_6x6",
+    "pose_at",
+]
 
 log = logging.getLogger(__name__)
 
@@ -49,7 +57,7 @@ def pose_at(buf: Any, stamp_ns: int) -> NDArray[np.float64]:
     where a stamp matches, interpolated between neighbours (:func:`interpolate_pose`), held at the
     first / last pose outside the buffer's span."""
     stamps = [s for s, _ in buf]
-    i = int(np.searchsorted(stamps, stamp_ns))
+    i = bisect.bisect_left(stamps, stamp_ns)
     if i < len(stamps) and stamps[i] == stamp_ns:
         return buf[i][1]  # type: ignore[no-any-return]
     if i == 0:
@@ -154,3 +162,122 @@ class TransformTree:
         inv = np.eye(4)
         inv[:3, :3], inv[:3, 3] = R.T, -R.T @ t
         return inv @ T_anc_source
+
+
+def planar_correction(
+    T_map_sensor: NDArray[np.float64], T_root_sensor: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``T_map_root`` of a planar fix, the way AMCL and Cartographer publish ``map -> odom``:
+    ``T_map_root = T_map_sensor inv(T_root_sensor)`` taken in the plane (x, y, yaw of both
+    poses), so the correction has no height, roll or pitch and the sensor keeps the height and
+    tilt its odometry chain gives it."""
+    a, b = _xyyaw(T_map_sensor), _xyyaw(T_root_sensor)
+    yaw = a[2] - b[2]
+    c, s = np.cos(yaw), np.sin(yaw)
+    T = np.eye(4)
+    T[:2, :2] = [[c, -s], [s, c]]
+    T[:2, 3] = a[:2] - T[:2, :2] @ b[:2]
+    return T
+
+
+def _xyyaw(T: NDArray[np.float64]) -> NDArray[np.float64]:
+    return np.array([T[0, 3], T[1, 3], np.arctan2(T[1, 0], T[0, 0])])
+
+
+def planar_covariance_6x6(
+    cov3: NDArray[np.float64] | None, lever_xy: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """ROS's ``(6, 6)`` pose covariance (x, y, z, roll, pitch, yaw; row-major) of a frame that
+    sits ``lever_xy`` (map-frame vector from the matched sensor to it) away from a sensor whose
+    planar pose ``(x, y, yaw)`` has covariance ``cov3``: ``J cov3 J^T`` with ``J = [[1, 0, -ly],
+    [0, 1, lx], [0, 0, 1]]`` (a heading error swings the lever). z, roll and pitch are not
+    estimated (0, as AMCL publishes them)."""
+    out = np.zeros((6, 6))
+    if cov3 is None:
+        return out
+    J = np.array([[1.0, 0.0, -lever_xy[1]], [0.0, 1.0, lever_xy[0]], [0.0, 0.0, 1.0]])
+    C = J @ np.asarray(cov3, dtype=np.float64) @ J.T
+    idx = [0, 1, 5]
+    out[np.ix_(idx, idx)] = C
+    return out
+
+
+class TfPublisher:
+    """The TF tree ``results.mcap`` carries (``/tf``, ``/tf_static``), so every frame of its
+    outputs links to ``map``.
+
+    - The recording's own transforms are passed through (same topic, stamp and frames).
+    - A pose topic (the run's ``pose`` and ``odometry`` topics; the reference too unless
+      localization runs, which owns ``map``) that gives ``T_frame_child`` publishes
+      ``frame -> child`` when ``child`` has no parent yet (e.g. KITTI's poses, CARMEN's
+      odometry), or ``frame -> root`` of the child's tree (``T_frame_child T_child_root``, the
+      AMCL form) when ``frame`` is not connected to it yet (e.g. a ground truth in ``map`` beside
+      odometry in ``odom``); afterwards every pose of that topic republishes its edge.
+    - Stages publish their own transforms (localization's ``map -> odom``, plane odometry's
+      ``planes_odom``) as outputs of kind ``tf``.
+    - Without localization, a frame still not linked to ``map`` when an output uses it gets a
+      static identity ``map -> root of its tree`` (the world is the odometry's frame; logged
+      once). With localization, ``map`` is linked by its first fix.
+    """
+
+    def __init__(self, pose_topics: tuple[str, ...], link_map: bool, maxlen: int = 256) -> None:
+        self.tree = TransformTree(maxlen)
+        self.pose_topics = tuple(t for t in dict.fromkeys(pose_topics) if t)
+        self.link_map = link_map
+        self.owner: dict[str, str] = {}  # child frame -> the pose topic publishing its edge
+
+    def root(self, frame: str, below: str = "") -> str:
+        """The top of ``frame``'s chain (stopping under ``below`` when the chain reaches it)."""
+        chain = self.tree._chain(frame.lstrip("/"))
+        if below and below in chain:
+            chain = chain[: chain.index(below)]
+        return chain[-1] if chain else frame
+
+    def add(self, topic: str, parent: str, child: str, stamp_ns: int, T: Any) -> None:
+        """Record a published transform (``topic`` ``/tf_static``: static)."""
+        self.tree.add(parent, child, stamp_ns, T, topic.rstrip("/").endswith("tf_static"))
+
+    def pose(self, topic: str, stamp_ns: int, frame: str, child: str, T: Any) -> list[Any]:
+        """The ``/tf`` output of one pose message (empty when its topic does not publish)."""
+        from navkit.runtime.messages import Output
+
+        frame, child = frame.lstrip("/"), child.lstrip("/")
+        if topic not in self.pose_topics or not frame or not child or frame == child:
+            return []
+        T = np.asarray(T, dtype=np.float64)
+        target = child
+        if self.owner.get(child) != topic:
+            owned = [c for c, t in self.owner.items() if t == topic and self.tree.parent.get(c)]
+            if owned:  # this topic already links frame to child's tree through another edge
+                target = owned[0]
+            elif child not in self.tree.parent:
+                self.owner[child] = topic
+            elif not self.tree.can_transform(frame, child):
+                target = self.root(child)
+                self.owner[target] = topic
+            else:
+                return []
+        if target != child:
+            T_child_target = self.tree.lookup(child, target, stamp_ns)
+            if T_child_target is None:
+                return []
+            T = T @ T_child_target
+        self.tree.add(frame, target, stamp_ns, T, static=False)
+        return [Output("/tf", "tf", stamp_ns, frame, [(target, T)])]
+
+    def link(self, frame: str, stamp_ns: int) -> list[Any]:
+        """A static identity ``map -> root`` when ``frame`` is not linked to ``map`` (only
+        without localization; empty otherwise)."""
+        from navkit.runtime.messages import Output
+
+        frame = frame.lstrip("/")
+        if not self.link_map or not frame or frame == "map":
+            return []
+        if self.tree.can_transform("map", frame):
+            return []
+        root = self.root(frame)
+        if root == "map":
+            return []
+        log.info("TF: no transform links %s to map; publishing map -> %s as identity", frame, root)
+        self.tree.add("map", root, stamp_ns, np.eye(4), static=True)
+        return [Output("/tf_static", "tf", stamp_ns, "map", [(root, np.eye(4))])]

@@ -1,0 +1,179 @@
+"""Per-frame files written off the run's hot path: a writer process with a bounded queue.
+
+The loop hands each frame's files (e.g. the obstacles' ``labels.npy`` + ``obstacles.json``) to
+:class:`FileWriter` as plain data (arrays, dicts of numbers and names: pickled in about 0.2 ms
+for a KITTI frame); a separate process encodes and writes them, while the loop goes on with the
+next message. Decision: a process, not a thread: encoding a KITTI frame's ``obstacles.json``
+(~150 kB) holds Python's GIL for 7-14 ms, which a writer thread takes from the loop's thread
+(the compiled kernels hold the GIL too), so the loop would pay it all the same.
+
+- Each file is written atomically (a temporary file beside it, then renamed). The loop, not the
+  writer, records the file in the caller's output transaction
+  (:func:`navkit.io.atomic.output_transaction`) before queueing it, so a failed command still
+  removes it.
+- At most ``maxsize`` files are queued: a loop faster than the disk waits (memory stays
+  bounded). A writer process that dies is an error at the next wait, never a hang.
+- :meth:`FileWriter.drain` waits until every queued file is written and raises the first error
+  (:class:`~navkit.errors.InputError` naming the file); the run drains before every checkpoint
+  and at the end, so a checkpoint never counts a file that is not on disk.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import multiprocessing as mp
+import os
+import re
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["FileWriter", "dumps_json"]
+
+_NONFINITE = re.compile(r"(?<=[\[,:\s])(?:-?Infinity|NaN)(?=[\],}\s])")
+
+
+def _default(o: Any) -> Any:
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"{type(o).__name__} is not JSON serialisable")
+
+
+def dumps_json(data: Any, indent: int | None = None) -> str:
+    """JSON of plain data with NumPy arrays / scalars, NaN and infinities written as ``null``
+    (as :func:`navkit.io.atomic.write_json`), by the C encoder (``indent=None``): about 3x
+    faster than converting the tree in Python first. The values are numbers and navkit's own
+    names, so a bare ``NaN`` / ``Infinity`` token is always a number."""
+    text = json.dumps(data, default=_default, indent=indent, allow_nan=True)
+    return _NONFINITE.sub("null", text)
+
+
+def encode(kind: str, payload: Any) -> bytes:
+    """A file's bytes: ``"json"`` (:func:`dumps_json` + newline) or ``"npy"`` (``np.save``)."""
+    if kind == "json":
+        return (dumps_json(payload) + "\n").encode()
+    buf = io.BytesIO()
+    np.save(buf, payload)
+    return buf.getvalue()
+
+
+def _write_atomic(path: str, data: bytes) -> None:
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=target.suffix)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)
+        os.replace(tmp, target)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _serve(jobs: Any, done: Any) -> None:
+    """The writer process: ``(kind, path, payload)`` jobs until ``None``; one ``(path, error
+    or None)`` reply per job. It ignores SIGINT: Ctrl-C in a terminal reaches the whole process
+    group, and the run, not its writer, decides how to stop (it drains the writer first)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    while True:
+        job = jobs.get()
+        if job is None:
+            return
+        kind, path, payload = job
+        try:
+            _write_atomic(path, encode(kind, payload))
+            done.put((path, None))
+        except Exception as exc:
+            done.put((path, f"{type(exc).__name__}: {exc}"))
+
+
+class FileWriter:
+    """A writer process for per-frame files (see the module docstring)."""
+
+    def __init__(self, maxsize: int = 16) -> None:
+        # fork: "spawn" and "forkserver" re-import the caller's main module in the child, which
+        # re-runs an unguarded script (``python myscript.py`` calling run_recording); the forked
+        # child only encodes JSON / NumPy and writes files, touching none of the parent's threads
+        methods = mp.get_all_start_methods()
+        ctx = mp.get_context("fork" if "fork" in methods else "spawn")
+        self.maxsize = maxsize
+        self._jobs = ctx.Queue()
+        self._done = ctx.Queue()
+        self._pending = 0
+        self._error: tuple[str, str] | None = None
+        self._proc = ctx.Process(  # type: ignore[attr-defined]
+            target=_serve, args=(self._jobs, self._done), name="navkit-files", daemon=True
+        )
+        self._proc.start()
+
+    def submit(self, kind: str, path: Path, payload: Any) -> None:
+        """Queue one file (``kind`` ``"json"`` or ``"npy"``); waits while ``maxsize`` files are
+        queued. The file (and its folder) is recorded in the caller's output transaction here;
+        the writer creates the folder."""
+        from navkit.io.atomic import current_transaction
+
+        path = Path(path)
+        txn = current_transaction()
+        if txn is not None:
+            txn.watch_dir(path.parent)
+            txn.before_replace(path)
+        while self._pending >= self.maxsize:
+            self._wait_one()
+        self._jobs.put((kind, str(path), payload))
+        self._pending += 1
+
+    def _wait_one(self) -> None:
+        """Take one reply; a writer that died is an error, never a wait forever."""
+        import queue
+
+        while True:
+            try:
+                path, err = self._done.get(timeout=1.0)
+                break
+            except queue.Empty:
+                if not self._proc.is_alive():
+                    self._pending = 0
+                    self._raise(f"the writer process ended (exit code {self._proc.exitcode})")
+        self._pending -= 1
+        if err is not None and self._error is None:
+            self._error = (path, err)
+
+    def _raise(self, reason: str, path: Any = None) -> None:
+        from navkit.errors import InputError
+
+        raise InputError(
+            f"could not be written: {reason}",
+            source=path or "per-frame files",
+            expected="a writable output folder",
+        )
+
+    def drain(self) -> None:
+        """Wait until every queued file is written; raise the first error one hit."""
+        while self._pending:
+            self._wait_one()
+        if self._error is not None:
+            (path, reason), self._error = self._error, None
+            self._raise(reason, path)
+
+    def close(self) -> None:
+        """Drain and stop the process."""
+        try:
+            self.drain()
+        finally:
+            if self._proc.is_alive():
+                self._jobs.put(None)
+                self._proc.join(timeout=30)
+            if self._proc.is_alive():
+                self._proc.terminate()

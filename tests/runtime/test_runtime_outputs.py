@@ -1,0 +1,95 @@
+"""The run's fast paths equal their references: the MarkerArray and the classified
+PointCloud2 serialised with NumPy are byte for byte rosbags' serialisation of the same message, and the obstacle map's vectorised update
+(:meth:`ObstacleMapper.add_scan`) counts exactly what :meth:`ObstacleMapper.add_points` counts on
+:func:`scan_points_2d`'s points (up to the rounding of points on a cell edge)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from navkit.runtime.messages import Polyline
+
+
+@pytest.mark.parametrize("n_lines", [0, 1, 7])
+def test_line_list_cdr_is_rosbags_serialisation(n_lines):
+    pytest.importorskip("rosbags")
+    from navkit.io.results_mcap import _builder, line_list_cdr, read_messages
+
+    rng = np.random.default_rng(n_lines)
+    lines = [
+        Polyline(
+            f"shape/A{k % 3}",
+            k,
+            rng.normal(size=(int(rng.integers(1, 40)), 3)),
+            tuple(rng.random(4)),
+            closed=bool(k % 2),
+        )
+        for k in range(n_lines)
+    ]
+    b = _builder()
+    msgtype = "visualization_msgs/msg/MarkerArray"
+    for stamp, frame in ((0, ""), (1_234_567_890_123, "velodyne"), (5, "a_frame")):
+        want = bytes(b.ts.serialize_cdr(b.build("markers", stamp, frame, lines), msgtype))
+        assert line_list_cdr(stamp, frame, lines) == want
+    msg = b.ts.deserialize_cdr(line_list_cdr(7, "f", lines), msgtype)
+    if n_lines:
+        mk = msg.markers[1]
+        n_seg = sum(
+            len(ln.points) if ln.closed and len(ln.points) > 2 else len(ln.points) - 1
+            for ln in lines
+        )
+        assert mk.type == 5 and len(mk.points) == 2 * n_seg == len(mk.colors)
+    assert read_messages  # the module's reader decodes the same bytes (test_runtime_bags)
+
+
+@pytest.mark.parametrize("n", [0, 1, 1000])
+def test_classified_cloud_cdr_is_rosbags_serialisation(n):
+    pytest.importorskip("rosbags")
+    from navkit.io.results_mcap import _builder, classified_cloud_cdr
+
+    rng = np.random.default_rng(n)
+    P = rng.normal(size=(n, 3)) * 30
+    P[::7] = np.nan  # no-return points travel as NaN
+    cls = rng.integers(-4, 1, n).astype(np.int8)
+    b = _builder()
+    for stamp, frame in ((0, ""), (1_234_567_890_123, "velodyne"), (9, "abc")):
+        msg = b.build("classified_cloud", stamp, frame, (P, cls))
+        want = bytes(b.ts.serialize_cdr(msg, "sensor_msgs/msg/PointCloud2"))
+        assert classified_cloud_cdr(stamp, frame, P, cls) == want
+
+
+def test_vectorised_map_update_counts_like_add_points():
+    from navkit.geometry import se3_from_rt
+    from navkit.obstacles import Mounting, ObstacleSettings, detect_obstacles_in_grid
+    from navkit.obstacles.grids import cloud_to_grid
+    from navkit.obstacles.mapper import MapperSettings, ObstacleMapper, scan_points_2d
+    from navkit.sim import SpinningLidar, render_scan
+    from tests.runtime.test_runtime_tf import _scene
+
+    scene, lidar = _scene(), SpinningLidar(n_beams=16, n_columns=900)
+    st = MapperSettings(resolution=0.1, max_range=12.0)
+    # the grid's cell edges off the boxes' faces: the two sum the transform in another order,
+    # so a point within ~1e-15 m of a cell edge may fall either side (the simulated faces lie
+    # exactly on a 0.1 m grid through the origin)
+    lo, hi = np.array([-5.0123, -8.0123]), np.array([12.0, 8.0])
+    fast, ref = ObstacleMapper(lo, hi, st), ObstacleMapper(lo, hi, st)
+    for k in range(6):
+        yaw = 0.2 * k
+        c, s = np.cos(yaw), np.sin(yaw)
+        T = se3_from_rt(np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]]), [0.7 * k, 0.3 * k, 1.5])
+        sim = render_scan(scene, lidar, T, max_range=30.0)
+        P = sim.scan.points("sensor").transpose(1, 0, 2).reshape(-1, 3)
+        P = P[np.all(np.isfinite(P), axis=1)]
+        det = detect_obstacles_in_grid(cloud_to_grid(P), Mounting(1.5), ObstacleSettings())
+        T_body = T @ np.linalg.inv(Mounting(1.5).T_body_sensor)
+        planar = np.array([[c, -s, T[0, 3]], [s, c, T[1, 3]], [0, 0, 1.0]])
+        for Tw in (T_body, planar) if k % 2 else (T_body,):
+            fast.add_scan(det, Tw)
+            ref.add_points(*scan_points_2d(det, Tw, st.max_range))
+    assert ref.hits.sum() > 0
+    np.testing.assert_array_equal(fast.hits, ref.hits)
+    np.testing.assert_array_equal(fast.seen, ref.seen)
+    assert fast.n_scans == ref.n_scans
+    for a, b in zip(fast.recent, ref.recent, strict=True):
+        np.testing.assert_array_equal(a, b)
