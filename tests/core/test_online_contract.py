@@ -10,6 +10,7 @@ import pytest
 
 from navkit.localization import LocalizationFailure, Localizer
 from navkit.localization.localizer import Fix
+from navkit.obstacles import MapUpdate, ObstacleMapper
 from navkit.path import (
     OnlineApproximator,
     PathUpdate,
@@ -30,11 +31,12 @@ OBJECTS = {
     "localization.Localizer": Localizer,
     "path.OnlineApproximator": OnlineApproximator,
     "path.Return": Return,
+    "obstacles.ObstacleMapper": ObstacleMapper,
 }
 
 
 @pytest.mark.parametrize(
-    "cls", [FrameMotion, MotionEstimate, Fix, PathUpdate, ReturnStep, WayAhead]
+    "cls", [FrameMotion, MotionEstimate, Fix, PathUpdate, ReturnStep, WayAhead, MapUpdate]
 )
 def test_results_are_results(cls):
     assert issubclass(cls, Result) and not issubclass(cls, Failure) and cls.ok
@@ -137,3 +139,24 @@ def test_plane_odometry_register_frame_is_a_deprecated_alias(monkeypatch):
     with pytest.warns(DeprecationWarning, match="PlaneOdometry.register_frame"):
         assert PlaneOdometry().register_frame("obs", "prior") == "r"
     assert seen == [("obs", "prior")]
+
+
+def test_obstacle_mapper_update_and_its_deprecated_alias():
+    """The mapper's update counts the scan's distinct cells inside the mapped area; the former
+    verb warns and fuses the same."""
+    from navkit.obstacles import detect_obstacles
+    from navkit.sim import Box, Ground, Scene, SpinningLidar, render_scan
+
+    T = np.eye(4)
+    T[2, 3] = 1.0
+    det = detect_obstacles(
+        render_scan(Scene([Ground(), Box((4, 0, 0.5), (1, 1, 1))]), SpinningLidar(16, 360), T).scan
+    )
+    a, b = ObstacleMapper([-10, -10], [10, 10]), ObstacleMapper([-10, -10], [10, 10])
+    r = a.update(det, T)
+    assert isinstance(r, MapUpdate) and r.ok and r.scan == 0
+    assert 0 < r.obstacle_cells <= r.seen_cells == int((a.seen > 0).sum())
+    assert r.obstacle_cells == int((a.hits > 0).sum())
+    with pytest.warns(DeprecationWarning, match="ObstacleMapper.update"):
+        b.add_scan(det, T)
+    assert np.array_equal(a.hits, b.hits) and np.array_equal(a.seen, b.seen)

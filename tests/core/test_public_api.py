@@ -109,6 +109,7 @@ SURFACES: dict[str, list[str]] = {
         "run_to_dir",
     ],
     "obstacles": [
+        "MapUpdate",
         "MappedObstacle",
         "MapperSettings",
         "Mounting",

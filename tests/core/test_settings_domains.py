@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
-import pkgutil
 import math
+import pkgutil
 
 import pytest
 

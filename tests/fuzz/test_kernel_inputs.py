@@ -141,8 +141,8 @@ def _obstacles_cases() -> Iterator[tuple[str, Callable[[], Any]]]:
         T = np.eye(4)
         T[0, 3] = v
         yield (
-            f"ObstacleMapper.add_scan/pose-{label}",
-            lambda T=T: ObstacleMapper([-20, -20], [20, 20]).add_scan(det, T),
+            f"ObstacleMapper.update/pose-{label}",
+            lambda T=T: ObstacleMapper([-20, -20], [20, 20]).update(det, T),
         )
         xy = np.array([[1.0, 2.0], [v, 0.5], [0.5, v]])
         yield (

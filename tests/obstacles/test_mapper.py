@@ -52,7 +52,7 @@ def test_mapper_gives_the_map_the_mission_made_before(yard):
     absorb float-level changes of the detector's compiled kernels (a changed cell or two)."""
     mapper = ObstacleMapper([-5.0, -8.0], [20.0, 8.0], MapperSettings())
     for _, _, det, T2, _ in yard:
-        mapper.add_scan(det, T2)
+        mapper.update(det, T2)
     g = mapper.grid()
     assert g.hits.sum() == pytest.approx(BEFORE["hits"], rel=0.01)
     assert g.seen.sum() == pytest.approx(BEFORE["seen"], rel=0.01)
@@ -70,8 +70,8 @@ def test_a_level_3d_pose_gives_the_same_map_as_the_planar_one(yard):
     m2 = ObstacleMapper([-5.0, -8.0], [20.0, 8.0])
     m3 = ObstacleMapper([-5.0, -8.0], [20.0, 8.0])
     for _, _, det, T2, T3 in yard:
-        m2.add_scan(det, T2)
-        m3.add_scan(det, T3)
+        m2.update(det, T2)
+        m3.update(det, T3)
     # 3D rotation then projection vs the planar one: equal up to cells hit on a boundary
     assert (m2.occupied != m3.occupied).sum() <= 0.01 * m2.occupied.sum()
 
@@ -85,7 +85,7 @@ def test_every_obstacle_in_view_is_on_the_map(yard):
     hits_per_prim: dict[int, int] = {}
     scene = yard[0][0]
     for _, sim, det, T2, _ in yard:
-        mapper.add_scan(det, T2)
+        mapper.update(det, T2)
         ok = sim.scan.valid & (sim.true_ranges <= mapper.settings.max_range)
         for k in np.unique(sim.hit_index[ok]).tolist():
             hits_per_prim[k] = hits_per_prim.get(k, 0) + 1
@@ -111,4 +111,4 @@ def test_bad_settings_and_poses_are_named():
     mapper = ObstacleMapper([0, 0], [1, 1])
     det = next(yard_scans())[2]
     with pytest.raises(InputError, match="T_world_sensor"):
-        mapper.add_scan(det, np.eye(2))
+        mapper.update(det, np.eye(2))

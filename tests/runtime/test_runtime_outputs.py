@@ -1,6 +1,6 @@
 """The run's fast paths equal their references: the MarkerArray and the classified
 PointCloud2 serialised with NumPy are byte for byte rosbags' serialisation of the same message, and the obstacle map's vectorised update
-(:meth:`ObstacleMapper.add_scan`) counts exactly what :meth:`ObstacleMapper.add_points` counts on
+(:meth:`ObstacleMapper.update`) counts exactly what :meth:`ObstacleMapper.add_points` counts on
 :func:`scan_points_2d`'s points (up to the rounding of points on a cell edge)."""
 
 from __future__ import annotations
@@ -85,7 +85,7 @@ def test_vectorised_map_update_counts_like_add_points():
         T_body = T @ np.linalg.inv(Mounting(1.5).T_body_sensor)
         planar = np.array([[c, -s, T[0, 3]], [s, c, T[1, 3]], [0, 0, 1.0]])
         for Tw in (T_body, planar) if k % 2 else (T_body,):
-            fast.add_scan(det, Tw)
+            fast.update(det, Tw)
             ref.add_points(*scan_points_2d(det, Tw, st.max_range))
     assert ref.hits.sum() > 0
     np.testing.assert_array_equal(fast.hits, ref.hits)

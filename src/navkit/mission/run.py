@@ -338,7 +338,7 @@ class Mission:
             body, _ = scan_points_2d(det, np.eye(3), M.max_range)
             self.est = self.localizer.map_fix(body, self.est, truth, self.t)
         with timed(lg.timings, "obstacles_fuse"):
-            self.mapper.add_scan(det, se2_from_xytheta(*self.est))
+            self.mapper.update(det, se2_from_xytheta(*self.est))
         self._det, self._scan_pose = det, self.est.copy()
         if F.room_sensor == "lidar":  # the room (laser variant)
             B = sim.scan.points("body")[sim.scan.valid]

@@ -27,11 +27,18 @@ from navkit.obstacles.detector import (
     detect_obstacles_in_grid,
 )
 from navkit.obstacles.grids import ScanGrid
-from navkit.obstacles.mapper import MappedObstacle, MapperSettings, ObstacleGrid, ObstacleMapper
+from navkit.obstacles.mapper import (
+    MappedObstacle,
+    MapperSettings,
+    MapUpdate,
+    ObstacleGrid,
+    ObstacleMapper,
+)
 from navkit.obstacles.mounting import Mounting
 from navkit.obstacles.settings import ObstacleSettings
 
 __all__ = [
+    "MapUpdate",
     "MappedObstacle",
     "MapperSettings",
     "Mounting",

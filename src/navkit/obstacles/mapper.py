@@ -2,7 +2,7 @@
 
 :class:`ObstacleMapper` is the online object of paper 1 (kiss-icp shaped): built from frozen
 :class:`MapperSettings` and the mapped area, it takes one detection at a time
-(:meth:`ObstacleMapper.add_scan`, an :class:`~navkit.obstacles.ObstacleDetection` and the
+(:meth:`ObstacleMapper.update`, an :class:`~navkit.obstacles.ObstacleDetection` and the
 sensor's pose in the map frame) and keeps the evidence grid.
 
 Fusion: every scan's obstacle vertices (class ``OBSTACLE`` with ``vertex_obstacle > 0``, i.e.
@@ -37,8 +37,9 @@ from navkit.errors import ConfigError, InputError
 from navkit.geometry._validate import check_grid_size
 from navkit.obstacles.detector import ObstacleDetection
 from navkit.obstacles.rules import OBSTACLE
+from navkit.results import Result, deprecated_alias
 
-__all__ = ["MappedObstacle", "MapperSettings", "ObstacleGrid", "ObstacleMapper"]
+__all__ = ["MapUpdate", "MappedObstacle", "MapperSettings", "ObstacleGrid", "ObstacleMapper"]
 
 log = logging.getLogger(__name__)
 
@@ -181,6 +182,25 @@ def scan_points_2d(
     return obst, seen
 
 
+@dataclass(frozen=True)
+class MapUpdate(Result):
+    """What one :meth:`ObstacleMapper.update` fused.
+
+    Attributes
+    ----------
+    scan : int
+        The scan's index (0 = the first fused).
+    obstacle_cells : int
+        Distinct cells the scan saw an obstacle in, inside the mapped area.
+    seen_cells : int
+        Distinct cells the scan's valid points fell in, inside the mapped area.
+    """
+
+    scan: int
+    obstacle_cells: int
+    seen_cells: int
+
+
 class ObstacleMapper:
     """Fuses obstacle detections into a 2D evidence grid (the online object of paper 1).
 
@@ -194,7 +214,7 @@ class ObstacleMapper:
     --------
     >>> mapper = ObstacleMapper([-10, -10], [10, 10])            # doctest: +SKIP
     >>> for scan, T in stream:                                    # doctest: +SKIP
-    ...     mapper.add_scan(detect_obstacles(scan), T)
+    ...     mapper.update(detect_obstacles(scan), T)
     >>> grid, obstacles = mapper.grid(), mapper.obstacles()       # doctest: +SKIP
     """
 
@@ -219,21 +239,32 @@ class ObstacleMapper:
         self.known: NDArray[np.bool_] | None = None
 
     # --- the online interface ------------------------------------------------------------------
-    def add_scan(self, detection: ObstacleDetection, T_world_sensor: ArrayLike) -> None:
-        """Fuse one detection seen from ``T_world_sensor`` (``(3, 3)`` or ``(4, 4)``).
+    def update(self, detection: ObstacleDetection, T_world_sensor: ArrayLike) -> MapUpdate:
+        """Fuse one detection seen from ``T_world_sensor`` (``(3, 3)`` or ``(4, 4)``): the
+        online object's one verb (``docs/architecture.md``, "Online objects").
 
         The same counts as :meth:`add_points` on :func:`scan_points_2d`'s points, in one pass
         over the cloud: only the points' map ``x, y`` are computed, each point's cell index once,
         and a cell is counted once per scan by NumPy's buffered fancy-index increment (a repeated
-        index is incremented once), without sorting the points' cells."""
+        index is incremented once), without sorting the points' cells. Points outside the mapped
+        area are dropped (counted in the result), never an error."""
         obst, seen = self.scan_cells(detection, T_world_sensor)
         h = self.hits.reshape(-1)
         h[obst] += 1
         self.seen.reshape(-1)[seen] += 1
         mark = np.zeros(h.size, dtype=bool)  # the scan's obstacle cells, once each
         mark[obst] = True
-        self.recent.append(np.flatnonzero(mark))
+        cells = np.flatnonzero(mark)
+        self.recent.append(cells)
         self.n_scans += 1
+        mark[cells] = False  # reused for the scan's seen cells, once each
+        mark[seen] = True
+        return MapUpdate(self.n_scans - 1, len(cells), int(np.count_nonzero(mark)))
+
+    def add_scan(self, detection: ObstacleDetection, T_world_sensor: ArrayLike) -> None:
+        """Deprecated alias of :meth:`update` (kept for one release)."""
+        deprecated_alias("ObstacleMapper.add_scan", "ObstacleMapper.update")
+        self.update(detection, T_world_sensor)
 
     def scan_cells(
         self, detection: ObstacleDetection, T_world_sensor: ArrayLike

@@ -383,7 +383,7 @@ class ObstaclesStage:
         )
         if T is not None:
             self.map_frame = poses.frames.get(self.pose_topic, "map") or "map"
-            self._mapper(T).add_scan(det, T @ self.T_sensor_body)
+            self._mapper(T).update(det, T @ self.T_sensor_body)
             if self.n % max(c.map_every, 1) == 0:
                 outs.append(self.grid_output(msg.stamp_ns))
         return StageResult(outs, record)
