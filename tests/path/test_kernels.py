@@ -240,7 +240,7 @@ def _figure_eight_segments(tolerance: float):  # type: ignore[no-untyped-def]
     ref = OnlineApproximator(ApproximatorSettings(tolerance=tolerance, remove_loops=False))
     ref.compiled = ref._chain.compiled = False
     for p in xy:
-        ref.add(p)
+        ref.update(p)
     return ref.finish().raw_spline
 
 

@@ -13,6 +13,7 @@ from navkit.stereo.rooms import ROOM_KINDS, room, sample_poses
 from navkit.stereo.triangulation import planar_camera_pose
 
 sim = pytest.importorskip("navkit.sim")
+scene_io = pytest.importorskip("navkit.sim.scene_io")
 
 RIG = StereoRig(PinholeCamera.from_fov(320, 240, 90.0), 0.2)
 HEIGHT = 1.2
@@ -27,7 +28,7 @@ def _render(scene, pose, seed):
 @pytest.fixture(scope="module")
 def rect_map():
     truth = room("rectangle")
-    scene = sim.scene_from_dict(truth.scene)
+    scene = scene_io.scene_from_dict(truth.scene)
     views = []
     for k, pose in enumerate(truth.survey):  # 12 headings, 30 degrees apart, 90 deg field of view
         st, T = _render(scene, pose, k)
@@ -37,7 +38,7 @@ def rect_map():
 
 def test_wall_points_lie_on_the_walls():
     truth = room("rectangle")
-    scene = sim.scene_from_dict(truth.scene)
+    scene = scene_io.scene_from_dict(truth.scene)
     st, T = _render(scene, (4.0, 3.0, 0.3), 1)
     P = stereo_wall_points(st.pair.left, st.pair.right, RIG, T_world_camera=T)
     assert len(P) > 300
@@ -89,7 +90,7 @@ def test_locate_by_turning_the_camera_in_the_stereo_map(rect_map):
 def test_rooms_are_well_formed():
     for kind in ROOM_KINDS:
         r = room(kind)
-        sim.scene_from_dict(r.scene)  # the simulator accepts the description
+        scene_io.scene_from_dict(r.scene)  # the simulator accepts the description
         P = sample_poses(r, 50, np.random.default_rng(0))
         from navkit.geometry.polygons import points_in_polygon
 
