@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from navkit.geometry import se3_from_rt
-from navkit.runtime.capabilities import textured_planes
+from navkit.runtime.planes_stage import textured_planes
 
 
 @pytest.fixture(scope="module")

@@ -1,0 +1,291 @@
+"""The ground under an unorganised cloud (:mod:`navkit.obstacles.unorganised`): the data's point
+spacing and height noise, the lowest point per cell, and the ground surface - a progressive
+opening, then triangulated irregular networks cut at height jumps - that the rules' heights are
+measured from."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import Delaunay, QhullError, cKDTree
+
+from navkit.errors import InputError
+
+if TYPE_CHECKING:
+    from navkit.obstacles.unorganised import UnorganisedSettings
+
+
+def point_spacing(xy: NDArray[np.float64], *, sample: int = 20_000) -> float:
+    """Median horizontal nearest-neighbour distance (the data's point spacing), on at most
+    ``sample`` query points (the median of a few thousand is stable to a few %)."""
+    if len(xy) < 2:
+        return float("nan")
+    tree = cKDTree(xy)
+    q = xy[:: max(1, len(xy) // sample)]
+    d, _ = tree.query(q, k=2)
+    pos = d[:, 1][d[:, 1] > 0]
+    return float(np.median(pos)) if pos.size else float("nan")
+
+
+def lowest_per_cell(
+    xy: NDArray[np.float64],
+    z: NDArray[np.float64],
+    cell: float,
+    subset: NDArray[np.int64] | None = None,
+) -> NDArray[np.int64]:
+    """Indices (into ``xy``) of the lowest point of each ``cell`` x ``cell`` square (among
+    ``subset`` when given), sorted."""
+    idx = np.arange(len(xy)) if subset is None else np.asarray(subset, dtype=np.int64)
+    if idx.size == 0:
+        return idx
+    ij = np.floor((xy[idx] - xy[idx].min(axis=0)) / cell).astype(np.int64)
+    key = ij[:, 0] * (int(ij[:, 1].max()) + 1) + ij[:, 1]
+    o = np.lexsort((z[idx], key))
+    first = np.ones(len(o), dtype=bool)
+    first[1:] = key[o][1:] != key[o][:-1]
+    return np.sort(idx[o[first]])
+
+
+def _min_grid(
+    xy: NDArray[np.float64], z: NDArray[np.float64], cell: float
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """The minimum surface: lowest z per cell, empty cells filled from the nearest full cell."""
+    ij = np.floor((xy - xy.min(axis=0)) / cell).astype(np.int64)
+    shape = (int(ij[:, 0].max()) + 1, int(ij[:, 1].max()) + 1)
+    Z = np.full(shape[0] * shape[1], np.inf)
+    np.minimum.at(Z, ij[:, 0] * shape[1] + ij[:, 1], z)
+    Z = Z.reshape(shape)
+    empty = ~np.isfinite(Z)
+    if empty.any():
+        _, ind = ndimage.distance_transform_edt(empty, return_indices=True)
+        Z = Z[tuple(ind)]
+    return Z, empty
+
+
+def height_noise(Z: NDArray[np.float64]) -> float:
+    """Height noise of a minimum surface: the robust spread (1.4826 x MAD) of each cell's
+    second difference to its 3 x 3 neighbourhood's median, over the cells whose neighbourhood
+    is smooth (the lower half of the local ranges: ground, not walls). For independent noise
+    of deviation sigma on a plane this is about ``1.1 sigma``."""
+    med = ndimage.median_filter(Z, size=3, mode="nearest")
+    rng = ndimage.maximum_filter(Z, size=3) - ndimage.minimum_filter(Z, size=3)
+    smooth = rng <= np.median(rng)
+    r = (Z - med)[smooth]
+    if r.size < 10:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+# ----------------------------------------------------------------------------------------------
+# the ground surface
+
+
+@dataclass(frozen=True)
+class GroundSurface:
+    """A TIN through ground points: the ground estimate.
+
+    Attributes
+    ----------
+    xy, z : arrays
+        The TIN's vertices.
+    tri : scipy.spatial.Delaunay
+        Their triangulation in x-y.
+    band_m : float
+        The ground band (m) the surface was built with.
+    noise_m : float
+        The measured height noise (m).
+    """
+
+    xy: NDArray[np.float64]
+    z: NDArray[np.float64]
+    tri: Any
+    band_m: float
+    noise_m: float
+
+    def at(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Height and slope (rise over run) of the surface at ``q (M, 2)``; outside the hull
+        the nearest vertex's height and slope 0."""
+        return _tin_at(self.xy, self.z, self.tri, q)
+
+
+def _tin_at(
+    vxy: NDArray[np.float64], vz: NDArray[np.float64], tri: Any, q: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    s = _find_simplex(tri, q)
+    s0 = np.maximum(s, 0)
+    T = tri.transform[s0]
+    b = np.einsum("ijk,ik->ij", T[:, :2], q - T[:, 2])
+    bc = np.column_stack([b, 1.0 - b.sum(axis=1)])
+    V = tri.simplices[s0]
+    zq = np.einsum("ij,ij->i", vz[V], bc)
+    A, Zv = vxy[V], vz[V]
+    e1 = np.column_stack([A[:, 1] - A[:, 0], Zv[:, 1] - Zv[:, 0]])
+    e2 = np.column_stack([A[:, 2] - A[:, 0], Zv[:, 2] - Zv[:, 0]])
+    n = np.cross(e1, e2)
+    slope = np.hypot(n[:, 0], n[:, 1]) / np.maximum(np.abs(n[:, 2]), 1e-12)
+    out = s < 0
+    if out.any():
+        _, nn = cKDTree(vxy).query(q[out])
+        zq[out] = vz[nn]
+        slope[out] = 0.0
+    return zq, slope
+
+
+def _framed(
+    vxy: NDArray[np.float64],
+    vz: NDArray[np.float64],
+    lo: NDArray[np.float64],
+    hi: NDArray[np.float64],
+    step: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The TIN vertices plus a frame around ``[lo, hi]`` (a vertex every ``step`` along the
+    rectangle one step outside it), each at the height of its nearest vertex: every query in
+    the rectangle is then inside the triangulation (SciPy's point location falls back to a
+    search over every triangle for a query outside the hull)."""
+    a, b = lo - step, hi + step
+    nx = max(1, math.ceil((b[0] - a[0]) / step))
+    ny = max(1, math.ceil((b[1] - a[1]) / step))
+    xs = np.linspace(a[0], b[0], nx + 1)
+    ys = np.linspace(a[1], b[1], ny + 1)[1:-1]
+    frame = np.concatenate(
+        [
+            np.column_stack([xs, np.full_like(xs, a[1])]),
+            np.column_stack([xs, np.full_like(xs, b[1])]),
+            np.column_stack([np.full_like(ys, a[0]), ys]),
+            np.column_stack([np.full_like(ys, b[0]), ys]),
+        ]
+    )
+    _, nn = cKDTree(vxy).query(frame)
+    return np.concatenate([vxy, frame]), np.concatenate([vz, vz[nn]])
+
+
+def _find_simplex(tri: Any, q: NDArray[np.float64]) -> NDArray[np.int64]:
+    """The triangle of ``tri`` holding each query (-1 outside), by Matplotlib's trapezoid map
+    (O(log n) a query whatever the triangulation). SciPy's ``find_simplex`` walks from triangle
+    to triangle and, when a walk fails on the near-collinear vertices of quantised coordinates
+    (UTM stored as float32), searches every triangle: seconds for one airborne tile."""
+    from matplotlib.tri import Triangulation
+
+    pts = tri.points
+    finder = Triangulation(pts[:, 0], pts[:, 1], tri.simplices).get_trifinder()
+    return np.asarray(finder(q[:, 0], q[:, 1]), dtype=np.int64)
+
+
+def _tin_edges(tri: Any) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    ip, ix = tri.vertex_neighbor_vertices
+    return np.repeat(np.arange(len(ip) - 1), np.diff(ip)), ix.astype(np.int64)
+
+
+def _jump_components(
+    xy: NDArray[np.float64],
+    z: NDArray[np.float64],
+    tan0: float,
+    band: float,
+    *,
+    rounds: int = 4,
+) -> tuple[NDArray[np.int64], Any]:
+    """Rules P1/P4 on a ground TIN: drop the vertices of components that stand on jumps.
+
+    Edges rising faster than ``band + tan0 * length`` are height jumps; the TIN cut at its jumps
+    falls into components. A component whose jump edges all step down out of it (at least 90 %
+    of them) is an obstacle top (a roof, a tree crown); a component of at most 3 vertices whose
+    jumps all step up is a low outlier. The largest component is the terrain and stays. Returns
+    the kept vertex indices and their triangulation.
+    """
+    keep = np.arange(len(xy))
+    tri = Delaunay(xy)
+    for _ in range(rounds):
+        i, j = _tin_edges(tri)
+        d = np.hypot(*(xy[keep][i] - xy[keep][j]).T)
+        dz = z[keep][i] - z[keep][j]
+        cut = np.abs(dz) > band + tan0 * d
+        m = len(keep)
+        smooth = ~cut
+        graph = coo_matrix((np.ones(int(smooth.sum())), (i[smooth], j[smooth])), shape=(m, m))
+        nc, lab = connected_components(graph, directed=False)
+        li, lj = lab[i], lab[j]
+        c = cut & (li != lj)
+        down = np.bincount(li[c], weights=(dz[c] > 0).astype(float), minlength=nc)
+        total = np.bincount(li[c], minlength=nc)
+        size = np.bincount(lab, minlength=nc)
+        top = (total > 0) & (down >= 0.9 * total)
+        pit = (total > 0) & (down <= 0.1 * total) & (size <= 3)
+        bad = top | pit
+        bad[int(size.argmax())] = False
+        if not bad.any():
+            break
+        keep = keep[~bad[lab]]
+        tri = Delaunay(xy[keep])
+    return keep, tri
+
+
+def ground_surface(
+    xy: NDArray[np.float64],
+    z: NDArray[np.float64],
+    settings: UnorganisedSettings,
+    spacing: float,
+) -> GroundSurface:
+    """The ground estimate of one tile (see the module docstring, step 3).
+
+    1. The minimum surface on cells of ``grid_spacings * spacing``; its noise gives the band.
+    2. The progressive opening: windows of radius 1, 2, ... cells up to ``max_object_m``; a cell
+       whose opened height drops by more than ``opening_slope * radius * cell`` from the previous
+       window's is an object cell (SMRF's test, Pingel et al. 2013, with square windows).
+    3. A first ground TIN through the centres of the ground cells; the points within the band
+       (grown by the slope) of it are ground candidates.
+    4. The lowest candidate per ``thin_spacings * spacing`` cell, cut at its jumps
+       (:func:`_jump_components`), is the ground TIN returned.
+    """
+    cell = settings.grid_spacings * spacing
+    Z, empty = _min_grid(xy, z, cell)
+    noise = height_noise(Z)
+    band = max(settings.band_min_m, settings.band_noise * noise)
+    obj = np.zeros(Z.shape, dtype=bool)
+    last = Z
+    for w in range(1, max(1, math.ceil(settings.max_object_m / cell)) + 1):
+        size = 2 * w + 1
+        opened = ndimage.maximum_filter(ndimage.minimum_filter(Z, size=size), size=size)
+        obj |= (last - opened) > settings.opening_slope * w * cell
+        last = opened
+    ground_cells = ~obj & ~empty
+    if np.count_nonzero(ground_cells) < 3:
+        ground_cells = ~empty
+    gi = np.argwhere(ground_cells)
+    cxy = (gi + 0.5) * cell + xy.min(axis=0)
+    cz = Z[ground_cells]
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    step = 10.0 * cell
+    try:
+        fxy, fz = _framed(cxy, cz, lo, hi, step)
+        zs, slope = _tin_at(fxy, fz, Delaunay(fxy), xy)
+    except QhullError:
+        zs, slope = np.full(len(z), float(np.median(cz))), np.zeros(len(z))
+    r = z - zs
+    thr = band + settings.slope_scale_m * slope
+    cand = np.flatnonzero((r < thr) & (r > -settings.low_factor * thr))
+    if cand.size < 3:
+        cand = np.arange(len(z))
+    v = lowest_per_cell(xy, z, settings.thin_spacings * spacing, cand)
+    tan0 = math.tan(math.radians(settings.c0_deg))
+    try:
+        keep, _ = _jump_components(xy[v], z[v], tan0, band)
+        gxy, gz = _framed(xy[v[keep]], z[v[keep]], lo, hi, step)
+        tri = Delaunay(gxy)
+    except QhullError as exc:
+        raise InputError(
+            f"the ground points are degenerate in x-y ({exc.__class__.__name__})",
+            field="points",
+            expected="ground points spanning an area",
+        ) from None
+    return GroundSurface(gxy, gz, tri, band, noise)
+
+
+# ----------------------------------------------------------------------------------------------
+# stages 3-5 on the mesh
