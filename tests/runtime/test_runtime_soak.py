@@ -164,7 +164,7 @@ def test_plane_odometry_memory_is_bounded(tmp_path):
     from navkit.planes import OdometrySettings, PlaneOdometry, observe_rgbd
     from navkit.planes.motion import MotionSettings
     from navkit.planes.solve import SolverSettings
-    from navkit.runtime.capabilities import PlanesStage
+    from navkit.runtime.planes_stage import PlanesStage
     from navkit.sensors import RGBDFrame
 
     frames = _corridor_frames()

@@ -15,7 +15,9 @@ REPO = Path(__file__).resolve().parents[2]
 
 
 def run_topics() -> set[str]:
-    src = (REPO / "src" / "navkit" / "runtime" / "capabilities.py").read_text()
+    runtime = REPO / "src" / "navkit" / "runtime"
+    # the stages of `navkit run` (the mission's sink publishes other topics)
+    src = "".join((runtime / f).read_text() for f in ("capabilities.py", "planes_stage.py"))
     topics = set(re.findall(r'Output\(\s*"(/navkit/[^"]+)"', src))
     return topics - {"/navkit/planes/textured"}  # viewer only, not in results.mcap
 
