@@ -88,10 +88,10 @@ def _return_tasks(quick: bool, tmp: Path):  # type: ignore[no-untyped-def]
     the rows' "inputs" are these tasks, so runs/s is 10x the figure."""
     import numpy as np
 
-    from navkit.batch.path_return import ReturnSweepSettings, return_sweep_tasks
+    from navkit.batch.path_return import ReturnSweepSpec, return_sweep_tasks
     from navkit.io.pathjson import write_path_json
     from navkit.path import ApproximatorSettings, approximate
-    from navkit.path.control import ReturnSettings
+    from navkit.path.control import PathFollowerSettings
     from navkit.sensors import VisualOdometryNoise
     from navkit.sim.return_sim import leg_drive
 
@@ -100,7 +100,7 @@ def _return_tasks(quick: bool, tmp: Path):  # type: ignore[no-untyped-def]
     est = vo.corrupt(leg_drive(7, 0.5, 90.0, rng=rng, rate_hz=vo.rate_hz), rng)
     spline = approximate(est[:, :2], ApproximatorSettings(tolerance=0.05)).spline
     write_path_json(tmp / "path.json", spline)
-    sweep = ReturnSweepSettings(vo=vo, controller=ReturnSettings(), seed=0)
+    sweep = ReturnSweepSpec(vo=vo, controller=PathFollowerSettings(), seed=0)
     return return_sweep_tasks(str(tmp / "path.json"), 40 if quick else 80, sweep, 10)
 
 

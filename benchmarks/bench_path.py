@@ -148,7 +148,7 @@ def brute_force_loops(spline, step: float) -> tuple[int, float]:
 # --------------------------------------------------------------------------- the benchmark
 def run(quick: bool = False) -> list[Row]:
     from navkit.path import ApproximatorSettings, approximate
-    from navkit.path.control import ReturnSettings
+    from navkit.path.control import PathFollowerSettings
     from navkit.path.loops import find_crossings
     from navkit.sensors import VisualOdometryNoise
     from navkit.sim.return_sim import leg_drive, simulate_returns
@@ -302,7 +302,7 @@ def run(quick: bool = False) -> list[Row]:
     for legs in (7, 28) if quick else (7, 14, 28, 56):
         poses = leg_drive(legs)
         spl = approximate(poses[:, :2], ApproximatorSettings(tolerance=0.005), timed=False).spline
-        sim = simulate_returns(spl, runs=runs, vo=base, rng=7, settings=ReturnSettings())
+        sim = simulate_returns(spl, runs=runs, vo=base, rng=7, settings=PathFollowerSettings())
         s = sim.summary()
         rows.append(
             Row(

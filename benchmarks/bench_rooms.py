@@ -38,8 +38,8 @@ def sim_rooms(
     from navkit.localization import (
         Localizer,
         LocalizerSettings,
-        MapSettings,
         MatcherSettings,
+        WallMapSettings,
         build_map,
         match_scan,
     )
@@ -83,7 +83,7 @@ def sim_rooms(
             st, T = render(pose)
             views.append(stereo_wall_points(st.pair.left, st.pair.right, rig, T_world_camera=T))
         survey_xy = np.asarray(truth.survey, dtype=np.float64)[:, :2]  # the cameras' positions
-        map_settings = MapSettings(
+        map_settings = WallMapSettings(
             range_sigma_coefficient=fp.disparity_sigma / (rig.baseline * rig.camera.fx)
             if weighted_map
             else 0.0

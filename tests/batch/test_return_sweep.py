@@ -48,7 +48,7 @@ def test_two_workers_equal_the_runs_made_one_by_one(cli, path_json, tmp_path):
         "distributed", reason="the cluster extra (dask.distributed) is not installed"
     )
     from navkit.io.pathjson import read_path_json
-    from navkit.path.control import ReturnSettings
+    from navkit.path.control import PathFollowerSettings
     from navkit.sensors import VisualOdometryNoise
     from navkit.sim.return_sim import simulate_returns
 
@@ -69,7 +69,11 @@ def test_two_workers_equal_the_runs_made_one_by_one(cli, path_json, tmp_path):
     spline = read_path_json(path_json)
     for i, d in enumerate(_detail(b)):
         alone = simulate_returns(
-            spline, runs=1, settings=ReturnSettings(), vo=VisualOdometryNoise(), rng=run_rng(7, i)
+            spline,
+            runs=1,
+            settings=PathFollowerSettings(),
+            vo=VisualOdometryNoise(),
+            rng=run_rng(7, i),
         )
         assert d["run"] == i and d["seed"] == [7, i]
         assert d["final_error_m"] == float(alone.final_error[0])

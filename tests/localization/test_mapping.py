@@ -9,7 +9,7 @@ import pytest
 
 from navkit.errors import FormatError
 from navkit.geometry.polygons import polygon_area
-from navkit.localization import MapSettings, WallMap, build_map, build_map_from_scans
+from navkit.localization import WallMap, WallMapSettings, build_map, build_map_from_scans
 from navkit.localization.evaluate import evaluate_map
 from navkit.localization.raster import rasterize
 from tests.localization.helpers import LSHAPE, LSHAPE_POLY, RECT, cast, scan_points
@@ -65,7 +65,7 @@ def test_build_from_scans_traces_free_space(rng):
     poses = np.array([[2.0, 2.0, 0.0], [6.0, 4.0, 2.0]])
     b = np.linspace(-np.pi, np.pi, 720, endpoint=False)
     ranges = np.stack([cast(RECT, p, b) for p in poses])
-    m = build_map_from_scans(ranges, b, poses, MapSettings(resolution=0.1))
+    m = build_map_from_scans(ranges, b, poses, WallMapSettings(resolution=0.1))
     g, o, r = m.occupancy, m.origin, m.resolution
 
     def cell(x, y):
@@ -163,7 +163,7 @@ def test_weighted_map_from_stereo_like_views_and_origin_checks(rng):
         r = np.linalg.norm(P, axis=1)
         P = P + rng.normal(0.0, k * r**2)[:, None] * (P / r[:, None])  # error along the ray
         views.append(P[r < 5.5])
-    s = MapSettings(range_sigma_coefficient=k)
+    s = WallMapSettings(range_sigma_coefficient=k)
     m = build_map(views, poses, s)
     acc = evaluate_map(m, LSHAPE, LSHAPE_POLY)
     assert acc["walls_found"] == 6 and len(m.walls) == 6 and acc["corners_found"] == 6

@@ -11,7 +11,7 @@ from navkit.errors import ConfigError, FormatError
 from navkit.mission import CameraSettings, MissionSettings, PurePursuit, load_route
 from navkit.mission.driver import polyline_point
 from navkit.mission.pose2d import blend, compose, relative
-from navkit.obstacles import MapperSettings, ObstacleMapper
+from navkit.obstacles import ObstacleMapper, ObstacleMapperSettings
 from navkit.obstacles.evaluate import distance_to_polygon as _distance_to_polygon
 from navkit.obstacles.evaluate import score_obstacle_map
 from navkit.sim.footprints import true_footprints
@@ -71,7 +71,7 @@ def test_obstacle_grid_confirms_repeated_obstacles_and_scores_them():
     scene = small_scene()
     fps = true_footprints(scene)
     crate = next(f for f in fps if f.name == "crate")
-    grid = ObstacleMapper((-2, -5), (15, 5), MapperSettings(0.1, min_hits=2, min_ratio=0.3))
+    grid = ObstacleMapper((-2, -5), (15, 5), ObstacleMapperSettings(0.1, min_hits=2, min_ratio=0.3))
     ground = np.random.default_rng(0).uniform([-2, -5], [8, 5], (4000, 2))
     crate_pts = _box_cells(np.array([3.0, 1.6]), 0.45)
     for k in range(3):
@@ -89,7 +89,7 @@ def test_obstacle_grid_confirms_repeated_obstacles_and_scores_them():
 
 def test_blocked_corridor_matches_brute_force(np_rng):
     grid = ObstacleMapper(
-        (0, 0), (10, 10), MapperSettings(0.1, min_hits=1, min_ratio=0.0, recent_scans=1)
+        (0, 0), (10, 10), ObstacleMapperSettings(0.1, min_hits=1, min_ratio=0.0, recent_scans=1)
     )
     pts = np_rng.uniform(0, 10, (40, 2))
     grid.add_points(pts, pts)
@@ -109,7 +109,7 @@ def test_blocked_corridor_matches_brute_force(np_rng):
 
 def test_known_obstacles_do_not_block_the_way_back_new_ones_do():
     grid = ObstacleMapper(
-        (0, 0), (10, 10), MapperSettings(0.1, min_hits=1, min_ratio=0.0, recent_scans=1)
+        (0, 0), (10, 10), ObstacleMapperSettings(0.1, min_hits=1, min_ratio=0.0, recent_scans=1)
     )
     jamb = np.c_[np.full(20, 5.0), np.linspace(5.6, 7.5, 20)]  # a door jamb 0.6 m from the path
     grid.add_points(jamb, jamb)
@@ -173,7 +173,7 @@ def test_detour_on_the_obstacle_map_avoids_known_and_new_obstacles():
 
     s = MissionSettings()
     grid = ObstacleMapper(
-        (-2, -5), (14, 5), MapperSettings(0.1, min_hits=1, min_ratio=0.0, recent_scans=2)
+        (-2, -5), (14, 5), ObstacleMapperSettings(0.1, min_hits=1, min_ratio=0.0, recent_scans=2)
     )
     wall = np.c_[np.linspace(0.0, 12.0, 121), np.full(121, 1.3)]  # mapped on the way out
     grid.add_points(wall, wall)

@@ -8,7 +8,7 @@ import pytest
 
 from navkit.errors import ConfigError, InputError
 from navkit.geometry import se3_from_rt
-from navkit.obstacles import MapperSettings, ObstacleMapper, detect_obstacles
+from navkit.obstacles import ObstacleMapper, ObstacleMapperSettings, detect_obstacles
 from navkit.obstacles.evaluate import score_obstacle_map
 from navkit.sim import SpinningLidar, load_scene, render_scan
 from navkit.sim.footprints import true_footprints
@@ -50,7 +50,7 @@ def test_mapper_gives_the_map_the_mission_made_before(yard):
     """Same scans, same fusion: the counts agree with the old code path. The scans are seeded and
     every step is deterministic, so today they are identical; the 1 % / one-cell margins only
     absorb float-level changes of the detector's compiled kernels (a changed cell or two)."""
-    mapper = ObstacleMapper([-5.0, -8.0], [20.0, 8.0], MapperSettings())
+    mapper = ObstacleMapper([-5.0, -8.0], [20.0, 8.0], ObstacleMapperSettings())
     for _, _, det, T2, _ in yard:
         mapper.update(det, T2)
     g = mapper.grid()
@@ -105,9 +105,9 @@ def test_every_obstacle_in_view_is_on_the_map(yard):
 
 def test_bad_settings_and_poses_are_named():
     with pytest.raises(ConfigError, match="min_ratio"):
-        MapperSettings(min_ratio=1.5)
+        ObstacleMapperSettings(min_ratio=1.5)
     with pytest.raises(ConfigError, match="resolution"):
-        MapperSettings(resolution=0.0)
+        ObstacleMapperSettings(resolution=0.0)
     mapper = ObstacleMapper([0, 0], [1, 1])
     det = next(yard_scans())[2]
     with pytest.raises(InputError, match="T_world_sensor"):

@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 from scipy.spatial import cKDTree
 
 from navkit.errors import ConfigError, InputError
-from navkit.path.control import ReturnController, ReturnSettings
+from navkit.path.control import PathFollowerSettings, ReturnController
 from navkit.path.detour import (
     DetourFailure,
     DetourSettings,
@@ -268,7 +268,7 @@ def test_return_controller_follows_a_polyline_spline():
     np.testing.assert_allclose(spl.position(np.array([0.0, 2.0, 2.0 + SQRT2])), P[:3], atol=1e-12)
     # the controller drives from the end back to the start; noise-free, it stops inside the
     # stop radius and stays within the look-ahead of the polyline (corner cutting < delta)
-    cfg = ReturnSettings(delta=0.3, stop_radius=0.1)
+    cfg = PathFollowerSettings(delta=0.3, stop_radius=0.1)
     ctrl = ReturnController(spl, cfg)
     pose = np.array([[5.0, 1.0, np.pi]])
     lateral = []

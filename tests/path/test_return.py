@@ -7,7 +7,7 @@ import pytest
 
 from navkit.errors import ConfigError, InputError
 from navkit.path import ApproximatorSettings, PathSpline, approximate
-from navkit.path.control import ReturnController, ReturnSettings
+from navkit.path.control import PathFollowerSettings, ReturnController
 from navkit.sensors import VisualOdometryNoise
 from navkit.sim.return_sim import corrupt_step, leg_drive, simulate_returns
 
@@ -22,24 +22,24 @@ def staircase() -> PathSpline:
 def test_controller_turns_in_place_then_drives(staircase):
     L = staircase.total_length
     end = staircase.position(L)
-    ctrl = ReturnController(staircase, ReturnSettings())
+    ctrl = ReturnController(staircase, PathFollowerSettings())
     # at the end, facing away along the path: the target is behind -> turn in place at the limit
     cmd = ctrl.command(np.array([[end[0], end[1], staircase.heading(L)]]))
     assert cmd.v[0] == 0.0
-    assert abs(cmd.omega[0]) == pytest.approx(ReturnSettings().omega_max)
+    assert abs(cmd.omega[0]) == pytest.approx(PathFollowerSettings().omega_max)
     # facing the target point exactly: full speed, no turn
     target = staircase.position(cmd.s_target[0])
     facing = np.arctan2(*(target - end)[::-1])
     cmd = ctrl.command(np.array([[end[0], end[1], facing]]))
     assert cmd.omega[0] == pytest.approx(0.0, abs=1e-9)
-    assert cmd.v[0] == pytest.approx(ReturnSettings().v_max)
+    assert cmd.v[0] == pytest.approx(PathFollowerSettings().v_max)
     # at the start: stopped, and it stays stopped
     s = staircase.start
     assert ReturnController(staircase).command(np.array([[s[0], s[1], 0.0]])).done[0]
 
 
 def test_noiseless_return_stops_inside_the_radius(staircase):
-    st = ReturnSettings()
+    st = PathFollowerSettings()
     sim = simulate_returns(
         staircase,
         runs=3,
@@ -89,7 +89,7 @@ def test_bad_input():
     with pytest.raises(InputError, match="zero length"):
         ReturnController(empty)
     with pytest.raises(ConfigError, match="delta"):
-        ReturnSettings(delta=-1.0)
+        PathFollowerSettings(delta=-1.0)
     line = PathSpline.from_segments([1.0], [[0.0, 1.0, 0, 0]], [[0.0, 0, 0, 0]])
     with pytest.raises(InputError, match="robots"):
         ReturnController(line, n_robots=2).command(np.zeros((3, 3)))

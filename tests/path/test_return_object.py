@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from navkit.obstacles import MapperSettings, ObstacleMapper
+from navkit.obstacles import ObstacleMapper, ObstacleMapperSettings
 from navkit.path import Return, ReturnFailure, ReturnStep, ReturnTripSettings, approximate
-from navkit.path.control import ReturnSettings
+from navkit.path.control import PathFollowerSettings
 from navkit.sim.unicycle import unicycle_step
 
 DT = 0.1
@@ -19,7 +19,7 @@ def stored_path():
 
 
 def mapper_with(points):
-    m = ObstacleMapper((-3, -5), (13, 5), MapperSettings(0.1, min_hits=1, min_ratio=0.0))
+    m = ObstacleMapper((-3, -5), (13, 5), ObstacleMapperSettings(0.1, min_hits=1, min_ratio=0.0))
     m.add_points(points, points)
     return m
 
@@ -40,7 +40,7 @@ def drive(ret, mapper, pose, t_max=80.0):
 
 
 def settings(detour=True):
-    ctrl = ReturnSettings(delta=0.8, v_max=0.6, stop_radius=0.25, approach_radius=0.5)
+    ctrl = PathFollowerSettings(delta=0.8, v_max=0.6, stop_radius=0.25, approach_radius=0.5)
     return ReturnTripSettings(controller=ctrl, half_width=0.3, detour=detour, wait=2.0)
 
 

@@ -63,12 +63,12 @@ def test_vectorised_map_update_counts_like_add_points():
     from navkit.geometry import se3_from_rt
     from navkit.obstacles import Mounting, ObstacleSettings, detect_obstacles_in_grid
     from navkit.obstacles.grids import cloud_to_grid
-    from navkit.obstacles.mapper import MapperSettings, ObstacleMapper, scan_points_2d
+    from navkit.obstacles.mapper import ObstacleMapper, ObstacleMapperSettings, scan_points_2d
     from navkit.sim import SpinningLidar, render_scan
     from tests.runtime.test_runtime_tf import _scene
 
     scene, lidar = _scene(), SpinningLidar(n_beams=16, n_columns=900)
-    st = MapperSettings(resolution=0.1, max_range=12.0)
+    st = ObstacleMapperSettings(resolution=0.1, max_range=12.0)
     # the grid's cell edges off the boxes' faces: the two sum the transform in another order,
     # so a point within ~1e-15 m of a cell edge may fall either side (the simulated faces lie
     # exactly on a 0.1 m grid through the origin)

@@ -41,7 +41,7 @@ from numpy.typing import NDArray
 __all__ = [
     "ERROR_RATE_PCT",
     "RUNS_PER_TASK",
-    "ReturnSweepSettings",
+    "ReturnSweepSpec",
     "collect_returns",
     "read_return_path",
     "return_runs_job",
@@ -59,9 +59,9 @@ counts against."""
 
 
 @dataclass(frozen=True)
-class ReturnSweepSettings:
+class ReturnSweepSpec:
     """What one simulated return needs besides its run index: the VO model and the controller
-    (:class:`~navkit.sensors.VisualOdometryNoise`, :class:`~navkit.path.control.ReturnSettings`)
+    (:class:`~navkit.sensors.VisualOdometryNoise`, :class:`~navkit.path.control.PathFollowerSettings`)
     and the sweep's seed."""
 
     vo: Any
@@ -94,7 +94,7 @@ def read_return_path(path_json: str) -> Any:
 
 
 def return_runs_job(
-    out_dir: Path, *, path_json: str, first: int, count: int, settings: ReturnSweepSettings
+    out_dir: Path, *, path_json: str, first: int, count: int, settings: ReturnSweepSpec
 ) -> dict[str, Any]:
     """Simulate runs ``first .. first + count - 1`` of a sweep in lock-step, one stream per run:
     write ``runs.json`` and ``true_xy.npy``; their figures (one list entry per run)."""
@@ -143,7 +143,7 @@ def return_runs_job(
 def return_sweep_tasks(
     path_json: str,
     runs: int,
-    settings: ReturnSweepSettings,
+    settings: ReturnSweepSpec,
     runs_per_task: int = RUNS_PER_TASK,
 ) -> list[Any]:
     """One :class:`~navkit.batch.BatchTask` per chunk of ``runs_per_task`` runs (folder

@@ -91,14 +91,14 @@ def build_cmd(
 
         from navkit.io.scan_sequence import read_scan_sequence
         from navkit.io.wallmap import read_map_truth, write_wall_map
-        from navkit.localization import MapSettings, build_map, build_map_from_scans
+        from navkit.localization import WallMapSettings, build_map, build_map_from_scans
         from navkit.localization.evaluate import evaluate_map
         from navkit.viz.maps import plot_map
 
         check_out_dir(out, overwrite)
         table = dict(_read_toml(config).get("map", {})) if config is not None else {}
         table.update({"resolution": resolution} if resolution is not None else {})
-        settings = MapSettings.from_dict(table, source=str(config or "options"))
+        settings = WallMapSettings.from_dict(table, source=str(config or "options"))
         seq = read_scan_sequence(input, every=every, max_range=max_range)
         t0 = time.perf_counter()
         if seq.carmen is not None:

@@ -256,12 +256,12 @@ def return_(
         import numpy as np
 
         from navkit.batch.path_return import (
-            ReturnSweepSettings,
+            ReturnSweepSpec,
             collect_returns,
             read_return_path,
             return_sweep_tasks,
         )
-        from navkit.path.control import ReturnSettings
+        from navkit.path.control import PathFollowerSettings
         from navkit.sensors import VisualOdometryNoise
         from navkit.sim.return_sim import simulate_returns
 
@@ -273,7 +273,7 @@ def return_(
             heading_bias_per_m=np.radians(vo_heading_bias_deg_per_m),
             heading_sigma=np.radians(vo_heading_sigma_deg),
         )
-        ctrl = ReturnSettings(delta=delta, v_max=speed, stop_radius=stop_radius)
+        ctrl = PathFollowerSettings(delta=delta, v_max=speed, stop_radius=stop_radius)
         # every check of the controller and the simulator (time limit, step bound) before any
         # run starts or anything is written: a return that starts at the path's start stops at
         # once, so this costs one control cycle
@@ -282,7 +282,7 @@ def return_(
             spline, runs=1, settings=ctrl, vo=vo, initial_true=[start[0], start[1], 0.0], rng=0
         )
         check_out_dir(out, overwrite or resume)
-        sweep = ReturnSweepSettings(vo=vo, controller=ctrl, seed=seed)
+        sweep = ReturnSweepSpec(vo=vo, controller=ctrl, seed=seed)
         bs = run_inputs(
             return_sweep_tasks(path_json, runs, sweep, runs_per_task),
             out,

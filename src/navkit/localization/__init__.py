@@ -31,7 +31,7 @@ from navkit.localization.correlation import (
 )
 from navkit.localization.evaluation import evaluate_fixes
 from navkit.localization.localizer import Fix, LocalizationFailure, Localizer, LocalizerSettings
-from navkit.localization.mapping import MapSettings, WallMap, build_map, build_map_from_scans
+from navkit.localization.mapping import WallMap, WallMapSettings, build_map, build_map_from_scans
 from navkit.localization.matcher import MatcherSettings, ScanMatch, match_scan
 
 __all__ = [
@@ -41,10 +41,10 @@ __all__ = [
     "LocalizationFailure",
     "Localizer",
     "LocalizerSettings",
-    "MapSettings",
     "MatcherSettings",
     "ScanMatch",
     "WallMap",
+    "WallMapSettings",
     "build_map",
     "build_map_from_scans",
     "evaluate_fixes",

@@ -64,7 +64,7 @@ from navkit.localization.correlation import (
     locate_known_heading,
 )
 from navkit.localization.field import LikelihoodField
-from navkit.localization.mapping import MapSettings, WallMap, build_map
+from navkit.localization.mapping import WallMap, WallMapSettings, build_map
 from navkit.localization.matcher import MatcherSettings, ScanMatch, match_scan
 from navkit.localization.raster import sample_segments
 from navkit.localization.refine import PoseRefinement, RefineSettings, refine_pose
@@ -408,7 +408,7 @@ class Localizer:
         views: Sequence[ArrayLike],
         poses: ArrayLike,
         settings: LocalizerSettings | None = None,
-        map_settings: MapSettings | None = None,
+        map_settings: WallMapSettings | None = None,
         *,
         ordered: bool = False,
         min_walls: int = 2,

@@ -49,8 +49,8 @@ from navkit.localization.walls import (
 
 __all__ = [
     "Corner",
-    "MapSettings",
     "WallMap",
+    "WallMapSettings",
     "build_map",
     "build_map_from_scans",
     "drop_corner_stubs",
@@ -74,7 +74,7 @@ MAP_VERSION = 1
 
 
 @dataclass(frozen=True)
-class MapSettings:
+class WallMapSettings:
     """How wall maps are built.
 
     Attributes
@@ -146,7 +146,7 @@ class MapSettings:
     sigma_floor: float = domain_field(0.01, NON_NEGATIVE)
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], source: str = "settings") -> MapSettings:
+    def from_dict(cls, data: Mapping[str, Any], source: str = "settings") -> WallMapSettings:
         """Build from a mapping (e.g. the ``[map]`` table of a ``settings.toml``), a nested
         ``segmentation`` table; unknown keys are rejected."""
         from navkit.localization._settings import settings_from_dict
@@ -321,7 +321,7 @@ class WallMap:
 
 # --------------------------------------------------------------------------- merging
 def merge_segments(
-    segments: Sequence[WallSegment], settings: MapSettings | None = None
+    segments: Sequence[WallSegment], settings: WallMapSettings | None = None
 ) -> list[WallSegment]:
     """Merge segments of the same wall (seen from several views), transitively.
 
@@ -333,7 +333,7 @@ def merge_segments(
     list of WallSegment
         Longest first; walls shorter than ``min_wall_length`` dropped.
     """
-    s = settings or MapSettings()
+    s = settings or WallMapSettings()
     segs = list(segments)
     if not segs:
         return []
@@ -394,13 +394,15 @@ def merge_segments(
 
 
 # --------------------------------------------------------------------------- corners, outline
-def find_corners(walls: Sequence[WallSegment], settings: MapSettings | None = None) -> list[Corner]:
+def find_corners(
+    walls: Sequence[WallSegment], settings: WallMapSettings | None = None
+) -> list[Corner]:
     """Corners where two walls meet (line intersection near an end of both walls).
 
     The intersection of the TLS lines ``n1 . p = rho1`` and ``n2 . p = rho2`` is the paper's
     ``x = (b2 - b1)/(k1 - k2), y = (k1 b2 - k2 b1)/(k1 - k2)`` in a form valid for vertical walls.
     """
-    s = settings or MapSettings()
+    s = settings or WallMapSettings()
     if len(walls) < 2:
         return []
     N = np.array([w.normal for w in walls])
@@ -441,7 +443,7 @@ def find_corners(walls: Sequence[WallSegment], settings: MapSettings | None = No
 
 
 def find_outline(
-    walls: Sequence[WallSegment], corners: Sequence[Corner], settings: MapSettings | None = None
+    walls: Sequence[WallSegment], corners: Sequence[Corner], settings: WallMapSettings | None = None
 ) -> tuple[NDArray[np.float64] | None, list[NDArray[np.float64]]]:
     """Closed cycles of walls: the largest (by area) is the outline, the rest are islands.
 
@@ -456,7 +458,7 @@ def find_outline(
         Counter-clockwise polygon, metres.
     islands : list of (K, 2) arrays
     """
-    s = settings or MapSettings()
+    s = settings or WallMapSettings()
     M = len(walls)
     links: dict[int, list[tuple[int, list[NDArray[np.float64]]]]] = {k: [] for k in range(M)}
     for c in corners:
@@ -525,7 +527,7 @@ def find_outline(
 
 # --------------------------------------------------------------------------- grid
 def drop_corner_stubs(
-    walls: Sequence[WallSegment], settings: MapSettings | None = None
+    walls: Sequence[WallSegment], settings: WallMapSettings | None = None
 ) -> list[WallSegment]:
     """Remove short pieces lying across a corner of two longer walls (stereo smear at corners).
 
@@ -537,7 +539,7 @@ def drop_corner_stubs(
     stereo matching window makes of a far corner (noisy there: the depth error grows as
     ``z^2``).
     """
-    s = settings or MapSettings()
+    s = settings or WallMapSettings()
     walls = list(walls)
     corners = find_corners(walls, s)
     drop = set()
@@ -564,7 +566,7 @@ def drop_corner_stubs(
 
 
 def drop_wall_shadows(
-    walls: Sequence[WallSegment], settings: MapSettings | None = None
+    walls: Sequence[WallSegment], settings: WallMapSettings | None = None
 ) -> list[WallSegment]:
     """Remove weak pieces running alongside a strong wall (stereo smear beside occluders).
 
@@ -572,7 +574,7 @@ def drop_wall_shadows(
     ``2 * merge_angle_deg``, both its ends lie within ``shadow_distance`` of the longer wall's
     line and inside its extent, and it has less than ``shadow_support`` of its points.
     """
-    s = settings or MapSettings()
+    s = settings or WallMapSettings()
     walls = list(walls)
     if len(walls) < 2:
         return walls
@@ -601,7 +603,7 @@ def drop_wall_shadows(
 
 def _finish(
     walls: list[WallSegment],
-    s: MapSettings,
+    s: WallMapSettings,
     rays: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
     strongest_fraction: float = 0.0,
 ) -> WallMap:
@@ -645,7 +647,7 @@ def _finish(
 def build_map(
     views: Sequence[ArrayLike],
     poses: ArrayLike | None = None,
-    settings: MapSettings | None = None,
+    settings: WallMapSettings | None = None,
     *,
     ordered: bool = False,
     origins: ArrayLike | None = None,
@@ -659,7 +661,7 @@ def build_map(
         metres, in the view's frame (x forward, y left) - or in the world if ``poses`` is None.
     poses : (K, 3) array, optional
         ``(x, y, theta)`` of each view in the world (paper eq. 2: a rotation about z and a shift).
-    settings : MapSettings, optional
+    settings : WallMapSettings, optional
     ordered : bool
         Points of each view are in scan order: use split-and-merge; else RANSAC.
     origins : (K, 2) array, optional
@@ -672,7 +674,7 @@ def build_map(
     -------
     WallMap
     """
-    s = settings or MapSettings()
+    s = settings or WallMapSettings()
     if not hasattr(views, "__len__") or (isinstance(views, np.ndarray) and views.ndim == 0):
         raise InputError(
             f"is {type(views).__name__}", field="views", expected="a list of (N, 2) arrays"
@@ -810,7 +812,7 @@ def build_map_from_scans(
     ranges: ArrayLike,
     bearings: ArrayLike,
     poses: ArrayLike,
-    settings: MapSettings | None = None,
+    settings: WallMapSettings | None = None,
     *,
     max_range: float = 30.0,
 ) -> WallMap:
@@ -824,7 +826,7 @@ def build_map_from_scans(
         Beam angles in the sensor frame, radians (0 = forward, positive to the left).
     poses : (K, 3) array
         Sensor poses ``(x, y, theta)`` in the world.
-    settings : MapSettings, optional
+    settings : WallMapSettings, optional
     max_range : float
         Metres; readings at or above it are no return (they clear no free space either).
 
@@ -833,7 +835,7 @@ def build_map_from_scans(
     WallMap
         With the occupancy grid's free space traced along the beams.
     """
-    s = settings or MapSettings()
+    s = settings or WallMapSettings()
     R = np.asarray(ranges, dtype=np.float64)
     b = np.asarray(bearings, dtype=np.float64).reshape(-1)
     X = np.asarray(poses, dtype=np.float64).reshape(-1, 3)

@@ -191,12 +191,12 @@ class MissionLocalizer:
         settings = self.F.room_localizer()
         if settings is None:
             return
-        from navkit.localization import MapSettings
+        from navkit.localization import WallMapSettings
 
         views, poses = zip(*self.rec.room_views, strict=True)
         # stereo wall points scatter by their depth error (the floor-plan front end keeps it
         # below 0.25 m): walls closer than that are one wall
-        mapping = MapSettings(merge_distance=0.25, merge_angle_deg=8.0)
+        mapping = WallMapSettings(merge_distance=0.25, merge_angle_deg=8.0)
         with timed(self.timings, "room_map"):
             self.room = Localizer.from_views(list(views), np.array(poses), settings, mapping)
         self.rec.room_map = self.room.map

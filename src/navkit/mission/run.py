@@ -40,7 +40,7 @@ from navkit.mission.pose2d import compose
 from navkit.mission.robot import SimRobot
 from navkit.mission.settings import MissionSettings, Route
 from navkit.obstacles import ObstacleSettings, detect_obstacles
-from navkit.obstacles.mapper import MapperSettings, ObstacleMapper, scan_points_2d
+from navkit.obstacles.mapper import ObstacleMapper, ObstacleMapperSettings, scan_points_2d
 from navkit.path import (
     ApproximatorSettings,
     OnlineApproximator,
@@ -51,7 +51,7 @@ from navkit.path import (
     WayAhead,
     WayBlocked,
 )
-from navkit.path.control import ReturnSettings
+from navkit.path.control import PathFollowerSettings
 from navkit.path.returning import ReturnTripSettings
 from navkit.timing import Timings, new_timings, timed
 
@@ -203,7 +203,7 @@ class Mission:
         lo, hi = scene.bounds()
         pts = np.vstack([lo[:2], hi[:2], W, start[None, :2]])
         M = s.obstacle_map
-        settings_map = MapperSettings(
+        settings_map = ObstacleMapperSettings(
             M.resolution, M.min_hits, M.min_ratio, M.recent_scans, M.max_range
         )
         self.mapper = ObstacleMapper(pts.min(0) - M.margin, pts.max(0) + M.margin, settings_map)
@@ -478,7 +478,7 @@ def _return_settings(s: MissionSettings) -> ReturnTripSettings:
     stop = s.return_stop_radius
     B = s.block
     return ReturnTripSettings(
-        controller=ReturnSettings(
+        controller=PathFollowerSettings(
             delta=s.return_delta,
             v_max=s.return_v_max,
             stop_radius=stop,

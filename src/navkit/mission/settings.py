@@ -51,8 +51,8 @@ __all__ = [
     "DemoSettings",
     "FusionSettings",
     "LidarSettings",
+    "MissionMapSettings",
     "MissionSettings",
-    "ObstacleMapSettings",
     "RobotSettings",
     "Route",
     "ScannerMount",
@@ -290,7 +290,7 @@ class FusionSettings:
 
 
 @dataclass(frozen=True)
-class ObstacleMapSettings:
+class MissionMapSettings:
     """The global 2D obstacle map fused from every scan (estimate frame).
 
     Attributes
@@ -475,7 +475,7 @@ class MissionSettings:
     camera: CameraSettings = field(default_factory=CameraSettings)
     stereo: StereoSettings = field(default_factory=StereoSettings)
     fusion: FusionSettings = field(default_factory=FusionSettings)
-    obstacle_map: ObstacleMapSettings = field(default_factory=ObstacleMapSettings)
+    obstacle_map: MissionMapSettings = field(default_factory=MissionMapSettings)
     block: BlockSettings = field(default_factory=BlockSettings)
 
     def __post_init__(self) -> None:

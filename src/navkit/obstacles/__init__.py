@@ -29,10 +29,10 @@ from navkit.obstacles.detector import (
 from navkit.obstacles.grids import ScanGrid
 from navkit.obstacles.mapper import (
     MappedObstacle,
-    MapperSettings,
     MapUpdate,
     ObstacleGrid,
     ObstacleMapper,
+    ObstacleMapperSettings,
 )
 from navkit.obstacles.mounting import Mounting
 from navkit.obstacles.settings import ObstacleSettings
@@ -40,12 +40,12 @@ from navkit.obstacles.settings import ObstacleSettings
 __all__ = [
     "MapUpdate",
     "MappedObstacle",
-    "MapperSettings",
     "Mounting",
     "Obstacle",
     "ObstacleDetection",
     "ObstacleGrid",
     "ObstacleMapper",
+    "ObstacleMapperSettings",
     "ObstacleSettings",
     "ScanGrid",
     "detect_obstacles",

@@ -1,7 +1,7 @@
 """The global 2D obstacle map: paper 1's per-scan obstacles fused over time (online).
 
 :class:`ObstacleMapper` is the online object of paper 1 (kiss-icp shaped): built from frozen
-:class:`MapperSettings` and the mapped area, it takes one detection at a time
+:class:`ObstacleMapperSettings` and the mapped area, it takes one detection at a time
 (:meth:`ObstacleMapper.update`, an :class:`~navkit.obstacles.ObstacleDetection` and the
 sensor's pose in the map frame) and keeps the evidence grid.
 
@@ -39,13 +39,19 @@ from navkit.obstacles.detector import ObstacleDetection
 from navkit.obstacles.rules import OBSTACLE
 from navkit.results import Result, deprecated_alias
 
-__all__ = ["MapUpdate", "MappedObstacle", "MapperSettings", "ObstacleGrid", "ObstacleMapper"]
+__all__ = [
+    "MapUpdate",
+    "MappedObstacle",
+    "ObstacleGrid",
+    "ObstacleMapper",
+    "ObstacleMapperSettings",
+]
 
 log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class MapperSettings:
+class ObstacleMapperSettings:
     """Settings of :class:`ObstacleMapper` (SI units).
 
     Attributes
@@ -208,7 +214,7 @@ class ObstacleMapper:
     ----------
     lo, hi : (2,) arrays
         Corners of the mapped area, metres.
-    settings : MapperSettings, optional
+    settings : ObstacleMapperSettings, optional
 
     Examples
     --------
@@ -218,8 +224,10 @@ class ObstacleMapper:
     >>> grid, obstacles = mapper.grid(), mapper.obstacles()       # doctest: +SKIP
     """
 
-    def __init__(self, lo: ArrayLike, hi: ArrayLike, settings: MapperSettings | None = None):
-        self.settings = st = settings or MapperSettings()
+    def __init__(
+        self, lo: ArrayLike, hi: ArrayLike, settings: ObstacleMapperSettings | None = None
+    ):
+        self.settings = st = settings or ObstacleMapperSettings()
         self.origin = np.asarray(lo, dtype=np.float64)
         self.resolution = float(st.resolution)
         with np.errstate(invalid="ignore", over="ignore"):

@@ -29,11 +29,11 @@ from navkit.errors import ConfigError, InputError
 from navkit.geometry._validate import check_settings
 from navkit.path.spline import PathSpline
 
-__all__ = ["ReturnCommand", "ReturnController", "ReturnSettings"]
+__all__ = ["PathFollowerSettings", "ReturnCommand", "ReturnController"]
 
 
 @dataclass(frozen=True)
-class ReturnSettings:
+class PathFollowerSettings:
     """Settings of the return controller (SI units).
 
     Attributes
@@ -125,13 +125,13 @@ class ReturnController:
     ----------
     path : PathSpline
         The stored path (from its start at the operator to where the robot is).
-    settings : ReturnSettings, optional
+    settings : PathFollowerSettings, optional
     n_robots : int
         Batch size (each robot keeps its own progress ``s``).
     """
 
     def __init__(
-        self, path: PathSpline, settings: ReturnSettings | None = None, n_robots: int = 1
+        self, path: PathSpline, settings: PathFollowerSettings | None = None, n_robots: int = 1
     ) -> None:
         if path.n_segments == 0 or path.total_length <= 0:
             raise InputError(
@@ -140,7 +140,7 @@ class ReturnController:
                 expected="a path with at least one segment",
             )
         self.path = path
-        self.settings = settings or ReturnSettings()
+        self.settings = settings or PathFollowerSettings()
         self.start = path.start
         self.progress = np.full(int(n_robots), path.total_length)
         self.stopped = np.zeros(int(n_robots), dtype=bool)

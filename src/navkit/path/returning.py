@@ -28,7 +28,7 @@ from typing import Any, Protocol, overload
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.path.control import ReturnController, ReturnSettings
+from navkit.path.control import PathFollowerSettings, ReturnController
 from navkit.path.detour import Detour, DetourFailure, DetourSettings, plan_detour, polyline_spline
 from navkit.path.spline import PathSpline
 from navkit.results import Failure, Result, deprecated_alias
@@ -64,7 +64,7 @@ class ReturnTripSettings:
 
     Attributes
     ----------
-    controller : ReturnSettings
+    controller : PathFollowerSettings
         Paper 4's controller on the stored path.
     half_width : float
         Half the corridor the robot needs (half its width plus a clearance), metres.
@@ -84,7 +84,7 @@ class ReturnTripSettings:
         See :class:`~navkit.path.detour.DetourSettings`.
     """
 
-    controller: ReturnSettings = field(default_factory=ReturnSettings)
+    controller: PathFollowerSettings = field(default_factory=PathFollowerSettings)
     half_width: float = 0.3
     lookahead: float = 2.0
     wait: float = 3.0
@@ -425,7 +425,7 @@ class Return:
             stop = c.stop_radius
             ctrl = ReturnController(
                 polyline_spline(d.points[::-1]),
-                ReturnSettings(
+                PathFollowerSettings(
                     delta=st.detour_delta,
                     v_max=c.v_max,
                     stop_radius=stop,

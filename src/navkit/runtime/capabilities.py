@@ -314,14 +314,14 @@ class ObstaclesStage:
 
     def _mapper(self, T: NDArray[np.float64]) -> Any:
         if self.mapper is None:
-            from navkit.obstacles import MapperSettings, ObstacleMapper
+            from navkit.obstacles import ObstacleMapper, ObstacleMapperSettings
 
             c = self.cfg
             centre = T[:2, 3]
             self.mapper = ObstacleMapper(
                 centre - c.map_half_extent_m,
                 centre + c.map_half_extent_m,
-                MapperSettings(
+                ObstacleMapperSettings(
                     resolution=c.map_resolution_m,
                     min_hits=c.map_min_hits,
                     min_ratio=c.map_min_ratio,
@@ -475,13 +475,13 @@ class LaserMappingStage:
             return StageResult(record={"scans": self.n, "keyframes": 0, "walls": 0})
         from navkit.io.atomic import write_json
         from navkit.io.maps import write_occupancy_grid
-        from navkit.localization import MapSettings, build_map_from_scans
+        from navkit.localization import WallMapSettings, build_map_from_scans
 
         wm = build_map_from_scans(
             np.stack(self.ranges),
             self.bearings,
             np.stack(self.poses),
-            MapSettings(resolution=self.cfg.map_resolution_m),
+            WallMapSettings(resolution=self.cfg.map_resolution_m),
             max_range=self.cfg.max_range_m,
         )
         self.out.mkdir(parents=True, exist_ok=True)

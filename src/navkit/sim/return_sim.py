@@ -22,7 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import ConfigError
-from navkit.path.control import ReturnController, ReturnSettings
+from navkit.path.control import PathFollowerSettings, ReturnController
 from navkit.path.spline import PathSpline
 from navkit.sensors import VisualOdometryNoise
 from navkit.sim.unicycle import simulate_unicycle, unicycle_step
@@ -159,7 +159,7 @@ def simulate_returns(
     path: PathSpline,
     *,
     runs: int = 40,
-    settings: ReturnSettings | None = None,
+    settings: PathFollowerSettings | None = None,
     vo: VisualOdometryNoise | None = None,
     rng: np.random.Generator | Sequence[np.random.Generator] | int | None = None,
     initial_true: ArrayLike | None = None,
@@ -174,7 +174,7 @@ def simulate_returns(
         The stored path.
     runs : int
         Number of independent runs (paper: 40).
-    settings : ReturnSettings, optional
+    settings : PathFollowerSettings, optional
         Controller settings.
     vo : VisualOdometryNoise, optional
         VO error model; its ``rate_hz`` is the control rate.
@@ -190,7 +190,7 @@ def simulate_returns(
     """
     if runs < 1:
         raise ConfigError(f"is {runs}", field="runs", expected="at least 1")
-    settings = settings or ReturnSettings()
+    settings = settings or PathFollowerSettings()
     vo = vo or VisualOdometryNoise()
     if isinstance(rng, Sequence):
         if len(rng) != runs or not all(isinstance(g, np.random.Generator) for g in rng):
