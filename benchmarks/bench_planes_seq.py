@@ -4,7 +4,7 @@ Data: the 100 consecutive 7-Scenes frames of ``rgbd/7scenes-tsdf`` (30 Hz, hand-
 0.1-1.4 cm between frames; reference = the dataset's KinectFusion poses), taken every 1, 5, 10
 and 20 frames, and the slambook-ch5 pairs 1 -> 2 and 2 -> 3 (large motions).
 
-**Transfer table** (issue 26): both shared sequences, every frame, with ONE default
+**Transfer table**: both shared sequences, every frame, with ONE default
 ``OdometrySettings`` - 7-Scenes and ``rgbd/tum-fr3-structure-notexture-far`` (100 real Kinect
 frames of large untextured planes; reference = motion capture, ``groundtruth.txt``
 interpolated at the frame times by :func:`navkit.planes.metrics.poses_at`; frames before the
@@ -259,7 +259,7 @@ def load_sequence(name: str, n: int | None = None) -> tuple[list, np.ndarray]:
 
 
 def transfer_rows(quick: bool) -> tuple[list[Row], list[str]]:
-    """Issue 26's table: both shared sequences, one default settings object, navkit and Open3D
+    """The transfer table: both shared sequences, one default settings object, navkit and Open3D
     hybrid (single-threaded: ``OMP_NUM_THREADS=1`` is the caller's) in the same run."""
     from navkit.errors import DataNotFoundError
     from navkit.geometry import se3_inverse
