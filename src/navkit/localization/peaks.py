@@ -6,17 +6,13 @@ featureless wall is flat along itself) and the covariance of the fix.
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from navkit.geometry._validate import as_points
 from navkit.localization.field import LikelihoodField
+from navkit.localization.matcher_settings import _DEFAULT_SETTINGS, MatcherSettings
 from navkit.localization.search import _Search
-
-if TYPE_CHECKING:
-    from navkit.localization.matcher import MatcherSettings
 
 
 def analyse_peak(
@@ -43,11 +39,7 @@ def analyse_peak(
     best : float
         The best score in the neighbourhood.
     """
-    if settings is None:
-        from navkit.localization.matcher import MatcherSettings
-
-        settings = MatcherSettings()
-    s = settings
+    s = settings or _DEFAULT_SETTINGS
     P = as_points(points, 2)
     x0 = np.asarray(pose, dtype=np.float64).reshape(3)
     r = fld.resolution

@@ -51,10 +51,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
-from navkit.errors import ConfigError, InputError
+from navkit.errors import InputError
 from navkit.obstacles.detector import Obstacle
 from navkit.obstacles.rules import GROUND, OBSTACLE, SIDE_SHADOW, UNRELIABLE
-from navkit.obstacles.settings import DEFAULT_SHAPES
 from navkit.obstacles.unorganised_ground import (
     GroundSurface,
     ground_surface,
@@ -62,6 +61,7 @@ from navkit.obstacles.unorganised_ground import (
     lowest_per_cell,
     point_spacing,
 )
+from navkit.obstacles.unorganised_settings import UnorganisedSettings
 
 __all__ = [
     "CloudKind",
@@ -79,123 +79,6 @@ __all__ = [
     "recognise_cloud",
     "reference_ground",
 ]
-
-
-@dataclass(frozen=True)
-class UnorganisedSettings:
-    """Settings of the unorganised path: one object for every cloud.
-
-    Lengths are either multiples of the data's point spacing ``s`` (median horizontal
-    nearest-neighbour distance, measured per cloud) or metres of the scene (object sizes).
-
-    Attributes
-    ----------
-    c0_deg : float
-        Steepest terrain slope (deg). An edge of the ground TIN rising faster than this plus the
-        ground band is a height jump (rule P4), and a triangle tilted more than ``c1`` is steep
-        (P1). Natural terrain in the data may reach it (hillsides, embankments); walls exceed it.
-    c1_deg : float or None
-        Tilt threshold of P1 (deg); ``None`` = ``c0_deg`` (as on the scan path).
-    grid_spacings : float
-        Cell of the minimum surface used by the opening, in point spacings (1.5: most cells
-        hold a point, so the surface has few holes to fill).
-    thin_spacings : float
-        Thinning cell of the mesh, in point spacings (the lowest point per cell is a vertex).
-    max_object_m : float
-        Half-width of the largest object the opening removes (m): the largest window radius. An
-        object wider than twice this is left to the jump rule on the TIN.
-    opening_slope : float
-        Terrain slope (rise over run) the opening tolerates between two window sizes: a cell
-        whose opened height drops by more than ``opening_slope * window`` is an object cell.
-    band_noise : float
-        Ground band = ``max(band_min_m, band_noise * noise)`` with ``noise`` the measured height
-        noise of the cloud (:func:`height_noise`): a point within the band of the ground surface
-        is ground.
-    band_min_m : float
-        Floor of the ground band (m): below it the data cannot separate low objects (grass,
-        kerbs) from the ground whatever the noise.
-    slope_scale_m : float
-        The band grows by ``slope_scale_m * tan(slope)`` of the ground surface: on a slope an
-        error in x-y of a fraction of the spacing is a height error.
-    low_factor : float
-        A point more than ``low_factor`` bands below the ground surface is a low outlier
-        (multipath, a wrong echo), not ground.
-    gap_spacings : float
-        A mesh triangle with an edge longer than this many spacings spans a hole in the data
-        (water, an occlusion): unreliable (-1).
-    tile_m, overlap_m : float
-        Square tiles processed one at a time (m) and how far each tile's working area reaches
-        past its own square (m). ``overlap_m`` must hold the largest opening window.
-    min_obstacle_triangles : int
-        Connected obstacle zones with fewer triangles are not reported as obstacles (their
-        points keep their per-point label).
-    min_obstacle_height_m : float
-        Obstacle zones lower than this over the ground surface are not reported.
-    build_map, shapes, guaranteed_shapes : see :class:`~navkit.obstacles.ObstacleSettings`.
-    """
-
-    c0_deg: float = 35.0
-    c1_deg: float | None = None
-    grid_spacings: float = 1.5
-    thin_spacings: float = 1.0
-    max_object_m: float = 18.0
-    opening_slope: float = 0.15
-    band_noise: float = 3.0
-    band_min_m: float = 0.5
-    slope_scale_m: float = 1.25
-    low_factor: float = 3.0
-    gap_spacings: float = 20.0
-    tile_m: float = 512.0
-    overlap_m: float = 48.0
-    min_obstacle_triangles: int = 4
-    min_obstacle_height_m: float = 1.0
-    build_map: bool = True
-    shapes: tuple[str, ...] = DEFAULT_SHAPES
-    guaranteed_shapes: tuple[str, ...] = ("A1", "MEC")
-
-    def __post_init__(self) -> None:
-        def check(name: str, ok: bool, expected: str) -> None:
-            if not ok:
-                raise ConfigError(f"= {getattr(self, name)!r}", field=name, expected=expected)
-
-        for name in (
-            "grid_spacings",
-            "thin_spacings",
-            "max_object_m",
-            "opening_slope",
-            "band_noise",
-            "band_min_m",
-            "slope_scale_m",
-            "low_factor",
-            "gap_spacings",
-            "tile_m",
-            "min_obstacle_height_m",
-        ):
-            v = getattr(self, name)
-            check(name, isinstance(v, (int, float)) and math.isfinite(v) and v > 0, "a number > 0")
-        check("c0_deg", 0.0 < self.c0_deg < 90.0, "degrees in (0, 90)")
-        check(
-            "c1_deg", self.c1_deg is None or 0.0 < self.c1_deg < 90.0, "None or degrees in (0, 90)"
-        )
-        check("overlap_m", math.isfinite(self.overlap_m) and self.overlap_m >= 0, "metres >= 0")
-        check(
-            "overlap_m",
-            self.overlap_m >= self.max_object_m,
-            f"metres >= max_object_m ({self.max_object_m}): a tile must hold the widest window",
-        )
-        check("min_obstacle_triangles", self.min_obstacle_triangles >= 1, "an integer >= 1")
-        object.__setattr__(self, "shapes", tuple(self.shapes))
-        object.__setattr__(self, "guaranteed_shapes", tuple(self.guaranteed_shapes))
-        from navkit.geometry.shapes import SHAPES
-
-        for name in ("shapes", "guaranteed_shapes"):
-            bad = [s for s in getattr(self, name) if s not in SHAPES]
-            check(name, not bad, f"names among {sorted(SHAPES)}")
-
-    @property
-    def c1_rad(self) -> float:
-        """The P1 tilt threshold in radians."""
-        return math.radians(self.c0_deg if self.c1_deg is None else self.c1_deg)
 
 
 # ----------------------------------------------------------------------------------------------

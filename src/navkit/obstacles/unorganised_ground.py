@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,9 +17,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from navkit.errors import InputError
-
-if TYPE_CHECKING:
-    from navkit.obstacles.unorganised import UnorganisedSettings
+from navkit.obstacles.unorganised_settings import UnorganisedSettings
 
 
 def point_spacing(xy: NDArray[np.float64], *, sample: int = 20_000) -> float:

@@ -10,7 +10,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.runtime.capabilities import PoseBuffer, StageResult
 from navkit.runtime.messages import (
     CameraData,
     Message,
@@ -19,6 +18,7 @@ from navkit.runtime.messages import (
     TexturedPlane,
 )
 from navkit.runtime.pipeline import Pipeline
+from navkit.runtime.stage_base import PoseBuffer, StageResult
 
 __all__ = ["PlanesStage", "textured_planes"]
 
