@@ -387,7 +387,7 @@ def test_fixed_acos_cos_are_the_kernels_bits_and_libm_close(rng):
 
 @pytest.mark.twin("sum_rows")
 def test_sum_rows_bit_for_bit(rng):
-    """The region sums of moment rows: ``extract._sum_rows`` (``numpy.add.at``) gives the
+    """The region sums of moment rows: ``moments._sum_rows`` (``numpy.add.at``) gives the
     kernel's bits - each group's rows added one after the other from +0 in both - on rows whose
     magnitudes span 1e-6 to 1e6 (where another order of the additions changes the last bits, as
     the reversed order shows)."""

@@ -53,11 +53,11 @@ TWINS = {
     "cos_scalar": "navkit.geometry.angles.cos",
     "dense_components": "navkit.planes.regions._dense_components",
     "patch_graph": "navkit.planes.regions._grow_regions",
-    "patch_moments": "navkit.planes.extract._patch_moments",
-    "plane_rows": "navkit.planes.extract._planes_from_rows",
+    "patch_moments": "navkit.planes.moments._patch_moments",
+    "plane_rows": "navkit.planes.moments._planes_from_rows",
     "prune_merge": "navkit.planes.regions._prune_merge",
     "refine_pixels": "navkit.planes.extract._refine_border_numpy",
-    "sum_rows": "navkit.planes.extract._sum_rows",
+    "sum_rows": "navkit.planes.moments._sum_rows",
 }
 """Each public kernel -> its NumPy twin (``patch_graph``: the planar and edge tests of
 ``_grow_regions``' NumPy path; ``cell_components``: its components of the cell graph by
@@ -109,7 +109,7 @@ def _raw_row(
     """One raw float64 moment row ``out (13,)`` - count, sums, sums of outer products - from the
     moments about a reference point: ``n``, ``ref (3,)``, the sums of the coordinates minus it
     ``sd (3,)`` and of their products ``ssd (6,)`` (xx, xy, xz, yy, yz, zz). The operations of
-    ``extract._moment_rows`` in its order: ``S = n ref + Sd``, ``SS = ((SSd + ref Sd^T) + Sd
+    ``moments._moment_rows`` in its order: ``S = n ref + Sd``, ``SS = ((SSd + ref Sd^T) + Sd
     ref^T) + (n ref) ref^T``."""
     out[0] = n
     for a in range(3):
@@ -127,13 +127,13 @@ def patch_moments(
     P: np.ndarray, hc: int, wc: int, c: int, valid: np.ndarray, XP: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - compiled
     """Step 1 of the extraction, one band of ``c`` rows at a time (see
-    ``extract._patch_moments``).
+    ``moments._patch_moments``).
 
     Fills ``valid (hc c, wc c)`` (finite, non-zero range) and ``XP (G, 3, c c)`` (each patch's
     float32 coordinates, 0 where invalid, patch by patch: :func:`refine_pixels` reads the
     border patches from it) and returns per patch the raw float64
     moment row ``(G, 13)`` (count, sums, sums of outer products: the float32 sums about the
-    patch's float32 mean converted as ``extract._moment_rows`` does) and that mean ``(G, 3)``.
+    patch's float32 mean converted as ``moments._moment_rows`` does) and that mean ``(G, 3)``.
 
     The loops run along whole image rows (``wc c`` pixels: long, branch-free loops that LLVM
     vectorises without remainders; per patch they were ``c`` = 20 pixels, 8 + 8 + 4 scalar on
@@ -275,7 +275,7 @@ def _patch_stride(
     M: np.ndarray, g: int, c: int, cell: float, sqrt2: float
 ) -> np.int64:  # pragma: no cover - compiled
     """The pixel stride of patch ``g``'s outline samples from its scatter (moment row ``M[g]``):
-    ``extract._sample_stride``'s float64 operations, in the same order."""
+    ``moments._sample_stride``'s float64 operations, in the same order."""
     n = max(M[g, 0], 1.0)
     m0 = M[g, 1] / n
     m1 = M[g, 2] / n
@@ -313,7 +313,7 @@ def refine_pixels(
     ``cand (B, m)`` candidate regions (-1 padded), ``n32 (n_reg, 3)`` float32 normals and
     ``rho32 (n_reg,)`` distances, ``M (G, 13)`` the patch moments and ``raster`` the outline
     cell. Per (patch, candidate) the float32 offset ``n . ref - rho`` and per patch the outline
-    samples' stride (``extract._sample_stride``) are computed here as the NumPy path computes
+    samples' stride (``moments._sample_stride``) are computed here as the NumPy path computes
     them (the same float32 / float64 operations in the same order, instead of ~20 NumPy
     calls). The centred float32 coordinates and the bound are recomputed exactly as
     :func:`patch_moments` / the NumPy path define them.
@@ -321,7 +321,7 @@ def refine_pixels(
     earlier slot). Returns ``complete (B,)``, the raw float64 moments ``(n_reg, 13)`` of the
     pixels of the incomplete patches per region (per (patch, candidate): the float64 sums of d
     and d d^T, the pixels added one after the other in raster order as the twin's weighted
-    ``bincount`` adds them, converted by ``extract._moment_rows``' arithmetic and added in
+    ``bincount`` adds them, converted by ``moments._moment_rows``' arithmetic and added in
     (patch, slot) order as ``sum_rows`` adds them) and the outline samples of the incomplete
     patches: their labelled pixels on every ``stride[b]``-th row and column, ``float32(d + ref)``
     ``(3, K)``, and their regions ``(K,)`` (patch by patch, raster order within one).
@@ -460,7 +460,7 @@ def refine_pixels(
                 for t in range(13):
                     Mreg[k, t] += row[t]
         # outline samples: labelled pixels on every st-th row and column, raster order (st:
-        # extract._sample_stride's float64 operations)
+        # moments._sample_stride's float64 operations)
         st = _patch_stride(M, g, c, raster, sqrt2)
         for r in range(0, c, st):
             for q in range(0, c, st):
@@ -841,7 +841,7 @@ def border_patches(
 @njit(cache=True)
 def sum_rows(groups: np.ndarray, n_groups: int, M: np.ndarray) -> np.ndarray:  # pragma: no cover
     """Sums of the rows of ``M (G, 13)`` per group ``groups (G,)`` (-1 = none): ``(n_groups,
-    13)``, each group's rows added one after the other from +0 (``extract._sum_rows``'
+    13)``, each group's rows added one after the other from +0 (``moments._sum_rows``'
     ``numpy.add.at``: the same additions, the same bits)."""
     R = np.zeros((n_groups, M.shape[1]), np.float64)
     for g in range(len(groups)):

@@ -241,7 +241,7 @@ def outline_samples(
     coordinates: the quadrilaterals of its wholesale patches that sample the plane densely and
     the points - the sampled pixels ``points (3, N)`` float32 of the mixed patches (regions
     ``point_region``, segment ``new_id[region + 1]``, -1 = none), then every ``t``-th row and column of the valid pixels of its
-    other wholesale patches (``t`` from the patch's scatter ``M``, ``extract._sample_stride``).
+    other wholesale patches (``t`` from the patch's scatter ``M``, ``moments._sample_stride``).
 
     ``labels (H, W)`` are segment indices, ``wholesale (hc, wc)`` the patches assigned whole,
     ``segmap (hc, wc)`` the segment of each patch's region (-1 = none), ``axes (K, 2, 3)`` and
@@ -303,7 +303,7 @@ def outline_samples(
         if use[p]:
             n_use[k + 1] += 1
             continue
-        # the pixel stride of a patch rasterised pixel by pixel (extract._sample_stride)
+        # the pixel stride of a patch rasterised pixel by pixel (moments._sample_stride)
         st = _patch_stride(M, g, c, cell, sqrt2)
         stride[p] = st
         for r in range(0, c, st):

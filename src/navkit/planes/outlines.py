@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from navkit.geometry.fitting import Plane
-from navkit.planes.extract import (
+from navkit.planes.moments import (
     _Border,
     _outline_kernels,
     _Patches,

@@ -12,7 +12,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.planes.extract import (
+from navkit.planes.moments import (
     ExtractionSettings,
     _dot3,
     _kernels,
