@@ -86,6 +86,7 @@ KERNEL_MODULES = (
     "obstacles/_kernels_mesh.py",
     "path/_kernels.py",
     "planes/_kernels.py",
+    "planes/_kernels_dense.py",
     "planes/_kernels_outline.py",
     "stereo/_kernels.py",
 )

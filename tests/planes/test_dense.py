@@ -48,6 +48,35 @@ def test_dense_recovers_a_small_simulated_motion_from_the_identity():
     assert set(r.dof_sources) == {"tx", "ty", "tz", "rx", "ry", "rz"}
 
 
+@pytest.mark.twin("dense_terms", "normal_equations")
+def test_the_dense_kernels_equal_their_twins_bit_for_bit():
+    """One refinement, each Gauss-Newton step's residuals, Jacobians and normal equations,
+    with the compiled kernels and with their NumPy twins: the same bits (docs/kernels.md)."""
+    from navkit.planes.dense import DenseSettings, _dense_align, _normal_equations, _terms
+
+    pytest.importorskip("numba")
+    motion = se3_from_rt(Rotation.from_rotvec([0.01, -0.02, 0.01]).as_matrix(), [0.03, 0.0, -0.02])
+    p = render_pair(3, motion)
+    f1, f2 = _dense(p.f1.frame), _dense(p.f2.frame)
+    s = DenseSettings()
+    for lev in s.levels:
+        a = _terms(f1.levels[lev], f2.levels[lev], np.eye(4), s, lev, 0.01, True)
+        b = _terms(f1.levels[lev], f2.levels[lev], np.eye(4), s, lev, 0.01, False)
+        assert len(a[0]) > 100
+        for x, y in zip(a, b, strict=True):
+            np.testing.assert_array_equal(x, y)
+        w = np.abs(a[0]) + 0.5
+        for J, r in ((a[1], a[0]), (a[3], a[2])):
+            for x, y in zip(
+                _normal_equations(J, w, r, True), _normal_equations(J, w, r, False), strict=True
+            ):
+                np.testing.assert_array_equal(x, y)
+    ra = _dense_align(f1, f2, np.eye(4), s, compiled=True)
+    rb = _dense_align(f1, f2, np.eye(4), s, compiled=False)
+    np.testing.assert_array_equal(ra.T, rb.T)
+    assert ra.iterations == rb.iterations and ra.overlap == rb.overlap
+
+
 def test_rigid_projects_onto_rotations():
     T = np.eye(4)
     T[:3, :3] = Rotation.from_rotvec([0.1, 0.2, 0.3]).as_matrix() * 1.01

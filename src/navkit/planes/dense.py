@@ -52,6 +52,7 @@ from navkit.domains import (
 )
 from navkit.errors import ConfigError
 from navkit.geometry._validate import check_settings
+from navkit.jit import kernels_enabled
 from navkit.planes.noise import DepthNoise, brightness_sigma
 from navkit.sensors import PinholeCamera
 
@@ -269,7 +270,7 @@ def _bilinear(img: NDArray[np.float32], u: NDArray, v: NDArray) -> NDArray[np.fl
     a = (u - u0)[:, None]
     b = (v - v0)[:, None]
     W = img.shape[1]
-    flat = img.reshape(-1, img.shape[2])
+    flat = img.reshape(-1, img.shape[2]).astype(np.float64)
     i = v0 * W + u0
     top = flat[i] * (1 - a) + flat[i + 1] * a
     bot = flat[i + W] * (1 - a) + flat[i + W + 1] * a
@@ -306,38 +307,142 @@ def _robust_scale(r: NDArray[np.float64], floor: float) -> float:
     return max(1.4826 * float(np.median(np.abs(r - np.median(r)))), floor)
 
 
-def _terms(tgt: _Level, src: _Level, T, s: DenseSettings, lev: int, sigma_b: float):
+_Terms = tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.float64],
+    NDArray[np.int64],
+    NDArray[np.float64],
+]
+_DENSE_KERNELS: list = []  # the compiled module, imported on first use (no Numba at import)
+
+
+def _kernels():  # type: ignore[no-untyped-def]
+    """The compiled kernels (:mod:`navkit.planes._kernels_dense`), imported on first use."""
+    if not _DENSE_KERNELS:
+        from navkit.planes import _kernels_dense
+
+        _DENSE_KERNELS.append(_kernels_dense)
+    return _DENSE_KERNELS[0]
+
+
+def _level_args(tgt: _Level, src: _Level, T, s: DenseSettings, lev: int, sigma_b: float) -> tuple:
+    """The arguments of :func:`~navkit.planes._kernels_dense.dense_terms` and its twin."""
+    R = np.ascontiguousarray(T[:3, :3], dtype=np.float64)
+    t = np.ascontiguousarray(T[:3, 3], dtype=np.float64)
+    K = np.array(tgt.K, dtype=np.float64)
+    return (
+        src.src,
+        src.src_gray,
+        R,
+        t,
+        K,
+        tgt.V,
+        tgt.N,
+        tgt.G3,
+        float(s.max_depth_diff_sigmas),
+        float(s.noise.k),
+        float(2**lev),
+        float(sigma_b),
+    )
+
+
+def _terms(
+    tgt: _Level, src: _Level, T, s: DenseSettings, lev: int, sigma_b: float, compiled: bool
+) -> _Terms:
     """Residuals and Jacobians of both terms at one level for the current ``T``, each in
-    sigmas of its noise (depth: ``sqrt(2) sigma_z``, also returned in metres per point;
-    brightness: ``sigma_b``)."""
-    fx, fy, cx, cy = tgt.K
-    H, W = tgt.gray.shape
-    Y = src.src @ T[:3, :3].T + T[:3, 3]
-    z = Y[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = fx * Y[:, 0] / z + cx
-        v = fy * Y[:, 1] / z + cy
-    inside = (z > 0.1) & (u >= 0) & (v >= 0) & (u < W - 1) & (v < H - 1)
-    idx = np.nonzero(inside)[0]
-    Y, u, v, z = Y[idx], u[idx], v[idx], z[idx]
+    sigmas of its noise (depth: ``sqrt(2) sigma_z`` at the target's depth, also returned in
+    metres per correspondence; brightness: ``sigma_b``), and the correspondences' source
+    indices: ``(rG, JG, rI, JI, idx, sig)``."""
+    args = _level_args(tgt, src, T, s, lev, sigma_b)
+    f = _kernels().dense_terms if compiled else _terms_numpy
+    n, idx, rG, JG, rI, JI, sig = f(*args)
+    return rG[:n], JG[:n], rI[:n], JI[:n], idx[:n], sig[:n]
+
+
+def _terms_numpy(
+    src_pts, src_gray, R, t, K, V, N, G3, max_diff, noise_k, level_scale, sigma_b
+) -> tuple[int, NDArray, NDArray, NDArray, NDArray, NDArray, NDArray]:
+    """NumPy twin of :func:`navkit.planes._kernels_dense.dense_terms` (same operations, same
+    order: same bits)."""
+    fx, fy, cx, cy = (float(k) for k in K)
+    H, W = V.shape[:2]
+    x, y, zs = src_pts[:, 0], src_pts[:, 1], src_pts[:, 2]
+    Y0 = x * R[0, 0] + y * R[0, 1] + zs * R[0, 2] + t[0]
+    Y1 = x * R[1, 0] + y * R[1, 1] + zs * R[1, 2] + t[1]
+    z = x * R[2, 0] + y * R[2, 1] + zs * R[2, 2] + t[2]
+    keep = np.nonzero(z > 0.1)[0]
+    Y0, Y1, z = Y0[keep], Y1[keep], z[keep]
+    u = fx * Y0 / z + cx
+    v = fy * Y1 / z + cy
+    inside = (u >= 0.0) & (v >= 0.0) & (u < W - 1) & (v < H - 1)
+    keep, Y0, Y1, z, u, v = keep[inside], Y0[inside], Y1[inside], z[inside], u[inside], v[inside]
     ui, vi = np.rint(u).astype(np.int64), np.rint(v).astype(np.int64)
-    V1 = tgt.V[vi, ui].astype(np.float64)
-    N1 = tgt.N[vi, ui].astype(np.float64)
-    good = np.isfinite(V1[:, 2]) & np.isfinite(N1[:, 0])
+    Vp = V[vi, ui].astype(np.float64)
+    Np = N[vi, ui].astype(np.float64)
+    good = np.isfinite(Vp[:, 2]) & np.isfinite(Np[:, 0])
     with np.errstate(invalid="ignore"):
-        good &= np.abs(V1[:, 2] - z) < s.max_depth_diff_sigmas * s.noise.sigma(z) * (2**lev)
-    Y, u, v, z, V1, N1, idx = Y[good], u[good], v[good], z[good], V1[good], N1[good], idx[good]
-    # point-to-plane residual in sigmas of the depth noise at the target's depth
-    isg = 1.0 / s.noise.point_to_plane(V1[:, 2])
-    rG = np.einsum("ij,ij->i", N1, Y - V1) * isg
-    JG = np.hstack([N1, _cross(Y, N1)]) * isg[:, None]
-    S = _bilinear(tgt.G3, u, v)
+        good &= np.abs(Vp[:, 2] - z) < max_diff * (noise_k * z * z) * level_scale
+    keep, Y0, Y1, z, u, v = keep[good], Y0[good], Y1[good], z[good], u[good], v[good]
+    V0, V1, V2 = Vp[good, 0], Vp[good, 1], Vp[good, 2]
+    N0, N1, N2 = Np[good, 0], Np[good, 1], Np[good, 2]
+    p = np.sqrt(2.0) * (noise_k * V2 * V2)
+    isg = 1.0 / p
+    rG = (N0 * (Y0 - V0) + N1 * (Y1 - V1) + N2 * (z - V2)) * isg
+    JG = np.stack(
+        [
+            N0 * isg,
+            N1 * isg,
+            N2 * isg,
+            (Y1 * N2 - z * N1) * isg,
+            (z * N0 - Y0 * N2) * isg,
+            (Y0 * N1 - Y1 * N0) * isg,
+        ],
+        axis=1,
+    )
+    S = _bilinear(G3, u, v)
     gxs, gys = S[:, 1] * fx, S[:, 2] * fy
-    rI = (S[:, 0] - src.src_gray[idx]) / sigma_b
+    rI = (S[:, 0] - src_gray[keep]) / sigma_b
     iz = 1.0 / z
-    Jy = np.stack([gxs * iz, gys * iz, -(gxs * Y[:, 0] + gys * Y[:, 1]) * iz * iz], axis=1)
-    JI = np.hstack([Jy, _cross(Y, Jy)]) / sigma_b
-    return rG, JG, rI, JI, len(src.src), 1.0 / isg
+    j0, j1, j2 = gxs * iz, gys * iz, -(gxs * Y0 + gys * Y1) * iz * iz
+    JI = np.stack(
+        [
+            j0 / sigma_b,
+            j1 / sigma_b,
+            j2 / sigma_b,
+            (Y1 * j2 - z * j1) / sigma_b,
+            (z * j0 - Y0 * j2) / sigma_b,
+            (Y0 * j1 - Y1 * j0) / sigma_b,
+        ],
+        axis=1,
+    )
+    return len(keep), keep, rG, JG, rI, JI, p
+
+
+_UPPER = np.triu_indices(6)
+
+
+def _normal_equations(
+    J: NDArray[np.float64], w: NDArray[np.float64], r: NDArray[np.float64], compiled: bool
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(J^T W J, J^T W r)`` (:func:`navkit.planes._kernels_dense.normal_equations`)."""
+    f = _kernels().normal_equations if compiled else _normal_equations_numpy
+    return f(np.ascontiguousarray(J), np.ascontiguousarray(w), np.ascontiguousarray(r))
+
+
+def _normal_equations_numpy(
+    J: NDArray[np.float64], w: NDArray[np.float64], r: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """NumPy twin of :func:`navkit.planes._kernels_dense.normal_equations`: every entry summed
+    over the rows in order from +0 (``np.cumsum`` after a zero row; no BLAS)."""
+    Jw = J * w[:, None]
+    prod = np.concatenate([Jw[:, _UPPER[0]] * J[:, _UPPER[1]], Jw * r[:, None]], axis=1)
+    sums = np.cumsum(np.vstack([np.zeros((1, prod.shape[1])), prod]), axis=0)[-1]
+    H = np.zeros((6, 6))
+    H[_UPPER] = sums[: len(_UPPER[0])]
+    H = np.triu(H) + np.triu(H, 1).T
+    return H, np.ascontiguousarray(sums[len(_UPPER[0]) :])
 
 
 def _huber(r: NDArray[np.float64], k: float) -> NDArray[np.float64]:
@@ -367,6 +472,19 @@ def dense_align(
         Always a result; its ``overlap``, ``inliers`` and residuals say how much to trust it
         (the caller gates on them).
     """
+    return _dense_align(frame1, frame2, T_init, settings, compiled=kernels_enabled())
+
+
+def _dense_align(
+    frame1: DenseFrame,
+    frame2: DenseFrame,
+    T_init: NDArray[np.float64],
+    settings: DenseSettings | None,
+    *,
+    compiled: bool,
+) -> DenseResult:
+    """:func:`dense_align` with the implementation chosen by the caller (compiled kernels or
+    their NumPy twins; an online object decides once, when it is built)."""
     s = settings or DenseSettings()
     T = rigid(T_init)
     its = 0
@@ -378,7 +496,7 @@ def dense_align(
         tgt, src = frame1.levels[lev], frame2.levels[lev]
         for _ in range(n_it):
             its += 1
-            rG, JG, rI, JI, _, _ = _terms(tgt, src, T, s, lev, sigma_b)
+            rG, JG, rI, JI, _, _ = _terms(tgt, src, T, s, lev, sigma_b, compiled)
             if len(rG) < 50:
                 break
             # residuals are in noise sigmas; the robust scale (never below one sigma) absorbs
@@ -387,9 +505,9 @@ def dense_align(
             sI = _robust_scale(rI, 1.0)
             wG = _huber(rG / sG, s.huber) / sG**2
             wI = s.photometric_weight * _huber(rI / sI, s.huber) / sI**2
-            H_G = (JG * wG[:, None]).T @ JG
-            H_I = (JI * wI[:, None]).T @ JI
-            g = (JG * wG[:, None]).T @ rG + (JI * wI[:, None]).T @ rI
+            H_G, g_G = _normal_equations(JG, wG, rG, compiled)
+            H_I, g_I = _normal_equations(JI, wI, rI, compiled)
+            g = g_G + g_I
             Hm = H_G + H_I
             try:
                 xi = -np.linalg.solve(Hm + 1e-6 * np.trace(Hm) / 6 * np.eye(6), g)
@@ -401,8 +519,10 @@ def dense_align(
                 break
     # quality at the finest level
     lev = s.levels[-1]
-    rG, JG, rI, JI, n_src, sig = _terms(frame1.levels[lev], frame2.levels[lev], T, s, lev, sigma_b)
-    overlap = len(rG) / max(n_src, 1)
+    rG, JG, rI, JI, _, sig = _terms(
+        frame1.levels[lev], frame2.levels[lev], T, s, lev, sigma_b, compiled
+    )
+    overlap = len(rG) / max(len(frame2.levels[lev].src), 1)
     sG = _robust_scale(rG, 1.0)
     inl = np.abs(rG) < 3 * sG
     nan = float("nan")

@@ -55,7 +55,8 @@ from navkit.domains import (
 from navkit.errors import NavkitError
 from navkit.geometry import se3_inverse
 from navkit.geometry._validate import check_settings
-from navkit.planes.dense import DenseFrame, DenseResult, DenseSettings, dense_align, rigid
+from navkit.jit import kernels_enabled
+from navkit.planes.dense import DenseFrame, DenseResult, DenseSettings, _dense_align, rigid
 from navkit.planes.frame import PlaneObservation
 from navkit.planes.motion import (
     MotionPrior,
@@ -302,6 +303,7 @@ class PlaneOdometry:
 
     def __init__(self, settings: OdometrySettings | None = None) -> None:
         self.settings = settings or OdometrySettings()
+        self.compiled = kernels_enabled()  # kernels or twins, for this object's life
         self.map = PlaneMap(nu=self.settings.map_nu)
         self.poses: list[NDArray[np.float64]] = []
         self.results: list[FrameMotion | MotionFailure] = []
@@ -623,7 +625,8 @@ class PlaneOdometry:
         for ridx, rframe, T_ref in refs:
             best: tuple[str, DenseResult] | None = None
             for name, T0 in starts:
-                r = dense_align(rframe, dframe, se3_inverse(T_ref) @ T0, ds)
+                T1 = se3_inverse(T_ref) @ T0
+                r = _dense_align(rframe, dframe, T1, ds, compiled=self.compiled)
                 if name == "planes":
                     self._plane_overlap = max(self._plane_overlap, r.overlap)
                 why = gates.check(r)

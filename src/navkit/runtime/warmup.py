@@ -131,10 +131,11 @@ def _global_fix() -> None:
 
 
 def _camera_frames() -> None:
-    """A 640 x 480 RGB-D frame's planes and a 320 x 240 stereo pair's disparity (the default
+    """A 640 x 480 RGB-D frame's planes, plane odometry over two such frames, and a 320 x 240 stereo pair's disparity (the default
     left-right check)."""
     from navkit.mission.pose2d import T_body_camera, pose3
-    from navkit.planes import extract_planes_organized
+    from navkit.geometry import se3_from_rt
+    from navkit.planes import PlaneOdometry, extract_planes_organized, observe_rgbd
     from navkit.sensors import PinholeCamera, StereoRig
     from navkit.sim import load_scene, render_rgbd, render_stereo
     from navkit.stereo import DisparitySettings, compute_disparity
@@ -142,7 +143,13 @@ def _camera_frames() -> None:
     scene = load_scene("yard")
     T = pose3(np.array(scene.start, dtype=np.float64), 0.0) @ T_body_camera(0.6, 10.0)
     cam = PinholeCamera(525.0, 525.0, 319.5, 239.5, 640, 480)
-    extract_planes_organized(render_rgbd(scene, cam, T).frame.points())
+    frame = render_rgbd(scene, cam, T).frame
+    extract_planes_organized(frame.points())
+    odometry = PlaneOdometry()  # the dense step's kernels: two frames 2 cm apart
+    odometry.update(observe_rgbd(frame))
+    odometry.update(
+        observe_rgbd(render_rgbd(scene, cam, T @ se3_from_rt(np.eye(3), [0.02, 0, 0])).frame)
+    )
     small = PinholeCamera(260.0, 260.0, 159.5, 119.5, 320, 240)
     pair = render_stereo(scene, StereoRig(small, 0.12), T, supersample=1).pair
     compute_disparity(pair.left, pair.right)
