@@ -21,6 +21,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from navkit.errors import DegenerateGeometryError, InputError
 from navkit.geometry._validate import as_points
+from navkit.geometry.linalg import cross3
 
 __all__ = [
     "Line2D",
@@ -78,7 +79,7 @@ class Plane:
         ref = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
         u = ref - (ref @ n) * n
         u /= np.linalg.norm(u)
-        return np.stack([u, np.cross(n, u)])
+        return np.stack([u, cross3(n, u)])
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["rows_dot", "rows_matmul", "rows_norm"]
+__all__ = ["cross3", "rows_dot", "rows_matmul", "rows_norm"]
 
 FloatArray = NDArray[np.float64]
 
@@ -29,3 +29,11 @@ def rows_dot(A: FloatArray, v: FloatArray) -> FloatArray:
 def rows_norm(A: FloatArray) -> FloatArray:
     """Euclidean norms of the rows of ``A`` ``(N, 3)``."""
     return np.sqrt(A[:, 0] * A[:, 0] + A[:, 1] * A[:, 1] + A[:, 2] * A[:, 2])
+
+
+def cross3(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``a x b`` of two ``(3,)`` vectors (the same products and differences as ``np.cross``,
+    without its per-call overhead of ~15 us, which dominates for single vectors)."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
 
 from navkit.geometry._validate import check_settings
+from navkit.geometry.linalg import cross3
 from navkit.geometry.polygons import points_in_polygon
 from navkit.planes.extract_cloud import voxelize
 from navkit.planes.segments import PlaneSegment, plane_frame
@@ -78,8 +79,8 @@ def _overlap(a: PlaneSegment, b_pts: NDArray[np.float64], margin: float, frame=N
 
 
 def _rotation_from_two(n1a, n1b, n2a, n2b):
-    c1 = np.cross(n1a, n1b)
-    c2 = np.cross(n2a, n2b)
+    c1 = cross3(n1a, n1b)
+    c2 = cross3(n2a, n2b)
     A = np.stack([n1a, n1b, c1 / np.linalg.norm(c1)])
     B = np.stack([n2a, n2b, c2 / np.linalg.norm(c2)])
     U, _, Vt = np.linalg.svd(B.T @ A)
@@ -161,7 +162,7 @@ def associate(
     found = False
     for a in range(len(pairs)):
         for b in range(a + 1, len(pairs)):
-            if np.linalg.norm(np.cross(n1[a], n1[b])) < sin_par:
+            if np.linalg.norm(cross3(n1[a], n1[b])) < sin_par:
                 continue
             Rab = _rotation_from_two(n1[a], n1[b], n2s[a], n2s[b])
             err = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n1, n2s @ Rab.T), -1, 1)))

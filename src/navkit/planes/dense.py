@@ -94,6 +94,10 @@ class DenseSettings:
     finest_stride : int
         Source points of the finest level taken every ``finest_stride`` rows and columns
         (the target images stay whole).
+    step_tolerance_px : float
+        A level ends when a Gauss-Newton step moves the image by less than this many of its
+        pixels (rotation ``f |w|``, translation ``f |v| / z`` at the points' median depth):
+        smaller steps are below what the level resolves; the next level refines them.
     """
 
     levels: tuple[int, ...] = domain_field(
@@ -109,6 +113,7 @@ class DenseSettings:
         float("inf"), Domain(lo=0.0, lo_open=True, allow_inf=True, note="metres, inf = no limit")
     )
     finest_stride: int = domain_field(2, POSITIVE_INT)
+    step_tolerance_px: float = domain_field(0.05, POSITIVE)
 
     def __post_init__(self) -> None:
         check_settings(self)
@@ -128,17 +133,57 @@ class DenseSettings:
             )
 
 
-@dataclass(frozen=True)
 class _Level:
-    gray: NDArray[np.float32]
-    gx: NDArray[np.float32]
-    gy: NDArray[np.float32]
-    G3: NDArray[np.float32]  # (H, W, 3): brightness and its x / y gradients, gathered at once
-    V: NDArray[np.float32]  # (H, W, 3) vertex map, NaN = none
-    N: NDArray[np.float32]  # (H, W, 3) normal map, NaN = none
-    K: tuple[float, float, float, float]
-    src: NDArray[np.float64]  # (M, 3) valid points of this frame (as source)
-    src_gray: NDArray[np.float64]  # (M,) their brightness
+    """One pyramid level of a frame: its points as a *source* (built at once), and the maps it
+    is read from as a *target* - vertices, normals, brightness and its gradients - built on
+    first use (most frames are only ever a source: only keyframes are aligned against)."""
+
+    def __init__(self, g: NDArray[np.float32], d: NDArray[np.float32], K, stride: int) -> None:
+        fx, fy, cx, cy = K
+        self.K: tuple[float, float, float, float] = (fx, fy, cx, cy)
+        self._g, self._d = g, d
+        ok = np.isfinite(d)
+        ok[0, :] = ok[-1, :] = ok[:, 0] = ok[:, -1] = False
+        if stride > 1:  # a regular subsample of the source points (finest level: CPU)
+            sub = np.zeros_like(ok)
+            sub[::stride, ::stride] = True
+            ok &= sub
+        v, u = np.nonzero(ok)
+        z = d[v, u]
+        uf, vf = u.astype(np.float32), v.astype(np.float32)
+        self.src = np.stack([(uf - cx) / fx * z, (vf - cy) / fy * z, z], axis=-1).astype(
+            np.float64
+        )  # (M, 3) valid points of this frame, as the vertex map has them
+        self.src_gray = g[v, u].astype(np.float64)  # (M,) their brightness
+        self._target: tuple[NDArray[np.float32], ...] | None = None
+
+    def target(self) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+        """``(V, N, G3)``: vertex and normal maps ``(H, W, 3)`` (NaN = none) and brightness
+        with its x / y gradients ``(H, W, 3)``, float32."""
+        if self._target is None:
+            self._target = _target_maps(self._g, self._d, self.K)
+        return self._target  # type: ignore[return-value]
+
+
+def _target_maps(g, d, K) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
+    fx, fy, cx, cy = K
+    H, W = d.shape
+    u, v = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
+    V = np.stack([(u - cx) / fx * d, (v - cy) / fy * d, d], axis=-1).astype(np.float32)
+    N = np.full_like(V, np.nan)
+    dx = V[1:-1, 2:] - V[1:-1, :-2]
+    dy = V[2:, 1:-1] - V[:-2, 1:-1]
+    n = np.cross(dx, dy)
+    nn = np.linalg.norm(n, axis=-1, keepdims=True)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        N[1:-1, 1:-1] = n / nn
+    # a normal across a depth edge is meaningless: both differences must be short
+    span = np.maximum(np.linalg.norm(dx, axis=-1), np.linalg.norm(dy, axis=-1))
+    bad = ~(span < 0.1 * np.maximum(d[1:-1, 1:-1], 0.5))
+    N[1:-1, 1:-1][bad] = np.nan
+    gx = (cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8).astype(np.float32)
+    gy = (cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) / 8).astype(np.float32)
+    return V, N, np.ascontiguousarray(np.dstack([g, gx, gy]))
 
 
 @dataclass(frozen=True)
@@ -176,36 +221,8 @@ class DenseFrame:
             if lev not in s.levels:
                 continue
             stride = s.finest_stride if lev == min(s.levels) else 1
-            out[lev] = _make_level(g, d, (fx, fy, cx, cy), stride)
+            out[lev] = _Level(g, d, (fx, fy, cx, cy), stride)
         return cls(out, sigma_b)
-
-
-def _make_level(g, d, K, stride: int = 1) -> _Level:
-    fx, fy, cx, cy = K
-    H, W = d.shape
-    u, v = np.meshgrid(np.arange(W, dtype=np.float32), np.arange(H, dtype=np.float32))
-    V = np.stack([(u - cx) / fx * d, (v - cy) / fy * d, d], axis=-1).astype(np.float32)
-    N = np.full_like(V, np.nan)
-    dx = V[1:-1, 2:] - V[1:-1, :-2]
-    dy = V[2:, 1:-1] - V[:-2, 1:-1]
-    n = np.cross(dx, dy)
-    nn = np.linalg.norm(n, axis=-1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        N[1:-1, 1:-1] = n / nn
-    # a normal across a depth edge is meaningless: both differences must be short
-    span = np.maximum(np.linalg.norm(dx, axis=-1), np.linalg.norm(dy, axis=-1))
-    bad = ~(span < 0.1 * np.maximum(d[1:-1, 1:-1], 0.5))
-    N[1:-1, 1:-1][bad] = np.nan
-    gx = (cv2.Sobel(g, cv2.CV_32F, 1, 0, ksize=3) / 8).astype(np.float32)
-    gy = (cv2.Sobel(g, cv2.CV_32F, 0, 1, ksize=3) / 8).astype(np.float32)
-    ok = np.isfinite(V[..., 2])
-    ok[0, :] = ok[-1, :] = ok[:, 0] = ok[:, -1] = False
-    if stride > 1:  # a regular subsample of the source points (finest level: CPU)
-        sub = np.zeros_like(ok)
-        sub[::stride, ::stride] = True
-        ok &= sub
-    G3 = np.ascontiguousarray(np.dstack([g, gx, gy]))
-    return _Level(g, gx, gy, G3, V, N, K, V[ok].astype(np.float64), g[ok].astype(np.float64))
 
 
 @dataclass(frozen=True)
@@ -228,7 +245,8 @@ class DenseResult:
         RMS of the inliers' brightness residuals (brightness in [0, 1]).
     iterations : int
     converged : bool
-        The last update at the finest level was below 2e-5 (m and rad).
+        The last step at the finest level moved the image by less than
+        :attr:`DenseSettings.step_tolerance_px` pixels.
     dof_sources : dict
         For each of :data:`DENSE_DOF`: ``"depth"``, ``"image"`` or ``"depth+image"`` - the
         term that carries at least 80 % of the information about that axis (else both).
@@ -300,10 +318,11 @@ def _exp_se3(xi: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def _robust_scale(r: NDArray[np.float64], floor: float) -> float:
-    """1.4826 x MAD (from a regular subsample of at most ~4000 residuals), at least ``floor``."""
+    """1.4826 x MAD (from a regular subsample of at most ~2000 residuals: the scale's relative
+    standard error is then about 3 %), at least ``floor``."""
     if len(r) == 0:
         return floor
-    r = r[:: max(1, len(r) // 4000)]
+    r = r[:: max(1, len(r) // 1000)]
     return max(1.4826 * float(np.median(np.abs(r - np.median(r)))), floor)
 
 
@@ -332,15 +351,16 @@ def _level_args(tgt: _Level, src: _Level, T, s: DenseSettings, lev: int, sigma_b
     R = np.ascontiguousarray(T[:3, :3], dtype=np.float64)
     t = np.ascontiguousarray(T[:3, 3], dtype=np.float64)
     K = np.array(tgt.K, dtype=np.float64)
+    V, N, G3 = tgt.target()
     return (
         src.src,
         src.src_gray,
         R,
         t,
         K,
-        tgt.V,
-        tgt.N,
-        tgt.G3,
+        V,
+        N,
+        G3,
         float(s.max_depth_diff_sigmas),
         float(s.noise.k),
         float(2**lev),
@@ -494,6 +514,13 @@ def _dense_align(
     H_G = H_I = np.zeros((6, 6))
     for lev, n_it in zip(s.levels, s.iterations, strict=True):
         tgt, src = frame1.levels[lev], frame2.levels[lev]
+        # a step that moves the image by less than step_tolerance_px pixels of this level
+        # ends it: rotation w moves a pixel by f |w|, translation v by f |v| / z
+        f = max(tgt.K[0], tgt.K[1])
+        z_typ = (
+            float(np.median(src.src[:: max(1, len(src.src) // 1000), 2])) if len(src.src) else 1.0
+        )
+        converged = False
         for _ in range(n_it):
             its += 1
             rG, JG, rI, JI, _, _ = _terms(tgt, src, T, s, lev, sigma_b, compiled)
@@ -514,7 +541,8 @@ def _dense_align(
             except np.linalg.LinAlgError:
                 break
             T = _exp_se3(xi) @ T
-            converged = bool(np.abs(xi).max() < 2e-5)
+            moved_px = f * (np.abs(xi[3:]).max() + np.abs(xi[:3]).max() / max(z_typ, 0.1))
+            converged = bool(moved_px < s.step_tolerance_px)
             if converged:
                 break
     # quality at the finest level

@@ -17,7 +17,7 @@ from navkit.domains import NON_NEGATIVE_INT, Domain, domain_field
 from navkit.geometry import se3_from_rt
 from navkit.geometry._validate import check_settings
 from navkit.geometry.fitting import Plane, canonical_plane
-from navkit.geometry.linalg import rows_matmul
+from navkit.geometry.linalg import cross3, rows_matmul
 from navkit.planes.associate import AssociationSettings, associate, associate_global
 from navkit.planes.frame import PlaneObservation
 from navkit.planes.quaternion import q1_normal_alignment
@@ -480,7 +480,7 @@ def _rotation_two_normals(
 ) -> NDArray[np.float64]:
     """Least-squares rotation of eqs. 1 and 5: ``n1a ~ R n2a``, ``n1b ~ R n2b`` and their cross
     products (Procrustes on three vectors, as :func:`~navkit.planes.solve.solve_two_planes`)."""
-    c1, c2 = np.cross(n1a, n1b), np.cross(n2a, n2b)
+    c1, c2 = cross3(n1a, n1b), cross3(n2a, n2b)
     A = np.stack([n1a, n1b, c1 / np.linalg.norm(c1)])
     B = np.stack([n2a, n2b, c2 / np.linalg.norm(c2)])
     U, _, Vt = np.linalg.svd(B.T @ A)
@@ -510,7 +510,7 @@ def _fill_from_prior(
     if rank == 2:
         _, (a, b) = normal_rank(N1, s.solver.parallel_deg)
         R = _rotation_two_normals(N1[a], N1[b], N2[a], N2[b]) @ Rp
-        d = np.cross(N1[a], N1[b])
+        d = cross3(N1[a], N1[b])
         d /= np.linalg.norm(d)
         t = np.linalg.lstsq(N1, drho, rcond=None)[0]
         t += (tp @ d - t @ d) * d

@@ -178,6 +178,14 @@ class OdometrySettings:
         then, and the error does not grow with the way there and back.
     max_keyframes : int
         Keyframes kept for revisits (a pyramid is ~4 MB at 640 x 480; the first one is kept).
+    map_keyframe_distance, map_keyframe_angle_deg : float
+        A frame the map tracked merges into the map's planes only once it is this far
+        (metres, degrees) from the last frame that did (:meth:`PlaneOdometry._is_map_keyframe`);
+        in between a frame adds only its planes the map does not have. Between such *map keyframes* a frame
+        sees the same surfaces from nearly the same place: merging it adds CPU (the map
+        update is the costliest step after the dense one), not information. 5 cm / 5 deg:
+        at 1-4 m the view then shifts by 1-9 % of a 58 deg field of view, so new parts of the
+        surfaces enter at each merge; 0 / 0 merges every frame.
     max_history : int
         Poses and results kept (:attr:`PlaneOdometry.poses`, ``results``), and frame numbers
         kept per map plane (``MapPlane.observations``): the most recent ones; 0 = all (the
@@ -203,6 +211,8 @@ class OdometrySettings:
     revisit_distance: float = domain_field(0.15, NON_NEGATIVE)
     revisit_angle_deg: float = domain_field(10.0, Domain(lo=0.0, hi=180.0, note="degrees"))
     max_keyframes: int = domain_field(200, POSITIVE_INT)
+    map_keyframe_distance: float = domain_field(0.05, NON_NEGATIVE)
+    map_keyframe_angle_deg: float = domain_field(5.0, Domain(lo=0.0, hi=180.0, note="degrees"))
     max_history: int = domain_field(0, Domain(integer=True, lo=0, note="0 = all"))
     max_map_planes: int = domain_field(0, Domain(integer=True, lo=0, note="0 = all"))
 
@@ -310,7 +320,8 @@ class PlaneOdometry:
         self._prev: PlaneObservation | None = None
         self._velocity = np.eye(4)
         self._velocity_known = False  # a measured motion, not the start or a failure
-        self._anchor: tuple[PlaneObservation, NDArray[np.float64]] | None = None  # last merged
+        self._anchor: tuple[PlaneObservation, NDArray[np.float64]] | None = None  # last measured
+        self._merged_at: NDArray[np.float64] | None = None  # pose of the last map keyframe
         # dense step: (index, pyramid, T_world_frame) of the keyframe and of the last tracked
         self._keyframe: tuple[int, DenseFrame, NDArray[np.float64]] | None = None
         self._last_good: tuple[int, DenseFrame, NDArray[np.float64]] | None = None
@@ -438,9 +449,11 @@ class PlaneOdometry:
         T: NDArray[np.float64],
         m: _Measured,
     ) -> None:
-        """Stage 7: merge the frame's planes into the map; it becomes the reference of the
-        next frame-to-frame step and, with dense data, of the keyframes."""
+        """Stage 7: a measured frame becomes the reference of the next frame-to-frame step and,
+        with dense data, of the keyframes; a *map keyframe* (:meth:`_is_map_keyframe`) merges
+        all its planes into the map, any other frame only its planes the map does not have."""
         s = self.settings
+        key = self._is_map_keyframe(T, m)
         self.map.merge(
             obs,
             T,
@@ -450,11 +463,24 @@ class PlaneOdometry:
             angle_deg=s.merge_angle_deg,
             distance_m=s.merge_distance,
             margin_m=s.merge_margin,
+            only_new=not key,
         )
+        if key:
+            self._merged_at = T
         self._anchor = (obs, T)
         if dframe is not None:
             self._last_good = (idx, dframe, T)
             self._update_keyframe(idx, dframe, T, m.dense, m.reference)
+
+    def _is_map_keyframe(self, T: NDArray[np.float64], m: _Measured) -> bool:
+        """Does the measured frame merge into the map's existing planes? The first frame; a
+        frame the map did not track (frame-to-frame or dense from the prediction: the map
+        lacks what it sees); a frame ``map_keyframe_distance`` / ``map_keyframe_angle_deg``
+        from the last such frame. Any other frame adds only its new planes."""
+        s = self.settings
+        if self._merged_at is None or not m.source.startswith("map"):
+            return True
+        return _differs(self._merged_at, T, s.map_keyframe_distance, s.map_keyframe_angle_deg)
 
     def _result(
         self, idx: int, obs: PlaneObservation, T: NDArray[np.float64], m: _Measured, t0: float

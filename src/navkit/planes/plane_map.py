@@ -170,13 +170,15 @@ class PlaneMap:
         angle_deg: float,
         distance_m: float,
         margin_m: float,
+        only_new: bool = False,
     ) -> None:
         """Merge the planes of frame ``obs`` (number ``frame``, placed at ``T = T_world_frame``)
         into the map: a frame plane of at least ``min_points`` inliers joins the map plane whose
         normal agrees within ``angle_deg``, distance within ``distance_m`` and outline within
         ``margin_m`` (the nearest in distance), else it starts a new map plane; ``sample``
         inlier points per observation extend it (at most ``20 sample`` kept), and the frame's
-        texture is fused into the plane's running mean."""
+        texture is fused into the plane's running mean. ``only_new``: add only the planes that
+        join no map plane."""
         R, t = T[:3, :3], T[:3, 3]
         rng = np.random.default_rng(frame)
         P = obs.points.reshape(-1, 3)
@@ -184,13 +186,16 @@ class PlaneMap:
             if seg.plane.count < min_points:
                 continue
             n, rho = canonical_plane(R @ seg.normal, float(seg.rho + (R @ seg.normal) @ t))
+            probe = rows_matmul(P[seg.inliers[:: max(1, len(seg.inliers) // 300)]], R.T) + t
+            target = self._find(n, rho, probe, angle_deg, distance_m, margin_m)
+            if only_new and target is not None:
+                continue
             pick = (
                 seg.inliers
                 if len(seg.inliers) <= sample
                 else rng.choice(seg.inliers, sample, replace=False)
             )
             pts = rows_matmul(P[pick], R.T) + t
-            target = self._find(n, rho, pts, angle_deg, distance_m, margin_m)
             if target is None:
                 plane = Plane(n, rho, pts.mean(0), seg.rms, seg.plane.count)
                 mp = MapPlane(
@@ -240,8 +245,7 @@ class PlaneMap:
                 continue
             if len(mp.outline) >= 3:
                 o, ax = mp.plane.rho * mp.plane.normal, mp.plane.basis()
-                sub = pts[:: max(1, len(pts) // 300)]
-                if not points_in_polygon((sub - o) @ ax.T, mp.outline, tolerance=margin_m).any():
+                if not points_in_polygon((pts - o) @ ax.T, mp.outline, tolerance=margin_m).any():
                     continue
             if d < best_d:
                 best, best_d = mp, d
@@ -258,13 +262,21 @@ class PlaneMap:
     ) -> MapView:
         """The map planes seen from ``T_world_view``, with the texture windows centred on where
         the frame ``obs`` (placed at ``T_world_view``) sees each of them: its points within
-        ``near_m`` of the plane, plus ``margin_m``, at most ``max_pixels`` a side."""
+        ``near_m`` of the plane, plus ``margin_m``, at most ``max_pixels`` a side. A map plane
+        none of whose kept points falls in the frame's view (:func:`_in_view`) is left out:
+        the solver's association would only reject it, at a cost that grows with the map."""
         R, t = T_world_view[:3, :3], T_world_view[:3, 3]
-        P = np.asarray(obs.points, dtype=np.float64).reshape(-1, 3)
-        P = P[:: max(1, len(P) // 20_000)]
+        P = np.asarray(obs.points).reshape(-1, 3)
+        P = np.asarray(P[:: max(1, len(P) // 8_000)], dtype=np.float64)
         P = P[np.all(np.isfinite(P), axis=1)]
+        planes = [mp for mp in self.planes if _in_view(mp, obs, P, R, t, near_m)]
         segs, focus, pts = [], [], []
-        for mp in self.planes:
+        if planes:
+            # the frame's points near each map plane (view frame), all planes at once
+            Nw = np.array([mp.plane.normal for mp in planes])
+            rw = np.array([mp.plane.rho for mp in planes])
+            near_all = np.abs(rows_matmul(P, R.T @ Nw.T) - (rw - Nw @ t)) < near_m
+        for k, mp in enumerate(planes):
             nv = R.T @ mp.plane.normal
             n, rho = canonical_plane(nv, float(mp.plane.rho - mp.plane.normal @ t))
             c = R.T @ (mp.plane.centroid - t)
@@ -275,14 +287,13 @@ class PlaneMap:
             )
             outline = rows_matmul(ov - rho * n, plane.basis().T)
             segs.append(PlaneSegment(plane, np.zeros(0, np.int64), outline, mp.area))
-            near = np.abs(P @ n - rho) < near_m
-            focus.append(P[near])
+            focus.append(P[near_all[:, k]])
             pts.append(rows_matmul(mp.points[:: max(1, len(mp.points) // 2000)] - t, R))
         X = np.concatenate(pts) if pts else np.zeros((0, 3))
         return MapView(
             ExtractionResult(tuple(segs), -np.ones(len(X), np.int64)),
             X,
-            map_planes=tuple(self.planes),
+            map_planes=tuple(planes),
             T_world_view=np.asarray(T_world_view, dtype=np.float64),
             nu_map=self.nu,
             focus=tuple(focus),
@@ -393,6 +404,31 @@ class MapView(PlaneObservation):
             nu,
             seg.plane,
         )
+
+
+def _in_view(
+    mp: MapPlane,
+    obs: PlaneObservation,
+    P: NDArray[np.float64],
+    R: NDArray[np.float64],
+    t: NDArray[np.float64],
+    margin_m: float,
+) -> bool:
+    """Can the frame ``obs`` placed at ``(R, t)`` see map plane ``mp``? Some of its kept points
+    (a sample of 200) project into the camera's image in front of it; without a camera, fall
+    within the box of the frame's points ``P`` grown by ``margin_m``."""
+    X = rows_matmul(mp.points[:: max(1, len(mp.points) // 200)] - t, R)
+    cam = obs.camera
+    if cam is not None and obs.T_camera_sensor is None:
+        z = X[:, 2]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u = cam.fx * X[:, 0] / z + cam.cx
+            v = cam.fy * X[:, 1] / z + cam.cy
+        return bool(np.any((z > 0) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height)))
+    if len(P) == 0:
+        return True
+    lo, hi = P.min(0) - margin_m, P.max(0) + margin_m
+    return bool(np.any(np.all((X >= lo) & (X <= hi), axis=1)))
 
 
 def _refit(mp: MapPlane) -> None:

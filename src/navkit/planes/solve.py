@@ -35,6 +35,7 @@ from navkit.errors import ConfigError, NavkitError
 from navkit.geometry import se3_from_rt
 from navkit.geometry._validate import check_settings
 from navkit.geometry.fitting import Plane
+from navkit.geometry.linalg import cross3
 from navkit.geometry.rotations import matrix_to_quat, quat_to_matrix
 from navkit.planes.align import Search1D, Search2D, search_1d, search_2d
 from navkit.planes.quaternion import (
@@ -411,8 +412,8 @@ def two_plane_geometry(
         return MotionFailure(rank, free, f"the normals span {rank} direction(s), 2 expected")
     a, b = chosen
     # rotation: least squares of eqs. 1 and 5 (normals and their cross product)
-    c1 = np.cross(N1[a], N1[b])
-    c2 = np.cross(N2[a], N2[b])
+    c1 = cross3(N1[a], N1[b])
+    c2 = cross3(N2[a], N2[b])
     R = _kabsch(
         np.stack([N1[a], N1[b], c1 / np.linalg.norm(c1)]),
         np.stack([N2[a], N2[b], c2 / np.linalg.norm(c2)]),
@@ -423,7 +424,7 @@ def two_plane_geometry(
     # two directions across the line so t0 . d = 0; free along the line
     d = c1 / np.linalg.norm(c1)
     w = np.sqrt(np.minimum([max(x.count, 1) for x in p1], [max(y.count, 1) for y in p2]))
-    across = np.stack([N1[a], np.cross(d, N1[a])])
+    across = np.stack([N1[a], cross3(d, N1[a])])
     t0 = plane_translation(R, p1, p2, w, s.translation, basis=across)
     return PartialMotion(R, t0, d)
 
@@ -474,7 +475,7 @@ def solve_two_planes(
             continue  # not containing the line direction
         u = d - (d @ n) * n
         u /= np.linalg.norm(u)
-        axes1 = np.stack([u, np.cross(n, u)])
+        axes1 = np.stack([u, cross3(n, u)])
         ref1 = p1[k].rho * n
         axes2 = axes1 @ R  # R^T applied to each row
         ref2 = R.T @ (ref1 - t0)

@@ -131,10 +131,10 @@ def _global_fix() -> None:
 
 
 def _camera_frames() -> None:
-    """A 640 x 480 RGB-D frame's planes, plane odometry over two such frames, and a 320 x 240 stereo pair's disparity (the default
-    left-right check)."""
-    from navkit.mission.pose2d import T_body_camera, pose3
+    """A 640 x 480 RGB-D frame's planes, plane odometry over two such frames, and a 320 x 240
+    stereo pair's disparity (the default left-right check)."""
     from navkit.geometry import se3_from_rt
+    from navkit.mission.pose2d import T_body_camera, pose3
     from navkit.planes import PlaneOdometry, extract_planes_organized, observe_rgbd
     from navkit.sensors import PinholeCamera, StereoRig
     from navkit.sim import load_scene, render_rgbd, render_stereo
