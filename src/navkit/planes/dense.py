@@ -91,9 +91,11 @@ class DenseSettings:
     min_depth, max_depth : float
         Depth range used, metres: the sensor's range (default: every valid depth; the noise
         model already weighs far points down).
-    finest_stride : int
-        Source points of the finest level taken every ``finest_stride`` rows and columns
-        (the target images stay whole).
+    source_points : int
+        Source points per level, at most about: a level with more valid pixels takes every
+        ``k``-th row and column (the smallest such ``k``; the target images stay whole). Six
+        degrees of freedom are fixed long before that many points; more add CPU, and the
+        residual left is the model's (normals, brightness), not the points' noise.
     step_tolerance_px : float
         A level ends when a Gauss-Newton step moves the image by less than this many of its
         pixels (rotation ``f |w|``, translation ``f |v| / z`` at the points' median depth):
@@ -112,7 +114,7 @@ class DenseSettings:
     max_depth: float = domain_field(
         float("inf"), Domain(lo=0.0, lo_open=True, allow_inf=True, note="metres, inf = no limit")
     )
-    finest_stride: int = domain_field(2, POSITIVE_INT)
+    source_points: int = domain_field(5000, POSITIVE_INT)
     step_tolerance_px: float = domain_field(0.05, POSITIVE)
 
     def __post_init__(self) -> None:
@@ -144,7 +146,7 @@ class _Level:
         self._g, self._d = g, d
         ok = np.isfinite(d)
         ok[0, :] = ok[-1, :] = ok[:, 0] = ok[:, -1] = False
-        if stride > 1:  # a regular subsample of the source points (finest level: CPU)
+        if stride > 1:  # a regular subsample of the source points
             sub = np.zeros_like(ok)
             sub[::stride, ::stride] = True
             ok &= sub
@@ -220,7 +222,8 @@ class DenseFrame:
                 cx, cy = (cx + 0.5) / 2 - 0.5, (cy + 0.5) / 2 - 0.5
             if lev not in s.levels:
                 continue
-            stride = s.finest_stride if lev == min(s.levels) else 1
+            n_valid = int(np.count_nonzero(np.isfinite(d)))
+            stride = max(1, int(np.ceil(np.sqrt(n_valid / s.source_points))))
             out[lev] = _Level(g, d, (fx, fy, cx, cy), stride)
         return cls(out, sigma_b)
 

@@ -626,8 +626,10 @@ class PlaneOdometry:
         """Dense refinement against the keyframe (then the last tracked frame), started from
         the plane solution and - when it is missing or disagrees with the prediction by more
         than 2 cm / 1 deg - from the prediction (constant velocity, or the prior) and from the
-        previous pose; of the starts that pass the gates the lowest photometric RMS wins.
-        None (and ``self._dense_reason``) when no start passes."""
+        previous pose; of the starts that pass the gates the lowest photometric RMS wins. A
+        start within 2 cm / 1 deg of a result already accepted is not run: it lies in that
+        result's basin and ends there. None (and ``self._dense_reason``) when no start
+        passes."""
         ds, gates = self.settings.dense, self.settings.gates
         assert ds is not None and self._keyframe is not None
         starts: list[tuple[str, NDArray[np.float64]]] = []
@@ -652,6 +654,8 @@ class PlaneOdometry:
             best: tuple[str, DenseResult] | None = None
             for name, T0 in starts:
                 T1 = se3_inverse(T_ref) @ T0
+                if best is not None and not _differs(best[1].T, T1, 0.02, 1.0):
+                    continue  # starts within 2 cm / 1 deg of an accepted result end there
                 r = _dense_align(rframe, dframe, T1, ds, compiled=self.compiled)
                 if name == "planes":
                     self._plane_overlap = max(self._plane_overlap, r.overlap)
