@@ -236,20 +236,25 @@ class PlaneMap:
         distance_m: float,
         margin_m: float,
     ) -> MapPlane | None:
-        """The map plane the world plane ``(n, rho)`` with points ``pts`` joins, or None."""
-        best, best_d = None, np.inf
-        for mp in self.planes:
-            ang = np.degrees(np.arccos(np.clip(n @ mp.plane.normal, -1, 1)))
-            d = abs(rho - mp.plane.rho)
-            if ang > angle_deg or d > distance_m:
+        """The map plane the world plane ``(n, rho)`` with points ``pts`` joins, or None: of
+        the map planes within ``angle_deg`` and ``distance_m`` whose outline comes within
+        ``margin_m`` of the points, the nearest in distance."""
+        if not self.planes:
+            return None
+        N = np.array([mp.plane.normal for mp in self.planes])
+        r = np.array([mp.plane.rho for mp in self.planes])
+        ang = np.degrees(np.arccos(np.clip(N @ n, -1, 1)))
+        d = np.abs(rho - r)
+        for k in np.argsort(d, kind="stable"):
+            if not (ang[k] <= angle_deg and d[k] <= distance_m):
                 continue
+            mp = self.planes[k]
             if len(mp.outline) >= 3:
                 o, ax = mp.plane.rho * mp.plane.normal, mp.plane.basis()
                 if not points_in_polygon((pts - o) @ ax.T, mp.outline, tolerance=margin_m).any():
                     continue
-            if d < best_d:
-                best, best_d = mp, d
-        return best
+            return mp
+        return None
 
     def view(
         self,
@@ -269,8 +274,10 @@ class PlaneMap:
         P = np.asarray(obs.points).reshape(-1, 3)
         P = np.asarray(P[:: max(1, len(P) // 8_000)], dtype=np.float64)
         P = P[np.all(np.isfinite(P), axis=1)]
-        planes = [mp for mp in self.planes if _in_view(mp, obs, P, R, t, near_m)]
-        segs, focus, pts = [], [], []
+        seen = [(mp, _in_view(mp, obs, P, R, t, near_m)) for mp in self.planes]
+        planes = [mp for mp, X in seen if X is not None]
+        pts = [X for _, X in seen if X is not None]
+        segs, focus = [], []
         if planes:
             # the frame's points near each map plane (view frame), all planes at once
             Nw = np.array([mp.plane.normal for mp in planes])
@@ -288,7 +295,6 @@ class PlaneMap:
             outline = rows_matmul(ov - rho * n, plane.basis().T)
             segs.append(PlaneSegment(plane, np.zeros(0, np.int64), outline, mp.area))
             focus.append(P[near_all[:, k]])
-            pts.append(rows_matmul(mp.points[:: max(1, len(mp.points) // 2000)] - t, R))
         X = np.concatenate(pts) if pts else np.zeros((0, 3))
         return MapView(
             ExtractionResult(tuple(segs), -np.ones(len(X), np.int64)),
@@ -413,10 +419,11 @@ def _in_view(
     R: NDArray[np.float64],
     t: NDArray[np.float64],
     margin_m: float,
-) -> bool:
-    """Can the frame ``obs`` placed at ``(R, t)`` see map plane ``mp``? Some of its kept points
-    (a sample of 200) project into the camera's image in front of it; without a camera, fall
-    within the box of the frame's points ``P`` grown by ``margin_m``."""
+) -> NDArray[np.float64] | None:
+    """A sample of map plane ``mp``'s kept points (200) in the view frame of ``obs`` placed at
+    ``(R, t)``, or None when the frame cannot see the plane: none of them projects into the
+    camera's image in front of it; without a camera, none falls within the box of the frame's
+    points ``P`` grown by ``margin_m``."""
     X = rows_matmul(mp.points[:: max(1, len(mp.points) // 200)] - t, R)
     cam = obs.camera
     if cam is not None and obs.T_camera_sensor is None:
@@ -424,11 +431,13 @@ def _in_view(
         with np.errstate(divide="ignore", invalid="ignore"):
             u = cam.fx * X[:, 0] / z + cam.cx
             v = cam.fy * X[:, 1] / z + cam.cy
-        return bool(np.any((z > 0) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height)))
-    if len(P) == 0:
-        return True
-    lo, hi = P.min(0) - margin_m, P.max(0) + margin_m
-    return bool(np.any(np.all((X >= lo) & (X <= hi), axis=1)))
+        seen = np.any((z > 0) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height))
+    elif len(P) == 0:
+        seen = True
+    else:
+        lo, hi = P.min(0) - margin_m, P.max(0) + margin_m
+        seen = np.any(np.all((X >= lo) & (X <= hi), axis=1))
+    return X if seen else None
 
 
 def _refit(mp: MapPlane) -> None:
