@@ -26,7 +26,6 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
 
 from navkit.geometry._validate import check_settings
-from navkit.geometry.linalg import cross3
 from navkit.geometry.polygons import points_in_polygon
 from navkit.planes.extract_cloud import voxelize
 from navkit.planes.segments import PlaneSegment, plane_frame
@@ -78,14 +77,21 @@ def _overlap(a: PlaneSegment, b_pts: NDArray[np.float64], margin: float, frame=N
     return bool(points_in_polygon(uv, a.outline, tolerance=margin).any())
 
 
-def _rotation_from_two(n1a, n1b, n2a, n2b):
-    c1 = cross3(n1a, n1b)
-    c2 = cross3(n2a, n2b)
-    A = np.stack([n1a, n1b, c1 / np.linalg.norm(c1)])
-    B = np.stack([n2a, n2b, c2 / np.linalg.norm(c2)])
-    U, _, Vt = np.linalg.svd(B.T @ A)
-    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
-    return Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+def _rotations_from_two(n1a, n1b, n2a, n2b):
+    """The rotations ``(K, 3, 3)`` taking normals ``n2a``, ``n2b`` onto ``n1a``, ``n1b`` (least
+    squares, with their cross products), for ``(K, 3)`` stacks of normals."""
+    c1 = np.cross(n1a, n1b)
+    c2 = np.cross(n2a, n2b)
+    A = np.stack([n1a, n1b, c1 / np.linalg.norm(c1, axis=1, keepdims=True)], axis=1)
+    B = np.stack([n2a, n2b, c2 / np.linalg.norm(c2, axis=1, keepdims=True)], axis=1)
+    U, _, Vt = np.linalg.svd(np.swapaxes(B, 1, 2) @ A)
+    V, Ut = np.swapaxes(Vt, 1, 2), np.swapaxes(U, 1, 2)
+    d = np.sign(np.linalg.det(V @ Ut))
+    d[d == 0] = 1.0
+    D = np.zeros((len(d), 3, 3))
+    D[:, 0, 0] = D[:, 1, 1] = 1.0
+    D[:, 2, 2] = d
+    return V @ D @ Ut
 
 
 def associate(
@@ -157,18 +163,17 @@ def associate(
     sg = np.sign(np.einsum("ij,ij->i", n1, n2 @ R.T))
     sg[sg == 0] = 1
     n2s = n2 * sg[:, None]
-    best = np.ones(len(pairs), bool)
-    best_count = -1
-    found = False
-    for a in range(len(pairs)):
-        for b in range(a + 1, len(pairs)):
-            if np.linalg.norm(cross3(n1[a], n1[b])) < sin_par:
-                continue
-            Rab = _rotation_from_two(n1[a], n1[b], n2s[a], n2s[b])
-            err = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n1, n2s @ Rab.T), -1, 1)))
-            inl = err < s.consistency_deg
-            if inl.sum() > best_count:
-                best, best_count, found = inl, int(inl.sum()), True
+    # every non-parallel pair of matches proposes a rotation (all at once); the first with the
+    # most matches within consistency_deg wins
+    ia, ib = np.triu_indices(len(pairs), 1)
+    c1 = np.cross(n1[ia], n1[ib])
+    keep = np.linalg.norm(c1, axis=1) >= sin_par
+    found = bool(keep.any())
+    if found:
+        Rs = _rotations_from_two(n1[ia[keep]], n1[ib[keep]], n2s[ia[keep]], n2s[ib[keep]])
+        cos = np.einsum("kij,nj,ni->kn", Rs, n2s, n1)
+        inl = np.degrees(np.arccos(np.clip(cos, -1, 1))) < s.consistency_deg
+        best = inl[int(np.argmax(inl.sum(axis=1)))]
     kept = [p for p, k in zip(pairs, best, strict=True) if k] if found else list(pairs)
     if len(kept) < len(pairs):
         log.debug(
