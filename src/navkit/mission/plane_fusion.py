@@ -1,14 +1,13 @@
 """Paper 2 in the mission: plane-based motion between camera frames, fused with the VO.
 
 :class:`PlaneMotionFusion` takes one RGB-D frame at a time: paper 2's planes
-(:func:`navkit.planes.observe_rgbd`) and the motion since the previous frame
-(:func:`navkit.planes.estimate_motion`, geometry with >= 3 plane directions, texture with fewer),
-with the VO increment over the same interval as a :class:`~navkit.planes.MotionPrior`. The plane
-increment and the VO increment are blended (a complementary filter, weights by case) and the
-estimate is corrected by the difference; an increment further than the gate from the VO is
-ignored. Decision: frame to frame, not :class:`navkit.planes.PlaneOdometry`'s frame-to-map
-tracking: swapped in, it made the demo's figures worse (final distance to the operator 0.29 ->
-1.17 m, corrected pose RMS 0.35 -> 0.56 m, seed 0; ``docs/mission.md``).
+(:func:`navkit.planes.observe_rgbd`) and the motion since the previous frame measured by one
+:class:`navkit.planes.PlaneOdometry` (frame-to-map tracking, the dense refinement and
+verification; the same object as ``navkit planes odometry`` and ``navkit run``), with the VO
+increment over the same interval as a :class:`~navkit.planes.MotionPrior`. The plane increment
+and the VO increment are blended (a complementary filter, weights by case) and the estimate is
+corrected by the difference; an increment further than the gate from the VO is ignored, a
+failed frame (:class:`~navkit.planes.MotionFailure`) is recorded with its reason.
 """
 
 from __future__ import annotations
@@ -20,7 +19,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from navkit.errors import NavkitError
 from navkit.geometry import se3_inverse, wrap_angle
 from navkit.mission.pose2d import compose, pose3, relative
 from navkit.timing import Timings, timed
@@ -93,7 +91,10 @@ class PlaneMotionFusion:
         self.F, self.rec, self.timings = fusion, record, timings
         self.T_bc = T_body_camera
         self.T_cb = se3_inverse(T_body_camera)
-        self.prev: Any = None  # (observation, vo pose, truth pose)
+        self.prev: Any = None  # (vo pose, truth pose) at the previous frame
+        from navkit.planes import PlaneOdometry
+
+        self.odometry = PlaneOdometry()
 
     def add_frame(
         self,
@@ -112,10 +113,13 @@ class PlaneMotionFusion:
             obs = observe_rgbd(frame)
         if self.prev is not None:
             est = self._motion(obs, est, vo, truth, t)
+        else:
+            with timed(self.timings, "planes_motion"):
+                self.odometry.update(obs)  # the first frame: the odometry's world
         # plane map: the frame's large planes, moved to the map with the corrected estimate
         if outbound:
             self._add_plane_map(obs, pose3(est, ground_z) @ self.T_bc)
-        self.prev = (obs, vo.copy(), truth.copy())
+        self.prev = (vo.copy(), truth.copy())
         return est
 
     def _motion(
@@ -126,11 +130,11 @@ class PlaneMotionFusion:
         truth: NDArray[np.float64],
         t: float,
     ) -> NDArray[np.float64]:
-        from navkit.planes import MotionPrior, estimate_motion
+        from navkit.planes import FrameMotion, MotionPrior
         from navkit.planes.solve import MotionEstimate
 
         F = self.F
-        obs0, vo0, truth0 = self.prev
+        vo0, truth0 = self.prev
         vo_int = relative(vo0, vo)
         true_int = relative(truth0, truth)
         # T_c1_c2 predicted by the VO, with the fusion gate as its 3-sigma bound: it gates the
@@ -139,11 +143,8 @@ class PlaneMotionFusion:
             self.T_cb @ pose3(vo_int, 0.0) @ self.T_bc, F.gate_deg / 3.0, F.gate_m / 3.0
         )
         with timed(self.timings, "planes_motion"):
-            try:
-                mot = estimate_motion(obs0, obs, prior)
-            except NavkitError as exc:
-                log.debug("plane motion failed: %s", exc)
-                mot = None
+            res = self.odometry.update(obs, prior)
+        mot = res.motion if isinstance(res, FrameMotion) else res
         if isinstance(mot, MotionEstimate):
             pinc = _inc_from_se3(self.T_bc @ mot.T @ self.T_cb)
             diff = pinc - vo_int
@@ -163,6 +164,7 @@ class PlaneMotionFusion:
         else:
             pinc = np.full(3, np.nan)
             status = f"failed: {getattr(mot, 'reason', 'exception')}"
+            log.debug("plane motion at t=%.1f s: %s", t, status)
             case = int(getattr(mot, "case", 0))
         self.rec.steps.append(PlaneStep(t, len(obs.segments), case, status, pinc, vo_int, true_int))
         return est
