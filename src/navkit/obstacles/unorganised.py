@@ -311,7 +311,8 @@ class UnorganisedDetection:
         -1 for NaN / (0, 0, 0) points.
     point_obstacle : (N,) int32
         Obstacle id of each point (0 = none): the id of its nearest mesh vertex when the point
-        is not ground.
+        is not ground (the id of its record in ``obstacles``; without ``build_map``, ids unique
+        over the tiles and no records).
     ground_z : (N,) float
         Height of the ground surface under each point (NaN for invalid points).
     obstacles : tuple of Obstacle
@@ -408,6 +409,7 @@ def detect_unorganised(
     counts = {"ground": 0, "unreliable": 0, "obstacle": 0, "side_shadow": 0, "shadow_behind": 0}
     obstacles: list[Obstacle] = []
     tiles_info: list[dict[str, Any]] = []
+    id_base = 0
     lo, hi = xy_all.min(axis=0), xy_all.max(axis=0)
     clock["prepare"] = time.perf_counter() - t0
     for tx0, ty0, tw, th in _tile_origins(lo, hi, settings.tile_m):
@@ -440,10 +442,14 @@ def detect_unorganised(
             cx, cy = ob.polygon_xy.mean(axis=0) if len(ob.polygon_xy) else (np.nan, np.nan)
             if tx0 <= cx <= tx0 + tw and ty0 <= cy <= ty0 + th:
                 keep_obs.append(ob)
-        remap = np.zeros(len(res["obstacles"]) + 1, dtype=np.int32)
-        for k, ob in enumerate(keep_obs):
-            remap[ob.id] = base + k + 1
-        obstacle_id[rows] = remap[ids]
+        if settings.build_map:
+            remap = np.zeros(len(res["obstacles"]) + 1, dtype=np.int32)
+            for k, ob in enumerate(keep_obs):
+                remap[ob.id] = base + k + 1
+            obstacle_id[rows] = remap[ids]
+        else:  # no records: the tile's own obstacle ids, made unique over the tiles
+            obstacle_id[rows] = np.where(ids > 0, ids + id_base, 0)
+            id_base += int(res["point_obstacle"].max(initial=0))
         for k, ob in enumerate(keep_obs):
             obstacles.append(_shifted(ob, base + k + 1, offset))
         for key, v in res["counts"].items():
