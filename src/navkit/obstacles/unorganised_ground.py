@@ -116,18 +116,21 @@ class GroundSurface:
 def _tin_at(
     vxy: NDArray[np.float64], vz: NDArray[np.float64], tri: Any, q: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Height and slope of the TIN at ``q``: each triangle's plane ``z = z0 + g . (p - p0)``
+    (its gradient ``g`` from its two edges), evaluated in the triangle holding the query."""
     s = _find_simplex(tri, q)
     s0 = np.maximum(s, 0)
-    T = tri.transform[s0]
-    b = np.einsum("ijk,ik->ij", T[:, :2], q - T[:, 2])
-    bc = np.column_stack([b, 1.0 - b.sum(axis=1)])
-    V = tri.simplices[s0]
-    zq = np.einsum("ij,ij->i", vz[V], bc)
+    V = tri.simplices
     A, Zv = vxy[V], vz[V]
-    e1 = np.column_stack([A[:, 1] - A[:, 0], Zv[:, 1] - Zv[:, 0]])
-    e2 = np.column_stack([A[:, 2] - A[:, 0], Zv[:, 2] - Zv[:, 0]])
-    n = np.cross(e1, e2)
-    slope = np.hypot(n[:, 0], n[:, 1]) / np.maximum(np.abs(n[:, 2]), 1e-12)
+    e1, e2 = A[:, 1] - A[:, 0], A[:, 2] - A[:, 0]
+    d1, d2 = Zv[:, 1] - Zv[:, 0], Zv[:, 2] - Zv[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    det = np.where(det == 0.0, np.inf, det)  # a flat sliver: slope 0, its first vertex's height
+    gx = (d1 * e2[:, 1] - d2 * e1[:, 1]) / det
+    gy = (e1[:, 0] * d2 - e2[:, 0] * d1) / det
+    p0 = A[s0, 0]
+    zq = Zv[s0, 0] + gx[s0] * (q[:, 0] - p0[:, 0]) + gy[s0] * (q[:, 1] - p0[:, 1])
+    slope = np.hypot(gx, gy)[s0]
     out = s < 0
     if out.any():
         _, nn = cKDTree(vxy).query(q[out])
