@@ -249,12 +249,12 @@ def opening_objects(
     import cv2
 
     surface = (Z - float(Z.min())).astype(np.float32)  # over the lowest cell: mm-exact in float32
-    last = surface
+    last: NDArray[Any] = surface
     obj = np.zeros(Z.shape, dtype=bool)
     for w in range(1, max(1, math.ceil(settings.max_object_m / cell)) + 1):
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * w + 1, 2 * w + 1))
         eroded = cv2.erode(surface, k, borderType=cv2.BORDER_REPLICATE)
-        opened = cv2.dilate(eroded, k, borderType=cv2.BORDER_REPLICATE)
+        opened: NDArray[Any] = cv2.dilate(eroded, k, borderType=cv2.BORDER_REPLICATE)
         obj |= (last - opened) > settings.opening_slope * w * cell
         last = opened
     return obj
@@ -278,7 +278,7 @@ def ground_surface(
        window, a crown) are removed. The TIN of the rest is the ground surface returned.
     """
     cell = settings.grid_spacings * spacing
-    Z, empty = _min_grid(xy, z, cell)
+    Z, _ = _min_grid(xy, z, cell)
     noise = height_noise(Z)
     band = max(settings.band_min_m, settings.band_noise * noise)
     obj = opening_objects(Z, cell, settings)
