@@ -16,11 +16,11 @@ cannot be built. This module builds the mesh the data allow and runs the paper's
    of an obstacle from the ground behind it. A 2.5-D cloud has no line of sight to the sensor, and
    an airborne cloud has roofs larger than the distance between two jumps. The ground is
    estimated from the data: the lowest point per cell (a minimum surface), a progressive opening
-   with growing windows marks the cells that rise above their surroundings faster than the
-   terrain slope allows (objects narrower than the window), and a TIN through the lowest
-   remaining points is the ground surface; components of that TIN bounded by height jumps that
-   all step down out of them (a roof that survived the opening, a tree) are removed by the
-   paper's jump rule.
+   with growing disc windows marks the cells that rise above their surroundings faster than the
+   terrain slope allows (objects narrower than the window), and a TIN through the lowest point
+   of each remaining cell is the ground surface; components of that TIN bounded by height jumps
+   that all step down out of them (a roof wider than the widest window, a tree) are removed by
+   the paper's jump rule.
 4. **The rules on the mesh** (:func:`classify_triangles`, stages 3-5): per triangle the normal
    (stage 3), its tilt, the height-jump code and the vertices' height over the ground estimate
    (stage 4); the classes (stage 5) with the line of sight taken as the vertical (the view of a
@@ -311,7 +311,8 @@ class UnorganisedDetection:
         -1 for NaN / (0, 0, 0) points.
     point_obstacle : (N,) int32
         Obstacle id of each point (0 = none): the id of its nearest mesh vertex when the point
-        is not ground.
+        is not ground (the id of its record in ``obstacles``; without ``build_map``, ids unique
+        over the tiles and no records).
     ground_z : (N,) float
         Height of the ground surface under each point (NaN for invalid points).
     obstacles : tuple of Obstacle
@@ -360,6 +361,7 @@ def detect_unorganised(
     settings: UnorganisedSettings | None = None,
     *,
     source: str = "points",
+    ground_only: bool = False,
 ) -> UnorganisedDetection:
     """Paper 1's stages 3-8 on a cloud without rings (see the module docstring).
 
@@ -368,6 +370,9 @@ def detect_unorganised(
     points : (N, >=3) float
         x, y, z with z up (extra columns ignored). NaN and ``(0, 0, 0)`` points are no-returns.
     settings : UnorganisedSettings, optional
+    ground_only : bool
+        Stop after the per-point ground / non-ground labels (the job of a ground filter such as
+        SMRF or CSF): no mesh, no obstacles; ``point_obstacle`` is all 0 and ``counts`` all 0.
 
     Raises
     ------
@@ -408,6 +413,7 @@ def detect_unorganised(
     counts = {"ground": 0, "unreliable": 0, "obstacle": 0, "side_shadow": 0, "shadow_behind": 0}
     obstacles: list[Obstacle] = []
     tiles_info: list[dict[str, Any]] = []
+    id_base = 0
     lo, hi = xy_all.min(axis=0), xy_all.max(axis=0)
     clock["prepare"] = time.perf_counter() - t0
     for tx0, ty0, tw, th in _tile_origins(lo, hi, settings.tile_m):
@@ -428,7 +434,7 @@ def detect_unorganised(
         core = in_core[work]
         if not core.any():
             continue
-        res = _detect_tile(xy_all[work], z_all[work], settings, source, clock)
+        res = _detect_tile(xy_all[work], z_all[work], settings, source, clock, ground_only)
         rows = idx[work[core]]
         # a point on a shared tile edge is written by the last tile: the same rule everywhere
         labels[rows] = res["labels"][core]
@@ -440,10 +446,14 @@ def detect_unorganised(
             cx, cy = ob.polygon_xy.mean(axis=0) if len(ob.polygon_xy) else (np.nan, np.nan)
             if tx0 <= cx <= tx0 + tw and ty0 <= cy <= ty0 + th:
                 keep_obs.append(ob)
-        remap = np.zeros(len(res["obstacles"]) + 1, dtype=np.int32)
-        for k, ob in enumerate(keep_obs):
-            remap[ob.id] = base + k + 1
-        obstacle_id[rows] = remap[ids]
+        if settings.build_map:
+            remap = np.zeros(len(res["obstacles"]) + 1, dtype=np.int32)
+            for k, ob in enumerate(keep_obs):
+                remap[ob.id] = base + k + 1
+            obstacle_id[rows] = remap[ids]
+        else:  # no records: the tile's own obstacle ids, made unique over the tiles
+            obstacle_id[rows] = np.where(ids > 0, ids + id_base, 0)
+            id_base += int(res["point_obstacle"].max(initial=0))
         for k, ob in enumerate(keep_obs):
             obstacles.append(_shifted(ob, base + k + 1, offset))
         for key, v in res["counts"].items():
@@ -519,8 +529,10 @@ def _detect_tile(
     settings: UnorganisedSettings,
     source: str,
     clock: dict[str, float],
+    ground_only: bool = False,
 ) -> dict[str, Any]:
-    """Stages 2-8 on one tile's points (local x-y)."""
+    """Stages 2-8 on one tile's points (local x-y); only the ground labels with
+    ``ground_only``."""
     t = time.perf_counter()
     spacing = point_spacing(xy)
     if not math.isfinite(spacing) or spacing <= 0:
@@ -538,18 +550,27 @@ def _detect_tile(
     ground = (h <= band) & (h >= -settings.low_factor * band)
     labels = np.where(ground, GROUND, OBSTACLE).astype(np.int8)
     t = _tick(clock, "labels", t)
-    # stage 2: the mesh over the thinned cloud (lowest point per spacing cell)
-    v = lowest_per_cell(xy, z, settings.thin_spacings * spacing)
     info = {
         "spacing_m": spacing,
         "noise_m": surf.noise_m,
         "band_m": surf.band_m,
         "n_ground_vertices": len(surf.z),
-        "n_mesh_vertices": int(v.size),
     }
     counts = {"ground": 0, "unreliable": 0, "obstacle": 0, "side_shadow": 0, "shadow_behind": 0}
     point_obstacle = np.zeros(len(z), dtype=np.int32)
     obstacles: list[Obstacle] = []
+    if ground_only:
+        return {
+            "labels": labels,
+            "ground_z": zg,
+            "point_obstacle": point_obstacle,
+            "obstacles": obstacles,
+            "counts": counts,
+            "info": info,
+        }
+    # stage 2: the mesh over the thinned cloud (lowest point per spacing cell)
+    v = lowest_per_cell(xy, z, settings.thin_spacings * spacing)
+    info["n_mesh_vertices"] = int(v.size)
     try:
         mesh = Delaunay(xy[v])
     except QhullError:

@@ -116,18 +116,21 @@ class GroundSurface:
 def _tin_at(
     vxy: NDArray[np.float64], vz: NDArray[np.float64], tri: Any, q: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Height and slope of the TIN at ``q``: each triangle's plane ``z = z0 + g . (p - p0)``
+    (its gradient ``g`` from its two edges), evaluated in the triangle holding the query."""
     s = _find_simplex(tri, q)
     s0 = np.maximum(s, 0)
-    T = tri.transform[s0]
-    b = np.einsum("ijk,ik->ij", T[:, :2], q - T[:, 2])
-    bc = np.column_stack([b, 1.0 - b.sum(axis=1)])
-    V = tri.simplices[s0]
-    zq = np.einsum("ij,ij->i", vz[V], bc)
+    V = tri.simplices
     A, Zv = vxy[V], vz[V]
-    e1 = np.column_stack([A[:, 1] - A[:, 0], Zv[:, 1] - Zv[:, 0]])
-    e2 = np.column_stack([A[:, 2] - A[:, 0], Zv[:, 2] - Zv[:, 0]])
-    n = np.cross(e1, e2)
-    slope = np.hypot(n[:, 0], n[:, 1]) / np.maximum(np.abs(n[:, 2]), 1e-12)
+    e1, e2 = A[:, 1] - A[:, 0], A[:, 2] - A[:, 0]
+    d1, d2 = Zv[:, 1] - Zv[:, 0], Zv[:, 2] - Zv[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    det = np.where(det == 0.0, np.inf, det)  # a flat sliver: slope 0, its first vertex's height
+    gx = (d1 * e2[:, 1] - d2 * e1[:, 1]) / det
+    gy = (e1[:, 0] * d2 - e2[:, 0] * d1) / det
+    p0 = A[s0, 0]
+    zq = Zv[s0, 0] + gx[s0] * (q[:, 0] - p0[:, 0]) + gy[s0] * (q[:, 1] - p0[:, 1])
+    slope = np.hypot(gx, gy)[s0]
     out = s < 0
     if out.any():
         _, nn = cKDTree(vxy).query(q[out])
@@ -224,6 +227,39 @@ def _jump_components(
     return keep, tri
 
 
+def _lowest_cells(
+    xy: NDArray[np.float64], z: NDArray[np.float64], cell: float, shape: tuple[int, int]
+) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """The lowest point of each full cell of the minimum surface: its index and its cell's flat
+    index (row-major in ``shape``)."""
+    li = lowest_per_cell(xy, z, cell)
+    ij = np.floor((xy[li] - xy.min(axis=0)) / cell).astype(np.int64)
+    return li, ij[:, 0] * shape[1] + ij[:, 1]
+
+
+def opening_objects(
+    Z: NDArray[np.float64], cell: float, settings: UnorganisedSettings
+) -> NDArray[np.bool_]:
+    """The progressive opening of a minimum surface (SMRF's test, Pingel et al. 2013): discs
+    of radius 1, 2, ... cells up to ``max_object_m``; a cell whose opened height drops by more
+    than ``opening_slope * radius * cell`` from the previous disc's is an object cell. The
+    windows are discs (OpenCV's elliptic structuring element), so the slope a window tolerates
+    is the same in every direction: a square window reaches ``sqrt(2)`` times as far along its
+    diagonals and cuts crests and ridges of the terrain that a disc keeps."""
+    import cv2
+
+    surface = (Z - float(Z.min())).astype(np.float32)  # over the lowest cell: mm-exact in float32
+    last: NDArray[Any] = surface
+    obj = np.zeros(Z.shape, dtype=bool)
+    for w in range(1, max(1, math.ceil(settings.max_object_m / cell)) + 1):
+        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * w + 1, 2 * w + 1))
+        eroded = cv2.erode(surface, k, borderType=cv2.BORDER_REPLICATE)
+        opened: NDArray[Any] = cv2.dilate(eroded, k, borderType=cv2.BORDER_REPLICATE)
+        obj |= (last - opened) > settings.opening_slope * w * cell
+        last = opened
+    return obj
+
+
 def ground_surface(
     xy: NDArray[np.float64],
     z: NDArray[np.float64],
@@ -233,44 +269,26 @@ def ground_surface(
     """The ground estimate of one tile (see the module docstring, step 3).
 
     1. The minimum surface on cells of ``grid_spacings * spacing``; its noise gives the band.
-    2. The progressive opening: windows of radius 1, 2, ... cells up to ``max_object_m``; a cell
-       whose opened height drops by more than ``opening_slope * radius * cell`` from the previous
-       window's is an object cell (SMRF's test, Pingel et al. 2013, with square windows).
-    3. A first ground TIN through the centres of the ground cells; the points within the band
-       (grown by the slope) of it are ground candidates.
-    4. The lowest candidate per ``thin_spacings * spacing`` cell, cut at its jumps
-       (:func:`_jump_components`), is the ground TIN returned.
+    2. The progressive opening with disc windows (:func:`opening_objects`) marks object cells.
+    3. The lowest point of each remaining cell (at its own x-y, not the cell's centre: on a
+       slope the centre would shift the surface by up to half a cell times the slope) is a
+       ground vertex.
+    4. The paper's jump rule on the TIN of those vertices (:func:`_jump_components`): the
+       components bounded by jumps that all step down out of them (a roof wider than the widest
+       window, a crown) are removed. The TIN of the rest is the ground surface returned.
     """
     cell = settings.grid_spacings * spacing
-    Z, empty = _min_grid(xy, z, cell)
+    Z, _ = _min_grid(xy, z, cell)
     noise = height_noise(Z)
     band = max(settings.band_min_m, settings.band_noise * noise)
-    obj = np.zeros(Z.shape, dtype=bool)
-    last = Z
-    for w in range(1, max(1, math.ceil(settings.max_object_m / cell)) + 1):
-        size = 2 * w + 1
-        opened = ndimage.maximum_filter(ndimage.minimum_filter(Z, size=size), size=size)
-        obj |= (last - opened) > settings.opening_slope * w * cell
-        last = opened
-    ground_cells = ~obj & ~empty
-    if np.count_nonzero(ground_cells) < 3:
-        ground_cells = ~empty
-    gi = np.argwhere(ground_cells)
-    cxy = (gi + 0.5) * cell + xy.min(axis=0)
-    cz = Z[ground_cells]
+    obj = opening_objects(Z, cell, settings)
+    li, flat = _lowest_cells(xy, z, cell, Z.shape)
+    ok = ~obj.reshape(-1)[flat]
+    if np.count_nonzero(ok) < 3:
+        ok[:] = True
+    v = li[ok]
     lo, hi = xy.min(axis=0), xy.max(axis=0)
     step = 10.0 * cell
-    try:
-        fxy, fz = _framed(cxy, cz, lo, hi, step)
-        zs, slope = _tin_at(fxy, fz, Delaunay(fxy), xy)
-    except QhullError:
-        zs, slope = np.full(len(z), float(np.median(cz))), np.zeros(len(z))
-    r = z - zs
-    thr = band + settings.slope_scale_m * slope
-    cand = np.flatnonzero((r < thr) & (r > -settings.low_factor * thr))
-    if cand.size < 3:
-        cand = np.arange(len(z))
-    v = lowest_per_cell(xy, z, settings.thin_spacings * spacing, cand)
     tan0 = math.tan(math.radians(settings.c0_deg))
     try:
         keep, _ = _jump_components(xy[v], z[v], tan0, band)

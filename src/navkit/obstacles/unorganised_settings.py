@@ -28,8 +28,9 @@ class UnorganisedSettings:
     c1_deg : float or None
         Tilt threshold of P1 (deg); ``None`` = ``c0_deg`` (as on the scan path).
     grid_spacings : float
-        Cell of the minimum surface used by the opening, in point spacings (1.5: most cells
-        hold a point, so the surface has few holes to fill).
+        Cell of the minimum surface used by the opening, in point spacings (1: the surface
+        resolves what the data resolve; the cells left empty take their nearest full cell's
+        height).
     thin_spacings : float
         Thinning cell of the mesh, in point spacings (the lowest point per cell is a vertex).
     max_object_m : float
@@ -67,7 +68,7 @@ class UnorganisedSettings:
 
     c0_deg: float = 35.0
     c1_deg: float | None = None
-    grid_spacings: float = 1.5
+    grid_spacings: float = 1.0
     thin_spacings: float = 1.0
     max_object_m: float = 18.0
     opening_slope: float = 0.15
