@@ -431,12 +431,12 @@ def _in_view(
         with np.errstate(divide="ignore", invalid="ignore"):
             u = cam.fx * X[:, 0] / z + cam.cx
             v = cam.fy * X[:, 1] / z + cam.cy
-        seen = np.any((z > 0) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height))
+        seen = bool(np.any((z > 0) & (u >= 0) & (u < cam.width) & (v >= 0) & (v < cam.height)))
     elif len(P) == 0:
         seen = True
     else:
         lo, hi = P.min(0) - margin_m, P.max(0) + margin_m
-        seen = np.any(np.all((X >= lo) & (X <= hi), axis=1))
+        seen = bool(np.any(np.all((X >= lo) & (X <= hi), axis=1)))
     return X if seen else None
 
 
