@@ -363,24 +363,27 @@ def _marker_cdr(
     c.pack("?", False, align=1)  # mesh_use_embedded_materials
 
 
-def classified_points(points: Any, classes: Any) -> np.ndarray:
+def classified_points(points: Any, classes: Any, out: Any = None) -> np.ndarray:
     """The ``(N, 16)`` uint8 records of a classified cloud: ``x y z`` float32, ``class`` int8,
-    three zero bytes."""
+    three zero bytes; written into ``out`` (``16 N`` zeroed bytes, e.g. a slice of the
+    message's buffer) when given."""
     pts = np.asarray(points).reshape(-1, 3)
-    rec = np.zeros((len(pts), 4), dtype="<f4")
+    n = len(pts)
+    if out is None:
+        out = np.zeros(16 * n, dtype=np.uint8)
+    raw = np.frombuffer(out, dtype=np.uint8, count=16 * n).reshape(n, 16)
+    rec = raw.view("<f4")  # (N, 4): the float32 columns x y z and the class's word
     rec[:, :3] = pts
-    raw = rec.view(np.uint8).reshape(-1, 16)
     raw[:, 12] = np.asarray(classes, dtype=np.int8).reshape(-1).view(np.uint8)
     return raw
 
 
-def classified_cloud_cdr(stamp_ns: int, frame_id: str, points: Any, classes: Any) -> bytes:
+def classified_cloud_cdr(stamp_ns: int, frame_id: str, points: Any, classes: Any) -> bytearray:
     """The CDR bytes of the ``sensor_msgs/PointCloud2`` of a classified cloud (fields ``x y z``
-    float32 + ``class`` int8, 16 bytes a point): the points' bytes copied once, without
-    rosbags' message object. Byte for byte ``serialize_cdr`` of :meth:`_Builder.build`
-    (tested)."""
-    raw = classified_points(points, classes)
-    n = len(raw)
+    float32 + ``class`` int8, 16 bytes a point): the points written once, straight into the
+    message's buffer, without rosbags' message object. Byte for byte ``serialize_cdr`` of
+    :meth:`_Builder.build` (tested)."""
+    n = int(np.asarray(points).size // 3)
     c = _Cdr()
     c.pack("iI", int(stamp_ns // 1_000_000_000), int(stamp_ns % 1_000_000_000), align=4)
     c.string(frame_id)
@@ -394,9 +397,11 @@ def classified_cloud_cdr(stamp_ns: int, frame_id: str, points: Any, classes: Any
     c.pack("?", False, align=1)  # is_bigendian
     c.pack("II", 16, 16 * n, align=4)  # point_step, row_step
     c.pack("I", 16 * n, align=4)
-    c.raw(raw.tobytes())
-    c.pack("?", False, align=1)  # is_dense
-    return b"".join(c.parts)
+    head = b"".join(c.parts)
+    buf = bytearray(len(head) + 16 * n + 1)  # zeroed: padding, and is_dense False at the end
+    buf[: len(head)] = head
+    classified_points(points, classes, memoryview(buf)[len(head) : len(head) + 16 * n])
+    return buf
 
 
 def line_list_cdr(stamp_ns: int, frame_id: str, lines: Sequence[Any]) -> bytes:
