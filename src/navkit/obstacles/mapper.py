@@ -452,13 +452,18 @@ class ObstacleMapper:
     @property
     def occupied(self) -> NDArray[np.bool_]:
         """Confirmed obstacle cells ``(H, W)``."""
+        occ = np.zeros(self.shape[0] * self.shape[1], dtype=bool)
+        occ[self.occupied_cells()] = True
+        return occ.reshape(self.shape)
+
+    def occupied_cells(self) -> NDArray[np.intp]:
+        """Flat (row-major) indices of the confirmed obstacle cells, ascending: ``hits >=
+        min_hits`` and ``hits / max(seen, 1) >= min_ratio``."""
         # the ratio only where there are enough hits (a few cells of the grid)
         h = self.hits.reshape(-1)
         cand = np.flatnonzero(h >= self.settings.min_hits)
         ratio = h[cand] / np.maximum(self.seen.reshape(-1)[cand], 1)
-        occ = np.zeros(h.size, dtype=bool)
-        occ[cand[ratio >= self.settings.min_ratio]] = True
-        return occ.reshape(self.shape)
+        return cand[ratio >= self.settings.min_ratio]
 
     @property
     def recent_occupied(self) -> NDArray[np.bool_]:

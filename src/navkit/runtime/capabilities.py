@@ -135,8 +135,9 @@ def obstacle_lines(
 def obstacle_map_output(mapper: Any, stamp_ns: int, frame_id: str) -> Output:
     """An :class:`~navkit.obstacles.ObstacleMapper`'s grid as ``/navkit/obstacle_map``
     (-1 never seen, 0 seen free, 100 occupied)."""
-    occ = np.where(mapper.seen > 0, np.int8(0), np.int8(-1))  # no snapshot copies of the counts
-    occ[mapper.occupied] = 100
+    occ = (mapper.seen > 0).view(np.int8)  # 1 seen, 0 never: minus 1 gives 0 / -1
+    occ -= 1
+    occ.reshape(-1)[mapper.occupied_cells()] = 100
     origin = np.array(mapper.origin, dtype=np.float64)
     return Output(
         "/navkit/obstacle_map", "grid", stamp_ns, frame_id, (occ, mapper.resolution, origin)
