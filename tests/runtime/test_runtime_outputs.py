@@ -149,3 +149,24 @@ def test_segment_writer_writes_mcaps_unchunked_file(tmp_path):
     np.testing.assert_array_equal(
         np.frombuffer(cloud_msgs[0].message.data, "<f4").reshape(-1, 4)[:, :3], P.astype(np.float32)
     )
+
+
+def test_dumps_json_writes_non_finite_numbers_as_null():
+    """The per-frame JSON (``navkit.runtime.files.dumps_json``): the standard library's text
+    where every value is finite, ``null`` for NaN and infinities (in lists, values and nested
+    arrays) and never inside a name."""
+    import json
+
+    from navkit.runtime.files import dumps_json
+
+    doc = {"a": [1.5, 2, np.float64(0.1)], "b": np.arange(3.0), "NaN": "Infinity", "c": {"d": 1}}
+    assert dumps_json(doc) == json.dumps(
+        {"a": [1.5, 2, 0.1], "b": [0.0, 1.0, 2.0], "NaN": "Infinity", "c": {"d": 1}}
+    )
+    bad = {"x": [np.nan, 1.0, -np.inf], "y": np.inf, "z": np.array([np.nan, 2.0]), "NaN": "NaN"}
+    assert json.loads(dumps_json(bad)) == {
+        "x": [None, 1.0, None],
+        "y": None,
+        "z": [None, 2.0],
+        "NaN": "NaN",
+    }
