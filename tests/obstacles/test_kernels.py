@@ -12,6 +12,7 @@ scenes (both scanners, with noise) and on every real scan grid in ``NAVKIT_DATA/
 from __future__ import annotations
 
 import math
+import pickle
 from dataclasses import replace
 
 import numpy as np
@@ -621,7 +622,11 @@ def test_map_update_compiled_equals_numpy(data_path, rng):
                 ups.append(mapper.update(dets[k % len(dets)], T))
                 if k == 5:
                     recent = [r.copy() for r in mapper.recent]
+                assert not mapper._mark.any()  # the scratch is zero between scans
             out[mode] = (mapper.hits, mapper.seen, list(mapper.recent), recent, ups)
+            clone = pickle.loads(pickle.dumps(mapper))  # a checkpoint: the scratch not kept
+            assert clone._mark is None and np.array_equal(clone.seen, mapper.seen)
+            assert clone.update(dets[0], np.eye(3)) == replace(ups[0], scan=12)
     (ha, sa, ra, qa, ua), (hb, sb, rb, qb, ub) = out["numpy"], out["eager"]
     assert ha.sum() > 0 and sa.sum() > ha.sum()  # not vacuous
     assert all(u.obstacle_cells > 0 for u in ua[:3])

@@ -970,15 +970,16 @@ def map_groups_kernel(flat, tri, tri_obstacle, shadows, ntri, vid, boundary, n):
 
 
 @njit(cache=True)
-def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen):  # type: ignore[no-untyped-def]
+def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen, mark):  # type: ignore[no-untyped-def]
     """``mapper.count_scan_cells`` in one pass over the points: each counted point's cell from
-    the twin's operations in its order (``floor(((x S0 + y S1) + z S2) + o)``), counted at
-    once; a per-scan mark (0 not yet, 1 seen, 2 seen and obstacle) counts a cell once per scan
-    in ``seen`` and in ``hits``. Returns the obstacle cells (ascending) and the number of
+    the twin's operations in its order (``((x S0 + y S1) + z S2) + o``; a cell index ``c`` is in
+    the grid when ``0 <= c < W``, where ``floor(c)`` is ``int(c)``), counted at once; ``mark``
+    (zero on entry and on return: 1 seen, 2 seen and obstacle) counts a cell once per scan in
+    ``seen`` and in ``hits``. Returns the obstacle cells (ascending) and the number of
     distinct cells seen."""
     n = P.shape[0]
-    mark = np.zeros(H * W, np.uint8)
     obst = np.empty(n, np.int64)
+    cells = np.empty(n, np.int64)
     n_obst = 0
     n_seen = 0
     s00, s01, s02 = S[0, 0], S[0, 1], S[0, 2]
@@ -991,14 +992,15 @@ def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen):  # t
         x, y, z = P[i, 0], P[i, 1], P[i, 2]
         if not (x * x + y * y <= max_r2):
             continue
-        c = np.floor(((x * s00 + y * s01) + z * s02) + o0)
-        r = np.floor(((x * s10 + y * s11) + z * s12) + o1)
+        c = ((x * s00 + y * s01) + z * s02) + o0
+        r = ((x * s10 + y * s11) + z * s12) + o1
         if not (c >= 0.0 and r >= 0.0 and c < fw and r < fh):  # NaN fails
             continue
         f = int(r) * W + int(c)
         m = mark[f]
         if m == 0:
             seen[f] += 1
+            cells[n_seen] = f
             n_seen += 1
             m = 1
         if m == 1 and vlab[i] == OBSTACLE and vobs[i] > 0:
@@ -1007,4 +1009,6 @@ def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen):  # t
             n_obst += 1
             m = 2
         mark[f] = m
+    for k in range(n_seen):
+        mark[cells[k]] = 0
     return np.sort(obst[:n_obst]), n_seen

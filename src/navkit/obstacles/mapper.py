@@ -236,22 +236,24 @@ def count_scan_cells(
     W: int,
     hits: NDArray[np.int32],
     seen: NDArray[np.int32],
+    mark: NDArray[np.uint8],
 ) -> tuple[NDArray[np.intp], int]:
     """Count one scan into the flat ``(H * W,)`` grids ``hits`` and ``seen`` (in place): each
     cell an obstacle vertex fell in once in ``hits``, each cell any counted point fell in once
-    in ``seen`` (points as :func:`_scan_flat`). Returns the scan's obstacle cells (ascending,
-    each once) and the number of distinct cells seen. NumPy's buffered fancy-index increment
-    counts a repeated index once; the NumPy twin of ``map_cells_kernel``."""
+    in ``seen`` (points as :func:`_scan_flat`). ``mark`` ``(H * W,)`` uint8 is scratch, zero on
+    entry and on return. Returns the scan's obstacle cells (ascending, each once) and the number
+    of distinct cells seen. NumPy's buffered fancy-index increment counts a repeated index once;
+    the NumPy twin of ``map_cells_kernel``."""
     flat, is_obst = _scan_flat(P, valid, vlab, vobs, S, o, max_r2, H, W)
     obst = flat[is_obst]
     hits[obst] += 1
     seen[flat] += 1
-    mark = np.zeros(hits.size, dtype=bool)  # the scan's obstacle cells, once each
-    mark[obst] = True
+    mark[obst] = 1  # the scan's obstacle cells, once each
     cells = np.flatnonzero(mark)
-    mark[cells] = False  # reused for the scan's seen cells, once each
-    mark[flat] = True
-    return cells, int(np.count_nonzero(mark))
+    mark[flat] = 1  # and the seen ones
+    n_seen = int(np.count_nonzero(mark))
+    mark[flat] = 0
+    return cells, n_seen
 
 
 @dataclass(frozen=True)
@@ -311,6 +313,12 @@ class ObstacleMapper:
         self.n_scans = 0
         self.recent: deque[NDArray[np.intp]] = deque(maxlen=int(st.recent_scans))
         self.known: NDArray[np.bool_] | None = None
+        self._mark: NDArray[np.uint8] | None = None
+
+    def __getstate__(self) -> dict[str, object]:
+        state = dict(self.__dict__)
+        state["_mark"] = None  # scratch (all zero): not part of the map
+        return state
 
     # --- the online interface ------------------------------------------------------------------
     def update(self, detection: ObstacleDetection, T_world_sensor: ArrayLike) -> MapUpdate:
@@ -323,12 +331,15 @@ class ObstacleMapper:
         are dropped (counted in the result), never an error."""
         args = self._scan_args(detection, T_world_sensor)
         hits, seen = self.hits.reshape(-1), self.seen.reshape(-1)  # views: counted in place
+        mark = getattr(self, "_mark", None)  # per-scan scratch, kept zero between scans
+        if mark is None or mark.size != hits.size:
+            mark = self._mark = np.zeros(hits.size, dtype=np.uint8)
         if kernels_enabled():
             from navkit.obstacles._kernels_map import map_cells_kernel
 
-            cells, n_seen = map_cells_kernel(*args, hits, seen)
+            cells, n_seen = map_cells_kernel(*args, hits, seen, mark)
         else:
-            cells, n_seen = count_scan_cells(*args, hits, seen)
+            cells, n_seen = count_scan_cells(*args, hits, seen, mark)
         self.recent.append(cells)
         self.n_scans += 1
         return MapUpdate(self.n_scans - 1, len(cells), int(n_seen))
