@@ -544,7 +544,7 @@ class _UnchunkedWriter:
         start = self._fh.tell()
         b = RecordBuilder()
         offsets = []
-        groups = (
+        groups: tuple[tuple[int, list[Any]], ...] = (
             (Opcode.SCHEMA, self._schemas),
             (Opcode.CHANNEL, self._channels),
             (Opcode.STATISTICS, [self._stats]),
@@ -617,6 +617,7 @@ class ResultsWriter:
                 field="kind",
                 expected=f"one of {sorted(ROS_TYPES)}",
             )
+        raw: bytes | bytearray
         if kind == "markers":
             raw = line_list_cdr(stamp_ns, frame_id, data)
         elif kind == "classified_cloud":
@@ -627,7 +628,12 @@ class ResultsWriter:
         self.write_raw(topic, msgtype, stamp_ns, raw)
 
     def write_raw(
-        self, topic: str, msgtype: str, log_time_ns: int, raw: bytes, msgdef: bytes | None = None
+        self,
+        topic: str,
+        msgtype: str,
+        log_time_ns: int,
+        raw: bytes | bytearray,
+        msgdef: bytes | None = None,
     ) -> None:
         """Write an already serialised CDR message."""
         ch = self._channel(topic, msgtype, msgdef)
