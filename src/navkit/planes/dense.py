@@ -282,6 +282,12 @@ class DenseResult:
         RMS of the inliers' brightness residuals in sigmas of the images' brightness noise.
     brightness_sigma : float
         That brightness noise (both images combined), brightness in [0, 1].
+    information : (6, 6) array
+        The Gauss-Newton information of the last step about ``xi = (v, w)`` (frame 1's axes,
+        ``T <- exp(xi) T``): both terms, each residual in its noise sigmas times its robust
+        scale. Its inverse is the motion's covariance if the residuals were independent; the
+        pixels' errors are correlated (model errors, colour offset), so it is a lower bound
+        (:attr:`navkit.planes.FrameMotion.covariance` scales it).
     """
 
     T: NDArray[np.float64]
@@ -295,6 +301,7 @@ class DenseResult:
     geometric_sigmas: float = float("nan")
     photometric_sigmas: float = float("nan")
     brightness_sigma: float = float("nan")
+    information: NDArray[np.float64] = field(default_factory=lambda: np.zeros((6, 6)))
 
 
 def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -588,6 +595,7 @@ def _dense_align(
         iterations=its,
         converged=converged,
         dof_sources=_dof_sources(H_G, H_I),
+        information=H_G + H_I,
         geometric_sigmas=float(np.sqrt(np.mean(rG[inl] ** 2))) if inl.any() else nan,
         photometric_sigmas=float(np.sqrt(np.mean(rI[inl] ** 2))) if inl.any() else nan,
         brightness_sigma=sigma_b,
