@@ -178,7 +178,8 @@ class PlaneMap:
         ``margin_m`` (the nearest in distance), else it starts a new map plane; ``sample``
         inlier points per observation extend it (at most ``20 sample`` kept), and the frame's
         texture is fused into the plane's running mean. ``only_new``: add only the planes that
-        join no map plane."""
+        join no map plane, without their texture (the next full merge fuses it: texture
+        fusion is the costliest part of a merge)."""
         R, t = T[:3, :3], T[:3, 3]
         rng = np.random.default_rng(frame)
         P = obs.points.reshape(-1, 3)
@@ -217,7 +218,7 @@ class PlaneMap:
                     mp.points = mp.points[rng.choice(len(mp.points), 20 * sample, replace=False)]
                 mp.observations.append(frame)
             _refit(mp)
-            if obs.has_texture:
+            if obs.has_texture and not only_new:
                 axes_c = mp.tex_axes @ R  # world axes seen in the frame
                 ref_c = R.T @ (mp.tex_ref - t)
                 try:
@@ -272,7 +273,7 @@ class PlaneMap:
         the solver's association would only reject it, at a cost that grows with the map."""
         R, t = T_world_view[:3, :3], T_world_view[:3, 3]
         P = np.asarray(obs.points).reshape(-1, 3)
-        P = np.asarray(P[:: max(1, len(P) // 8_000)], dtype=np.float64)
+        P = np.asarray(P[:: max(1, len(P) // 4_000)], dtype=np.float64)
         P = P[np.all(np.isfinite(P), axis=1)]
         seen = [(mp, _in_view(mp, obs, P, R, t, near_m)) for mp in self.planes]
         planes = [mp for mp, X in seen if X is not None]
@@ -288,11 +289,12 @@ class PlaneMap:
             n, rho = canonical_plane(nv, float(mp.plane.rho - mp.plane.normal @ t))
             c = R.T @ (mp.plane.centroid - t)
             plane = Plane(n, rho, c, mp.plane.rms, mp.plane.count)
-            o_w, ax_w = mp.plane.rho * mp.plane.normal, mp.plane.basis()
-            ov = (
-                rows_matmul(o_w + mp.outline @ ax_w - t, R) if len(mp.outline) else np.zeros((0, 3))
-            )
-            outline = rows_matmul(ov - rho * n, plane.basis().T)
+            # the outline in the view plane's own 2-D frame: the map plane's outline moved
+            # in-plane (a 2 x 2 rotation and an offset between the two planes' frames)
+            o_w, ax_w, ax_v = mp.plane.rho * mp.plane.normal, mp.plane.basis(), plane.basis()
+            M2 = ax_w @ R @ ax_v.T
+            offset = ((o_w - t) @ R - rho * n) @ ax_v.T
+            outline = mp.outline @ M2 + offset if len(mp.outline) else np.zeros((0, 2))
             segs.append(PlaneSegment(plane, np.zeros(0, np.int64), outline, mp.area))
             focus.append(P[near_all[:, k]])
         X = np.concatenate(pts) if pts else np.zeros((0, 3))
