@@ -443,12 +443,14 @@ def _in_view(
 
 
 def _refit(mp: MapPlane) -> None:
-    """Refit the map plane to its kept points (total least squares) and redraw its outline."""
-    X = mp.points
+    """Refit the map plane to its kept points (total least squares) and redraw its outline,
+    from at most 10 000 of them (a regular subsample: the normal's error from 10 000 points of
+    a Kinect plane is ~1e-4 rad, and a 5 cm outline raster of a few m^2 has ~1000 cells)."""
+    X = mp.points[:: max(1, len(mp.points) // 10_000)]
     c = X.mean(0)
     w, V = np.linalg.eigh(np.einsum("ni,nj->ij", X - c, X - c))
     n, rho = canonical_plane(V[:, 0], float(V[:, 0] @ c))
-    mp.plane = Plane(n, rho, c, float(np.sqrt(max(w[0], 0) / len(X))), len(X))
+    mp.plane = Plane(n, rho, c, float(np.sqrt(max(w[0], 0) / len(X))), len(mp.points))
     o, ax = rho * n, mp.plane.basis()
     uv = rows_matmul(X - o, ax.T)
     mp.outline, _ = outline_from_points(uv, 0.05)
