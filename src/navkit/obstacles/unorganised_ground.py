@@ -113,11 +113,24 @@ class GroundSurface:
         return _tin_at(self.xy, self.z, self.tri, q)
 
 
+TIE_BARYCENTRIC = 1e-9
+"""A query whose barycentric coordinate in its triangle is within this of 0 lies on that
+triangle's edge (two of them: on a vertex); far above the rounding of the coordinates
+(~1e-13 for a tile's local coordinates) and far below any real offset from an edge."""
+
+
 def _tin_at(
     vxy: NDArray[np.float64], vz: NDArray[np.float64], tri: Any, q: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Height and slope of the TIN at ``q``: each triangle's plane ``z = z0 + g . (p - p0)``
-    (its gradient ``g`` from its two edges), evaluated in the triangle holding the query."""
+    (its gradient ``g`` from its two edges), evaluated in the triangle holding the query.
+
+    The TIN is continuous, so a query on an edge or a vertex has one height whichever triangle
+    holds it, but each triangle its own slope (the band's slope term). There the gentlest of
+    the triangles meeting at the query is used: on a vertex the height is the vertex's own
+    measured height, not an interpolation over a slope, and on an edge the interpolation runs
+    along the edge. (Every ground vertex is a query, and so is every other return at its x-y.)
+    """
     s = _find_simplex(tri, q)
     s0 = np.maximum(s, 0)
     V = tri.simplices
@@ -128,9 +141,26 @@ def _tin_at(
     det = np.where(det == 0.0, np.inf, det)  # a flat sliver: slope 0, its first vertex's height
     gx = (d1 * e2[:, 1] - d2 * e1[:, 1]) / det
     gy = (e1[:, 0] * d2 - e2[:, 0] * d1) / det
+    tslope = np.hypot(gx, gy)
     p0 = A[s0, 0]
     zq = Zv[s0, 0] + gx[s0] * (q[:, 0] - p0[:, 0]) + gy[s0] * (q[:, 1] - p0[:, 1])
-    slope = np.hypot(gx, gy)[s0]
+    slope = tslope[s0]
+    # queries on an edge (the gentler of its two triangles) or a vertex (the gentlest around it)
+    Tr = tri.transform[s0]
+    b2 = np.einsum("ijk,ik->ij", Tr[:, :2], q - Tr[:, 2])
+    b = np.column_stack([b2, 1.0 - b2.sum(axis=1)])
+    on = (np.abs(b) <= TIE_BARYCENTRIC) & (s >= 0)[:, None]
+    nb = tri.neighbors[s0]
+    for i in range(3):
+        m = on[:, i] & (nb[:, i] >= 0)
+        slope[m] = np.minimum(slope[m], tslope[nb[m, i]])
+    vert = np.count_nonzero(on, axis=1) >= 2
+    if vert.any():
+        gentlest = np.full(len(vxy), np.inf)
+        np.minimum.at(gentlest, V.reshape(-1), np.repeat(tslope, 3))
+        vi = V[s0[vert], np.argmax(b[vert], axis=1)]
+        slope[vert] = gentlest[vi]
+        zq[vert] = vz[vi]
     out = s < 0
     if out.any():
         _, nn = cKDTree(vxy).query(q[out])
@@ -168,15 +198,12 @@ def _framed(
 
 
 def _find_simplex(tri: Any, q: NDArray[np.float64]) -> NDArray[np.int64]:
-    """The triangle of ``tri`` holding each query (-1 outside), by Matplotlib's trapezoid map
-    (O(log n) a query whatever the triangulation). SciPy's ``find_simplex`` walks from triangle
-    to triangle and, when a walk fails on the near-collinear vertices of quantised coordinates
-    (UTM stored as float32), searches every triangle: seconds for one airborne tile."""
-    from matplotlib.tri import Triangulation
-
-    pts = tri.points
-    finder = Triangulation(pts[:, 0], pts[:, 1], tri.simplices).get_trifinder()
-    return np.asarray(finder(q[:, 0], q[:, 1]), dtype=np.int64)
+    """The triangle of ``tri`` holding each query (-1 outside), by SciPy's directed walk from
+    the previous query's triangle (a cloud's storage order keeps neighbours close, so a walk
+    is a few steps). The coordinates must be local (a tile's, offset from its corner): on UTM
+    values stored as float32 the walk fails on near-collinear vertices and SciPy searches
+    every triangle instead."""
+    return np.asarray(tri.find_simplex(q), dtype=np.int64)
 
 
 def _tin_edges(tri: Any) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -189,25 +216,36 @@ def _jump_components(
     z: NDArray[np.float64],
     tan0: float,
     band: float,
+    frame: tuple[NDArray[np.float64], NDArray[np.float64], float],
     *,
     rounds: int = 4,
-) -> tuple[NDArray[np.int64], Any]:
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64], Any]:
     """Rules P1/P4 on a ground TIN: drop the vertices of components that stand on jumps.
 
     Edges rising faster than ``band + tan0 * length`` are height jumps; the TIN cut at its jumps
-    falls into components. A component whose jump edges all step down out of it (at least 90 %
+    falls into components. A component whose jump edges all step down out of them (at least 90 %
     of them) is an obstacle top (a roof, a tree crown); a component of at most 3 vertices whose
-    jumps all step up is a low outlier. The largest component is the terrain and stays. Returns
-    the kept vertex indices and their triangulation.
+    jumps all step up is a low outlier. The largest component is the terrain and stays.
+
+    Each round triangulates the kept vertices with their frame (:func:`_framed` around
+    ``frame = (lo, hi, step)``) and judges the edges between kept vertices only, so the last
+    round's triangulation is the ground surface's. Returns the kept vertex indices, the
+    surface's vertices (kept, then frame) with their heights, and its triangulation.
     """
+    lo, hi, step = frame
     keep = np.arange(len(xy))
-    tri = Delaunay(xy)
-    for _ in range(rounds):
-        i, j = _tin_edges(tri)
-        d = np.hypot(*(xy[keep][i] - xy[keep][j]).T)
-        dz = z[keep][i] - z[keep][j]
-        cut = np.abs(dz) > band + tan0 * d
+    for r in range(rounds + 1):
+        gxy, gz = _framed(xy[keep], z[keep], lo, hi, step)
+        tri = Delaunay(gxy)
+        if r == rounds:
+            break
         m = len(keep)
+        i, j = _tin_edges(tri)
+        inner = (i < m) & (j < m)
+        i, j = i[inner], j[inner]
+        d = np.hypot(*(gxy[i] - gxy[j]).T)
+        dz = gz[i] - gz[j]
+        cut = np.abs(dz) > band + tan0 * d
         smooth = ~cut
         graph = coo_matrix((np.ones(int(smooth.sum())), (i[smooth], j[smooth])), shape=(m, m))
         nc, lab = connected_components(graph, directed=False)
@@ -223,8 +261,7 @@ def _jump_components(
         if not bad.any():
             break
         keep = keep[~bad[lab]]
-        tri = Delaunay(xy[keep])
-    return keep, tri
+    return keep, gxy, gz, tri
 
 
 def _lowest_cells(
@@ -291,9 +328,7 @@ def ground_surface(
     step = 10.0 * cell
     tan0 = math.tan(math.radians(settings.c0_deg))
     try:
-        keep, _ = _jump_components(xy[v], z[v], tan0, band)
-        gxy, gz = _framed(xy[v[keep]], z[v[keep]], lo, hi, step)
-        tri = Delaunay(gxy)
+        _, gxy, gz, tri = _jump_components(xy[v], z[v], tan0, band, (lo, hi, step))
     except QhullError as exc:
         raise InputError(
             f"the ground points are degenerate in x-y ({exc.__class__.__name__})",
