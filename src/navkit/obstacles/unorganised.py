@@ -438,18 +438,22 @@ def detect_unorganised(
         core = in_core[work]
         if not core.any():
             continue
-        res = _detect_tile(xy_all[work], z_all[work], settings, source, clock, ground_only)
+        res = _detect_tile(xy_all[work], z_all[work], settings, source, clock, ground_only, offset)
         rows = idx[work[core]]
         # a point on a shared tile edge is written by the last tile: the same rule everywhere
         labels[rows] = res["labels"][core]
         ground_z[rows] = res["ground_z"][core]
         base = len(obstacles)
         ids = res["point_obstacle"][core]
-        keep_obs = []
-        for ob in res["obstacles"]:
-            cx, cy = ob.polygon_xy.mean(axis=0) if len(ob.polygon_xy) else (np.nan, np.nan)
-            if tx0 <= cx <= tx0 + tw and ty0 <= cy <= ty0 + th:
-                keep_obs.append(ob)
+        # an obstacle belongs to the tile whose own square holds its outline's centre
+        centres = res["centres"]
+        inside = (
+            (centres[:, 0] >= tx0)
+            & (centres[:, 0] <= tx0 + tw)
+            & (centres[:, 1] >= ty0)
+            & (centres[:, 1] <= ty0 + th)
+        )
+        keep_obs = [ob for ob, ok in zip(res["obstacles"], inside.tolist(), strict=True) if ok]
         if settings.build_map:
             remap = np.zeros(len(res["obstacles"]) + 1, dtype=np.int32)
             for k, ob in enumerate(keep_obs):
@@ -459,7 +463,9 @@ def detect_unorganised(
             obstacle_id[rows] = np.where(ids > 0, ids + id_base, 0)
             id_base += int(res["point_obstacle"].max(initial=0))
         for k, ob in enumerate(keep_obs):
-            obstacles.append(_shifted(ob, base + k + 1, offset))
+            # the tile's records are new and not shared yet: renumbered in place
+            ob.__dict__["id"] = base + k + 1
+            obstacles.append(ob)
         for key, v in res["counts"].items():
             counts[key] += v
         tiles_info.append(
@@ -528,22 +534,6 @@ def _shift_shape(shape: Any, dx: float, dy: float) -> Any:
     return shape
 
 
-def _shifted(ob: Obstacle, new_id: int, offset: NDArray[np.float64]) -> Obstacle:
-    """``ob`` (local coordinates) in the input frame, with id ``new_id`` (a new record built
-    without the frozen dataclass's ``__init__``, as stage 8's)."""
-    dx, dy = float(offset[0]), float(offset[1])
-    out = object.__new__(Obstacle)
-    d = out.__dict__
-    d.update(ob.__dict__)
-    d["id"] = new_id
-    d["boundary_xy"] = ob.boundary_xy + offset
-    d["polygon_xy"] = ob.polygon_xy + offset
-    d["shadow_xy"] = ob.shadow_xy + offset
-    d["shapes"] = {k: _shift_shape(v, dx, dy) for k, v in ob.shapes.items()}
-    d["guaranteed"] = {k: _shift_shape(v, dx, dy) for k, v in ob.guaranteed.items()}
-    return out
-
-
 def _tick(clock: dict[str, float], key: str, t: float) -> float:
     now = time.perf_counter()
     clock[key] = clock.get(key, 0.0) + now - t
@@ -557,9 +547,11 @@ def _detect_tile(
     source: str,
     clock: dict[str, float],
     ground_only: bool = False,
+    offset: NDArray[np.float64] | None = None,
 ) -> dict[str, Any]:
-    """Stages 2-8 on one tile's points (local x-y); only the ground labels with
-    ``ground_only``."""
+    """Stages 2-8 on one tile's points (local x-y, ``offset`` from the input's frame); only
+    the ground labels with ``ground_only``. The obstacle records are in the input's frame,
+    ``centres`` the local centres of their outlines."""
     t = time.perf_counter()
     spacing = point_spacing(xy)
     if not math.isfinite(spacing) or spacing <= 0:
@@ -586,17 +578,23 @@ def _detect_tile(
     counts = {"ground": 0, "unreliable": 0, "obstacle": 0, "side_shadow": 0, "shadow_behind": 0}
     point_obstacle = np.zeros(len(z), dtype=np.int32)
     obstacles: list[Obstacle] = []
+    centres = np.empty((0, 2))
     if ground_only:
         return {
             "labels": labels,
             "ground_z": zg,
             "point_obstacle": point_obstacle,
             "obstacles": obstacles,
+            "centres": centres,
             "counts": counts,
             "info": info,
         }
     # stage 2: the mesh over the thinned cloud (lowest point per spacing cell)
-    v = lowest_per_cell(xy, z, settings.thin_spacings * spacing)
+    v = (
+        surf.lowest  # the ground estimate's cells are the thinning cells
+        if settings.thin_spacings == settings.grid_spacings
+        else lowest_per_cell(xy, z, settings.thin_spacings * spacing)
+    )
     info["n_mesh_vertices"] = int(v.size)
     try:
         mesh = Delaunay(xy[v])
@@ -607,6 +605,7 @@ def _detect_tile(
             "ground_z": zg,
             "point_obstacle": point_obstacle,
             "obstacles": obstacles,
+            "centres": centres,
             "counts": counts,
             "info": info,
         }
@@ -649,13 +648,16 @@ def _detect_tile(
         _, nn = cKDTree(xy[v]).query(xy[~ground])
         point_obstacle[~ground] = vid[nn]
     if settings.build_map and nc:
-        obstacles = _stage_8(xy, z, v, simp, comp, owner, vid, boundary, nc, settings)
+        obstacles, centres = _stage_8(
+            xy, z, v, simp, comp, owner, vid, boundary, nc, settings, offset
+        )
     _tick(clock, "shapes", t)
     return {
         "labels": labels,
         "ground_z": zg,
         "point_obstacle": point_obstacle,
         "obstacles": obstacles,
+        "centres": centres,
         "counts": counts,
         "info": info,
     }
@@ -678,10 +680,13 @@ def _stage_8(
     boundary: NDArray[np.bool_],
     nc: int,
     settings: UnorganisedSettings,
-) -> list[Obstacle]:
+    offset: NDArray[np.float64] | None = None,
+) -> tuple[list[Obstacle], NDArray[np.float64]]:
     """Stage 8: an :class:`~navkit.obstacles.Obstacle` per obstacle, shapes on its boundary
-    vertices (A1-A6, ...) and A7 over obstacle plus shadow vertices. Coordinates are local
-    (the caller's x-y).
+    vertices (A1-A6, ...) and A7 over obstacle plus shadow vertices, and the centre of each
+    outline (the mean of its hull's vertices, local). The hulls and shapes are computed in the
+    local x-y (UTM values lose precision in the shapes' products) and the records moved by
+    ``offset`` into the input's frame.
 
     The vertex sets of all obstacles are built at once in a CSR layout (rows of obstacle ``k``
     in vertex order): its vertices (``vid == k``), their boundary vertices (all its vertices
@@ -752,6 +757,10 @@ def _stage_8(
             if settings.guaranteed_shapes
             else none
         )
+    centres = np.array([h.mean(axis=0) for h in hulls]).reshape(-1, 2)
+    off = np.zeros(2) if offset is None else np.asarray(offset, dtype=np.float64)
+    dx, dy = float(off[0]), float(off[1])
+    b_in, g_in = b_xy + off, g_xy + off
     zlo, zhi, n_pts, n_tri = z_min.tolist(), z_max.tolist(), n_points.tolist(), ntri.tolist()
     s_area = shadow_area.tolist()
     bo, go = b_off.tolist(), g_off.tolist()
@@ -767,14 +776,14 @@ def _stage_8(
         d["n_points"] = n_pts[k]
         d["z_min"] = zlo[k]
         d["z_max"] = zhi[k]
-        d["boundary_xy"] = b_xy[bo[k] : bo[k + 1]]
-        d["polygon_xy"] = hulls[k]
-        d["shadow_xy"] = g_xy[go[k] : go[k + 1]]
+        d["boundary_xy"] = b_in[bo[k] : bo[k + 1]]
+        d["polygon_xy"] = hulls[k] + off
+        d["shadow_xy"] = g_in[go[k] : go[k + 1]]
         d["shadow_area"] = s_area[k]
-        d["shapes"] = shapes[k]
-        d["guaranteed"] = guaranteed[k]
+        d["shapes"] = {name: _shift_shape(sh, dx, dy) for name, sh in shapes[k].items()}
+        d["guaranteed"] = {name: _shift_shape(sh, dx, dy) for name, sh in guaranteed[k].items()}
         out.append(o)
-    return out
+    return out, centres
 
 
 # ----------------------------------------------------------------------------------------------

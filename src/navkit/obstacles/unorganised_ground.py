@@ -6,7 +6,7 @@ measured from."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -99,6 +99,9 @@ class GroundSurface:
         The ground band (m) the surface was built with.
     noise_m : float
         The measured height noise (m).
+    lowest : (K,) int
+        Index (into the points the surface was built from) of the lowest point of each cell of
+        the minimum surface, sorted (:func:`lowest_per_cell`).
     """
 
     xy: NDArray[np.float64]
@@ -106,6 +109,7 @@ class GroundSurface:
     tri: Any
     band_m: float
     noise_m: float
+    lowest: NDArray[np.int64] = field(default_factory=lambda: np.empty(0, dtype=np.int64))
 
     def at(self, q: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Height and slope (rise over run) of the surface at ``q (M, 2)``; outside the hull
@@ -335,7 +339,7 @@ def ground_surface(
             field="points",
             expected="ground points spanning an area",
         ) from None
-    return GroundSurface(gxy, gz, tri, band, noise)
+    return GroundSurface(gxy, gz, tri, band, noise, li)
 
 
 # ----------------------------------------------------------------------------------------------
