@@ -6,7 +6,7 @@ measured from."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -137,7 +137,7 @@ def _tin_at(
     """
     s = _find_simplex(tri, q)
     s0 = np.maximum(s, 0)
-    V = tri.simplices
+    V = np.asarray(tri.simplices, dtype=np.int64)
     A, Zv = vxy[V], vz[V]
     e1, e2 = A[:, 1] - A[:, 0], A[:, 2] - A[:, 0]
     d1, d2 = Zv[:, 1] - Zv[:, 0], Zv[:, 2] - Zv[:, 0]
@@ -150,9 +150,7 @@ def _tin_at(
     zq = Zv[s0, 0] + gx[s0] * (q[:, 0] - p0[:, 0]) + gy[s0] * (q[:, 1] - p0[:, 1])
     slope = tslope[s0]
     # queries on an edge (the gentler of its two triangles) or a vertex (the gentlest around it)
-    Tr = tri.transform[s0]
-    b2 = np.einsum("ijk,ik->ij", Tr[:, :2], q - Tr[:, 2])
-    b = np.column_stack([b2, 1.0 - b2.sum(axis=1)])
+    b = _barycentric(A[s0], q)
     on = (np.abs(b) <= TIE_BARYCENTRIC) & (s >= 0)[:, None]
     nb = tri.neighbors[s0]
     for i in range(3):
@@ -211,8 +209,132 @@ def _find_simplex(tri: Any, q: NDArray[np.float64]) -> NDArray[np.int64]:
 
 
 def _tin_edges(tri: Any) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    ip, ix = tri.vertex_neighbor_vertices
-    return np.repeat(np.arange(len(ip) - 1), np.diff(ip)), ix.astype(np.int64)
+    """Every edge of a triangulation in both directions (``i -> j`` and ``j -> i``)."""
+    if isinstance(tri, Delaunay):
+        ip, ix = tri.vertex_neighbor_vertices
+        return np.repeat(np.arange(len(ip) - 1), np.diff(ip)), ix.astype(np.int64)
+    # each edge once: from the triangle with the larger index, or from its only triangle
+    S, nb = tri.simplices, tri.neighbors
+    once = (nb < np.arange(len(S))[:, None]).reshape(-1)
+    a = S[:, [1, 2, 0]].reshape(-1)[once]
+    b = S[:, [2, 0, 1]].reshape(-1)[once]
+    return np.concatenate([a, b]), np.concatenate([b, a])
+
+
+def _neighbours(S: NDArray[np.int64], n: int) -> NDArray[np.int64]:
+    """``(T, 3)`` the triangle across the edge opposite each vertex (-1 on the hull), as
+    :attr:`scipy.spatial.Delaunay.neighbors`."""
+    T = len(S)
+    u, w = S[:, [1, 2, 0]].reshape(-1), S[:, [2, 0, 1]].reshape(-1)
+    key = np.minimum(u, w) * n + np.maximum(u, w)
+    order = np.argsort(key, kind="stable")
+    k = key[order]
+    pair = np.flatnonzero(k[1:] == k[:-1])
+    nb = np.full(3 * T, -1, dtype=np.int64)
+    a, b = order[pair], order[pair + 1]
+    nb[a], nb[b] = b // 3, a // 3
+    return nb.reshape(T, 3)
+
+
+def _areas(P: NDArray[np.float64]) -> NDArray[np.float64]:
+    return 0.5 * np.abs(
+        (P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1])
+        - (P[:, 2, 0] - P[:, 0, 0]) * (P[:, 1, 1] - P[:, 0, 1])
+    )
+
+
+@dataclass(frozen=True)
+class _Thinned:
+    """A Delaunay triangulation ``base`` with the vertices ``removed`` taken out: the triangles
+    around them (the cavity) replaced by the Delaunay triangles of the cavity's other vertices
+    that lie inside it (``sub``'s triangles ``inside``).
+
+    Taking vertices out of a Delaunay triangulation leaves every triangle not incident to them
+    Delaunay, and the triangles of the points left that cover the cavity have circles empty of
+    them, so they are triangles of the cavity's own vertices: the same triangulation as a new
+    one of the points left (up to the choice among co-circular points), at the cost of the
+    cavity. ``simplices`` index ``points`` (the base's, removed ones unused); ``neighbors`` and
+    :meth:`find_simplex` as SciPy's.
+    """
+
+    base: Any
+    points: NDArray[np.float64]
+    simplices: NDArray[np.int64]
+    neighbors: NDArray[np.int64]
+    old_to_new: NDArray[np.int64]
+    cavity: NDArray[np.bool_]
+    sub: Any
+    sub_to_new: NDArray[np.int64]
+
+    def find_simplex(self, q: NDArray[np.float64]) -> NDArray[np.int64]:
+        s0 = np.asarray(self.base.find_simplex(q), dtype=np.int64)
+        out = np.where(s0 >= 0, self.old_to_new[np.maximum(s0, 0)], -1)
+        cav = np.flatnonzero(s0 >= 0)
+        cav = cav[self.cavity[s0[cav]]]
+        if cav.size:
+            s1 = np.asarray(self.sub.find_simplex(q[cav]), dtype=np.int64)
+            out[cav] = np.where(s1 >= 0, self.sub_to_new[np.maximum(s1, 0)], -1)
+            lost = cav[out[cav] < 0]  # on the cavity's rim: the triangles around it
+            if lost.size:
+                out[lost] = self._rim(q[lost])
+        return out
+
+    def _rim(self, q: NDArray[np.float64]) -> NDArray[np.int64]:
+        """The first of the cavity's new triangles and their neighbours that holds each query
+        (within rounding), else -1."""
+        new = self.sub_to_new[self.sub_to_new >= 0]
+        cand = np.union1d(new, self.neighbors[new].reshape(-1))
+        cand = cand[cand >= 0]
+        A = self.points[self.simplices[cand]]
+        out = np.full(len(q), -1, dtype=np.int64)
+        for k in range(len(q)):
+            b = _barycentric(A, np.broadcast_to(q[k], (len(cand), 2)))
+            hit = np.flatnonzero((b >= -TIE_BARYCENTRIC).all(axis=1))
+            if hit.size:
+                out[k] = cand[hit[0]]
+        return out
+
+
+def _barycentric(A: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
+    """``(M, 3)`` barycentric coordinates of ``q (M, 2)`` in the triangles ``A (M, 3, 2)``."""
+    e1, e2, d = A[:, 1] - A[:, 0], A[:, 2] - A[:, 0], q - A[:, 0]
+    det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+    det = np.where(det == 0.0, np.inf, det)
+    u = (d[:, 0] * e2[:, 1] - d[:, 1] * e2[:, 0]) / det
+    v = (e1[:, 0] * d[:, 1] - e1[:, 1] * d[:, 0]) / det
+    return np.column_stack([1.0 - u - v, u, v])
+
+
+def _thinned(base: Any, removed: NDArray[np.bool_]) -> _Thinned | None:
+    """``base`` without the vertices ``removed`` (see :class:`_Thinned`); None when the cavity
+    holds more than a quarter of the vertices (a new triangulation is then as cheap) or its new
+    triangles do not cover it exactly (co-circular or collinear rims)."""
+    S = base.simplices.astype(np.int64)
+    P = base.points
+    hit = removed[S].any(axis=1)
+    rim = np.unique(S[hit])
+    rim = rim[~removed[rim]]
+    if len(rim) < 3 or len(rim) > len(P) // 4:
+        return None
+    try:
+        sub = Delaunay(P[rim])
+    except QhullError:
+        return None
+    sub_s = rim[sub.simplices.astype(np.int64)]
+    loc = np.asarray(base.find_simplex(P[sub_s].mean(axis=1)), dtype=np.int64)
+    inside = (loc >= 0) & hit[np.maximum(loc, 0)]
+    cav_area = float(_areas(P[S[hit]]).sum())
+    if abs(float(_areas(P[sub_s[inside]]).sum()) - cav_area) > 1e-9 * cav_area:
+        return None
+    keep_t = np.flatnonzero(~hit)
+    simplices = np.concatenate([S[keep_t], sub_s[inside]])
+    old_to_new = np.full(len(S), -1, dtype=np.int64)
+    old_to_new[keep_t] = np.arange(len(keep_t))
+    sub_to_new = np.full(len(sub_s), -1, dtype=np.int64)
+    sub_to_new[inside] = len(keep_t) + np.arange(int(inside.sum()))
+    return _Thinned(
+        base, P, simplices, _neighbours(simplices, len(P)), old_to_new, hit, sub, sub_to_new
+    )
 
 
 def _jump_components(
@@ -231,40 +353,62 @@ def _jump_components(
     of them) is an obstacle top (a roof, a tree crown); a component of at most 3 vertices whose
     jumps all step up is a low outlier. The largest component is the terrain and stays.
 
-    Each round triangulates the kept vertices with their frame (:func:`_framed` around
-    ``frame = (lo, hi, step)``) and judges the edges between kept vertices only, so the last
-    round's triangulation is the ground surface's. Returns the kept vertex indices, the
-    surface's vertices (kept, then frame) with their heights, and its triangulation.
+    The TIN holds the vertices with their frame (:func:`_framed` around
+    ``frame = (lo, hi, step)``, the frame's heights from the nearest vertex kept) and only the
+    edges between vertices are judged, so the last round's TIN is the ground surface's. A
+    round's removals are taken out of the first round's triangulation (:func:`_thinned`: only
+    the cavities are triangulated again) unless they are too many. Returns the kept vertex
+    indices, the surface's vertices (kept, then frame) with their heights, and its
+    triangulation.
     """
     lo, hi, step = frame
-    keep = np.arange(len(xy))
-    for r in range(rounds + 1):
-        gxy, gz = _framed(xy[keep], z[keep], lo, hi, step)
-        tri = Delaunay(gxy)
-        if r == rounds:
-            break
-        m = len(keep)
+    ids = np.arange(len(xy))  # the base's vertices (then its frame)
+    gxy, gz = _framed(xy, z, lo, hi, step)
+    base = Delaunay(gxy)
+    tri: Any = base
+    alive = np.ones(len(gxy), dtype=bool)
+    for _ in range(rounds):
+        n = len(ids)
         i, j = _tin_edges(tri)
-        inner = (i < m) & (j < m)
+        inner = (i < n) & (j < n)
         i, j = i[inner], j[inner]
         d = np.hypot(*(gxy[i] - gxy[j]).T)
         dz = gz[i] - gz[j]
         cut = np.abs(dz) > band + tan0 * d
         smooth = ~cut
-        graph = coo_matrix((np.ones(int(smooth.sum())), (i[smooth], j[smooth])), shape=(m, m))
+        graph = coo_matrix((np.ones(int(smooth.sum())), (i[smooth], j[smooth])), shape=(n, n))
         nc, lab = connected_components(graph, directed=False)
         li, lj = lab[i], lab[j]
         c = cut & (li != lj)
         down = np.bincount(li[c], weights=(dz[c] > 0).astype(float), minlength=nc)
         total = np.bincount(li[c], minlength=nc)
-        size = np.bincount(lab, minlength=nc)
+        size = np.bincount(lab[alive[:n]], minlength=nc)  # removed vertices stand alone
         top = (total > 0) & (down >= 0.9 * total)
         pit = (total > 0) & (down <= 0.1 * total) & (size <= 3)
         bad = top | pit
         bad[int(size.argmax())] = False
-        if not bad.any():
+        drop = bad[lab] & alive[:n]
+        if not drop.any():
             break
-        keep = keep[~bad[lab]]
+        alive[:n] &= ~drop
+        kept = ids[alive[:n]]
+        _, nn = cKDTree(xy[kept]).query(gxy[n:])  # the frame's heights: nearest vertex kept
+        gz = np.concatenate([gz[:n], z[kept[nn]]])
+        thin = _thinned(base, ~alive)
+        if thin is not None:
+            tri = thin
+            continue
+        sel = np.flatnonzero(alive)  # a new triangulation of the vertices kept
+        ids, gxy, gz = kept, gxy[sel], gz[sel]
+        base = tri = Delaunay(gxy)
+        alive = np.ones(len(gxy), dtype=bool)
+    keep = ids[alive[: len(ids)]]
+    if isinstance(tri, _Thinned):  # the vertices kept, then the frame, as after a new one
+        sel = np.flatnonzero(alive)
+        remap = np.full(len(gxy), -1, dtype=np.int64)
+        remap[sel] = np.arange(len(sel))
+        gxy, gz = gxy[sel], gz[sel]
+        tri = replace(tri, points=gxy, simplices=remap[tri.simplices])
     return keep, gxy, gz, tri
 
 
