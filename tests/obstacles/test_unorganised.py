@@ -260,11 +260,12 @@ def test_cli_refuses_a_cloud_that_fits_neither_path(cli, tmp_path):
 
 def test_vertices_taken_out_of_a_triangulation_give_the_delaunay_of_the_points_left():
     """The jump rounds' cavity update (``_thinned``): on points in general position the
-    triangles are those of a new Delaunay triangulation of the points left, and every query
-    is located in a triangle that holds it."""
+    triangles are those of a new Delaunay triangulation of the points left, and the walk
+    (``_find_simplex``) puts every query inside the hull in a triangle that holds it, in
+    any storage order."""
     from scipy.spatial import Delaunay
 
-    from navkit.obstacles.unorganised_ground import _barycentric, _thinned
+    from navkit.obstacles.unorganised_ground import _barycentric, _find_simplex, _thinned
 
     rng = np.random.default_rng(11)
     P = rng.uniform(0.0, 100.0, (3000, 2))
@@ -285,7 +286,7 @@ def test_vertices_taken_out_of_a_triangulation_give_the_delaunay_of_the_points_l
         edge = {S[t, (i + 1) % 3], S[t, (i + 2) % 3]}
         assert edge <= set(S[nb[t, i]].tolist())
     q = rng.uniform(1.0, 99.0, (2000, 2))
-    s = thin.find_simplex(q)
+    s = _find_simplex(thin, q)
     inside = fresh.find_simplex(q) >= 0
     assert np.array_equal(s >= 0, inside)
     b = _barycentric(P[S[s[inside]]], q[inside])

@@ -200,12 +200,36 @@ def _framed(
 
 
 def _find_simplex(tri: Any, q: NDArray[np.float64]) -> NDArray[np.int64]:
-    """The triangle of ``tri`` holding each query (-1 outside), by SciPy's directed walk from
-    the previous query's triangle (a cloud's storage order keeps neighbours close, so a walk
-    is a few steps). The coordinates must be local (a tile's, offset from its corner): on UTM
-    values stored as float32 the walk fails on near-collinear vertices and SciPy searches
-    every triangle instead."""
-    return np.asarray(tri.find_simplex(q), dtype=np.int64)
+    """The triangle of ``tri`` (``points``, ``simplices``, ``neighbors`` as SciPy's Delaunay)
+    holding each query (within rounding; -1 outside), by a visibility walk in NumPy, all
+    queries at once: each starts in a triangle of its nearest vertex and steps across the
+    edge its most negative barycentric coordinate faces until a triangle holds it (a walk
+    that terminates on a Delaunay triangulation; from the nearest vertex it is a step or
+    two). SciPy's own ``find_simplex`` computes a LAPACK factorisation per triangle first,
+    slow with a multi-threaded BLAS, and walks from the previous query, slow on a cloud in
+    random order."""
+    P = np.asarray(tri.points, dtype=np.float64)
+    S = np.asarray(tri.simplices, dtype=np.int64)
+    N = np.asarray(tri.neighbors, dtype=np.int64)
+    out = np.full(len(q), -1, dtype=np.int64)
+    if len(q) == 0 or len(S) == 0:
+        return out
+    start = np.full(len(P), -1, dtype=np.int64)
+    start[S.reshape(-1)] = np.repeat(np.arange(len(S)), 3)
+    used = np.flatnonzero(start >= 0)
+    _, nn = cKDTree(P[used]).query(q)
+    cur = start[used[nn]]
+    todo = np.arange(len(q))
+    for _ in range(len(S) + 1):
+        b = _barycentric(P[S[cur]], q[todo])
+        low = np.argmin(np.where(np.isnan(b), -np.inf, b), axis=1)
+        held = b[np.arange(len(todo)), low] >= -TIE_BARYCENTRIC
+        out[todo[held]] = cur[held]
+        nxt = N[cur[~held], low[~held]]
+        todo, cur = todo[~held][nxt >= 0], nxt[nxt >= 0]
+        if todo.size == 0:
+            break
+    return out
 
 
 def _tin_edges(tri: Any) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
@@ -245,71 +269,39 @@ def _areas(P: NDArray[np.float64]) -> NDArray[np.float64]:
 
 @dataclass(frozen=True)
 class _Thinned:
-    """A Delaunay triangulation ``base`` with the vertices ``removed`` taken out: the triangles
-    around them (the cavity) replaced by the Delaunay triangles of the cavity's other vertices
-    that lie inside it (``sub``'s triangles ``inside``).
+    """A Delaunay triangulation with vertices taken out (:func:`_thinned`): ``simplices``
+    index ``points``, ``neighbors`` as SciPy's (the triangle across the edge opposite each
+    vertex, -1 on the hull)."""
 
-    Taking vertices out of a Delaunay triangulation leaves every triangle not incident to them
-    Delaunay, and the triangles of the points left that cover the cavity have circles empty of
-    them, so they are triangles of the cavity's own vertices: the same triangulation as a new
-    one of the points left (up to the choice among co-circular points), at the cost of the
-    cavity. ``simplices`` index ``points`` (the base's, removed ones unused); ``neighbors`` and
-    :meth:`find_simplex` as SciPy's.
-    """
-
-    base: Any
     points: NDArray[np.float64]
     simplices: NDArray[np.int64]
     neighbors: NDArray[np.int64]
-    old_to_new: NDArray[np.int64]
-    cavity: NDArray[np.bool_]
-    sub: Any
-    sub_to_new: NDArray[np.int64]
-
-    def find_simplex(self, q: NDArray[np.float64]) -> NDArray[np.int64]:
-        s0 = np.asarray(self.base.find_simplex(q), dtype=np.int64)
-        out = np.where(s0 >= 0, self.old_to_new[np.maximum(s0, 0)], -1)
-        cav = np.flatnonzero(s0 >= 0)
-        cav = cav[self.cavity[s0[cav]]]
-        if cav.size:
-            s1 = np.asarray(self.sub.find_simplex(q[cav]), dtype=np.int64)
-            out[cav] = np.where(s1 >= 0, self.sub_to_new[np.maximum(s1, 0)], -1)
-            lost = cav[out[cav] < 0]  # on the cavity's rim: the triangles around it
-            if lost.size:
-                out[lost] = self._rim(q[lost])
-        return out
-
-    def _rim(self, q: NDArray[np.float64]) -> NDArray[np.int64]:
-        """The first of the cavity's new triangles and their neighbours that holds each query
-        (within rounding), else -1."""
-        new = self.sub_to_new[self.sub_to_new >= 0]
-        cand = np.union1d(new, self.neighbors[new].reshape(-1))
-        cand = cand[cand >= 0]
-        A = self.points[self.simplices[cand]]
-        out = np.full(len(q), -1, dtype=np.int64)
-        for k in range(len(q)):
-            b = _barycentric(A, np.broadcast_to(q[k], (len(cand), 2)))
-            hit = np.flatnonzero((b >= -TIE_BARYCENTRIC).all(axis=1))
-            if hit.size:
-                out[k] = cand[hit[0]]
-        return out
 
 
 def _barycentric(A: NDArray[np.float64], q: NDArray[np.float64]) -> NDArray[np.float64]:
     """``(M, 3)`` barycentric coordinates of ``q (M, 2)`` in the triangles ``A (M, 3, 2)``."""
     e1, e2, d = A[:, 1] - A[:, 0], A[:, 2] - A[:, 0], q - A[:, 0]
     det = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    det = np.where(det == 0.0, np.inf, det)
+    det = np.where(det == 0.0, np.nan, det)  # a flat sliver holds nothing
     u = (d[:, 0] * e2[:, 1] - d[:, 1] * e2[:, 0]) / det
     v = (e1[:, 0] * d[:, 1] - e1[:, 1] * d[:, 0]) / det
     return np.column_stack([1.0 - u - v, u, v])
 
 
 def _thinned(base: Any, removed: NDArray[np.bool_]) -> _Thinned | None:
-    """``base`` without the vertices ``removed`` (see :class:`_Thinned`); None when the cavity
-    holds more than a quarter of the vertices (a new triangulation is then as cheap) or its new
-    triangles do not cover it exactly (co-circular or collinear rims)."""
-    S = base.simplices.astype(np.int64)
+    """The Delaunay triangulation ``base`` without the vertices ``removed``: the triangles
+    around them (the cavity) replaced by the Delaunay triangles of the cavity's other vertices
+    that lie inside it.
+
+    Taking vertices out of a Delaunay triangulation leaves every triangle not incident to them
+    Delaunay, and the triangles of the points left that cover the cavity have circles empty of
+    them, so they are triangles of the cavity's own vertices: the same triangulation as a new
+    one of the points left (up to the choice among co-circular points), at the cost of the
+    cavity. None when the cavity holds more than a quarter of the vertices (a new
+    triangulation is then as cheap) or its new triangles do not cover it exactly (co-circular
+    or collinear rims).
+    """
+    S = np.asarray(base.simplices, dtype=np.int64)
     P = base.points
     hit = removed[S].any(axis=1)
     rim = np.unique(S[hit])
@@ -321,20 +313,13 @@ def _thinned(base: Any, removed: NDArray[np.bool_]) -> _Thinned | None:
     except QhullError:
         return None
     sub_s = rim[sub.simplices.astype(np.int64)]
-    loc = np.asarray(base.find_simplex(P[sub_s].mean(axis=1)), dtype=np.int64)
+    loc = _find_simplex(base, P[sub_s].mean(axis=1))
     inside = (loc >= 0) & hit[np.maximum(loc, 0)]
     cav_area = float(_areas(P[S[hit]]).sum())
     if abs(float(_areas(P[sub_s[inside]]).sum()) - cav_area) > 1e-9 * cav_area:
         return None
-    keep_t = np.flatnonzero(~hit)
-    simplices = np.concatenate([S[keep_t], sub_s[inside]])
-    old_to_new = np.full(len(S), -1, dtype=np.int64)
-    old_to_new[keep_t] = np.arange(len(keep_t))
-    sub_to_new = np.full(len(sub_s), -1, dtype=np.int64)
-    sub_to_new[inside] = len(keep_t) + np.arange(int(inside.sum()))
-    return _Thinned(
-        base, P, simplices, _neighbours(simplices, len(P)), old_to_new, hit, sub, sub_to_new
-    )
+    simplices = np.concatenate([S[~hit], sub_s[inside]])
+    return _Thinned(P, simplices, _neighbours(simplices, len(P)))
 
 
 def _jump_components(
