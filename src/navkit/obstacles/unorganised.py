@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -52,6 +52,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from navkit.errors import InputError
+from navkit.geometry.shape_types import Circle, Ellipse, Rectangle
 from navkit.obstacles.detector import Obstacle
 from navkit.obstacles.rules import GROUND, OBSTACLE, SIDE_SHADOW, UNRELIABLE
 from navkit.obstacles.unorganised_ground import (
@@ -492,10 +493,10 @@ def detect_unorganised(
     )
 
 
-_SHIFT_FIELDS = {
-    "Rectangle": (("xmin", "xmax"), ("ymin", "ymax")),
-    "Circle": (("x",), ("y",)),
-    "Ellipse": (("x",), ("y",)),
+_SHIFT_FIELDS: dict[type, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    Rectangle: (("xmin", "xmax"), ("ymin", "ymax")),
+    Circle: (("x",), ("y",)),
+    Ellipse: (("x",), ("y",)),
 }
 """The coordinate fields of the shipped shapes (:mod:`navkit.geometry.shape_types`)."""
 
@@ -503,16 +504,11 @@ _SHIFT_FIELDS = {
 def _shift_shape(shape: Any, dx: float, dy: float) -> Any:
     """A bounding shape moved by ``(dx, dy)`` (rectangles by their bounds, circles and ellipses
     by their centre; other registered shapes are returned as they are)."""
-    from dataclasses import fields, replace
-
-    from navkit.geometry import shape_types
-
-    cls = type(shape)
-    known = _SHIFT_FIELDS.get(cls.__name__)
-    if known is not None and getattr(shape_types, cls.__name__) is cls:
+    known = _SHIFT_FIELDS.get(type(shape))
+    if known is not None:
         # the shipped records (no ``__post_init__``): a copy of the fields with the coordinates
         # moved, without the frozen dataclass's ``__init__`` (as ``geometry.shapes._ellipses``)
-        out = object.__new__(cls)
+        out = object.__new__(type(shape))
         d = out.__dict__
         d.update(shape.__dict__)
         for name in known[0]:

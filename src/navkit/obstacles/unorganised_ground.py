@@ -407,6 +407,84 @@ def _lowest_cells(
     return li, ij[:, 0] * shape[1] + ij[:, 1]
 
 
+OPENING_ROWS_BUDGET = 1 << 25
+"""Most float32 cells the row-wise opening (:func:`_openings_by_rows`) holds at once (128 MB);
+a larger grid is opened disc by disc."""
+
+
+def _disc(w: int) -> NDArray[np.uint8]:
+    import cv2
+
+    return np.asarray(cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * w + 1, 2 * w + 1)))
+
+
+def _disc_rows(w: int) -> list[int] | None:
+    """Half-widths of the rows of OpenCV's elliptic element of radius ``w`` (row ``dy + w``),
+    or None if a row is not one run centred on the middle column."""
+    half = []
+    for row in _disc(w):
+        on = np.flatnonzero(row)
+        h = (len(on) - 1) // 2
+        if len(on) == 0 or len(on) != 2 * h + 1 or on[0] != w - h:
+            return None
+        half.append(h)
+    return half
+
+
+def _openings_by_discs(surface: NDArray[np.float32], radii: range) -> list[NDArray[np.float32]]:
+    """The opening of ``surface`` by each disc (OpenCV's elliptic element, replicated border)."""
+    import cv2
+
+    out = []
+    for w in radii:
+        k = _disc(w)
+        eroded = cv2.erode(surface, k, borderType=cv2.BORDER_REPLICATE)
+        out.append(cv2.dilate(eroded, k, borderType=cv2.BORDER_REPLICATE))
+    return out
+
+
+def _openings_by_rows(
+    surface: NDArray[np.float32], radii: range
+) -> list[NDArray[np.float32]] | None:
+    """:func:`_openings_by_discs`, the same values: a disc is a stack of centred row segments,
+    so its erosion is the minimum over its rows of the row erosions shifted by the row's
+    offset (dilation likewise). The row erosions of ``surface`` (one per half-width) serve
+    every disc; each disc then costs one minimum per row instead of one per element, and
+    minima and maxima of float32 values are exact, so any order gives the same bits. None when
+    the grid is too large to hold the row erosions (:data:`OPENING_ROWS_BUDGET`) or a disc is
+    not such a stack."""
+    import cv2
+
+    W = max(radii, default=0)
+    H, C = surface.shape
+    rows = [_disc_rows(w) for w in radii]
+    if (
+        W == 0
+        or any(r is None for r in rows)
+        or (W + 1) * (H + 2 * W) * (C + 2 * W) > (OPENING_ROWS_BUDGET)
+    ):
+        return None
+    rep = cv2.BORDER_REPLICATE
+    pad = cv2.copyMakeBorder(surface, W, W, W, W, rep)
+    seg = [np.ones((1, 2 * h + 1), np.uint8) for h in range(W + 1)]
+    eroded_rows = [pad] + [cv2.erode(pad, seg[h], borderType=rep) for h in range(1, W + 1)]
+    out = []
+    for w, half in zip(radii, rows, strict=True):
+        assert half is not None
+        acc = eroded_rows[half[w]][W : W + H, W : W + C].copy()
+        for dy in range(1, w + 1):
+            for r in (w + dy, w - dy):
+                cv2.min(acc, eroded_rows[half[r]][W + r - w : W + r - w + H, W : W + C], dst=acc)
+        q = cv2.copyMakeBorder(acc, w, w, w, w, rep)
+        dil = {h: cv2.dilate(q, seg[h], borderType=rep) if h else q for h in set(half)}
+        res = dil[half[w]][w : w + H, w : w + C].copy()
+        for dy in range(1, w + 1):
+            for r in (w + dy, w - dy):
+                cv2.max(res, dil[half[r]][r : r + H, w : w + C], dst=res)
+        out.append(res)
+    return out
+
+
 def opening_objects(
     Z: NDArray[np.float64], cell: float, settings: UnorganisedSettings
 ) -> NDArray[np.bool_]:
@@ -415,16 +493,16 @@ def opening_objects(
     than ``opening_slope * radius * cell`` from the previous disc's is an object cell. The
     windows are discs (OpenCV's elliptic structuring element), so the slope a window tolerates
     is the same in every direction: a square window reaches ``sqrt(2)`` times as far along its
-    diagonals and cuts crests and ridges of the terrain that a disc keeps."""
-    import cv2
-
+    diagonals and cuts crests and ridges of the terrain that a disc keeps. The openings are
+    computed row by row (:func:`_openings_by_rows`; the same values as disc by disc)."""
     surface = (Z - float(Z.min())).astype(np.float32)  # over the lowest cell: mm-exact in float32
+    radii = range(1, max(1, math.ceil(settings.max_object_m / cell)) + 1)
+    openings = _openings_by_rows(surface, radii)
+    if openings is None:
+        openings = _openings_by_discs(surface, radii)
     last: NDArray[Any] = surface
     obj = np.zeros(Z.shape, dtype=bool)
-    for w in range(1, max(1, math.ceil(settings.max_object_m / cell)) + 1):
-        k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * w + 1, 2 * w + 1))
-        eroded = cv2.erode(surface, k, borderType=cv2.BORDER_REPLICATE)
-        opened: NDArray[Any] = cv2.dilate(eroded, k, borderType=cv2.BORDER_REPLICATE)
+    for w, opened in zip(radii, openings, strict=True):
         obj |= (last - opened) > settings.opening_slope * w * cell
         last = opened
     return obj
