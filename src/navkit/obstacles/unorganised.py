@@ -31,7 +31,8 @@ cannot be built. This module builds the mesh the data allow and runs the paper's
 5. **Stages 6-8 as in the paper**: connected obstacle triangles form one obstacle, shadow
    triangles go to the obstacle they touch, boundary vertices are those with both obstacle and
    other triangles around them, and the bounding shapes A1-A6 (and A7 over obstacle plus shadow)
-   come from :func:`navkit.geometry.shapes.compute_shapes`.
+   come from :mod:`navkit.geometry.shapes`, every obstacle's vertex sets at once (compiled hulls
+   and shapes as on the scan path, or the NumPy twin: the same shapes).
 
 Per-point labels (for scoring against a reference): a point is ground (0) when its height over the
 ground surface is within the ground band, else obstacle (-2). The thresholds are in the data's

@@ -93,8 +93,9 @@ class GroundSurface:
     ----------
     xy, z : arrays
         The TIN's vertices.
-    tri : scipy.spatial.Delaunay
-        Their triangulation in x-y.
+    tri : scipy.spatial.Delaunay or _Thinned
+        Their Delaunay triangulation in x-y (``points``, ``simplices``, ``neighbors``): SciPy's,
+        or the first jump round's with the removed vertices taken out (:func:`_thinned`).
     band_m : float
         The ground band (m) the surface was built with.
     noise_m : float
@@ -303,7 +304,7 @@ def _thinned(base: Any, removed: NDArray[np.bool_]) -> _Thinned | None:
     """
     S = np.asarray(base.simplices, dtype=np.int64)
     P = base.points
-    hit = removed[S].any(axis=1)
+    hit: NDArray[np.bool_] = np.asarray(removed[S].any(axis=1), dtype=bool)
     rim = np.unique(S[hit])
     rim = rim[~removed[rim]]
     if len(rim) < 3 or len(rim) > len(P) // 4:
@@ -431,7 +432,7 @@ def _disc_rows(w: int) -> list[int] | None:
     return half
 
 
-def _openings_by_discs(surface: NDArray[np.float32], radii: range) -> list[NDArray[np.float32]]:
+def _openings_by_discs(surface: NDArray[np.float32], radii: range) -> list[NDArray[Any]]:
     """The opening of ``surface`` by each disc (OpenCV's elliptic element, replicated border)."""
     import cv2
 
@@ -443,9 +444,7 @@ def _openings_by_discs(surface: NDArray[np.float32], radii: range) -> list[NDArr
     return out
 
 
-def _openings_by_rows(
-    surface: NDArray[np.float32], radii: range
-) -> list[NDArray[np.float32]] | None:
+def _openings_by_rows(surface: NDArray[np.float32], radii: range) -> list[NDArray[Any]] | None:
     """:func:`_openings_by_discs`, the same values: a disc is a stack of centred row segments,
     so its erosion is the minimum over its rows of the row erosions shifted by the row's
     offset (dilation likewise). The row erosions of ``surface`` (one per half-width) serve
