@@ -16,8 +16,12 @@ Every method runs in this process on the same points, with one parameter set for
 
 Figures per sample: total error, type I, type II (%), kappa (%) and CPU seconds per million
 points (``time.process_time`` of one call; BLAS / OpenMP pools held to one thread so that the
-CPU time is the work, not idle spinning on a shared machine). SMRF and CSF come from the
-``bench`` extra; a missing one is reported and left out.
+CPU time is the work, not idle spinning on a shared machine). Before the first sample navkit
+runs once on a small synthetic cloud with two boxes, so that every stage has run (stage 8's
+compiled kernels loaded) and no sample's CPU holds a first call. The CPU rows compare each
+sample's navkit runs with SMRF's in the same process: the figure to read is their ratio, the
+absolute seconds move with the machine's load. SMRF and CSF come from the ``bench`` extra; a
+missing one is reported and left out.
 
     python -m benchmarks obstacles_unorganised
 """
