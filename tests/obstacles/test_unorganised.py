@@ -362,3 +362,22 @@ def test_row_wise_opening_equals_opencv_disc_by_disc():
         assert rows is not None
         for w, a, b in zip(radii, _openings_by_discs(Z, radii), rows, strict=True):
             assert np.array_equal(a, b), (shape, w)
+
+
+def test_point_location_walk_and_search_of_every_triangle_agree(monkeypatch):
+    """The walk from each query's nearest vertex and the search of every triangle (what a walk
+    that does not end falls back to) put the queries in triangles that hold them: the same
+    triangle away from edges, -1 outside the hull."""
+    from scipy.spatial import Delaunay
+
+    from navkit.obstacles import unorganised_ground as ug
+
+    rng = np.random.default_rng(13)
+    tri = Delaunay(rng.uniform(0.0, 50.0, (500, 2)))
+    q = rng.uniform(-5.0, 55.0, (300, 2))  # some outside the hull
+    walked = ug._find_simplex(tri, q)
+    monkeypatch.setattr(ug, "WALK_STEPS", 0)
+    searched = ug._find_simplex(tri, q)
+    assert np.array_equal(walked, tri.find_simplex(q))
+    assert np.array_equal(searched, walked)
+    assert (walked < 0).any() and (walked >= 0).any()

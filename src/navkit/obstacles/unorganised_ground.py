@@ -200,6 +200,12 @@ def _framed(
     return np.concatenate([vxy, frame]), np.concatenate([vz, vz[nn]])
 
 
+WALK_STEPS = 256
+"""Steps after which a point's walk is given up for a search of every triangle (a walk from
+the nearest vertex takes a step or two; only rounding on near-degenerate triangles makes one
+circle)."""
+
+
 def _find_simplex(tri: Any, q: NDArray[np.float64]) -> NDArray[np.int64]:
     """The triangle of ``tri`` (``points``, ``simplices``, ``neighbors`` as SciPy's Delaunay)
     holding each query (within rounding; -1 outside), by a visibility walk in NumPy, all
@@ -221,7 +227,7 @@ def _find_simplex(tri: Any, q: NDArray[np.float64]) -> NDArray[np.int64]:
     _, nn = cKDTree(P[used]).query(q)
     cur = start[used[nn]]
     todo = np.arange(len(q))
-    for _ in range(len(S) + 1):
+    for _ in range(WALK_STEPS):
         b = _barycentric(P[S[cur]], q[todo])
         low = np.argmin(np.where(np.isnan(b), -np.inf, b), axis=1)
         held = b[np.arange(len(todo)), low] >= -TIE_BARYCENTRIC
@@ -229,7 +235,13 @@ def _find_simplex(tri: Any, q: NDArray[np.float64]) -> NDArray[np.int64]:
         nxt = N[cur[~held], low[~held]]
         todo, cur = todo[~held][nxt >= 0], nxt[nxt >= 0]
         if todo.size == 0:
-            break
+            return out
+    # walks that did not end (rounding on near-degenerate triangles): every triangle tried
+    A = P[S]
+    for k in todo.tolist():
+        b = _barycentric(A, np.broadcast_to(q[k], (len(S), 2)))
+        hit = np.flatnonzero((b >= -TIE_BARYCENTRIC).all(axis=1))
+        out[k] = hit[0] if hit.size else -1
     return out
 
 
@@ -335,7 +347,7 @@ def _jump_components(
     """Rules P1/P4 on a ground TIN: drop the vertices of components that stand on jumps.
 
     Edges rising faster than ``band + tan0 * length`` are height jumps; the TIN cut at its jumps
-    falls into components. A component whose jump edges all step down out of them (at least 90 %
+    falls into components. A component whose jump edges all step down out of it (at least 90 %
     of them) is an obstacle top (a roof, a tree crown); a component of at most 3 vertices whose
     jumps all step up is a low outlier. The largest component is the terrain and stays.
 
@@ -460,7 +472,7 @@ def _openings_by_rows(surface: NDArray[np.float32], radii: range) -> list[NDArra
     if (
         W == 0
         or any(r is None for r in rows)
-        or (W + 1) * (H + 2 * W) * (C + 2 * W) > (OPENING_ROWS_BUDGET)
+        or (W + 1) * (H + 2 * W) * (C + 2 * W) > OPENING_ROWS_BUDGET
     ):
         return None
     rep = cv2.BORDER_REPLICATE
