@@ -17,7 +17,9 @@ SemanticKITTI clouds looped to 10 Hz frames with their poses (obstacles + obstac
 per-frame files on), beside ``cloud_to_grid`` + ``detect_obstacles_in_grid`` on the same clouds
 with the run's mounting, alternated in one process. Printed: the capability's work per cloud
 (handling + serialising and writing its outputs) / the detector's, and the whole loop's wall
-time per cloud (reading, decoding, path, TF, the files' writer thread) / the detector's.
+time per cloud (reading, decoding, path, TF, the files' writer thread) / the detector's. CPU
+times: the stage's and the detector's are their thread's CPU; the whole run's is the process's
+plus its children's (the per-frame files' writer process).
 ``python -m benchmarks.bench_runtime`` prints the ratios alone.
 """
 
@@ -148,7 +150,9 @@ def obstacles_cost(loops: int = 10, repeats: int = 3) -> tuple[list[Row], dict[s
             files_cpu.append(
                 1e3 * (ch1.ru_utime + ch1.ru_stime - ch0.ru_utime - ch0.ru_stime) / o["frames"]
             )
-            t0, c0 = time.perf_counter(), time.process_time()
+            # the calling thread's CPU, as the stage's cpu_ms_per_frame (the process's would
+            # also count other threads: a BLAS pool's spinning, the run's leftovers)
+            t0, c0 = time.perf_counter(), time.thread_time()
             # as navkit obstacles detect: the height measured once, on the first cloud
             g = cloud_to_grid(clouds[0])
             h = choose_sensor_height(g.points, np.eye(3), given_m=None, source="bench")
@@ -157,7 +161,7 @@ def obstacles_cost(loops: int = 10, repeats: int = 3) -> tuple[list[Row], dict[s
                 for P in clouds:
                     detect_obstacles_in_grid(cloud_to_grid(P), mounting)
             det_ms.append(1e3 * (time.perf_counter() - t0) / (loops * len(clouds)))
-            det_cpu.append(1e3 * (time.process_time() - c0) / (loops * len(clouds)))
+            det_cpu.append(1e3 * (time.thread_time() - c0) / (loops * len(clouds)))
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     d, st, lp = (float(np.median(x)) for x in (det_ms, stage_ms, loop_ms))

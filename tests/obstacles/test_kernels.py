@@ -12,6 +12,7 @@ scenes (both scanners, with noise) and on every real scan grid in ``NAVKIT_DATA/
 from __future__ import annotations
 
 import math
+import pickle
 from dataclasses import replace
 
 import numpy as np
@@ -579,3 +580,59 @@ def test_branch_free_select_is_the_order_statistic(rng):
             v = np.sort(v)[:: 1 if t % 2 else -1].copy()
         k = int(rng.integers(0, m))
         assert _kernels_map._kth_select(v.copy(), k) == np.sort(v)[k]
+
+
+@pytest.mark.twin("map_cells_kernel")
+def test_map_update_compiled_equals_numpy(data_path, rng):
+    """``ObstacleMapper.update`` on the kernel and on its twin: the same hits, seen counts,
+    recent obstacle cells and per-scan figures, scan after scan. The SemanticKITTI clouds from
+    moving (4, 4) poses and planar (3, 3) ones, the map's edge crossing the clouds (points
+    dropped on every side), with NaN / infinite points marked valid, points exactly on cell
+    edges and a range bound that cuts the cloud."""
+    from navkit.obstacles import ObstacleMapper, ObstacleMapperSettings
+
+    mounting = Mounting(height_m=1.73)
+    dets = [detect_obstacles_in_grid(g, mounting, FAST) for _, g in _kitti_grids(data_path)]
+    # a detection with broken returns marked valid and points on the 0.2 m cell edges
+    d = dets[0]
+    P = d.points.copy()
+    valid = d.valid.copy()
+    flat_p, flat_v = P.reshape(-1, 3), valid.reshape(-1)
+    k = rng.choice(len(flat_p), 400, replace=False)
+    flat_p[k[:100]] = np.nan
+    flat_p[k[100:200], 0] = np.inf
+    flat_p[k[200:], :2] = np.round(flat_p[k[200:], :2] / 0.2) * 0.2
+    flat_v[k] = True
+    dets.append(replace(d, points=P, valid=valid))
+    st = ObstacleMapperSettings(resolution=0.2, max_range=25.0)
+    out = {}
+    for mode in ("numpy", "eager"):
+        with jit.use(mode):
+            mapper = ObstacleMapper([-30.0, -20.0], [30.0, 40.0], st)
+            ups = []
+            for k in range(12):
+                yaw = 0.3 * k
+                c, s = math.cos(yaw), math.sin(yaw)
+                if k % 3:
+                    T = np.eye(4)
+                    T[:2, :2] = [[c, -s], [s, c]]
+                    T[:3, 3] = [1.5 * k, 2.0 * k, 1.73]
+                else:
+                    T = np.array([[c, -s, 1.5 * k], [s, c, 2.0 * k], [0.0, 0.0, 1.0]])
+                ups.append(mapper.update(dets[k % len(dets)], T))
+                if k == 5:
+                    recent = [r.copy() for r in mapper.recent]
+                assert not mapper._mark.any()  # the scratch is zero between scans
+            out[mode] = (mapper.hits, mapper.seen, list(mapper.recent), recent, ups)
+            clone = pickle.loads(pickle.dumps(mapper))  # a checkpoint: the scratch not kept
+            assert clone._mark is None and np.array_equal(clone.seen, mapper.seen)
+            assert clone.update(dets[0], np.eye(3)) == replace(ups[0], scan=12)
+    (ha, sa, ra, qa, ua), (hb, sb, rb, qb, ub) = out["numpy"], out["eager"]
+    assert ha.sum() > 0 and sa.sum() > ha.sum()  # not vacuous
+    assert all(u.obstacle_cells > 0 for u in ua[:3])
+    np.testing.assert_array_equal(ha, hb)
+    np.testing.assert_array_equal(sa, sb)
+    assert ua == ub
+    for a, b in zip(ra + qa, rb + qb, strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+        assert np.all(np.diff(a) > 0)  # ascending, each cell once

@@ -93,3 +93,80 @@ def test_vectorised_map_update_counts_like_add_points():
     assert fast.n_scans == ref.n_scans
     for a, b in zip(fast.recent, ref.recent, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_segment_writer_writes_mcaps_unchunked_file(tmp_path):
+    """A run's segment (``ResultsWriter(chunked=False)``, messages written as they are) is byte
+    for byte the file of ``mcap``'s own ``Writer(use_chunking=False)`` given the same schemas,
+    channels and messages: records, statistics, summary offsets and footer CRC."""
+    pytest.importorskip("mcap")
+    from mcap.writer import CompressionType, Writer
+
+    from navkit.io.results_mcap import ResultsWriter, classified_cloud_cdr, read_messages
+
+    rng = np.random.default_rng(3)
+    P = rng.normal(size=(500, 3))
+    cls = rng.integers(-4, 1, 500).astype(np.int8)
+    cloud = "sensor_msgs/msg/PointCloud2"
+    msgs = [
+        ("/a", cloud, 5_000, classified_cloud_cdr(5_000, "v", P, cls)),
+        ("/b", cloud, 3_000, b"\x00\x01\x00\x00" + bytes(range(40))),
+        ("/a", cloud, 9_000, classified_cloud_cdr(9_000, "v", P[:7], cls[:7])),
+        ("/c", "geometry_msgs/msg/PoseStamped", 4_000, b"\x00\x01\x00\x00" + bytes(60)),
+    ]
+    w = ResultsWriter(tmp_path / "ours.mcap", chunked=False)
+    for topic, msgtype, t, raw in msgs:
+        w.write_raw(topic, msgtype, t, raw, msgdef=b"def " + msgtype.encode())
+        w.flush()
+    w.close()
+    with open(tmp_path / "ref.mcap", "wb") as fh:
+        ref = Writer(fh, compression=CompressionType.NONE, use_chunking=False, chunk_size=1 << 20)
+        ref.start(profile="ros2", library="navkit")
+        schemas: dict[str, int] = {}
+        channels: dict[str, int] = {}
+        for topic, msgtype, t, raw in msgs:
+            if topic not in channels:
+                if msgtype not in schemas:
+                    schemas[msgtype] = ref.register_schema(
+                        msgtype, "ros2msg", b"def " + msgtype.encode()
+                    )
+                channels[topic] = ref.register_channel(topic, "cdr", schemas[msgtype])
+            ref.add_message(channels[topic], log_time=t, data=bytes(raw), publish_time=t)
+        ref.finish()
+    assert (tmp_path / "ours.mcap").read_bytes() == (tmp_path / "ref.mcap").read_bytes()
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "ours.mcap", "rb") as fh:
+        reader = make_reader(fh)
+        summary = reader.get_summary()
+        assert summary is not None and summary.statistics.message_count == len(msgs)
+        got = [
+            (ch.topic, m.log_time, m.data)
+            for _, ch, m in reader.iter_messages(log_time_order=False)
+        ]
+    assert got == [(t, s, bytes(raw)) for t, _, s, raw in msgs]
+    cloud_msgs = list(read_messages(tmp_path / "ours.mcap", topics=["/a"]))
+    np.testing.assert_array_equal(
+        np.frombuffer(cloud_msgs[0].message.data, "<f4").reshape(-1, 4)[:, :3], P.astype(np.float32)
+    )
+
+
+def test_dumps_json_writes_non_finite_numbers_as_null():
+    """The per-frame JSON (``navkit.runtime.files.dumps_json``): the standard library's text
+    where every value is finite, ``null`` for NaN and infinities (in lists, values and nested
+    arrays) and never inside a name."""
+    import json
+
+    from navkit.runtime.files import dumps_json
+
+    doc = {"a": [1.5, 2, np.float64(0.1)], "b": np.arange(3.0), "NaN": "Infinity", "c": {"d": 1}}
+    assert dumps_json(doc) == json.dumps(
+        {"a": [1.5, 2, 0.1], "b": [0.0, 1.0, 2.0], "NaN": "Infinity", "c": {"d": 1}}
+    )
+    bad = {"x": [np.nan, 1.0, -np.inf], "y": np.inf, "z": np.array([np.nan, 2.0]), "NaN": "NaN"}
+    assert json.loads(dumps_json(bad)) == {
+        "x": [None, 1.0, None],
+        "y": None,
+        "z": [None, 2.0],
+        "NaN": "NaN",
+    }

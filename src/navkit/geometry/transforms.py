@@ -21,6 +21,7 @@ __all__ = [
     "se2_from_xytheta",
     "se2_inverse",
     "se2_to_xytheta",
+    "se3_adjoint",
     "se3_apply",
     "se3_compose",
     "se3_from_rt",
@@ -62,6 +63,19 @@ def se3_inverse(T: ArrayLike) -> NDArray[np.float64]:
     R, t = se3_to_rt(T)
     Rt = np.swapaxes(R, -1, -2)
     return se3_from_rt(Rt, -np.einsum("...ij,...j->...i", Rt, t))
+
+
+def se3_adjoint(T: ArrayLike) -> NDArray[np.float64]:
+    """``(6, 6)`` adjoint of a rigid transform for twists ``(v, w)`` (translation first):
+    ``T exp(xi) T^-1 = exp(Ad(T) xi)``, ``Ad(T) = [[R, [t]x R], [0, R]]``. It moves a left
+    perturbation of a pose expressed in frame ``T``'s axes into its parent's."""
+    R, t = se3_to_rt(T)
+    tx = np.array([[0.0, -t[2], t[1]], [t[2], 0.0, -t[0]], [-t[1], t[0], 0.0]])
+    Ad = np.zeros((6, 6))
+    Ad[:3, :3] = R
+    Ad[:3, 3:] = tx @ R
+    Ad[3:, 3:] = R
+    return Ad
 
 
 def se3_compose(*transforms: ArrayLike) -> NDArray[np.float64]:

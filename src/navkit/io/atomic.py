@@ -64,6 +64,8 @@ class OutputTransaction:
     backups: dict[Path, Path | None] = field(default_factory=dict)
     created_dirs: list[Path] = field(default_factory=list)
     roots: dict[Path, set[Path]] = field(default_factory=dict)
+    # created_dirs as a set: a long run watches one new folder per frame
+    _created: set[Path] = field(default_factory=set, repr=False)
 
     def watch_root(self, folder: str | os.PathLike[str]) -> None:
         """Watch an output folder: a rollback also removes the empty sub-folders it did not have
@@ -85,7 +87,8 @@ class OutputTransaction:
             missing.append(d)
             d = d.parent
         for d in reversed(missing):
-            if d not in self.created_dirs:
+            if d not in self._created:
+                self._created.add(d)
                 self.created_dirs.append(d)
 
     def before_replace(self, target: Path) -> None:
@@ -113,6 +116,7 @@ class OutputTransaction:
                 backup.unlink(missing_ok=True)
         self.backups.clear()
         self.created_dirs.clear()
+        self._created.clear()
         self.roots.clear()
 
     def rollback(self) -> None:
@@ -141,6 +145,7 @@ class OutputTransaction:
                 pass
         self.backups.clear()
         self.created_dirs.clear()
+        self._created.clear()
         self.roots.clear()
 
 

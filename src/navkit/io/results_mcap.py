@@ -363,24 +363,30 @@ def _marker_cdr(
     c.pack("?", False, align=1)  # mesh_use_embedded_materials
 
 
-def classified_points(points: Any, classes: Any) -> np.ndarray:
+_CLASSIFIED_RECORD = np.dtype([("xyz", "V12"), ("class", "i1"), ("pad", "V3")])
+
+
+def classified_points(points: Any, classes: Any, out: Any = None) -> np.ndarray:
     """The ``(N, 16)`` uint8 records of a classified cloud: ``x y z`` float32, ``class`` int8,
-    three zero bytes."""
+    three zero bytes; written into ``out`` (``16 N`` zeroed bytes, e.g. a slice of the
+    message's buffer) when given."""
     pts = np.asarray(points).reshape(-1, 3)
-    rec = np.zeros((len(pts), 4), dtype="<f4")
-    rec[:, :3] = pts
-    raw = rec.view(np.uint8).reshape(-1, 16)
-    raw[:, 12] = np.asarray(classes, dtype=np.int8).reshape(-1).view(np.uint8)
-    return raw
+    n = len(pts)
+    if out is None:
+        out = np.zeros(16 * n, dtype=np.uint8)
+    rec = np.frombuffer(out, dtype=_CLASSIFIED_RECORD, count=n)
+    # x y z cast at once (contiguous), then moved as 12-byte items: one long strided copy
+    rec["xyz"] = np.ascontiguousarray(pts, dtype="<f4").view("V12").reshape(-1)
+    rec["class"] = np.asarray(classes, dtype=np.int8).reshape(-1)
+    return rec.view(np.uint8).reshape(n, 16)
 
 
-def classified_cloud_cdr(stamp_ns: int, frame_id: str, points: Any, classes: Any) -> bytes:
+def classified_cloud_cdr(stamp_ns: int, frame_id: str, points: Any, classes: Any) -> bytearray:
     """The CDR bytes of the ``sensor_msgs/PointCloud2`` of a classified cloud (fields ``x y z``
-    float32 + ``class`` int8, 16 bytes a point): the points' bytes copied once, without
-    rosbags' message object. Byte for byte ``serialize_cdr`` of :meth:`_Builder.build`
-    (tested)."""
-    raw = classified_points(points, classes)
-    n = len(raw)
+    float32 + ``class`` int8, 16 bytes a point): the points written once, straight into the
+    message's buffer, without rosbags' message object. Byte for byte ``serialize_cdr`` of
+    :meth:`_Builder.build` (tested)."""
+    n = int(np.asarray(points).size // 3)
     c = _Cdr()
     c.pack("iI", int(stamp_ns // 1_000_000_000), int(stamp_ns % 1_000_000_000), align=4)
     c.string(frame_id)
@@ -394,9 +400,11 @@ def classified_cloud_cdr(stamp_ns: int, frame_id: str, points: Any, classes: Any
     c.pack("?", False, align=1)  # is_bigendian
     c.pack("II", 16, 16 * n, align=4)  # point_step, row_step
     c.pack("I", 16 * n, align=4)
-    c.raw(raw.tobytes())
-    c.pack("?", False, align=1)  # is_dense
-    return b"".join(c.parts)
+    head = b"".join(c.parts)
+    buf = bytearray(len(head) + 16 * n + 1)  # zeroed: padding, and is_dense False at the end
+    buf[: len(head)] = head
+    classified_points(points, classes, memoryview(buf)[len(head) : len(head) + 16 * n])
+    return buf
 
 
 def line_list_cdr(stamp_ns: int, frame_id: str, lines: Sequence[Any]) -> bytes:
@@ -441,6 +449,127 @@ def _compression() -> Any:
     return CompressionType.ZSTD
 
 
+class _UnchunkedWriter:
+    """An unchunked MCAP writer (the run's crash-safe segments): the records and summary of
+    ``mcap.writer.Writer(use_chunking=False)``, with each message's header and data written to
+    the file as they are (``Writer`` first copies every record into a buffer: for a 2 MB cloud
+    that is one more pass over it per frame). Schemas and channels are written when
+    registered; :meth:`finish` writes the data end, the summary (schemas, channels, statistics,
+    empty index groups, offsets) and the footer, as ``Writer.finish`` does."""
+
+    def __init__(self, fh: Any) -> None:
+        from mcap.records import Statistics
+
+        self._fh = fh
+        self._schemas: list[Any] = []
+        self._channels: list[Any] = []
+        self._stats = Statistics(
+            attachment_count=0,
+            channel_count=0,
+            channel_message_counts={},
+            chunk_count=0,
+            message_count=0,
+            metadata_count=0,
+            message_start_time=0,
+            message_end_time=0,
+            schema_count=0,
+        )
+
+    def _record(self, record: Any) -> None:
+        from mcap.data_stream import RecordBuilder
+
+        b = RecordBuilder()
+        record.write(b)
+        self._fh.write(b.end())
+
+    def start(self, profile: str, library: str) -> None:
+        from mcap.records import Header
+        from mcap.writer import MCAP0_MAGIC
+
+        self._fh.write(MCAP0_MAGIC)
+        self._record(Header(profile, library))
+
+    def register_schema(self, name: str, encoding: str, data: bytes) -> int:
+        from mcap.records import Schema
+
+        schema = Schema(id=len(self._schemas) + 1, data=data, encoding=encoding, name=name)
+        self._schemas.append(schema)
+        self._stats.schema_count += 1
+        self._record(schema)
+        return int(schema.id)
+
+    def register_channel(self, topic: str, message_encoding: str, schema_id: int) -> int:
+        from mcap.records import Channel
+
+        channel = Channel(
+            id=len(self._channels) + 1,
+            topic=topic,
+            message_encoding=message_encoding,
+            schema_id=schema_id,
+            metadata={},
+        )
+        self._channels.append(channel)
+        self._stats.channel_count += 1
+        self._record(channel)
+        return int(channel.id)
+
+    def add_message(self, channel_id: int, log_time: int, data: Any, publish_time: int) -> None:
+        from mcap.opcode import Opcode
+
+        st = self._stats
+        if st.message_count == 0:
+            st.message_start_time = log_time
+        else:
+            st.message_start_time = min(log_time, st.message_start_time)
+        st.message_end_time = max(log_time, st.message_end_time)
+        counts = st.channel_message_counts
+        counts[channel_id] = counts.get(channel_id, 0) + 1
+        st.message_count += 1
+        size = memoryview(data).nbytes
+        # opcode, record length, channel id, sequence, log time, publish time; then the data
+        self._fh.write(
+            struct.pack("<BQHIQQ", Opcode.MESSAGE, 22 + size, channel_id, 0, log_time, publish_time)
+        )
+        self._fh.write(data)
+
+    def finish(self) -> None:
+        import zlib
+
+        from mcap.data_stream import RecordBuilder
+        from mcap.opcode import Opcode
+        from mcap.records import DataEnd, Footer, SummaryOffset
+        from mcap.writer import MCAP0_MAGIC
+
+        self._record(DataEnd(0))
+        start = self._fh.tell()
+        b = RecordBuilder()
+        offsets = []
+        groups: tuple[tuple[int, list[Any]], ...] = (
+            (Opcode.SCHEMA, self._schemas),
+            (Opcode.CHANNEL, self._channels),
+            (Opcode.STATISTICS, [self._stats]),
+            (Opcode.CHUNK_INDEX, []),
+            (Opcode.ATTACHMENT_INDEX, []),
+            (Opcode.METADATA_INDEX, []),
+        )
+        for opcode, records in groups:
+            g0 = b.count
+            for rec in records:
+                rec.write(b)
+            offsets.append(SummaryOffset(opcode, start + g0, b.count - g0))
+        offset_start = start + b.count
+        for off in offsets:
+            off.write(b)
+        summary = b.end()
+        crc = zlib.crc32(summary)
+        crc = zlib.crc32(struct.pack("<BQQQ", Opcode.FOOTER, 20, start, offset_start), crc)
+        self._fh.write(summary)
+        self._record(
+            Footer(summary_start=start, summary_offset_start=offset_start, summary_crc=crc)
+        )
+        self._fh.write(MCAP0_MAGIC)
+
+
 class ResultsWriter:
     """Writes navkit outputs to an MCAP file as ROS 2 messages.
 
@@ -455,15 +584,14 @@ class ResultsWriter:
 
     def __init__(self, path: PathLike, chunked: bool = True) -> None:
         require_module("mcap", "ros", "writing results.mcap")
-        from mcap.writer import CompressionType, Writer
+        from mcap.writer import Writer
 
         self.path = Path(path)
         self._fh = open(self.path, "wb")
-        self._w = Writer(
-            self._fh,
-            compression=_compression() if chunked else CompressionType.NONE,
-            use_chunking=chunked,
-            chunk_size=1 << 20,
+        self._w: Any = (
+            Writer(self._fh, compression=_compression(), use_chunking=True, chunk_size=1 << 20)
+            if chunked
+            else _UnchunkedWriter(self._fh)
         )
         self._w.start(profile="ros2", library="navkit")
         self._b = _builder()
@@ -489,6 +617,7 @@ class ResultsWriter:
                 field="kind",
                 expected=f"one of {sorted(ROS_TYPES)}",
             )
+        raw: bytes | bytearray
         if kind == "markers":
             raw = line_list_cdr(stamp_ns, frame_id, data)
         elif kind == "classified_cloud":
@@ -499,7 +628,12 @@ class ResultsWriter:
         self.write_raw(topic, msgtype, stamp_ns, raw)
 
     def write_raw(
-        self, topic: str, msgtype: str, log_time_ns: int, raw: bytes, msgdef: bytes | None = None
+        self,
+        topic: str,
+        msgtype: str,
+        log_time_ns: int,
+        raw: bytes | bytearray,
+        msgdef: bytes | None = None,
     ) -> None:
         """Write an already serialised CDR message."""
         ch = self._channel(topic, msgtype, msgdef)

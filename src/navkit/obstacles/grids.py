@@ -68,11 +68,10 @@ class ScanGrid:
 
     def per_point(self, values: NDArray[Any], fill: int | float = -1) -> NDArray[Any]:
         """Spread a per-cell array ``(n_az, n_el)`` back to the input points ``(N,)``."""
-        flat = values.reshape(-1)
-        out = np.full(self.cell_of_point.shape, fill, dtype=values.dtype)
-        ok = self.cell_of_point >= 0
-        out[ok] = flat[self.cell_of_point[ok]]
-        return out
+        # one gather from the cells with ``fill`` appended: a point's -1 picks the last element
+        ext = np.empty(values.size + 1, dtype=values.dtype)
+        ext[:-1], ext[-1] = values.reshape(-1), fill
+        return ext[self.cell_of_point]
 
 
 def _as_cloud(points: ArrayLike, source: str, convert: bool = True) -> NDArray[Any]:

@@ -35,6 +35,7 @@ from scipy.spatial import cKDTree
 
 from navkit.errors import ConfigError, InputError
 from navkit.geometry._validate import check_grid_size
+from navkit.jit import kernels_enabled
 from navkit.obstacles.detector import ObstacleDetection
 from navkit.obstacles.rules import OBSTACLE
 from navkit.results import Result, deprecated_alias
@@ -188,6 +189,73 @@ def scan_points_2d(
     return obst, seen
 
 
+def _scan_flat(
+    P: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    vlab: NDArray[np.int8],
+    vobs: NDArray[np.int32],
+    S: NDArray[np.float64],
+    o: NDArray[np.float64],
+    max_r2: float,
+    H: int,
+    W: int,
+) -> tuple[NDArray[np.intp], NDArray[np.bool_]]:
+    """The flat cells (row-major, with repeats, in point order) of the valid points within
+    ``sqrt(max_r2)`` of the sensor that fall inside the ``(H, W)`` grid, and which of them are
+    obstacle vertices. A point's column / row: ``floor(((x S[j, 0] + y S[j, 1]) + z S[j, 2]) +
+    o[j])``, each operation rounded in this order (``map_cells_kernel``'s)."""
+    x, y, z = P[:, 0], P[:, 1], P[:, 2]
+    near = np.flatnonzero(valid & (x * x + y * y <= max_r2))
+    xn, yn, zn = x[near], y[near], z[near]
+    with np.errstate(invalid="ignore", over="ignore"):
+        cr = []
+        for j in range(2):
+            c = xn * S[j, 0]
+            c += yn * S[j, 1]
+            c += zn * S[j, 2]
+            c += o[j]
+            cr.append(np.floor(c, out=c))
+        cols, rows = cr
+        # decided on the floats (NaN fails), converted in range: a far point's index may not
+        # fit an integer
+        ok = (cols >= 0) & (rows >= 0) & (cols < W) & (rows < H)
+    flat = rows[ok].astype(np.intp) * W + cols[ok].astype(np.intp)
+    k = near[ok]
+    return flat, (vlab[k] == OBSTACLE) & (vobs[k] > 0)
+
+
+def count_scan_cells(
+    P: NDArray[np.float64],
+    valid: NDArray[np.bool_],
+    vlab: NDArray[np.int8],
+    vobs: NDArray[np.int32],
+    S: NDArray[np.float64],
+    o: NDArray[np.float64],
+    max_r2: float,
+    H: int,
+    W: int,
+    hits: NDArray[np.int32],
+    seen: NDArray[np.int32],
+    mark: NDArray[np.uint8],
+) -> tuple[NDArray[np.intp], int]:
+    """Count one scan into the flat ``(H * W,)`` grids ``hits`` and ``seen`` (in place): each
+    cell an obstacle vertex fell in once in ``hits``, each cell any counted point fell in once
+    in ``seen`` (points as :func:`_scan_flat`). ``mark`` ``(H * W,)`` uint8 is scratch, zero on
+    entry and on return. Returns the scan's obstacle cells (ascending, each once) and the number
+    of distinct cells seen. NumPy's buffered fancy-index increment counts a repeated index once;
+    the NumPy twin of ``map_cells_kernel``."""
+    flat, is_obst = _scan_flat(P, valid, vlab, vobs, S, o, max_r2, H, W)
+    obst = flat[is_obst]
+    hits[obst] += 1
+    seen[flat] += 1
+    mark[obst] = 1  # the scan's obstacle cells, once each
+    cells = np.flatnonzero(mark)
+    mark[flat] = 1  # and the seen ones
+    n_seen = int(np.count_nonzero(mark))
+    mark[flat] = 0
+    return cells, n_seen
+
+
 @dataclass(frozen=True)
 class MapUpdate(Result):
     """What one :meth:`ObstacleMapper.update` fused.
@@ -245,6 +313,12 @@ class ObstacleMapper:
         self.n_scans = 0
         self.recent: deque[NDArray[np.intp]] = deque(maxlen=int(st.recent_scans))
         self.known: NDArray[np.bool_] | None = None
+        self._mark: NDArray[np.uint8] | None = None
+
+    def __getstate__(self) -> dict[str, object]:
+        state = dict(self.__dict__)
+        state["_mark"] = None  # scratch (all zero): not part of the map
+        return state
 
     # --- the online interface ------------------------------------------------------------------
     def update(self, detection: ObstacleDetection, T_world_sensor: ArrayLike) -> MapUpdate:
@@ -252,22 +326,23 @@ class ObstacleMapper:
         online object's one verb (``docs/architecture.md``, "Online objects").
 
         The same counts as :meth:`add_points` on :func:`scan_points_2d`'s points, in one pass
-        over the cloud: only the points' map ``x, y`` are computed, each point's cell index once,
-        and a cell is counted once per scan by NumPy's buffered fancy-index increment (a repeated
-        index is incremented once), without sorting the points' cells. Points outside the mapped
-        area are dropped (counted in the result), never an error."""
-        obst, seen = self.scan_cells(detection, T_world_sensor)
-        h = self.hits.reshape(-1)
-        h[obst] += 1
-        self.seen.reshape(-1)[seen] += 1
-        mark = np.zeros(h.size, dtype=bool)  # the scan's obstacle cells, once each
-        mark[obst] = True
-        cells = np.flatnonzero(mark)
+        over the cloud (:func:`count_scan_cells`; compiled: ``map_cells_kernel``, one loop that
+        computes each point's cell and counts it once per scan). Points outside the mapped area
+        are dropped (counted in the result), never an error."""
+        args = self._scan_args(detection, T_world_sensor)
+        hits, seen = self.hits.reshape(-1), self.seen.reshape(-1)  # views: counted in place
+        mark = getattr(self, "_mark", None)  # per-scan scratch, kept zero between scans
+        if mark is None or mark.size != hits.size:
+            mark = self._mark = np.zeros(hits.size, dtype=np.uint8)
+        if kernels_enabled():
+            from navkit.obstacles._kernels_map import map_cells_kernel
+
+            cells, n_seen = map_cells_kernel(*args, hits, seen, mark)
+        else:
+            cells, n_seen = count_scan_cells(*args, hits, seen, mark)
         self.recent.append(cells)
         self.n_scans += 1
-        mark[cells] = False  # reused for the scan's seen cells, once each
-        mark[seen] = True
-        return MapUpdate(self.n_scans - 1, len(cells), int(np.count_nonzero(mark)))
+        return MapUpdate(self.n_scans - 1, len(cells), int(n_seen))
 
     def add_scan(self, detection: ObstacleDetection, T_world_sensor: ArrayLike) -> None:
         """Deprecated alias of :meth:`update` (kept for one release)."""
@@ -280,7 +355,26 @@ class ObstacleMapper:
         """Flat grid indices (row-major, with repeats) of one detection's obstacle points and of
         all its valid points within ``max_range``, inside the grid (see :func:`scan_points_2d`
         for which points and the transform)."""
-        P = np.asarray(detection.points, dtype=np.float64).reshape(-1, 3)
+        flat, is_obst = _scan_flat(*self._scan_args(detection, T_world_sensor))
+        return flat[is_obst], flat
+
+    def _scan_args(
+        self, detection: ObstacleDetection, T_world_sensor: ArrayLike
+    ) -> tuple[
+        NDArray[np.float64],
+        NDArray[np.bool_],
+        NDArray[np.int8],
+        NDArray[np.int32],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        float,
+        int,
+        int,
+    ]:
+        """The arguments of :func:`count_scan_cells` but the counts: the detection's points,
+        validity, classes and obstacle ids flattened (contiguous, one dtype each, so the kernel
+        has one signature), and the map-cell transform ``S (2, 3)``, ``o (2,)`` (a point ``p``'s
+        column and row are ``floor(S p + o)``)."""
         T = np.asarray(T_world_sensor, dtype=np.float64)
         if T.shape == (3, 3):
             A = np.zeros((2, 4))
@@ -293,24 +387,19 @@ class ObstacleMapper:
                 field="T_world_sensor",
                 expected="a (3, 3) planar or (4, 4) rigid transform",
             )
-        x, y = P[:, 0], P[:, 1]
-        near = np.asarray(detection.valid).reshape(-1) & (
-            x * x + y * y <= self.settings.max_range**2
+        S = np.ascontiguousarray(A[:, :3] / self.resolution)
+        o = (A[:, 3] - self.origin) / self.resolution
+        return (
+            np.ascontiguousarray(detection.points, dtype=np.float64).reshape(-1, 3),
+            np.ascontiguousarray(detection.valid, dtype=np.bool_).reshape(-1),
+            np.ascontiguousarray(detection.vertex_labels, dtype=np.int8).reshape(-1),
+            np.ascontiguousarray(detection.vertex_obstacle, dtype=np.int32).reshape(-1),
+            S,
+            o,
+            float(self.settings.max_range) ** 2,
+            self.shape[0],
+            self.shape[1],
         )
-        is_obst = (np.asarray(detection.vertex_labels).reshape(-1) == OBSTACLE) & (
-            np.asarray(detection.vertex_obstacle).reshape(-1) > 0
-        )
-        # the cells' (column, row) as one (2, N) product in cell units; einsum, not a
-        # (N, 3) @ (3, 2) matmul: a threaded BLAS on a loaded machine took 15x longer for this
-        # small product than the arithmetic itself
-        with np.errstate(invalid="ignore", over="ignore"):
-            cr = np.einsum("nk,jk->jn", P, A[:, :3] / self.resolution)
-            cr += ((A[:, 3] - self.origin) / self.resolution)[:, None]
-            np.floor(cr, out=cr)
-            cols, rows = cr[0], cr[1]
-            ok = near & (cols >= 0) & (rows >= 0) & (cols < self.shape[1]) & (rows < self.shape[0])
-        flat = rows[ok].astype(np.intp) * self.shape[1] + cols[ok].astype(np.intp)
-        return flat[is_obst[ok]], flat
 
     def grid(self) -> ObstacleGrid:
         """A snapshot of the grid (copies: later scans do not change it)."""
@@ -374,9 +463,18 @@ class ObstacleMapper:
     @property
     def occupied(self) -> NDArray[np.bool_]:
         """Confirmed obstacle cells ``(H, W)``."""
-        with np.errstate(invalid="ignore", divide="ignore"):
-            ratio = self.hits / np.maximum(self.seen, 1)
-        return (self.hits >= self.settings.min_hits) & (ratio >= self.settings.min_ratio)
+        occ = np.zeros(self.shape[0] * self.shape[1], dtype=bool)
+        occ[self.occupied_cells()] = True
+        return occ.reshape(self.shape)
+
+    def occupied_cells(self) -> NDArray[np.intp]:
+        """Flat (row-major) indices of the confirmed obstacle cells, ascending: ``hits >=
+        min_hits`` and ``hits / max(seen, 1) >= min_ratio``."""
+        # the ratio only where there are enough hits (a few cells of the grid)
+        h = self.hits.reshape(-1)
+        cand = np.flatnonzero(h >= self.settings.min_hits)
+        ratio = h[cand] / np.maximum(self.seen.reshape(-1)[cand], 1)
+        return cand[ratio >= self.settings.min_ratio]
 
     @property
     def recent_occupied(self) -> NDArray[np.bool_]:

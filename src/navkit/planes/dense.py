@@ -20,8 +20,10 @@ Decisions
 - Levels: 1/8, 1/4 and 1/2 of the input resolution (80 x 60 ... 320 x 240 for a 640 x 480
   Kinect frame); full resolution adds CPU, not accuracy, on the 7-Scenes frames (measured:
   ``python -m benchmarks planes_seq``).
-- Depth is resampled by nearest neighbour (no mixing of foreground and background depth at
-  edges), brightness by ``cv2.pyrDown``.
+- Brightness is resampled by ``cv2.pyrDown``; depth by the same Gaussian over the valid depths
+  that agree with the centre pixel (:func:`_depth_down`: noise averaged on surfaces, no
+  mixing of foreground and background at edges). Both are centred on the even pixels, so a
+  level's principal point is ``c / 2**l``.
 - Every threshold is in the sensor's noise units (:mod:`navkit.planes.noise`): the geometric
   residual of a point at depth ``z`` is divided by ``sqrt(2) sigma_z(z)`` (``sigma_z = k z^2``,
   Kinect-type depth), the brightness residual by the images' own brightness noise
@@ -167,6 +169,26 @@ class _Level:
         return self._target  # type: ignore[return-value]
 
 
+def _depth_down(d: NDArray[np.float32], k: float) -> NDArray[np.float32]:
+    """The next pyramid level of a depth image (NaN = none), centred on the even pixels as
+    ``cv2.pyrDown`` centres the brightness: the valid depths under pyrDown's 5 x 5 Gaussian,
+    averaged (a normalised convolution) where the average agrees with the centre pixel within
+    3 ``sigma_z`` of the depth noise (``sigma_z = k z^2``), else the centre pixel itself - a
+    depth edge is never blurred into a surface that is not there. A centre pixel without depth
+    (a dropout) takes the average when most of the window has depth. The average of ~13 pixels
+    cuts the independent part of the depth noise about 4-fold per level, so the coarse normals
+    are not noise (KinectFusion smooths its depth for the same reason)."""
+    valid = np.isfinite(d)
+    num = np.asarray(cv2.pyrDown(np.where(valid, d, 0.0).astype(np.float32)), dtype=np.float32)
+    den = np.asarray(cv2.pyrDown(valid.astype(np.float32)), dtype=np.float32)
+    centre = d[::2, ::2][: num.shape[0], : num.shape[1]]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        avg = num / den
+        near = np.abs(avg - centre) < 3.0 * k * centre * centre
+        ok = (den > 0.5) & (near | (np.isnan(centre) & (den > 0.9)))
+    return np.where(ok, avg, centre).astype(np.float32)
+
+
 def _target_maps(g, d, K) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.float32]]:
     fx, fy, cx, cy = K
     H, W = d.shape
@@ -217,9 +239,9 @@ class DenseFrame:
         for lev in range(max(s.levels) + 1):
             if lev > 0:
                 g = np.asarray(cv2.pyrDown(g), dtype=np.float32)
-                d = d[::2, ::2][: g.shape[0], : g.shape[1]]
+                d = _depth_down(d, s.noise.k)[: g.shape[0], : g.shape[1]]
                 fx, fy = fx / 2, fy / 2
-                cx, cy = (cx + 0.5) / 2 - 0.5, (cy + 0.5) / 2 - 0.5
+                cx, cy = cx / 2, cy / 2
             if lev not in s.levels:
                 continue
             n_valid = int(np.count_nonzero(np.isfinite(d)))
@@ -260,6 +282,12 @@ class DenseResult:
         RMS of the inliers' brightness residuals in sigmas of the images' brightness noise.
     brightness_sigma : float
         That brightness noise (both images combined), brightness in [0, 1].
+    information : (6, 6) array
+        The Gauss-Newton information of the last step about ``xi = (v, w)`` (frame 1's axes,
+        ``T <- exp(xi) T``): both terms, each residual in its noise sigmas times its robust
+        scale. Its inverse is the motion's covariance if the residuals were independent; the
+        pixels' errors are correlated (model errors, colour offset), so it is a lower bound
+        (:attr:`navkit.planes.FrameMotion.covariance` scales it).
     """
 
     T: NDArray[np.float64]
@@ -273,6 +301,7 @@ class DenseResult:
     geometric_sigmas: float = float("nan")
     photometric_sigmas: float = float("nan")
     brightness_sigma: float = float("nan")
+    information: NDArray[np.float64] = field(default_factory=lambda: np.zeros((6, 6)))
 
 
 def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -566,6 +595,7 @@ def _dense_align(
         iterations=its,
         converged=converged,
         dof_sources=_dof_sources(H_G, H_I),
+        information=H_G + H_I,
         geometric_sigmas=float(np.sqrt(np.mean(rG[inl] ** 2))) if inl.any() else nan,
         photometric_sigmas=float(np.sqrt(np.mean(rI[inl] ** 2))) if inl.any() else nan,
         brightness_sigma=sigma_b,

@@ -55,6 +55,7 @@ from navkit.domains import (
 from navkit.errors import NavkitError
 from navkit.geometry import se3_inverse
 from navkit.geometry._validate import check_settings
+from navkit.geometry.transforms import se3_adjoint
 from navkit.jit import kernels_enabled
 from navkit.planes.dense import DenseFrame, DenseResult, DenseSettings, _dense_align, rigid
 from navkit.planes.frame import PlaneObservation
@@ -69,7 +70,7 @@ from navkit.planes.plane_map import MapView, PlaneMap
 from navkit.planes.solve import MotionEstimate, MotionFailure, normal_rank
 from navkit.results import Result, deprecated_alias
 
-__all__ = ["DenseGates", "FrameMotion", "OdometrySettings", "PlaneOdometry"]
+__all__ = ["DenseGates", "FrameMotion", "OdometrySettings", "PlaneOdometry", "ros_pose_covariance"]
 
 log = logging.getLogger(__name__)
 
@@ -84,18 +85,15 @@ class DenseGates:
     point's depth (``sqrt(2) k z^2``), the brightness RMS in sigmas of the images' own
     brightness noise; overlap and inliers are fractions. One set serves every sequence.
 
-    Calibration (``docs/planes.md``, "Gates in noise units"): the dense step was started from
-    the reference motion perturbed by 0, 2, 10, 20, 40 and 80 cm (0-20 deg) on 20 pairs 1 and
-    10 frames apart of the shared 7-Scenes frames. The 89 results within 3 cm / 1.5 deg had a
-    geometric RMS <= 1.17 sigma (median 0.72), a photometric RMS <= 15.7 sigma (7-Scenes'
-    colour is not registered with its depth: edges misalign by several pixels), overlap >=
-    0.83 and inliers >= 0.86; each of the 31 off by more than 5 cm or 2 deg fails a gate (the
-    closest: 1.78 sigma at overlap 0.76; 1.12 sigma at overlap 0.26). Checked, unchanged, on
-    the TUM frames (``rgbd/tum-fr3-structure-notexture-far``, motion-capture reference): all
-    107 right results pass (geometric <= 0.98 sigma, photometric <= 3.6 sigma, overlap >=
-    0.90); 12 of the 13 wrong ones fail; one, started 80 cm / 20 deg off, ends 7.4 cm / 0.3
-    deg off with 1.09 sigma, 5.1 brightness sigmas and overlap 0.83 and passes (the zig-zag
-    structure repeats itself; no start of the odometry is that far off).
+    Calibration (``docs/planes.md``, "How the gates were chosen"; ``python -m
+    benchmarks.planes_gates``): the dense step was started from the reference motion spoiled
+    by 0-80 cm (0-20 deg) on pairs 1 and 10 frames apart of both shared sequences. Right
+    results (within 3 cm / 1.5 deg) left <= 1.01 depth sigmas on 7-Scenes and <= 0.84 on TUM,
+    overlap >= 0.84 and inliers >= 0.99 on both, <= 14.9 brightness sigmas on 7-Scenes (colour
+    not registered with depth) and <= 3.4 on TUM; all pass these gates. Of the results off by
+    more than 5 cm or 2 deg, 1 of 31 passes on 7-Scenes (5.2 cm) and 2 of 17 on TUM (at most
+    10.2 cm / 0.6 deg, from starts 80 cm / 20 deg off in its repeating zig-zag; no odometry
+    start is that far off).
 
     Attributes
     ----------
@@ -170,10 +168,12 @@ class OdometrySettings:
     keyframe_overlap : float
         The dense step aligns each frame with the current *keyframe* (not the previous
         frame: drift grows per keyframe, not per frame); a tracked frame whose overlap with
-        the keyframe falls below this fraction becomes the next keyframe.
+        the keyframe falls below this fraction of the best overlap a frame had with it becomes
+        the next keyframe. Relative, because part of every view never overlaps whatever the
+        motion (sky, missing depth, depth edges): 0.7 of a view with much sky is full overlap.
     revisit_distance, revisit_angle_deg : float
         **Revisits**: when the frame's start pose is within these (metres, degrees) of a
-        keyframe at least 3 keyframes older than the current one, it is aligned with that old
+        keyframe at least 2 keyframes older than the current one, it is aligned with that old
         keyframe first: back where it started, the camera is measured against what it saw
         then, and the error does not grow with the way there and back.
     max_keyframes : int
@@ -186,6 +186,13 @@ class OdometrySettings:
         update is the costliest step after the dense one), not information. 5 cm / 5 deg:
         at 1-4 m the view then shifts by 1-9 % of a 58 deg field of view, so new parts of the
         surfaces enter at each merge; 0 / 0 merges every frame.
+    covariance_scale : float
+        Factor on the dense step's standard deviations (``FrameMotion.covariance``): its
+        Gauss-Newton information treats every pixel as independent, and the errors of
+        neighbouring pixels are not (normals, colour offset, the depth camera's correlation
+        window). Measured step errors against the references were 4.6x (TUM, motion capture;
+        median over the frames) and 17.5x (7-Scenes; its KinectFusion reference errs by about
+        as much) the uninflated sigma; 10 is between.
     max_history : int
         Poses and results kept (:attr:`PlaneOdometry.poses`, ``results``), and frame numbers
         kept per map plane (``MapPlane.observations``): the most recent ones; 0 = all (the
@@ -213,6 +220,7 @@ class OdometrySettings:
     max_keyframes: int = domain_field(200, POSITIVE_INT)
     map_keyframe_distance: float = domain_field(0.05, NON_NEGATIVE)
     map_keyframe_angle_deg: float = domain_field(5.0, Domain(lo=0.0, hi=180.0, note="degrees"))
+    covariance_scale: float = domain_field(10.0, POSITIVE)
     max_history: int = domain_field(0, Domain(integer=True, lo=0, note="0 = all"))
     max_map_planes: int = domain_field(0, Domain(integer=True, lo=0, note="0 = all"))
 
@@ -259,6 +267,13 @@ class FrameMotion(Result):
         The accepted dense refinement (None without one).
     reference : int
         Index of the frame the dense step aligned with (keyframe or previous), -1 if none.
+    covariance : (6, 6) array or None
+        Covariance of ``T_world_frame`` as a left perturbation ``exp(d) T`` with ``d = (v, w)``
+        in world axes (:func:`ros_pose_covariance` converts it to ROS's position /
+        fixed-axis rotation form): the reference frame's covariance plus the dense step's
+        (:attr:`~navkit.planes.dense.DenseResult.information` inverted, moved to world axes,
+        times ``OdometrySettings.covariance_scale`` squared). It grows per keyframe, as the
+        drift does. None for a motion without a dense step.
     """
 
     index: int
@@ -272,6 +287,7 @@ class FrameMotion(Result):
     dof_sources: dict[str, str] = field(default_factory=dict)
     dense: DenseResult | None = None
     reference: int = -1
+    covariance: NDArray[np.float64] | None = None
 
     @property
     def prior_dof(self) -> tuple[str, ...]:
@@ -326,6 +342,8 @@ class PlaneOdometry:
         self._keyframe: tuple[int, DenseFrame, NDArray[np.float64]] | None = None
         self._last_good: tuple[int, DenseFrame, NDArray[np.float64]] | None = None
         self._keyframes: list[tuple[int, DenseFrame, NDArray[np.float64]]] = []
+        self._keyframe_best_overlap: dict[int, float] = {}  # keyframe index -> best overlap
+        self._covariances: dict[int, NDArray[np.float64]] = {}  # reference frames' covariance
         self._dense_reason = ""
         self._plane_overlap = 0.0
         self._depth_note = ""
@@ -368,10 +386,11 @@ class PlaneOdometry:
             self._velocity_known = isinstance(m.motion, MotionEstimate)
         T = rigid(m.T)  # 6: chained products stay rotations
         self.poses.append(T)
+        cov = None if isinstance(m.motion, MotionFailure) else self._covariance(idx, m)
         if m.motion is None or (isinstance(m.motion, MotionEstimate) and not m.motion.prior_dof):
             self._update_map(idx, obs, dframe, T, m)  # 7: only measured poses
         self._prev = obs
-        res = self._result(idx, obs, T, m, t0)
+        res = self._result(idx, obs, T, m, t0, cov)
         self.results.append(res)
         self._bound()
         return res
@@ -483,15 +502,68 @@ class PlaneOdometry:
         return _differs(self._merged_at, T, s.map_keyframe_distance, s.map_keyframe_angle_deg)
 
     def _result(
-        self, idx: int, obs: PlaneObservation, T: NDArray[np.float64], m: _Measured, t0: float
+        self,
+        idx: int,
+        obs: PlaneObservation,
+        T: NDArray[np.float64],
+        m: _Measured,
+        t0: float,
+        cov: NDArray[np.float64] | None,
     ) -> FrameMotion | MotionFailure:
         ms = 1000 * (time.perf_counter() - t0)
         n = len(obs.segments)
         if isinstance(m.motion, MotionFailure):
             return replace(m.motion, index=idx, T_world_frame=T, ms=ms, n_planes=n)
         return FrameMotion(
-            idx, T, m.motion, m.case, ms, n, m.source, m.note, m.dof_sources, m.dense, m.reference
+            idx,
+            T,
+            m.motion,
+            m.case,
+            ms,
+            n,
+            m.source,
+            m.note,
+            m.dof_sources,
+            m.dense,
+            m.reference,
+            cov,
         )
+
+    def _covariance(self, idx: int, m: _Measured) -> NDArray[np.float64] | None:
+        """``FrameMotion.covariance`` of frame ``idx``; kept while the frame can be a reference
+        (the first frame: zero, it defines the world)."""
+        if m.motion is None:
+            cov: NDArray[np.float64] | None = np.zeros((6, 6))
+        elif m.dense is None or m.reference not in self._covariances:
+            cov = None
+        else:
+            H = m.dense.information
+            try:
+                C = np.linalg.inv(H + 1e-12 * max(float(np.trace(H)), 1e-300) * np.eye(6))
+            except np.linalg.LinAlgError:
+                C = np.full((6, 6), np.inf)
+            T_ref = self._reference_pose(m.reference)
+            Ad = se3_adjoint(T_ref)
+            cov = self._covariances[m.reference] + self.settings.covariance_scale**2 * (
+                Ad @ C @ Ad.T
+            )
+        if cov is not None:
+            # kept for the frames that can still be a reference: the keyframes, the last
+            # tracked frame and this one (it may become either)
+            keep = {k[0] for k in self._keyframes} | {idx}
+            if self._last_good is not None:
+                keep.add(self._last_good[0])
+            for k in [k for k in self._covariances if k not in keep]:
+                del self._covariances[k]
+            self._covariances[idx] = cov
+        return cov
+
+    def _reference_pose(self, ref: int) -> NDArray[np.float64]:
+        for k in self._keyframes:
+            if k[0] == ref:
+                return k[2]
+        assert self._last_good is not None and self._last_good[0] == ref
+        return self._last_good[2]
 
     def _bound(self) -> None:
         """Apply ``max_history`` and ``max_map_planes`` (:class:`OdometrySettings`)."""
@@ -583,36 +655,42 @@ class PlaneOdometry:
 
     def _update_keyframe(self, idx, dframe, T, dense_res: DenseResult | None, ref_idx: int) -> None:
         """Keep the reference keyframe while the overlap lasts; a tracked frame whose overlap
-        fell below ``keyframe_overlap`` becomes a new keyframe (and joins the list that
-        :meth:`_revisit` searches); an old keyframe the frame was aligned with becomes the
+        fell below ``keyframe_overlap`` times the best overlap any frame had with that keyframe
+        becomes a new keyframe (and joins the list that
+        :meth:`_revisit` searches), as does a frame the keyframes failed (aligned with the last
+        tracked frame instead); an old keyframe the frame was aligned with becomes the
         reference again when the overlap is good."""
         s = self.settings
         ref = next((k for k in self._keyframes if k[0] == ref_idx), None)
-        if self._keyframe is None or dense_res is None:
+        if self._keyframe is None or dense_res is None or ref is None:
+            # the first, a frame without a dense result, or one the keyframes failed (it was
+            # aligned with the last tracked frame): a new keyframe
             new = (idx, dframe, T)
-        elif dense_res.overlap < s.keyframe_overlap:
-            new = (idx, dframe, T)
-        elif ref is not None:
-            self._keyframe = ref
-            return
         else:
-            return
+            best = max(self._keyframe_best_overlap.get(ref_idx, 0.0), dense_res.overlap)
+            self._keyframe_best_overlap[ref_idx] = best
+            if dense_res.overlap >= s.keyframe_overlap * best:
+                self._keyframe = ref  # (an old keyframe, after a revisit)
+                return
+            new = (idx, dframe, T)
         self._keyframe = new
         self._keyframes.append(new)
         if len(self._keyframes) > s.max_keyframes:
-            self._keyframes.pop(1)  # the first keyframe (the world frame) stays
+            dropped = self._keyframes.pop(1)  # the first keyframe (the world frame) stays
+            self._keyframe_best_overlap.pop(dropped[0], None)
 
     def _revisit(self, T_start: NDArray[np.float64]):
         """The oldest keyframe within ``revisit_distance`` / ``revisit_angle_deg`` of
-        ``T_start`` that is at least 3 keyframes older than the current one (else None)."""
+        ``T_start`` that is at least 2 keyframes older than the current one (else None): the
+        one just before the current was left for lack of overlap."""
         s = self.settings
-        if self._keyframe is None or len(self._keyframes) < 4:
+        if self._keyframe is None or len(self._keyframes) < 3:
             return None
         current = next(
             (n for n, k in enumerate(self._keyframes) if k[0] == self._keyframe[0]),
             len(self._keyframes),
         )
-        for k in self._keyframes[: max(current - 2, 0)]:
+        for k in self._keyframes[: max(current - 1, 0)]:
             if not _differs(k[2], T_start, s.revisit_distance, s.revisit_angle_deg):
                 return k
         return None
@@ -776,3 +854,14 @@ def _dense_measured(
     )
     case = base.case if base is not None else 0
     return _Measured(T, step, motion, case, source, "", dict(dense.dof_sources), dense, reference)
+
+
+def ros_pose_covariance(cov: NDArray[np.float64], point: ArrayLike) -> NDArray[np.float64]:
+    """A :attr:`FrameMotion.covariance` (left perturbation, world axes) as ROS's pose covariance
+    of a frame at ``point`` (world): position, then rotation about the fixed world axes
+    (``geometry_msgs/PoseWithCovariance``). A left perturbation ``(v, w)`` moves ``point`` by
+    ``v + w x point``."""
+    p = np.asarray(point, dtype=np.float64)
+    J = np.eye(6)
+    J[:3, 3:] = -np.array([[0.0, -p[2], p[1]], [p[2], 0.0, -p[0]], [-p[1], p[0], 0.0]])
+    return J @ np.asarray(cov, dtype=np.float64) @ J.T

@@ -63,9 +63,10 @@ CORNER_COLOR = (0.0, 0.7, 0.7, 1.0)
 
 
 def _outlines(shapes: list[Any], n: int = 36) -> list[NDArray[np.float64]]:
-    """``shape.outline(n)`` of each shape; ellipses (A6, MVEE) all at once from the same
-    formula (``Ellipse.outline``: the same numbers, without a NumPy call chain per shape)."""
-    from navkit.geometry.shapes import Ellipse
+    """``shape.outline(n)`` of each shape; rectangles (A1) and ellipses (A6, MVEE) all at once
+    (the same numbers as ``Rectangle.outline`` / ``Ellipse.outline``, without a NumPy call chain
+    per shape)."""
+    from navkit.geometry.shapes import Ellipse, Rectangle
 
     out: list[Any] = [None] * len(shapes)
     ell = [i for i, shp in enumerate(shapes) if type(shp) is Ellipse]
@@ -77,9 +78,17 @@ def _outlines(shapes: list[Any], n: int = 36) -> list[NDArray[np.float64]]:
         c = np.array([math.cos(e.angle) for e in E])[:, None]
         s = np.array([math.sin(e.angle) for e in E])[:, None]
         u, v = a * ct, b * st
-        X, Y = x + c * u - s * v, y + s * u + c * v
+        XY = np.empty((len(E), n, 2))
+        XY[:, :, 0], XY[:, :, 1] = x + c * u - s * v, y + s * u + c * v
         for k, i in enumerate(ell):
-            out[i] = np.column_stack([X[k], Y[k]])
+            out[i] = XY[k]
+    rect = [i for i, shp in enumerate(shapes) if type(shp) is Rectangle]
+    if rect:
+        # the four corners counter-clockwise: (xmin, ymin) (xmax, ymin) (xmax, ymax) (xmin, ymax)
+        B = np.array([(r.xmin, r.xmax, r.ymin, r.ymax) for r in (shapes[i] for i in rect)])
+        XY = B[:, [[0, 2], [1, 2], [1, 3], [0, 3]]]
+        for k, i in enumerate(rect):
+            out[i] = XY[k]
     for i, shp in enumerate(shapes):
         if out[i] is None:
             out[i] = shp.outline(n)
@@ -95,7 +104,8 @@ def obstacle_lines(
     """Outlines of the bounding shapes A1-A6 (+ MEC, MVEE; ns ``shape/<name>``) and A7
     (``shape/A7:<name>``) of detected obstacles at height ``z`` of their (level body) frame;
     ``T`` (4, 4), optional, maps them into another frame; ``names``, optional, keeps only these
-    shapes (``"A7"`` keeps every A7 outline)."""
+    shapes (``"A7"`` keeps every A7 outline). Without ``T`` the lines' points are views of one
+    array (filled at once)."""
     items = []
     for ob in obstacles:
         items += [
@@ -105,21 +115,29 @@ def obstacle_lines(
         ]
         if names is None or "A7" in names:
             items += [(ob.id, f"shape/A7:{n}", shp, A7_COLOR) for n, shp in ob.guaranteed.items()]
-    lines = []
-    for (oid, ns, _, color), xy in zip(items, _outlines([it[2] for it in items]), strict=True):
-        P = np.empty((len(xy), 3))
-        P[:, :2], P[:, 2] = xy, z
-        if T is not None:
-            P = P @ T[:3, :3].T + T[:3, 3]
-        lines.append(Polyline(ns, oid, P, color))
-    return lines
+    if not items:
+        return []
+    xys = _outlines([it[2] for it in items])
+    if T is None:
+        ends = np.cumsum([len(xy) for xy in xys])
+        P = np.empty((int(ends[-1]), 3))
+        P[:, :2], P[:, 2] = np.concatenate(xys), z
+        pts = [P[a:b] for a, b in zip([0, *ends[:-1].tolist()], ends.tolist(), strict=True)]
+    else:
+        pts = []
+        for xy in xys:
+            Q = np.empty((len(xy), 3))
+            Q[:, :2], Q[:, 2] = xy, z
+            pts.append(Q @ T[:3, :3].T + T[:3, 3])
+    return [Polyline(ns, oid, Q, color) for (oid, ns, _, color), Q in zip(items, pts, strict=True)]
 
 
 def obstacle_map_output(mapper: Any, stamp_ns: int, frame_id: str) -> Output:
     """An :class:`~navkit.obstacles.ObstacleMapper`'s grid as ``/navkit/obstacle_map``
     (-1 never seen, 0 seen free, 100 occupied)."""
-    occ = np.where(mapper.seen > 0, np.int8(0), np.int8(-1))  # no snapshot copies of the counts
-    occ[mapper.occupied] = 100
+    occ = (mapper.seen > 0).view(np.int8)  # 1 seen, 0 never: minus 1 gives 0 / -1
+    occ -= 1
+    occ.reshape(-1)[mapper.occupied_cells()] = 100
     origin = np.array(mapper.origin, dtype=np.float64)
     return Output(
         "/navkit/obstacle_map", "grid", stamp_ns, frame_id, (occ, mapper.resolution, origin)
@@ -241,7 +259,7 @@ class ObstaclesStage:
         if self.height is None:
             self._set_height(grid.points, src)
         det = detect_obstacles_in_grid(grid, self.mounting, self.settings, source=src)
-        labels = grid.per_point(det.vertex_labels).astype(np.int8)
+        labels = grid.per_point(det.vertex_labels).astype(np.int8, copy=False)
         seq = self.n
         self.n += 1
         outs = [

@@ -51,8 +51,11 @@ def dumps_json(data: Any, indent: int | None = None) -> str:
     (as :func:`navkit.io.atomic.write_json`), by the C encoder (``indent=None``): about 3x
     faster than converting the tree in Python first. The values are numbers and navkit's own
     names, so a bare ``NaN`` / ``Infinity`` token is always a number."""
-    text = json.dumps(data, default=_default, indent=indent, allow_nan=True)
-    return _NONFINITE.sub("null", text)
+    try:  # most documents have no NaN / infinity: no pass of the regular expression
+        return json.dumps(data, default=_default, indent=indent, allow_nan=False)
+    except ValueError:
+        text = json.dumps(data, default=_default, indent=indent, allow_nan=True)
+        return _NONFINITE.sub("null", text)
 
 
 def encode(kind: str, payload: Any) -> bytes:

@@ -154,15 +154,22 @@ class PlanesStage:
             return StageResult()  # wait for the colour of this depth frame
         return self._frame(d, c if paired else None, poses)
 
-    def _robot(self, d: Message, poses: PoseBuffer, T: NDArray[np.float64]) -> list[Output]:
+    def _robot(
+        self,
+        d: Message,
+        poses: PoseBuffer,
+        T: NDArray[np.float64],
+        cov_left: NDArray[np.float64] | None,
+    ) -> list[Output]:
         """The frame's transforms and the robot's pose: ``planes_odom -> camera`` on ``/tf``
         when the recording's TF tree has no parent for the camera; else, once, a static
         ``root -> planes_odom`` that puts the odometry's origin where the tree had the camera
         at the first frame (the camera keeps its parent: one parent per frame). The robot
         (``base_link`` / ``base_footprint`` when the tree connects it to the camera, else the
-        camera) in ``planes_odom`` as ``PoseWithCovarianceStamped``: PlaneOdometry's result
-        carries no covariance, so it is marked not estimated (element 0 = -1, as
-        ``sensor_msgs/Imu`` marks a missing covariance)."""
+        camera) in ``planes_odom`` as ``PoseWithCovarianceStamped``, with the covariance of
+        PlaneOdometry's result (:attr:`~navkit.planes.FrameMotion.covariance` at the robot's
+        position); a frame without one (a failure, the planes alone) is marked not estimated
+        (element 0 = -1, as ``sensor_msgs/Imu`` marks a missing covariance)."""
         stamp, cam = d.stamp_ns, d.frame_id.lstrip("/")
         outs: list[Output] = []
         base = cam
@@ -185,8 +192,13 @@ class PlanesStage:
             )
         T_cam_base = poses.tf.lookup(cam, base, stamp) if base != cam else None
         T_base = T if T_cam_base is None else T @ T_cam_base
-        cov = np.zeros((6, 6))
-        cov[0, 0] = -1.0
+        from navkit.planes.odometry import ros_pose_covariance
+
+        if cov_left is None:  # no dense step measured this frame: not estimated
+            cov = np.zeros((6, 6))
+            cov[0, 0] = -1.0
+        else:
+            cov = ros_pose_covariance(cov_left, T_base[:3, 3])
         outs.append(Output("/navkit/planes/pose", "pose_cov", stamp, "planes_odom", (T_base, cov)))
         outs.append(Output("/navkit/planes/sensor_pose", "pose", stamp, "planes_odom", T))
         return outs
@@ -211,7 +223,7 @@ class PlanesStage:
         self.n += 1
         self.n_ok += isinstance(r, FrameMotion)
         self._append_pose(d.stamp_ns, T)
-        outs = self._robot(d, poses, T)
+        outs = self._robot(d, poses, T, r.covariance if isinstance(r, FrameMotion) else None)
         lines = []
         R, t = T[:3, :3], T[:3, 3]
         for k, seg in enumerate(obs.extraction.segments):
