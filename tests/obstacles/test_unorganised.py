@@ -256,3 +256,128 @@ def test_cli_refuses_a_cloud_that_fits_neither_path(cli, tmp_path):
     res = cli("obstacles", "detect", src, "--out", tmp_path / "out")
     assert res.exit_code == 2, res.output
     assert "do not span an area" in res.output
+
+
+def test_vertices_taken_out_of_a_triangulation_give_the_delaunay_of_the_points_left():
+    """The jump rounds' cavity update (``_thinned``): on points in general position the
+    triangles are those of a new Delaunay triangulation of the points left, and the walk
+    (``_find_simplex``) puts every query inside the hull in a triangle that holds it, in
+    any storage order."""
+    from scipy.spatial import Delaunay
+
+    from navkit.obstacles.unorganised_ground import _barycentric, _find_simplex, _thinned
+
+    rng = np.random.default_rng(11)
+    P = rng.uniform(0.0, 100.0, (3000, 2))
+    base = Delaunay(P)
+    removed = (np.hypot(P[:, 0] - 40.0, P[:, 1] - 55.0) < 9.0) | (
+        np.hypot(P[:, 0] - 75.0, P[:, 1] - 20.0) < 4.0
+    )
+    thin = _thinned(base, removed)
+    assert thin is not None
+    left = np.flatnonzero(~removed)
+    fresh = Delaunay(P[left])
+    assert {tuple(sorted(t)) for t in thin.simplices.tolist()} == {
+        tuple(sorted(t)) for t in left[fresh.simplices].tolist()
+    }
+    # neighbours: the triangle across the edge opposite each vertex shares that edge
+    S, nb = thin.simplices, thin.neighbors
+    for t, i in zip(*np.nonzero(nb >= 0), strict=True):
+        edge = {S[t, (i + 1) % 3], S[t, (i + 2) % 3]}
+        assert edge <= set(S[nb[t, i]].tolist())
+    q = rng.uniform(1.0, 99.0, (2000, 2))
+    s = _find_simplex(thin, q)
+    inside = fresh.find_simplex(q) >= 0
+    assert np.array_equal(s >= 0, inside)
+    b = _barycentric(P[S[s[inside]]], q[inside])
+    assert (b >= -1e-9).all()
+
+
+def test_tin_height_on_edges_and_vertices_takes_the_gentlest_plane():
+    """A query on a vertex gets the vertex's own height and the gentlest slope of the
+    triangles around it; a query on an edge the gentler of its two triangles; inside a
+    triangle that triangle's plane."""
+    from scipy.spatial import Delaunay
+
+    from navkit.obstacles.unorganised_ground import _tin_at
+
+    # a square around a centre vertex: four triangles of four different slopes
+    xy = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0], [1.0, 1.0]])
+    z = np.array([0.0, 0.0, 2.0, 0.4, 0.5])
+    tri = Delaunay(xy)
+    assert len(tri.simplices) == 4
+
+    def slope_of(t):
+        A = np.column_stack([xy[tri.simplices[t]], np.ones(3)])
+        gx, gy, _ = np.linalg.solve(A, z[tri.simplices[t]])
+        return np.hypot(gx, gy)
+
+    slopes = np.array([slope_of(t) for t in range(4)])
+    on_edge = [t for t in range(4) if {2, 4} <= set(tri.simplices[t].tolist())]
+    assert len(on_edge) == 2 and slopes[on_edge[0]] != slopes[on_edge[1]]
+    centre, edge, inside = [1.0, 1.0], [1.5, 1.5], [1.0, 0.4]
+    zq, sq = _tin_at(xy, z, tri, np.array([centre, edge, inside]))
+    assert zq[0] == z[4] and sq[0] == pytest.approx(slopes.min())
+    assert zq[1] == pytest.approx(0.5 * (z[2] + z[4]))
+    assert sq[1] == pytest.approx(slopes[on_edge].min())
+    assert sq[2] == pytest.approx(slopes[int(tri.find_simplex(np.array([inside]))[0])])
+
+
+def test_stage_8_kernels_and_twin_give_the_same_obstacles():
+    """Stage 8 of the unorganised path with the compiled hulls and shapes and with the NumPy
+    twin: the same records, shapes bit for bit."""
+    from navkit import jit
+
+    rng = np.random.default_rng(8)
+    P, _, _ = _terrain(rng, n=6000)
+    with jit.use("eager"):
+        a = detect_unorganised(P)
+    with jit.use("numpy"):
+        b = detect_unorganised(P)
+    assert len(a.obstacles) >= len(BOXES) and len(a.obstacles) == len(b.obstacles)
+    for x, y in zip(a.obstacles, b.obstacles, strict=True):
+        assert (x.id, x.n_triangles, x.n_points, x.z_min, x.z_max, x.shadow_area) == (
+            y.id, y.n_triangles, y.n_points, y.z_min, y.z_max, y.shadow_area
+        )  # fmt: skip
+        for name in ("boundary_xy", "polygon_xy", "shadow_xy"):
+            assert np.array_equal(getattr(x, name), getattr(y, name)), name
+        assert x.shapes == y.shapes and x.guaranteed == y.guaranteed
+    # the records are in the input's frame (UTM-sized x-y), around their own vertices
+    for ob in a.obstacles:
+        assert ob.shapes["A1"].contains(ob.boundary_xy, tol=1e-6).all()
+        assert ob.guaranteed["A1"].contains(ob.shadow_xy, tol=1e-6).all()
+
+
+def test_row_wise_opening_equals_opencv_disc_by_disc():
+    """The opening computed from row erosions gives OpenCV's disc opening bit for bit (minima
+    and maxima of float32 values are exact), on grids smaller and larger than the discs."""
+    from navkit.obstacles.unorganised_ground import _openings_by_discs, _openings_by_rows
+
+    rng = np.random.default_rng(12)
+    for shape in ((4, 3), (37, 61), (120, 90)):
+        Z = (rng.random(shape) * 20.0).astype(np.float32)
+        Z[rng.random(shape) < 0.1] += 15.0  # spikes: objects narrower than the windows
+        radii = range(1, 16)
+        rows = _openings_by_rows(Z, radii)
+        assert rows is not None
+        for w, a, b in zip(radii, _openings_by_discs(Z, radii), rows, strict=True):
+            assert np.array_equal(a, b), (shape, w)
+
+
+def test_point_location_walk_and_search_of_every_triangle_agree(monkeypatch):
+    """The walk from each query's nearest vertex and the search of every triangle (what a walk
+    that does not end falls back to) put the queries in triangles that hold them: the same
+    triangle away from edges, -1 outside the hull."""
+    from scipy.spatial import Delaunay
+
+    from navkit.obstacles import unorganised_ground as ug
+
+    rng = np.random.default_rng(13)
+    tri = Delaunay(rng.uniform(0.0, 50.0, (500, 2)))
+    q = rng.uniform(-5.0, 55.0, (300, 2))  # some outside the hull
+    walked = ug._find_simplex(tri, q)
+    monkeypatch.setattr(ug, "WALK_STEPS", 0)
+    searched = ug._find_simplex(tri, q)
+    assert np.array_equal(walked, tri.find_simplex(q))
+    assert np.array_equal(searched, walked)
+    assert (walked < 0).any() and (walked >= 0).any()

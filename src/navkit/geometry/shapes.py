@@ -118,7 +118,7 @@ def hull_points(points: ArrayLike) -> NDArray[np.float64]:
 def _from_lowest(H: NDArray[np.float64]) -> NDArray[np.float64]:
     """The cycle ``H`` started at its lexicographically smallest vertex (smallest x, then y)."""
     k = int(np.lexsort((H[:, 1], H[:, 0]))[0])
-    return np.roll(H, -k, axis=0) if k else H
+    return np.concatenate([H[k:], H[:k]]) if k else H  # np.roll's result, without its overhead
 
 
 # ----------------------------------------------------------------------------------------------

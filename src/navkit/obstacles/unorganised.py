@@ -31,7 +31,8 @@ cannot be built. This module builds the mesh the data allow and runs the paper's
 5. **Stages 6-8 as in the paper**: connected obstacle triangles form one obstacle, shadow
    triangles go to the obstacle they touch, boundary vertices are those with both obstacle and
    other triangles around them, and the bounding shapes A1-A6 (and A7 over obstacle plus shadow)
-   come from :func:`navkit.geometry.shapes.compute_shapes`.
+   come from :mod:`navkit.geometry.shapes`, every obstacle's vertex sets at once (compiled hulls
+   and shapes as on the scan path, or the NumPy twin: the same shapes).
 
 Per-point labels (for scoring against a reference): a point is ground (0) when its height over the
 ground surface is within the ground band, else obstacle (-2). The thresholds are in the data's
@@ -42,7 +43,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -52,6 +53,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from navkit.errors import InputError
+from navkit.geometry.shape_types import Circle, Ellipse, Rectangle
 from navkit.obstacles.detector import Obstacle
 from navkit.obstacles.rules import GROUND, OBSTACLE, SIDE_SHADOW, UNRELIABLE
 from navkit.obstacles.unorganised_ground import (
@@ -288,15 +290,19 @@ def _assign_shadows(
     """Stage 6: each shadow triangle goes to the obstacle it touches (across an edge, through
     other shadow triangles; the smallest id when it touches several)."""
     out = comp.copy()
-    todo = shadow & (out == 0)
+    big = np.iinfo(np.int32).max
+    todo = np.flatnonzero(shadow & (out == 0))  # the rounds work on the pending triangles only
     for _ in range(64):
-        nb = np.where(neighbors >= 0, out[np.maximum(neighbors, 0)], 0)
-        nb = np.where(nb > 0, nb, np.iinfo(np.int32).max).min(axis=1)
-        take = todo & (nb < np.iinfo(np.int32).max)
+        if todo.size == 0:
+            break
+        nbr = neighbors[todo]
+        nb = np.where(nbr >= 0, out[np.maximum(nbr, 0)], 0)
+        nb = np.where(nb > 0, nb, big).min(axis=1)
+        take = nb < big
         if not take.any():
             break
-        out[take] = nb[take]
-        todo &= ~take
+        out[todo[take]] = nb[take]
+        todo = todo[~take]
     return out
 
 
@@ -434,18 +440,22 @@ def detect_unorganised(
         core = in_core[work]
         if not core.any():
             continue
-        res = _detect_tile(xy_all[work], z_all[work], settings, source, clock, ground_only)
+        res = _detect_tile(xy_all[work], z_all[work], settings, source, clock, ground_only, offset)
         rows = idx[work[core]]
         # a point on a shared tile edge is written by the last tile: the same rule everywhere
         labels[rows] = res["labels"][core]
         ground_z[rows] = res["ground_z"][core]
         base = len(obstacles)
         ids = res["point_obstacle"][core]
-        keep_obs = []
-        for ob in res["obstacles"]:
-            cx, cy = ob.polygon_xy.mean(axis=0) if len(ob.polygon_xy) else (np.nan, np.nan)
-            if tx0 <= cx <= tx0 + tw and ty0 <= cy <= ty0 + th:
-                keep_obs.append(ob)
+        # an obstacle belongs to the tile whose own square holds its outline's centre
+        centres = res["centres"]
+        inside = (
+            (centres[:, 0] >= tx0)
+            & (centres[:, 0] <= tx0 + tw)
+            & (centres[:, 1] >= ty0)
+            & (centres[:, 1] <= ty0 + th)
+        )
+        keep_obs = [ob for ob, ok in zip(res["obstacles"], inside.tolist(), strict=True) if ok]
         if settings.build_map:
             remap = np.zeros(len(res["obstacles"]) + 1, dtype=np.int32)
             for k, ob in enumerate(keep_obs):
@@ -455,7 +465,9 @@ def detect_unorganised(
             obstacle_id[rows] = np.where(ids > 0, ids + id_base, 0)
             id_base += int(res["point_obstacle"].max(initial=0))
         for k, ob in enumerate(keep_obs):
-            obstacles.append(_shifted(ob, base + k + 1, offset))
+            # the tile's records are new and not shared yet: renumbered in place
+            ob.__dict__["id"] = base + k + 1
+            obstacles.append(ob)
         for key, v in res["counts"].items():
             counts[key] += v
         tiles_info.append(
@@ -482,11 +494,29 @@ def detect_unorganised(
     )
 
 
+_SHIFT_FIELDS: dict[type, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    Rectangle: (("xmin", "xmax"), ("ymin", "ymax")),
+    Circle: (("x",), ("y",)),
+    Ellipse: (("x",), ("y",)),
+}
+"""The coordinate fields of the shipped shapes (:mod:`navkit.geometry.shape_types`)."""
+
+
 def _shift_shape(shape: Any, dx: float, dy: float) -> Any:
     """A bounding shape moved by ``(dx, dy)`` (rectangles by their bounds, circles and ellipses
     by their centre; other registered shapes are returned as they are)."""
-    from dataclasses import fields, replace
-
+    known = _SHIFT_FIELDS.get(type(shape))
+    if known is not None:
+        # the shipped records (no ``__post_init__``): a copy of the fields with the coordinates
+        # moved, without the frozen dataclass's ``__init__`` (as ``geometry.shapes._ellipses``)
+        out = object.__new__(type(shape))
+        d = out.__dict__
+        d.update(shape.__dict__)
+        for name in known[0]:
+            d[name] += dx
+        for name in known[1]:
+            d[name] += dy
+        return out
     names = {f.name for f in fields(shape)} if hasattr(shape, "__dataclass_fields__") else set()
     if {"xmin", "xmax", "ymin", "ymax"} <= names:
         return replace(
@@ -499,22 +529,6 @@ def _shift_shape(shape: Any, dx: float, dy: float) -> Any:
     if {"x", "y"} <= names:
         return replace(shape, x=shape.x + dx, y=shape.y + dy)
     return shape
-
-
-def _shifted(ob: Obstacle, new_id: int, offset: NDArray[np.float64]) -> Obstacle:
-    """``ob`` (local coordinates) in the input frame, with id ``new_id``."""
-    from dataclasses import replace
-
-    dx, dy = float(offset[0]), float(offset[1])
-    return replace(
-        ob,
-        id=new_id,
-        boundary_xy=ob.boundary_xy + offset,
-        polygon_xy=ob.polygon_xy + offset,
-        shadow_xy=ob.shadow_xy + offset,
-        shapes={k: _shift_shape(v, dx, dy) for k, v in ob.shapes.items()},
-        guaranteed={k: _shift_shape(v, dx, dy) for k, v in ob.guaranteed.items()},
-    )
 
 
 def _tick(clock: dict[str, float], key: str, t: float) -> float:
@@ -530,9 +544,11 @@ def _detect_tile(
     source: str,
     clock: dict[str, float],
     ground_only: bool = False,
+    offset: NDArray[np.float64] | None = None,
 ) -> dict[str, Any]:
-    """Stages 2-8 on one tile's points (local x-y); only the ground labels with
-    ``ground_only``."""
+    """Stages 2-8 on one tile's points (local x-y, ``offset`` from the input's frame); only
+    the ground labels with ``ground_only``. The obstacle records are in the input's frame,
+    ``centres`` the local centres of their outlines."""
     t = time.perf_counter()
     spacing = point_spacing(xy)
     if not math.isfinite(spacing) or spacing <= 0:
@@ -559,17 +575,23 @@ def _detect_tile(
     counts = {"ground": 0, "unreliable": 0, "obstacle": 0, "side_shadow": 0, "shadow_behind": 0}
     point_obstacle = np.zeros(len(z), dtype=np.int32)
     obstacles: list[Obstacle] = []
+    centres = np.empty((0, 2))
     if ground_only:
         return {
             "labels": labels,
             "ground_z": zg,
             "point_obstacle": point_obstacle,
             "obstacles": obstacles,
+            "centres": centres,
             "counts": counts,
             "info": info,
         }
     # stage 2: the mesh over the thinned cloud (lowest point per spacing cell)
-    v = lowest_per_cell(xy, z, settings.thin_spacings * spacing)
+    v = (
+        surf.lowest  # the ground estimate's cells are the thinning cells
+        if settings.thin_spacings == settings.grid_spacings
+        else lowest_per_cell(xy, z, settings.thin_spacings * spacing)
+    )
     info["n_mesh_vertices"] = int(v.size)
     try:
         mesh = Delaunay(xy[v])
@@ -580,6 +602,7 @@ def _detect_tile(
             "ground_z": zg,
             "point_obstacle": point_obstacle,
             "obstacles": obstacles,
+            "centres": centres,
             "counts": counts,
             "info": info,
         }
@@ -622,16 +645,25 @@ def _detect_tile(
         _, nn = cKDTree(xy[v]).query(xy[~ground])
         point_obstacle[~ground] = vid[nn]
     if settings.build_map and nc:
-        obstacles = _stage_8(xy, z, v, simp, comp, owner, vid, boundary, nc, settings)
+        obstacles, centres = _stage_8(
+            xy, z, v, simp, comp, owner, vid, boundary, nc, settings, offset
+        )
     _tick(clock, "shapes", t)
     return {
         "labels": labels,
         "ground_z": zg,
         "point_obstacle": point_obstacle,
         "obstacles": obstacles,
+        "centres": centres,
         "counts": counts,
         "info": info,
     }
+
+
+def _csr_offsets(counts: NDArray[np.int64]) -> NDArray[np.int64]:
+    off = np.zeros(len(counts) + 1, dtype=np.int64)
+    np.cumsum(counts, out=off[1:])
+    return off
 
 
 def _stage_8(
@@ -645,60 +677,110 @@ def _stage_8(
     boundary: NDArray[np.bool_],
     nc: int,
     settings: UnorganisedSettings,
-) -> list[Obstacle]:
+    offset: NDArray[np.float64] | None = None,
+) -> tuple[list[Obstacle], NDArray[np.float64]]:
     """Stage 8: an :class:`~navkit.obstacles.Obstacle` per obstacle, shapes on its boundary
-    vertices (A1-A6, ...) and A7 over obstacle plus shadow vertices. Coordinates are local
-    (the caller's x-y)."""
-    from navkit.geometry.shapes import compute_shapes, hull_points
+    vertices (A1-A6, ...) and A7 over obstacle plus shadow vertices, and the centre of each
+    outline (the mean of its hull's vertices, local). The hulls and shapes are computed in the
+    local x-y (UTM values lose precision in the shapes' products) and the records moved by
+    ``offset`` into the input's frame.
+
+    The vertex sets of all obstacles are built at once in a CSR layout (rows of obstacle ``k``
+    in vertex order): its vertices (``vid == k``), their boundary vertices (all its vertices
+    when none is on the boundary), and its vertices with those of its shadow triangles. With
+    the compiled kernels the hulls and shapes of every obstacle come from a few kernel calls
+    (:func:`navkit.geometry.shapes.hulls_csr`, :func:`~navkit.geometry.shapes.shapes_csr`, as
+    the scan path's stage 8); else from :func:`~navkit.geometry.shapes.compute_shapes` on the
+    hulls (the twin: the same shapes bit for bit).
+    """
+    from navkit.geometry.shapes import compute_shapes, hull_points, hulls_csr, shapes_csr
+    from navkit.jit import kernels_enabled
 
     vxy, vz = xy[v], z[v]
-    order = np.argsort(vid, kind="stable")
-    starts = np.searchsorted(vid[order], np.arange(1, nc + 2))
+    nv = len(v)
+    # each obstacle's vertices, in vertex order
+    vsel = np.flatnonzero(vid > 0)
+    mem = vsel[np.argsort(vid[vsel], kind="stable")]
+    mem_id = vid[mem].astype(np.int64)
+    n_points = np.bincount(mem_id, minlength=nc + 1)[1:]
+    m_off = _csr_offsets(n_points)
+    z_min = np.full(nc, np.nan)
+    z_max = np.full(nc, np.nan)
+    if mem.size:
+        full = n_points > 0
+        z_min[full] = np.minimum.reduceat(vz[mem], m_off[:-1][full])
+        z_max[full] = np.maximum.reduceat(vz[mem], m_off[:-1][full])
+    # boundary vertices (all the obstacle's vertices when none is on its boundary)
+    on_b = boundary[mem]
+    n_b = np.bincount(mem_id[on_b], minlength=nc + 1)[1:]
+    take = on_b | (n_b == 0)[mem_id - 1]
+    b_ids = mem_id[take]
+    b_xy = np.ascontiguousarray(vxy[mem[take]])
+    b_off = _csr_offsets(np.bincount(b_ids, minlength=nc + 1)[1:])
+    # obstacle + shadow vertices (A7's input), unique, in vertex order
     shadow_tri = (owner > 0) & (comp == 0)
-    sv = simp[shadow_tri].reshape(-1)
-    so = np.repeat(owner[shadow_tri], 3)
-    s_order = np.argsort(so, kind="stable")
-    s_starts = np.searchsorted(so[s_order], np.arange(1, nc + 2))
-    P = vxy[simp]
+    s_ids = np.repeat(owner[shadow_tri].astype(np.int64), 3)
+    key = np.unique(np.concatenate([mem_id * nv + mem, s_ids * nv + simp[shadow_tri].reshape(-1)]))
+    g_ids = key // nv
+    g_xy = np.ascontiguousarray(vxy[key % nv])
+    g_off = _csr_offsets(np.bincount(g_ids, minlength=nc + 1)[1:])
+    P = vxy[simp[shadow_tri]]
     area = 0.5 * np.abs(
         (P[:, 1, 0] - P[:, 0, 0]) * (P[:, 2, 1] - P[:, 0, 1])
         - (P[:, 2, 0] - P[:, 0, 0]) * (P[:, 1, 1] - P[:, 0, 1])
     )
-    shadow_area = np.bincount(owner[shadow_tri], weights=area[shadow_tri], minlength=nc + 1)
-    ntri = np.bincount(comp, minlength=nc + 1)
-    sets, shadow_sets, recs = [], [], []
-    for k in range(1, nc + 1):
-        mem = order[starts[k - 1] : starts[k]]
-        bnd = mem[boundary[mem]]
-        pts = vxy[bnd] if len(bnd) >= 1 else vxy[mem]
-        sh = np.unique(np.concatenate([mem, sv[s_order[s_starts[k - 1] : s_starts[k]]]]))
-        sets.append(pts)
-        shadow_sets.append(vxy[sh])
-        recs.append((mem, bnd, sh))
-    shapes = compute_shapes(sets, settings.shapes) if settings.shapes else []
-    guaranteed = (
-        compute_shapes(shadow_sets, settings.guaranteed_shapes)
-        if settings.guaranteed_shapes
-        else []
-    )
-    out = []
-    for k, (mem, bnd, _) in enumerate(recs, start=1):
-        out.append(
-            Obstacle(
-                id=k,
-                n_triangles=int(ntri[k]),
-                n_points=len(mem),
-                z_min=float(vz[mem].min()),
-                z_max=float(vz[mem].max()),
-                boundary_xy=vxy[bnd],
-                polygon_xy=hull_points(sets[k - 1]),
-                shadow_xy=shadow_sets[k - 1],
-                shadow_area=float(shadow_area[k]),
-                shapes=shapes[k - 1] if shapes else {},
-                guaranteed=guaranteed[k - 1] if guaranteed else {},
+    shadow_area = np.bincount(owner[shadow_tri], weights=area, minlength=nc + 1)[1:]
+    ntri = np.bincount(comp, minlength=nc + 1)[1:]
+    none: list[dict[str, Any]] = [{} for _ in range(nc)]
+    if kernels_enabled():
+        H, hoff, chain = hulls_csr(b_xy, b_off)
+        shapes = shapes_csr(H, hoff, settings.shapes) if settings.shapes else none
+        guaranteed = none
+        if settings.guaranteed_shapes:
+            # the boundary's hull is inside the hull of obstacle + shadows: a cheap first filter
+            G, goff, _ = hulls_csr(g_xy, g_off, inner=(H, hoff, chain))
+            guaranteed = shapes_csr(G, goff, settings.guaranteed_shapes)
+        ho = hoff.tolist()
+        hulls = [H[ho[k] : ho[k + 1]] for k in range(nc)]
+    else:
+        bo_ = b_off.tolist()
+        hulls = [hull_points(b_xy[bo_[k] : bo_[k + 1]]) for k in range(nc)]
+        shapes = compute_shapes(hulls, settings.shapes, are_hulls=True) if settings.shapes else none
+        go_ = g_off.tolist()
+        guaranteed = (
+            compute_shapes(
+                [g_xy[go_[k] : go_[k + 1]] for k in range(nc)], settings.guaranteed_shapes
             )
+            if settings.guaranteed_shapes
+            else none
         )
-    return out
+    centres = np.array([h.mean(axis=0) for h in hulls]).reshape(-1, 2)
+    off = np.zeros(2) if offset is None else np.asarray(offset, dtype=np.float64)
+    dx, dy = float(off[0]), float(off[1])
+    b_in, g_in = b_xy + off, g_xy + off
+    zlo, zhi, n_pts, n_tri = z_min.tolist(), z_max.tolist(), n_points.tolist(), ntri.tolist()
+    s_area = shadow_area.tolist()
+    bo, go = b_off.tolist(), g_off.tolist()
+    # the records without the frozen dataclass's ``__init__`` (as the scan path's
+    # ``detector._assemble_compiled``: Obstacle has no ``__post_init__``)
+    new = object.__new__
+    out = []
+    for k in range(nc):
+        o = new(Obstacle)
+        d = o.__dict__
+        d["id"] = k + 1
+        d["n_triangles"] = n_tri[k]
+        d["n_points"] = n_pts[k]
+        d["z_min"] = zlo[k]
+        d["z_max"] = zhi[k]
+        d["boundary_xy"] = b_in[bo[k] : bo[k + 1]]
+        d["polygon_xy"] = hulls[k] + off
+        d["shadow_xy"] = g_in[go[k] : go[k + 1]]
+        d["shadow_area"] = s_area[k]
+        d["shapes"] = {name: _shift_shape(sh, dx, dy) for name, sh in shapes[k].items()}
+        d["guaranteed"] = {name: _shift_shape(sh, dx, dy) for name, sh in guaranteed[k].items()}
+        out.append(o)
+    return out, centres
 
 
 # ----------------------------------------------------------------------------------------------
