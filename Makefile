@@ -37,6 +37,7 @@ test: $(STAMP)
 # off. CI runs it after `make test` (.ci/run); docs/kernels.md, "The equivalence contract".
 PORTABLE_TESTS ?= tests/geometry tests/localization/test_kernels.py tests/obstacles/test_kernels.py \
   tests/path/test_kernels.py tests/planes/test_kernels.py tests/stereo/test_kernels.py \
+  tests/planes/test_dense.py::test_the_dense_kernels_equal_their_twins_bit_for_bit \
   tests/mission/test_mission.py tests/mission/test_twins.py $(wildcard tests/fuzz/test_kernel_inputs.py)
 test-portable: $(STAMP)
 	@cache=$$(mktemp -d) && \

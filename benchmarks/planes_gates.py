@@ -32,17 +32,6 @@ def load(name: str):
     return seq, poses_at(seq.timestamps, tr.timestamps, tr.poses)
 
 
-class _Frames:
-    def __init__(self, seq) -> None:
-        self.seq = seq
-
-    def __len__(self) -> int:
-        return len(self.seq)
-
-    def __getitem__(self, i: int):
-        return self.seq.frame(i)
-
-
 def main() -> None:
     from navkit.planes.gates_calibration import gates_from, passes, right_wrong, spoiled_alignments
     from navkit.planes.odometry import DenseGates
@@ -50,7 +39,7 @@ def main() -> None:
     results = {}
     for label, name in SEQUENCES.items():
         seq, G = load(name)
-        results[label] = A = spoiled_alignments(_Frames(seq), G, list(range(10, 85, 8)))
+        results[label] = A = spoiled_alignments(seq.frame, G, list(range(10, 85, 8)))
         right, wrong = right_wrong(A)
         R = A[right]
         print(

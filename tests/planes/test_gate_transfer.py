@@ -19,17 +19,6 @@ from navkit.planes.odometry import DenseGates
 STARTS = [10, 34, 58]
 
 
-class _Frames:
-    def __init__(self, seq) -> None:
-        self.seq = seq
-
-    def __len__(self) -> int:
-        return len(self.seq)
-
-    def __getitem__(self, i: int):
-        return self.seq.frame(i)
-
-
 @pytest.fixture(scope="module")
 def results():
     from navkit import datasets
@@ -49,8 +38,8 @@ def results():
     tr = read_tum(root / "groundtruth.txt")
     G = poses_at(tum.timestamps, tr.timestamps, tr.poses)
     return {
-        "7-Scenes": spoiled_alignments(_Frames(seven), seven.reference, STARTS),
-        "TUM": spoiled_alignments(_Frames(tum), G, STARTS),
+        "7-Scenes": spoiled_alignments(seven.frame, seven.reference, STARTS),
+        "TUM": spoiled_alignments(tum.frame, G, STARTS),
     }
 
 

@@ -576,16 +576,17 @@ def _detect_tile(
     point_obstacle = np.zeros(len(z), dtype=np.int32)
     obstacles: list[Obstacle] = []
     centres = np.empty((0, 2))
+    no_mesh = {  # the result when no mesh is made (ground only, or no triangulation)
+        "labels": labels,
+        "ground_z": zg,
+        "point_obstacle": point_obstacle,
+        "obstacles": obstacles,
+        "centres": centres,
+        "counts": counts,
+        "info": info,
+    }
     if ground_only:
-        return {
-            "labels": labels,
-            "ground_z": zg,
-            "point_obstacle": point_obstacle,
-            "obstacles": obstacles,
-            "centres": centres,
-            "counts": counts,
-            "info": info,
-        }
+        return no_mesh
     # stage 2: the mesh over the thinned cloud (lowest point per spacing cell)
     v = (
         surf.lowest  # the ground estimate's cells are the thinning cells
@@ -597,15 +598,7 @@ def _detect_tile(
         mesh = Delaunay(xy[v])
     except QhullError:
         info["n_triangles"] = 0
-        return {
-            "labels": labels,
-            "ground_z": zg,
-            "point_obstacle": point_obstacle,
-            "obstacles": obstacles,
-            "centres": centres,
-            "counts": counts,
-            "info": info,
-        }
+        return no_mesh
     t = _tick(clock, "mesh", t)
     simp = mesh.simplices.astype(np.int64)
     tri_labels, _, _, _ = classify_triangles(xy[v], z[v], simp, h[v], band[v], settings, spacing)

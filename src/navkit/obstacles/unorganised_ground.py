@@ -95,7 +95,7 @@ class GroundSurface:
         The TIN's vertices.
     tri : scipy.spatial.Delaunay or _Thinned
         Their Delaunay triangulation in x-y (``points``, ``simplices``, ``neighbors``): SciPy's,
-        or the first jump round's with the removed vertices taken out (:func:`_thinned`).
+        or the first jump pass's with the removed vertices taken out (:func:`_thinned`).
     band_m : float
         The ground band (m) the surface was built with.
     noise_m : float
@@ -353,8 +353,8 @@ def _jump_components(
 
     The TIN holds the vertices with their frame (:func:`_framed` around
     ``frame = (lo, hi, step)``, the frame's heights from the nearest vertex kept) and only the
-    edges between vertices are judged, so the last round's TIN is the ground surface's. A
-    round's removals are taken out of the first round's triangulation (:func:`_thinned`: only
+    edges between vertices are judged, so the last pass's TIN is the ground surface's. A
+    pass's removals are taken out of the first pass's triangulation (:func:`_thinned`: only
     the cavities are triangulated again) unless they are too many. Returns the kept vertex
     indices, the surface's vertices (kept, then frame) with their heights, and its
     triangulation.

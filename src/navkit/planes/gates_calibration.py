@@ -15,7 +15,8 @@ sequences, ``tests/planes/test_gate_transfer.py`` asserts what transfers):
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,13 +33,17 @@ FIELDS = ("err_m", "err_deg", "geometric", "photometric", "overlap", "inliers")
 
 
 def spoiled_alignments(
-    frames: Sequence, reference: NDArray[np.float64], starts: Sequence[int], seed: int = 0
+    frame_at: Callable[[int], Any],
+    reference: NDArray[np.float64],
+    starts: Sequence[int],
+    seed: int = 0,
 ) -> NDArray[np.float64]:
     """``(N, 6)`` rows of :data:`FIELDS`: pairs ``(k, k + 1)`` and ``(k, k + 10)`` for ``k`` in
     ``starts``, each aligned from the reference motion spoiled by each of :data:`SPOILS`.
 
-    ``frames``: RGB-D frames (``frames[i].color``, ``.depth``, ``.camera``); ``reference``:
-    ``(len(frames), 4, 4)`` poses, NaN where there is none (such pairs are skipped)."""
+    ``frame_at(i)``: RGB-D frame ``i`` (``.color``, ``.depth``, ``.camera``; e.g. an
+    :class:`~navkit.io.rgbd.RGBDSequence`'s ``frame``); ``reference``: ``(n, 4, 4)`` poses of
+    the sequence's frames, NaN where there is none (such pairs are skipped)."""
     from navkit.geometry import se3_from_rt, se3_inverse
     from navkit.planes.dense import DenseFrame, dense_align
     from navkit.planes.texture import to_gray
@@ -48,7 +53,7 @@ def spoiled_alignments(
 
     def dense(i: int) -> DenseFrame:
         if i not in cache:
-            f = frames[i]
+            f = frame_at(i)
             cache[i] = DenseFrame.build(to_gray(f.color), f.depth, f.camera)
         return cache[i]
 

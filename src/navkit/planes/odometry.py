@@ -423,7 +423,7 @@ class PlaneOdometry:
         plane solution stands on its own checks. Else the frame fails, at the prediction."""
         note = ""
         if dframe is not None and self._keyframe is not None:
-            d = self._dense(dframe, None if plane is None else plane[2], pred.T)
+            d = self._dense(dframe, None if plane is None else plane[2], pred)
             if d is not None:
                 return _dense_measured(pred, plane, *d)
             if (
@@ -699,26 +699,29 @@ class PlaneOdometry:
         self,
         dframe: DenseFrame,
         T_plane: NDArray[np.float64] | None,
-        T_pred: NDArray[np.float64],
+        pred: _Prediction,
     ) -> tuple[str, DenseResult, NDArray[np.float64], int] | None:
         """Dense refinement against the keyframe (then the last tracked frame), started from
         the plane solution and - when it is missing or disagrees with the prediction by more
         than 2 cm / 1 deg - from the prediction (constant velocity, or the prior) and from the
-        previous pose; of the starts that pass the gates the lowest photometric RMS wins. A
+        previous pose (not with a motion prior); of the starts that pass the gates, and agree
+        with the motion prior when one is given, the lowest photometric RMS wins. A
         start within 2 cm / 1 deg of a result already accepted is not run: it lies in that
         result's basin and ends there. None (and ``self._dense_reason``) when no start
         passes."""
         ds, gates = self.settings.dense, self.settings.gates
         assert ds is not None and self._keyframe is not None
+        T_pred = pred.T
         starts: list[tuple[str, NDArray[np.float64]]] = []
         if T_plane is not None:
             starts.append(("planes", T_plane))
         if T_plane is None or _differs(T_plane, T_pred, 0.02, 1.0):
             starts.append(("prediction", T_pred))
         # the previous pose (no motion since the last frame): inside the dense step's basin
-        # for any hand-held motion at video rate, when both others are off
+        # for any hand-held motion at video rate, when both others are off; not with a motion
+        # prior, which measured the motion
         T_still = self.poses[-1]
-        if all(_differs(T0, T_still, 0.02, 1.0) for _, T0 in starts):
+        if pred.prior is None and all(_differs(T0, T_still, 0.02, 1.0) for _, T0 in starts):
             starts.append(("prediction", T_still))
         refs = [self._keyframe]
         old = self._revisit(starts[0][1])
@@ -737,7 +740,7 @@ class PlaneOdometry:
                 r = _dense_align(rframe, dframe, T1, ds, compiled=self.compiled)
                 if name == "planes":
                     self._plane_overlap = max(self._plane_overlap, r.overlap)
-                why = gates.check(r)
+                why = gates.check(r) or self._outside_prior(pred, T_ref @ r.T)
                 if why:
                     reasons.append(f"from the {name} vs frame {ridx}: {why}")
                     continue
@@ -749,6 +752,22 @@ class PlaneOdometry:
                 return best[0], best[1], T_ref @ best[1].T, ridx
         self._dense_reason = "; ".join(reasons) if reasons else "no reference frame"
         return None
+
+    @staticmethod
+    def _outside_prior(pred: _Prediction, T_world: NDArray[np.float64]) -> str:
+        """Why the pose ``T_world`` contradicts the motion prior (empty when it does not, or
+        without a prior): its motion since the last pose is more than 3 sigma of the prior's
+        uncertainty (plus the association's 3 deg / 5 cm) from the prior's."""
+        if pred.prior is None:
+            return ""
+        p = pred.prior
+        E = se3_inverse(p.T) @ (se3_inverse(pred.T_prev) @ T_world)
+        dt = float(np.linalg.norm(E[:3, 3]))
+        dr = float(np.degrees(np.arccos(np.clip((np.trace(E[:3, :3]) - 1) / 2, -1.0, 1.0))))
+        lim_t, lim_r = 3 * p.sigma_translation + 0.05, 3 * p.sigma_rotation_deg + 3.0
+        if dt <= lim_t and dr <= lim_r:
+            return ""
+        return f"{100 * dt:.0f} cm / {dr:.1f} deg from the prior (> {100 * lim_t:.0f} cm / {lim_r:.0f} deg)"
 
     def map_view(self, obs: PlaneObservation, T_world_view: NDArray[np.float64]) -> MapView:
         """The map planes seen from ``T_world_view``, with the texture windows centred on where
