@@ -204,9 +204,10 @@ class ObstaclesStage:
             "stamp_ns": msg.stamp_ns,
             "frame": "body (x forward, y left, z up, origin on the ground under the sensor)",
             "sensor": det.sensor_origin,
-            "obstacles": [ob.to_dict() for ob in det.obstacles],
+            # formatted by the writer process (Obstacle.to_dict's dicts, built there)
+            "obstacle_fields": [ob.json_fields() for ob in det.obstacles],
         }
-        self.files.submit("json", d / "obstacles.json", doc)
+        self.files.submit("obstacles", d / "obstacles.json", doc)
 
     def _set_height(self, points: NDArray[np.float64], src: str) -> None:
         """The run's sensor height, once: given, or measured on this cloud's ground (as

@@ -59,7 +59,17 @@ def dumps_json(data: Any, indent: int | None = None) -> str:
 
 
 def encode(kind: str, payload: Any) -> bytes:
-    """A file's bytes: ``"json"`` (:func:`dumps_json` + newline) or ``"npy"`` (``np.save``)."""
+    """A file's bytes: ``"json"`` (:func:`dumps_json` + newline), ``"npy"`` (``np.save``) or
+    ``"obstacles"`` (``obstacles.json``: ``payload`` is the document without its
+    ``"obstacles"``, and the obstacles' :meth:`~navkit.obstacles.Obstacle.json_fields` under
+    ``"obstacle_fields"``; each made into :meth:`~navkit.obstacles.Obstacle.to_dict`'s dict
+    here, in the writer)."""
+    if kind == "obstacles":
+        from navkit.obstacles.detector import obstacle_dict
+
+        doc = dict(payload)
+        doc["obstacles"] = [obstacle_dict(*f) for f in doc.pop("obstacle_fields")]
+        kind, payload = "json", doc
     if kind == "json":
         return (dumps_json(payload) + "\n").encode()
     buf = io.BytesIO()
@@ -122,7 +132,7 @@ class FileWriter:
         self._proc.start()
 
     def submit(self, kind: str, path: Path, payload: Any) -> None:
-        """Queue one file (``kind`` ``"json"`` or ``"npy"``); waits while ``maxsize`` files are
+        """Queue one file (``kind`` of :func:`encode`); waits while ``maxsize`` files are
         queued. The file (and its folder) is recorded in the caller's output transaction here;
         the writer creates the folder."""
         from navkit.io.atomic import current_transaction
