@@ -77,18 +77,9 @@ def test_segment_writer_errors_reach_the_caller(tmp_path):
 def test_obstacles_json_from_json_fields_is_to_dict(tmp_path):
     """The writer's ``"obstacles"`` kind on a real detection: the same document as
     ``to_dict`` encoded in the loop (NaN / infinite values written as ``null`` alike)."""
-    from navkit.obstacles import detect_obstacles
     from navkit.runtime.files import encode
-    from navkit.sensors import RangeScan
 
-    rng = np.random.default_rng(0)
-    az = np.radians(np.arange(-180.0, 180.0, 0.5))
-    el = np.radians(np.linspace(-15.0, -1.0, 16))
-    d = np.tile(1.5 / np.sin(-el), (az.size, 1))  # level ground, the sensor 1.5 m above it
-    box = np.abs(az - 0.5) < 0.1
-    d[box] = np.minimum(d[box], 6.0 / np.cos(el))  # a wall 6 m away over 0.2 rad
-    d += rng.normal(0.0, 0.005, d.shape)
-    det = detect_obstacles(RangeScan(d, az, el, sensor_height=1.5, max_range=80.0))
+    det = _detection()
     assert det.obstacles, "the wall is an obstacle"
     head = {"topic": "/c", "stamp_ns": 7, "frame": "body", "sensor": det.sensor_origin}
     want = encode("json", {**head, "obstacles": [ob.to_dict() for ob in det.obstacles]})
@@ -96,3 +87,42 @@ def test_obstacles_json_from_json_fields_is_to_dict(tmp_path):
     got = encode("obstacles", {**head, "obstacle_fields": fields})
     assert got == want
     assert json.loads(got)["obstacles"][0]["id"] == det.obstacles[0].id
+
+
+def _detection():
+    """A real detection: a wall 6 m away over 0.2 rad on level ground, seen from 1.5 m."""
+    from navkit.obstacles import detect_obstacles
+    from navkit.sensors import RangeScan
+
+    rng = np.random.default_rng(0)
+    az = np.radians(np.arange(-180.0, 180.0, 0.5))
+    el = np.radians(np.linspace(-15.0, -1.0, 16))
+    d = np.tile(1.5 / np.sin(-el), (az.size, 1))
+    box = np.abs(az - 0.5) < 0.1
+    d[box] = np.minimum(d[box], 6.0 / np.cos(el))
+    d += rng.normal(0.0, 0.005, d.shape)
+    return detect_obstacles(RangeScan(d, az, el, sensor_height=1.5, max_range=80.0))
+
+
+@pytest.mark.parametrize("names", [None, ("A1", "A6"), ("A6", "MEC", "A7")])
+def test_obstacle_lines_are_the_shapes_outlines(names):
+    """The batched outlines of the shapes marker: each polyline is its shape's own
+    ``outline(36)`` at the ground's height, bit for bit, in the obstacles' and shapes' order."""
+    from navkit.runtime.capabilities import A7_COLOR, SHAPE_COLORS, obstacle_lines
+
+    det = _detection()
+    lines = obstacle_lines(det.obstacles, -1.5, names=names)
+    want = []
+    for ob in det.obstacles:
+        for n, shp in ob.shapes.items():
+            if names is None or n in names:
+                want.append((ob.id, f"shape/{n}", shp.outline(36), SHAPE_COLORS[n]))
+        if names is None or "A7" in names:
+            want += [
+                (ob.id, f"shape/A7:{n}", s.outline(36), A7_COLOR) for n, s in ob.guaranteed.items()
+            ]
+    assert len(lines) == len(want) > 0
+    for ln, (oid, ns, xy, color) in zip(lines, want, strict=True):
+        assert (ln.id, ln.ns, ln.color) == (oid, ns, color)
+        np.testing.assert_array_equal(ln.points[:, :2], xy)
+        assert np.all(ln.points[:, 2] == -1.5)
