@@ -111,7 +111,7 @@ def obstacle_lines(
     shapes (``"A7"`` keeps every A7 outline). Without ``T`` the lines' points are views of one
     array (filled at once)."""
     items = []
-    style: dict[str, tuple[str, tuple[float, ...]]] = {}  # a shape's ns and colour
+    style: dict[str, tuple[str, tuple[float, float, float, float]]] = {}  # ns, colour
     a7 = names is None or "A7" in names
     for ob in obstacles:
         for n, shp in ob.shapes.items():
