@@ -610,6 +610,13 @@ class ResultsWriter:
 
     def write(self, topic: str, kind: str, stamp_ns: int, frame_id: str, data: Any) -> None:
         """Write one output (see :class:`navkit.runtime.messages.Output` for ``data``)."""
+        msgtype, raw = self.serialize(kind, stamp_ns, frame_id, data)
+        self.write_raw(topic, msgtype, stamp_ns, raw)
+
+    def serialize(
+        self, kind: str, stamp_ns: int, frame_id: str, data: Any
+    ) -> tuple[str, bytes | bytearray]:
+        """One output's ROS type and CDR bytes (what :meth:`write` writes)."""
         msgtype = ROS_TYPES.get(kind)
         if msgtype is None:
             raise InputError(
@@ -617,15 +624,12 @@ class ResultsWriter:
                 field="kind",
                 expected=f"one of {sorted(ROS_TYPES)}",
             )
-        raw: bytes | bytearray
         if kind == "markers":
-            raw = line_list_cdr(stamp_ns, frame_id, data)
-        elif kind == "classified_cloud":
-            raw = classified_cloud_cdr(stamp_ns, frame_id, *data)
-        else:
-            msg = self._b.build(kind, stamp_ns, frame_id, data)
-            raw = bytes(self._b.ts.serialize_cdr(msg, msgtype))
-        self.write_raw(topic, msgtype, stamp_ns, raw)
+            return msgtype, line_list_cdr(stamp_ns, frame_id, data)
+        if kind == "classified_cloud":
+            return msgtype, classified_cloud_cdr(stamp_ns, frame_id, *data)
+        msg = self._b.build(kind, stamp_ns, frame_id, data)
+        return msgtype, bytes(self._b.ts.serialize_cdr(msg, msgtype))
 
     def write_raw(
         self,

@@ -102,19 +102,51 @@ class Obstacle:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-JSON description (what ``obstacles.json`` holds for each obstacle)."""
-        return {
-            "id": self.id,
-            "n_points": self.n_points,
-            "n_triangles": self.n_triangles,
-            "height": self.height,
-            "z_min": self.z_min,
-            "z_max": self.z_max,
-            "boundary_polygon": self.polygon_xy.tolist(),
-            "n_boundary_points": len(self.boundary_xy),
-            "shadow_area": self.shadow_area,
-            "shapes": {k: v.params() for k, v in self.shapes.items()},
-            "A7": {k: v.params() for k, v in self.guaranteed.items()},
-        }
+        return obstacle_dict(*self.json_fields())
+
+    def json_fields(self) -> tuple[Any, ...]:
+        """What :meth:`to_dict` is made of, unformatted (:func:`obstacle_dict` makes the dict):
+        ``navkit run`` hands these to its writer process, which formats ``obstacles.json``."""
+        return (
+            self.id,
+            self.n_points,
+            self.n_triangles,
+            self.z_min,
+            self.z_max,
+            self.polygon_xy,
+            len(self.boundary_xy),
+            self.shadow_area,
+            self.shapes,
+            self.guaranteed,
+        )
+
+
+def obstacle_dict(
+    id: int,
+    n_points: int,
+    n_triangles: int,
+    z_min: float,
+    z_max: float,
+    polygon_xy: NDArray[np.float64],
+    n_boundary_points: int,
+    shadow_area: float,
+    shapes: dict[str, Any],
+    guaranteed: dict[str, Any],
+) -> dict[str, Any]:
+    """:meth:`Obstacle.to_dict` from :meth:`Obstacle.json_fields`."""
+    return {
+        "id": id,
+        "n_points": n_points,
+        "n_triangles": n_triangles,
+        "height": z_max - z_min,
+        "z_min": z_min,
+        "z_max": z_max,
+        "boundary_polygon": polygon_xy.tolist(),
+        "n_boundary_points": n_boundary_points,
+        "shadow_area": shadow_area,
+        "shapes": {k: v.params() for k, v in shapes.items()},
+        "A7": {k: v.params() for k, v in guaranteed.items()},
+    }
 
 
 @dataclass(frozen=True)

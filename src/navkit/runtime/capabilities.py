@@ -73,12 +73,16 @@ def _outlines(shapes: list[Any], n: int = 36) -> list[NDArray[np.float64]]:
     if ell:
         t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
         ct, st = np.cos(t), np.sin(t)
-        E = [shapes[i] for i in ell]
-        x, y, a, b = (np.array([getattr(e, k) for e in E])[:, None] for k in "xyab")
-        c = np.array([math.cos(e.angle) for e in E])[:, None]
-        s = np.array([math.sin(e.angle) for e in E])[:, None]
+        # one row per ellipse: x, y, a, b, cos(angle), sin(angle) (math's, as Ellipse.outline)
+        A = np.array(
+            [
+                (e.x, e.y, e.a, e.b, math.cos(e.angle), math.sin(e.angle))
+                for e in (shapes[i] for i in ell)
+            ]
+        )
+        x, y, a, b, c, s = (A[:, k : k + 1] for k in range(6))
         u, v = a * ct, b * st
-        XY = np.empty((len(E), n, 2))
+        XY = np.empty((len(ell), n, 2))
         XY[:, :, 0], XY[:, :, 1] = x + c * u - s * v, y + s * u + c * v
         for k, i in enumerate(ell):
             out[i] = XY[k]
@@ -107,13 +111,16 @@ def obstacle_lines(
     shapes (``"A7"`` keeps every A7 outline). Without ``T`` the lines' points are views of one
     array (filled at once)."""
     items = []
+    style: dict[str, tuple[str, tuple[float, float, float, float]]] = {}  # ns, colour
+    a7 = names is None or "A7" in names
     for ob in obstacles:
-        items += [
-            (ob.id, f"shape/{n}", shp, SHAPE_COLORS.get(n, (1, 1, 1, 1)))
-            for n, shp in ob.shapes.items()
-            if names is None or n in names
-        ]
-        if names is None or "A7" in names:
+        for n, shp in ob.shapes.items():
+            if names is None or n in names:
+                st = style.get(n)
+                if st is None:
+                    st = style[n] = (f"shape/{n}", SHAPE_COLORS.get(n, (1, 1, 1, 1)))
+                items.append((ob.id, st[0], shp, st[1]))
+        if a7:
             items += [(ob.id, f"shape/A7:{n}", shp, A7_COLOR) for n, shp in ob.guaranteed.items()]
     if not items:
         return []
@@ -198,15 +205,17 @@ class ObstaclesStage:
         if self.files is None:
             self.files = FileWriter()
         d = self.out / f"{seq:06d}"
-        self.files.submit("npy", d / "labels.npy", labels)
         doc = {
             "topic": msg.topic,
             "stamp_ns": msg.stamp_ns,
             "frame": "body (x forward, y left, z up, origin on the ground under the sensor)",
             "sensor": det.sensor_origin,
-            "obstacles": [ob.to_dict() for ob in det.obstacles],
+            # formatted by the writer process (Obstacle.to_dict's dicts, built there)
+            "obstacle_fields": [ob.json_fields() for ob in det.obstacles],
         }
-        self.files.submit("json", d / "obstacles.json", doc)
+        self.files.submit_files(
+            [("npy", d / "labels.npy", labels), ("obstacles", d / "obstacles.json", doc)]
+        )
 
     def _set_height(self, points: NDArray[np.float64], src: str) -> None:
         """The run's sensor height, once: given, or measured on this cloud's ground (as

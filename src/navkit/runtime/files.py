@@ -11,8 +11,8 @@ next message. Decision: a process, not a thread: encoding a KITTI frame's ``obst
   writer, records the file in the caller's output transaction
   (:func:`navkit.io.atomic.output_transaction`) before queueing it, so a failed command still
   removes it.
-- At most ``maxsize`` files are queued: a loop faster than the disk waits (memory stays
-  bounded). A writer process that dies is an error at the next wait, never a hang.
+- At most ``maxsize`` jobs (a job: one frame's files) are queued: a loop faster than the disk
+  waits (memory stays bounded). A writer process that dies is an error at the next wait, never a hang.
 - :meth:`FileWriter.drain` waits until every queued file is written and raises the first error
   (:class:`~navkit.errors.InputError` naming the file); the run drains before every checkpoint
   and at the end, so a checkpoint never counts a file that is not on disk.
@@ -59,7 +59,17 @@ def dumps_json(data: Any, indent: int | None = None) -> str:
 
 
 def encode(kind: str, payload: Any) -> bytes:
-    """A file's bytes: ``"json"`` (:func:`dumps_json` + newline) or ``"npy"`` (``np.save``)."""
+    """A file's bytes: ``"json"`` (:func:`dumps_json` + newline), ``"npy"`` (``np.save``) or
+    ``"obstacles"`` (``obstacles.json``: ``payload`` is the document without its
+    ``"obstacles"``, and the obstacles' :meth:`~navkit.obstacles.Obstacle.json_fields` under
+    ``"obstacle_fields"``; each made into :meth:`~navkit.obstacles.Obstacle.to_dict`'s dict
+    here, in the writer)."""
+    if kind == "obstacles":
+        from navkit.obstacles.detector import obstacle_dict
+
+        doc = dict(payload)
+        doc["obstacles"] = [obstacle_dict(*f) for f in doc.pop("obstacle_fields")]
+        kind, payload = "json", doc
     if kind == "json":
         return (dumps_json(payload) + "\n").encode()
     buf = io.BytesIO()
@@ -84,9 +94,10 @@ def _write_atomic(path: str, data: bytes) -> None:
 
 
 def _serve(jobs: Any, done: Any) -> None:
-    """The writer process: ``(kind, path, payload)`` jobs until ``None``; one ``(path, error
-    or None)`` reply per job. It ignores SIGINT: Ctrl-C in a terminal reaches the whole process
-    group, and the run, not its writer, decides how to stop (it drains the writer first)."""
+    """The writer process: jobs (tuples of ``(kind, path, payload)`` files) until ``None``; one
+    ``(path, error or None)`` reply per job (its first failed file, or its last file). It
+    ignores SIGINT: Ctrl-C in a terminal reaches the whole process group, and the run, not its
+    writer, decides how to stop (it drains the writer first)."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -94,18 +105,21 @@ def _serve(jobs: Any, done: Any) -> None:
         job = jobs.get()
         if job is None:
             return
-        kind, path, payload = job
-        try:
-            _write_atomic(path, encode(kind, payload))
-            done.put((path, None))
-        except Exception as exc:
-            done.put((path, f"{type(exc).__name__}: {exc}"))
+        reply: tuple[str, str | None] = ("", None)
+        for kind, path, payload in job:
+            try:
+                _write_atomic(path, encode(kind, payload))
+                reply = (path, None)
+            except Exception as exc:
+                reply = (path, f"{type(exc).__name__}: {exc}")
+                break
+        done.put(reply)
 
 
 class FileWriter:
     """A writer process for per-frame files (see the module docstring)."""
 
-    def __init__(self, maxsize: int = 16) -> None:
+    def __init__(self, maxsize: int = 8) -> None:
         # fork: "spawn" and "forkserver" re-import the caller's main module in the child, which
         # re-runs an unguarded script (``python myscript.py`` calling run_recording); the forked
         # child only encodes JSON / NumPy and writes files, touching none of the parent's threads
@@ -121,20 +135,23 @@ class FileWriter:
         )
         self._proc.start()
 
-    def submit(self, kind: str, path: Path, payload: Any) -> None:
-        """Queue one file (``kind`` ``"json"`` or ``"npy"``); waits while ``maxsize`` files are
-        queued. The file (and its folder) is recorded in the caller's output transaction here;
-        the writer creates the folder."""
+    def submit_files(self, files: list[tuple[str, Path, Any]]) -> None:
+        """Queue files (``(kind of`` :func:`encode` ``, path, payload)``) written one after the
+        other as one job (e.g. a frame's files); waits while ``maxsize`` jobs are queued. The
+        files (and their folders) are recorded in the caller's output transaction here; the
+        writer creates the folders."""
         from navkit.io.atomic import current_transaction
 
-        path = Path(path)
+        job = tuple((kind, str(path), payload) for kind, path, payload in files)
         txn = current_transaction()
         if txn is not None:
-            txn.watch_dir(path.parent)
-            txn.before_replace(path)
+            for _, path, _ in files:
+                path = Path(path)
+                txn.watch_dir(path.parent)
+                txn.before_replace(path)
         while self._pending >= self.maxsize:
             self._wait_one()
-        self._jobs.put((kind, str(path), payload))
+        self._jobs.put(job)
         self._pending += 1
 
     def _wait_one(self) -> None:

@@ -185,13 +185,13 @@ class _State:
 
 class _Run:
     def __init__(self, pipe: Pipeline, out: Path, logger: Any, state: _State) -> None:
-        from navkit.io.results_mcap import ResultsWriter
+        from navkit.runtime.segments import SegmentWriter
 
         self.pipe, self.out, self.logger, self.s = pipe, out, logger, state
         self.state_dir = out / STATE_DIR
         self.seg_dir = self.state_dir / "segments"
         self.seg_dir.mkdir(parents=True, exist_ok=True)
-        self.writer = ResultsWriter(self._segment(state.segments), chunked=False)
+        self.writer = SegmentWriter(self._segment(state.segments))
         self.frames = open(out / "frames.jsonl", "ab")
         self.log_seconds = 0.0
         self.write_seconds = 0.0
@@ -310,7 +310,7 @@ class _Run:
 
     def checkpoint(self) -> None:
         """Close the current segment, make everything durable, save the state, start a segment."""
-        from navkit.io.results_mcap import ResultsWriter
+        from navkit.runtime.segments import SegmentWriter
 
         self.flush_files()
         self.writer.close()
@@ -330,7 +330,7 @@ class _Run:
             fh.flush()
             os.fsync(fh.fileno())
         os.replace(tmp, target)
-        self.writer = ResultsWriter(self._segment(self.s.segments), chunked=False)
+        self.writer = SegmentWriter(self._segment(self.s.segments))
 
     def flush_files(self) -> None:
         """Wait for the stages' per-frame files (written by their writer threads)."""
