@@ -766,28 +766,52 @@ def _assemble_compiled(
         guaranteed = shapes_csr(G, goff, settings.guaranteed_shapes)
     else:
         guaranteed = [{} for _ in range(n)]
-    zlo, zhi, n_pts = z_min.tolist(), z_max.tolist(), n_points.tolist()
-    n_tri = ntri.tolist()
-    area = shadow_area.tolist()
     bo, ho, go = b_off.tolist(), hoff.tolist(), g_off.tolist()
-    # the records without the frozen dataclass's ``__init__`` (its per-field
-    # ``object.__setattr__`` is ~5x the cost of filling ``__dict__``; Obstacle has no
-    # ``__post_init__``), as the shapes' records (``geometry.shapes._ellipses``): the fields
-    # stored one by one, no keyword dictionary per record
+    return obstacle_records(
+        ntri.tolist(),
+        n_points.tolist(),
+        z_min.tolist(),
+        z_max.tolist(),
+        [b_xy[bo[k] : bo[k + 1]] for k in range(n)],
+        [H[ho[k] : ho[k + 1]] for k in range(n)],
+        [g_xy[go[k] : go[k + 1]] for k in range(n)],
+        shadow_area.tolist(),
+        shapes,
+        guaranteed,
+    )
+
+
+def obstacle_records(
+    n_triangles: list[int],
+    n_points: list[int],
+    z_min: list[float],
+    z_max: list[float],
+    boundary_xy: list[NDArray[np.float64]],
+    polygon_xy: list[NDArray[np.float64]],
+    shadow_xy: list[NDArray[np.float64]],
+    shadow_area: list[float],
+    shapes: list[dict[str, Any]],
+    guaranteed: list[dict[str, Any]],
+) -> list[Obstacle]:
+    """:class:`Obstacle` records ``1 .. n`` from per-obstacle lists, built without the frozen
+    dataclass's ``__init__`` (its per-field ``object.__setattr__`` is ~5x the cost of filling
+    ``__dict__``; Obstacle has no ``__post_init__``), as the shapes' records
+    (``geometry.shapes._ellipses``): the fields stored one by one, no keyword dictionary per
+    record. Shared by the scan path and the unorganised path."""
     new = object.__new__
     out = []
-    for k in range(n):
+    for k in range(len(n_triangles)):
         o = new(Obstacle)
         d = o.__dict__
         d["id"] = k + 1
-        d["n_triangles"] = n_tri[k]
-        d["n_points"] = n_pts[k]
-        d["z_min"] = zlo[k]
-        d["z_max"] = zhi[k]
-        d["boundary_xy"] = b_xy[bo[k] : bo[k + 1]]
-        d["polygon_xy"] = H[ho[k] : ho[k + 1]]
-        d["shadow_xy"] = g_xy[go[k] : go[k + 1]]
-        d["shadow_area"] = area[k]
+        d["n_triangles"] = n_triangles[k]
+        d["n_points"] = n_points[k]
+        d["z_min"] = z_min[k]
+        d["z_max"] = z_max[k]
+        d["boundary_xy"] = boundary_xy[k]
+        d["polygon_xy"] = polygon_xy[k]
+        d["shadow_xy"] = shadow_xy[k]
+        d["shadow_area"] = shadow_area[k]
         d["shapes"] = shapes[k]
         d["guaranteed"] = guaranteed[k]
         out.append(o)

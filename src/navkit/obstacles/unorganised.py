@@ -54,7 +54,7 @@ from scipy.spatial import Delaunay, QhullError, cKDTree
 
 from navkit.errors import InputError
 from navkit.geometry.shape_types import Circle, Ellipse, Rectangle
-from navkit.obstacles.detector import Obstacle
+from navkit.obstacles.detector import Obstacle, obstacle_records
 from navkit.obstacles.rules import GROUND, OBSTACLE, SIDE_SHADOW, UNRELIABLE
 from navkit.obstacles.unorganised_ground import (
     GroundSurface,
@@ -751,28 +751,19 @@ def _stage_8(
     off = np.zeros(2) if offset is None else np.asarray(offset, dtype=np.float64)
     dx, dy = float(off[0]), float(off[1])
     b_in, g_in = b_xy + off, g_xy + off
-    zlo, zhi, n_pts, n_tri = z_min.tolist(), z_max.tolist(), n_points.tolist(), ntri.tolist()
-    s_area = shadow_area.tolist()
     bo, go = b_off.tolist(), g_off.tolist()
-    # the records without the frozen dataclass's ``__init__`` (as the scan path's
-    # ``detector._assemble_compiled``: Obstacle has no ``__post_init__``)
-    new = object.__new__
-    out = []
-    for k in range(nc):
-        o = new(Obstacle)
-        d = o.__dict__
-        d["id"] = k + 1
-        d["n_triangles"] = n_tri[k]
-        d["n_points"] = n_pts[k]
-        d["z_min"] = zlo[k]
-        d["z_max"] = zhi[k]
-        d["boundary_xy"] = b_in[bo[k] : bo[k + 1]]
-        d["polygon_xy"] = hulls[k] + off
-        d["shadow_xy"] = g_in[go[k] : go[k + 1]]
-        d["shadow_area"] = s_area[k]
-        d["shapes"] = {name: _shift_shape(sh, dx, dy) for name, sh in shapes[k].items()}
-        d["guaranteed"] = {name: _shift_shape(sh, dx, dy) for name, sh in guaranteed[k].items()}
-        out.append(o)
+    out = obstacle_records(
+        ntri.tolist(),
+        n_points.tolist(),
+        z_min.tolist(),
+        z_max.tolist(),
+        [b_in[bo[k] : bo[k + 1]] for k in range(nc)],
+        [h + off for h in hulls],
+        [g_in[go[k] : go[k + 1]] for k in range(nc)],
+        shadow_area.tolist(),
+        [{name: _shift_shape(sh, dx, dy) for name, sh in shapes[k].items()} for k in range(nc)],
+        [{name: _shift_shape(sh, dx, dy) for name, sh in guaranteed[k].items()} for k in range(nc)],
+    )
     return out, centres
 
 
