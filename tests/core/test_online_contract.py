@@ -142,8 +142,8 @@ def test_plane_odometry_register_frame_is_a_deprecated_alias(monkeypatch):
 
 
 def test_obstacle_mapper_update_and_its_deprecated_alias():
-    """The mapper's update counts the scan's distinct cells inside the mapped area; the former
-    verb warns and fuses the same."""
+    """The mapper's update counts the scan's distinct cells inside the mapped area; the
+    deprecated verb warns and fuses the same."""
     from navkit.obstacles import detect_obstacles
     from navkit.sim import Box, Ground, Scene, SpinningLidar, render_scan
 

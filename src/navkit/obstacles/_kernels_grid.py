@@ -1,5 +1,6 @@
 """Compiled (Numba) kernels of paper 1's stage 1: the scan grid from a cloud
-(:func:`navkit.obstacles.grids.cloud_to_grid`) and the body-frame points of a grid.
+(:func:`navkit.obstacles.grids.cloud_to_grid`) and the body-frame points of a grid; and the
+obstacle map's per-scan cell counting (:meth:`navkit.obstacles.ObstacleMapper.update`).
 
 Each kernel computes exactly what its NumPy twin computes (``TWINS`` below), in the same
 floating-point types and the same order of operations, so that classes, ids and masks are identical
@@ -29,6 +30,7 @@ import numpy as np
 from numba import njit
 
 from navkit.obstacles._kernels_common import _median, _median_banded
+from navkit.obstacles.rules import OBSTACLE
 
 __all__ = [
     "body_points_kernel",
@@ -37,6 +39,7 @@ __all__ = [
     "grid_cells_kernel",
     "grid_fill_kernel",
     "grid_order_fill_kernel",
+    "map_cells_kernel",
     "phase_fractions_kernel",
     "phase_sin_cos_kernel",
     "points_kernel",
@@ -51,6 +54,7 @@ TWINS = {
     "grid_cells_kernel": "navkit.obstacles.grids.cloud_to_grid",
     "grid_fill_kernel": "navkit.obstacles.grids.cloud_to_grid",
     "grid_order_fill_kernel": "navkit.obstacles.grids.cloud_to_grid",
+    "map_cells_kernel": "navkit.obstacles.mapper.count_scan_cells",
     "phase_fractions_kernel": "navkit.obstacles.grids.cloud_to_grid",
     "phase_sin_cos_kernel": "navkit.obstacles.grids.cloud_to_grid",
     "points_kernel": "navkit.obstacles.detector.detect_obstacles_grid",
@@ -554,3 +558,52 @@ def body_points_kernel(S, R, h, out, valid, limit):  # type: ignore[no-untyped-d
         o[3 * p + 1] = y if ok else np.nan
         o[3 * p + 2] = z if ok else np.nan
     return count, far
+
+
+# ------------------------------------------------------------------------------------------
+# the obstacle map: one scan's cells counted (twin: mapper.count_scan_cells)
+
+
+@njit(cache=True)
+def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen, mark):  # type: ignore[no-untyped-def]
+    """``mapper.count_scan_cells`` in one pass over the points: each counted point's cell from
+    the twin's operations in its order (``((x S0 + y S1) + z S2) + o``; a cell index ``c`` is in
+    the grid when ``0 <= c < W``, where ``floor(c)`` is ``int(c)``), counted at once; ``mark``
+    (zero on entry and on return: 1 seen, 2 seen and obstacle) counts a cell once per scan in
+    ``seen`` and in ``hits``. Returns the obstacle cells (ascending) and the number of
+    distinct cells seen."""
+    n = P.shape[0]
+    obst = np.empty(n, np.int64)
+    cells = np.empty(n, np.int64)
+    n_obst = 0
+    n_seen = 0
+    s00, s01, s02 = S[0, 0], S[0, 1], S[0, 2]
+    s10, s11, s12 = S[1, 0], S[1, 1], S[1, 2]
+    o0, o1 = o[0], o[1]
+    fw, fh = float(W), float(H)
+    for i in range(n):
+        if not valid[i]:
+            continue
+        x, y, z = P[i, 0], P[i, 1], P[i, 2]
+        if not (x * x + y * y <= max_r2):
+            continue
+        c = ((x * s00 + y * s01) + z * s02) + o0
+        r = ((x * s10 + y * s11) + z * s12) + o1
+        if not (c >= 0.0 and r >= 0.0 and c < fw and r < fh):  # NaN fails
+            continue
+        f = int(r) * W + int(c)
+        m = mark[f]
+        if m == 0:
+            seen[f] += 1
+            cells[n_seen] = f
+            n_seen += 1
+            m = 1
+        if m == 1 and vlab[i] == OBSTACLE and vobs[i] > 0:
+            hits[f] += 1
+            obst[n_obst] = f
+            n_obst += 1
+            m = 2
+        mark[f] = m
+    for k in range(n_seen):
+        mark[cells[k]] = 0
+    return np.sort(obst[:n_obst]), n_seen

@@ -1,9 +1,7 @@
-"""Compiled (Numba) kernels of stages 6-8 that share passes or batch all obstacles at once, and
-the obstacle map's per-scan cell counting (:meth:`navkit.obstacles.ObstacleMapper.update`).
+"""Compiled (Numba) kernels of stages 6-8 that share passes or batch all obstacles at once.
 
 Twins (the NumPy references, ``TWINS`` below) live in :mod:`navkit.obstacles.detector`,
-:mod:`navkit.obstacles.segment`, :mod:`navkit.obstacles.ground` and
-:mod:`navkit.obstacles.mapper`; see ``docs/kernels.md`` ("Obstacles"). The shape kernels of
+:mod:`navkit.obstacles.segment` and :mod:`navkit.obstacles.ground`; see ``docs/kernels.md`` ("Obstacles"). The shape kernels of
 stage 8 are in :mod:`navkit.geometry._kernels`.
 """
 
@@ -24,11 +22,9 @@ from navkit.obstacles._kernels_common import (
     _renumber_by_min,
     _union,
 )
-from navkit.obstacles.rules import OBSTACLE
 
 __all__ = [
     "ground_cells_kernel",
-    "map_cells_kernel",
     "map_groups_kernel",
     "refine_kernel",
     "split_kernel",
@@ -37,7 +33,6 @@ __all__ = [
 
 TWINS = {
     "ground_cells_kernel": "navkit.obstacles.ground.ground_height_map",
-    "map_cells_kernel": "navkit.obstacles.mapper.count_scan_cells",
     "map_groups_kernel": "navkit.obstacles.detector._build_obstacles",
     "refine_kernel": "navkit.obstacles.ground.refine_by_ground_height",
     "split_kernel": "navkit.obstacles.detector._split",
@@ -963,52 +958,3 @@ def map_groups_kernel(flat, tri, tri_obstacle, shadows, ntri, vid, boundary, n):
             p += 1
         q += s_cnt[a]
     return b_off, b_xy, g_off, g_xy, v_cnt[1:], z_min, z_max, area[1:], ntri
-
-
-# ------------------------------------------------------------------------------------------
-# the obstacle map: one scan's cells counted (twin: mapper.count_scan_cells)
-
-
-@njit(cache=True)
-def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen, mark):  # type: ignore[no-untyped-def]
-    """``mapper.count_scan_cells`` in one pass over the points: each counted point's cell from
-    the twin's operations in its order (``((x S0 + y S1) + z S2) + o``; a cell index ``c`` is in
-    the grid when ``0 <= c < W``, where ``floor(c)`` is ``int(c)``), counted at once; ``mark``
-    (zero on entry and on return: 1 seen, 2 seen and obstacle) counts a cell once per scan in
-    ``seen`` and in ``hits``. Returns the obstacle cells (ascending) and the number of
-    distinct cells seen."""
-    n = P.shape[0]
-    obst = np.empty(n, np.int64)
-    cells = np.empty(n, np.int64)
-    n_obst = 0
-    n_seen = 0
-    s00, s01, s02 = S[0, 0], S[0, 1], S[0, 2]
-    s10, s11, s12 = S[1, 0], S[1, 1], S[1, 2]
-    o0, o1 = o[0], o[1]
-    fw, fh = float(W), float(H)
-    for i in range(n):
-        if not valid[i]:
-            continue
-        x, y, z = P[i, 0], P[i, 1], P[i, 2]
-        if not (x * x + y * y <= max_r2):
-            continue
-        c = ((x * s00 + y * s01) + z * s02) + o0
-        r = ((x * s10 + y * s11) + z * s12) + o1
-        if not (c >= 0.0 and r >= 0.0 and c < fw and r < fh):  # NaN fails
-            continue
-        f = int(r) * W + int(c)
-        m = mark[f]
-        if m == 0:
-            seen[f] += 1
-            cells[n_seen] = f
-            n_seen += 1
-            m = 1
-        if m == 1 and vlab[i] == OBSTACLE and vobs[i] > 0:
-            hits[f] += 1
-            obst[n_obst] = f
-            n_obst += 1
-            m = 2
-        mark[f] = m
-    for k in range(n_seen):
-        mark[cells[k]] = 0
-    return np.sort(obst[:n_obst]), n_seen

@@ -335,7 +335,7 @@ class ObstacleMapper:
         if mark is None or mark.size != hits.size:
             mark = self._mark = np.zeros(hits.size, dtype=np.uint8)
         if kernels_enabled():
-            from navkit.obstacles._kernels_map import map_cells_kernel
+            from navkit.obstacles._kernels_grid import map_cells_kernel
 
             cells, n_seen = map_cells_kernel(*args, hits, seen, mark)
         else:

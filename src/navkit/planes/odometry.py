@@ -162,7 +162,7 @@ class OdometrySettings:
     dense : DenseSettings or None
         Dense photometric + geometric refinement and verification of every motion
         (:mod:`navkit.planes.dense`) when the frames are registered RGB-D images; None = the
-        planes alone (the former behaviour).
+        planes alone.
     gates : DenseGates
         When a densely refined motion counts as measured (else the frame fails).
     keyframe_overlap : float

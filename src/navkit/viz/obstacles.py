@@ -102,8 +102,8 @@ def plot_obstacle_map(
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
     from matplotlib.lines import Line2D
-    from matplotlib.patches import Patch, Polygon
-    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+    from matplotlib.offsetbox import AnchoredOffsetbox, AuxTransformBox, TextArea, VPacker
+    from matplotlib.patches import Patch, Polygon, Rectangle
 
     if ax is None:
         _, ax = plt.subplots(figsize=(9, 9))
@@ -166,12 +166,11 @@ def plot_obstacle_map(
     if scale_m is None:
         raw = 2 * extent_m / 8
         scale_m = float(min((1, 2, 5, 10, 20, 50, 100), key=lambda v: abs(v - raw)))
-    ax.add_artist(
-        AnchoredSizeBar(
-            ax.transData, scale_m, f"{scale_m:g} m", "lower right", pad=0.5, sep=3,
-            frameon=False, size_vertical=extent_m / 200,
-        )
-    )  # fmt: skip
+    # the scale bar (a bar in data units over its label, anchored at the lower right)
+    bar = AuxTransformBox(ax.transData)
+    bar.add_artist(Rectangle((0, 0), scale_m, extent_m / 200, facecolor="black", edgecolor="none"))
+    box = VPacker(children=[bar, TextArea(f"{scale_m:g} m")], align="center", pad=0, sep=3)
+    ax.add_artist(AnchoredOffsetbox("lower right", child=box, pad=0.5, frameon=False))
     handles: list[Any] = [
         Patch(facecolor="#f4a3a3", edgecolor="#a50f15", label="obstacle footprint (number = id)"),
         Patch(color=back[0], label="ground"),
