@@ -227,47 +227,63 @@ def detect(
           --sensor hdl64e-kitti -o out/kitti
     """
     with cli_errors():
-        settings, opts, mopts = _resolve_settings(ctx, config)
-        files = expand_sources(inputs, _suffixes())
-        check_out_dir(out, overwrite or resume)
-        if workers or scheduler or resume:
-            frames, failed, height = _run_batch(
-                files, out, settings, opts, mopts, workers, scheduler, resume
-            )
-            first_error = None
-        else:
-            from navkit.io.scans import check_scan_input
-            from navkit.io.urls import local_copy
+        n_failed = _detect(ctx, inputs, out, overwrite, config, workers, scheduler, resume)
+    exit_if_failed({"failed": n_failed})  # 3 with any failed frame, batch or not
 
-            for f in files:  # every input's container checked before anything is written
-                with local_copy(f) as local:
-                    check_scan_input(local)
-            frames, failed, height, first_error = _run_frames(files, out, settings, opts, mopts)
-        if first_error is not None and not frames:
-            raise first_error  # nothing worked: the one-line error, exit code 2, no run files
-        run = RunSettings(detector=asdict(settings), inputs=opts, map=mopts)
-        write_run_files(
-            out,
-            asdict(run),
-            {
-                "frames": frames,
-                "n_frames": len(frames),
-                "failed": failed,
-                "sensor_height": height.to_dict() if height is not None else None,
-                "outputs": list(mopts.outputs),
-            },
-            reference="none: the detections are not compared with any ground truth",
+
+def _detect(
+    ctx: typer.Context,
+    inputs: list[str],
+    out: Path,
+    overwrite: bool,
+    config: Path | None,
+    workers: int | None,
+    scheduler: str | None,
+    resume: bool,
+) -> int:
+    """``detect``'s run: settings, inputs checked before anything is written, the frames (in
+    this process or a batch), the run files and the summary line. Returns the failed count."""
+    settings, opts, mopts = _resolve_settings(ctx, config)
+    files = expand_sources(inputs, _suffixes())
+    check_out_dir(out, overwrite or resume)
+    if workers or scheduler or resume:
+        frames, failed, height = _run_batch(
+            files, out, settings, opts, mopts, workers, scheduler, resume
         )
-        if height is not None and height.source != "given":
-            log.info("sensor height %.3f m (%s)", height.height_m, height.source)
-        paths = sorted({str(f.get("path", "scan")) for f in frames})
-        typer.echo(
-            f"{len(frames)} frame(s) ({', '.join(paths) or 'no'} path), "
-            f"{sum(f['n_obstacles'] for f in frames)} obstacles"
-            + (f", {len(failed)} failed (see frames.csv)" if failed else "")
-            + f" -> {out}"
-        )
-    exit_if_failed({"failed": len(failed)})  # 3 with any failed frame, batch or not
+        first_error = None
+    else:
+        from navkit.io.scans import check_scan_input
+        from navkit.io.urls import local_copy
+
+        for f in files:  # every input's container checked before anything is written
+            with local_copy(f) as local:
+                check_scan_input(local)
+        frames, failed, height, first_error = _run_frames(files, out, settings, opts, mopts)
+    if first_error is not None and not frames:
+        raise first_error  # nothing worked: the one-line error, exit code 2, no run files
+    run = RunSettings(detector=asdict(settings), inputs=opts, map=mopts)
+    write_run_files(
+        out,
+        asdict(run),
+        {
+            "frames": frames,
+            "n_frames": len(frames),
+            "failed": failed,
+            "sensor_height": height.to_dict() if height is not None else None,
+            "outputs": list(mopts.outputs),
+        },
+        reference="none: the detections are not compared with any ground truth",
+    )
+    if height is not None and height.source != "given":
+        log.info("sensor height %.3f m (%s)", height.height_m, height.source)
+    paths = sorted({str(f.get("path", "scan")) for f in frames})
+    typer.echo(
+        f"{len(frames)} frame(s) ({', '.join(paths) or 'no'} path), "
+        f"{sum(f['n_obstacles'] for f in frames)} obstacles"
+        + (f", {len(failed)} failed (see frames.csv)" if failed else "")
+        + f" -> {out}"
+    )
+    return len(failed)
 
 
 def _resolve_settings(ctx: typer.Context, config: Path | None) -> tuple[Any, Any, Any]:
