@@ -156,7 +156,7 @@ def _log(x):  # type: ignore[no-untyped-def]
     return z + ef * _LOG_HI
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _atan2(yk, xk):  # type: ignore[no-untyped-def]
     """``atan2(y, x)``: :func:`navkit.geometry.angles.atan2` on one pair (the loop body of
     :func:`atan2_kernel`)."""
@@ -204,25 +204,9 @@ def log_kernel(x, out):  # type: ignore[no-untyped-def]
 @njit(cache=True, error_model="numpy")
 def atan2_kernel(y, x, out):  # type: ignore[no-untyped-def]
     """``out[k] = atan2(y[k], x[k])`` with the arithmetic of :func:`navkit.geometry.angles.atan2`
-    (its NumPy twin: the same operations in the same order, so the same bits); one branch-free
-    loop that LLVM vectorises (every candidate computed, then selected). Finite inputs."""
+    (its NumPy twin: the same operations in the same order, so the same bits): :func:`_atan2`
+    inlined into one branch-free loop that LLVM vectorises (every candidate computed, then
+    selected). Finite inputs."""
     for k in range(len(out)):
-        yk = y[k]
-        xk = x[k]
-        t = yk / xk
-        a = abs(t)
-        big = a > TAN_3PI_8
-        mid = a > MID_FROM
-        r = -1.0 / a if big else ((a - 1.0) / (a + 1.0) if mid else a)
-        z = r * r
-        num = ((((z * _P0 + _P1) * z + _P2) * z + _P3) * z + _P4) * z
-        den = (((z + _Q0) * z + _Q1) * z + _Q2) * z + _Q3
-        den = den * z + _Q4
-        v = r * (num / den) + r
-        v = v + (MOREBITS if big else (0.5 * MOREBITS if mid else 0.0))
-        v = v + (PI_2 if big else (PI_4 if mid else 0.0))
-        v = math.copysign(v, t)
-        v = v + math.copysign(math.pi, yk) if xk < 0 else v
-        on_axis = (math.pi if math.copysign(1.0, xk) < 0 else 0.0) if yk == 0 else PI_2
-        out[k] = math.copysign(on_axis, yk) if xk == 0 else v
+        out[k] = _atan2(y[k], x[k])
     return out
