@@ -40,29 +40,13 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from navkit.geometry.angles import COS_C, FOUR_OVER_PI, PI4A, PI4B, PI4C, SIN_C
+
 __all__ = ["exp", "log", "sincos"]
 
-# Cephes sin.c: sin(z) = z + z^3 S(z^2), cos(z) = 1 - z^2 / 2 + z^4 C(z^2) on |z| <= pi/4
-SIN_C = (
-    1.58962301576546568060e-10,
-    -2.50507477628578072866e-8,
-    2.75573136213857245213e-6,
-    -1.98412698295895385996e-4,
-    8.33333333332211858878e-3,
-    -1.66666666666666307295e-1,
-)
-COS_C = (
-    -1.13585365213876817300e-11,
-    2.08757008419747316778e-9,
-    -2.75573141792967388112e-7,
-    2.48015872888517045348e-5,
-    -1.38888888888730564116e-3,
-    4.16666666666665929218e-2,
-)
-PI4A = 7.85398125648498535156e-1  # pi/4 in three parts; PI4A and PI4B have trailing zeros,
-PI4B = 3.77489470793079817668e-8  # so y * PI4A and y * PI4B are exact for y < 2^29
-PI4C = 2.69515142907905952645e-15
-FOUR_OVER_PI = 1.2732395447351628  # fl(4 / pi)
+# Cephes sin.c: sin(z) = z + z^3 S(z^2), cos(z) = 1 - z^2 / 2 + z^4 C(z^2) on |z| <= pi/4; the
+# coefficients, pi/4 in three parts (Cody-Waite: PI4A and PI4B have trailing zeros, so y * PI4A
+# and y * PI4B are exact for y < 2^29) and fl(4 / pi) are those of navkit.geometry.angles.cos
 SINCOS_MAX = float(2**29)
 """``|x|`` from which :func:`sincos` returns NaN (the reduction's products are exact below)."""
 
