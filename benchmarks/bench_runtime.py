@@ -19,7 +19,8 @@ with the run's mounting, alternated in one process. Printed: the capability's wo
 (handling + serialising and writing its outputs) / the detector's, and the whole loop's wall
 time per cloud (reading, decoding, path, TF, the files' writer thread) / the detector's. CPU
 times: the stage's and the detector's are their thread's CPU; the whole run's is the process's
-plus its children's (the per-frame files' writer process).
+plus its children's (the per-frame files' writer process: reaped children's, and the kept
+writer's from ``/proc``).
 ``python -m benchmarks.bench_runtime`` prints the ratios alone.
 """
 
@@ -96,6 +97,18 @@ def _overhead(
     )
 
 
+def _files_cpu(pid: int | None) -> float:
+    """CPU seconds of the per-frame files' writer process ``pid`` (kept between runs, so not
+    in ``RUSAGE_CHILDREN`` until it stops): ``/proc/<pid>/stat``'s utime + stime; 0 without."""
+    import os
+
+    if pid is None:
+        return 0.0
+    with open(f"/proc/{pid}/stat") as fh:
+        fields = fh.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 class _LoopedClouds:
     """A KITTI folder's clouds and poses repeated ``loops`` times at 10 Hz (a Source)."""
 
@@ -137,18 +150,24 @@ def obstacles_cost(loops: int = 10, repeats: int = 3) -> tuple[list[Row], dict[s
         for _ in range(repeats):
             import resource
 
+            from navkit.runtime.files import idle_writer_pid
+
             ch0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            pid0 = idle_writer_pid()
+            w0 = _files_cpu(pid0)
             c0 = time.process_time()
             s, wall = _run(src, tmp / "run", cfg)
             cpu = time.process_time() - c0
             ch1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+            pid1 = idle_writer_pid()
+            w1 = _files_cpu(pid1) - (w0 if pid1 == pid0 else 0.0)
             o = s["capabilities"]["obstacles"]
             stage_ms.append(o["ms_per_frame"])
             stage_cpu.append(o["cpu_ms_per_frame"])
             loop_ms.append(1e3 * wall / o["frames"])
             loop_cpu.append(1e3 * cpu / o["frames"])
             files_cpu.append(
-                1e3 * (ch1.ru_utime + ch1.ru_stime - ch0.ru_utime - ch0.ru_stime) / o["frames"]
+                1e3 * (ch1.ru_utime + ch1.ru_stime - ch0.ru_utime - ch0.ru_stime + w1) / o["frames"]
             )
             # the calling thread's CPU, as the stage's cpu_ms_per_frame (the process's would
             # also count other threads: a BLAS pool's spinning, the run's leftovers)

@@ -623,6 +623,9 @@ def test_map_update_compiled_equals_numpy(data_path, rng):
                 if k == 5:
                     recent = [r.copy() for r in mapper.recent]
                 assert not mapper._mark.any()  # the scratch is zero between scans
+                rows, cols = np.nonzero(mapper.seen)  # the window: the box of the cells seen
+                box = [rows.min(), rows.max(), cols.min(), cols.max()]
+                assert mapper._box.tolist() == box
             out[mode] = (mapper.hits, mapper.seen, list(mapper.recent), recent, ups)
             clone = pickle.loads(pickle.dumps(mapper))  # a checkpoint: the scratch not kept
             assert clone._mark is None and np.array_equal(clone.seen, mapper.seen)

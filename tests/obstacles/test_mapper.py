@@ -112,3 +112,51 @@ def test_bad_settings_and_poses_are_named():
     det = next(yard_scans())[2]
     with pytest.raises(InputError, match="T_world_sensor"):
         mapper.update(det, np.eye(2))
+
+
+def _box_of(seen):
+    rows, cols = np.nonzero(seen)
+    return [rows.min(), rows.max(), cols.min(), cols.max()] if rows.size else None
+
+
+def _occupancy_reference(mapper):
+    """The occupancy grid from whole-grid arrays: -1 never seen, 0 seen, 100 confirmed."""
+    occ = np.where(mapper.seen > 0, 0, -1).astype(np.int8)
+    occ[mapper.occupied] = 100  # hits >= min_hits and hits / max(seen, 1) >= min_ratio
+    return occ
+
+
+def test_the_read_outs_scan_the_window_of_the_cells_seen(yard):
+    """:meth:`ObstacleMapper.window` is the smallest box of the cells seen (through
+    :meth:`~ObstacleMapper.update` and :meth:`~ObstacleMapper.add_points`, and kept by a
+    checkpoint or rebuilt from ``seen`` by a state without it), and the read-outs restricted to
+    it (:meth:`~ObstacleMapper.occupied_cells`, :meth:`~ObstacleMapper.occupancy`) equal their
+    definitions on the whole grid."""
+    import pickle
+
+    st = ObstacleMapperSettings()
+    mapper = ObstacleMapper([-30.0, -30.0], [40.0, 30.0], st)  # beyond max_range of the route
+    assert mapper.window() == (slice(0, 0), slice(0, 0))
+    assert mapper.occupied_cells().size == 0 and (mapper.occupancy() == -1).all()
+    for k, (_, _, det, T2, T3) in enumerate(yard):
+        mapper.update(det, T2 if k % 2 else T3)
+        rows, cols = mapper.window()
+        assert [rows.start, rows.stop - 1, cols.start, cols.stop - 1] == _box_of(mapper.seen)
+        h = mapper.hits.reshape(-1)
+        ratio = h / np.maximum(mapper.seen.reshape(-1), 1)
+        want = np.flatnonzero((h >= st.min_hits) & (ratio >= st.min_ratio))
+        got = mapper.occupied_cells()
+        assert got.dtype == want.dtype and np.array_equal(got, want)
+        np.testing.assert_array_equal(mapper.occupancy(), _occupancy_reference(mapper))
+    assert len(want) > 0 and (mapper.occupancy() == 0).any()  # not vacuous
+    # the area's first and last cells, given as map points: the window grows to hold them
+    assert mapper.window() != (slice(0, mapper.shape[0]), slice(0, mapper.shape[1]))
+    mapper.add_points(np.array([[40.05, 30.05]]), np.array([[-29.95, -29.95], [40.05, 30.05]]))
+    rows, cols = mapper.window()
+    assert (rows, cols) == (slice(0, mapper.shape[0]), slice(0, mapper.shape[1]))
+    assert [rows.start, rows.stop - 1, cols.start, cols.stop - 1] == _box_of(mapper.seen)
+    np.testing.assert_array_equal(mapper.occupancy(), _occupancy_reference(mapper))
+    clone = pickle.loads(pickle.dumps(mapper))
+    assert clone.window() == mapper.window()
+    del clone.__dict__["_box"]  # a state without the window: rebuilt from seen
+    assert clone.window() == mapper.window()

@@ -1,5 +1,5 @@
-"""The run's fast paths equal their references: the MarkerArray and the classified
-PointCloud2 serialised with NumPy are byte for byte rosbags' serialisation of the same message, and the obstacle map's vectorised update
+"""The run's fast paths equal their references: the MarkerArray, the classified
+PointCloud2 and the OccupancyGrid serialised with NumPy are byte for byte rosbags' serialisation of the same message, and the obstacle map's vectorised update
 (:meth:`ObstacleMapper.update`) counts exactly what :meth:`ObstacleMapper.add_points` counts on
 :func:`scan_points_2d`'s points (up to the rounding of points on a cell edge)."""
 
@@ -93,6 +93,28 @@ def test_vectorised_map_update_counts_like_add_points():
     assert fast.n_scans == ref.n_scans
     for a, b in zip(fast.recent, ref.recent, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+@pytest.mark.parametrize("shape", [(0, 0), (1, 1), (37, 53)])
+def test_occupancy_grid_cdr_is_rosbags_serialisation(shape):
+    pytest.importorskip("rosbags")
+    from navkit.io.results_mcap import _builder, occupancy_grid_cdr
+
+    rng = np.random.default_rng(shape[0])
+    occ = rng.choice(np.array([-1, 0, 100], dtype=np.int8), size=shape)
+    b = _builder()
+    msgtype = "nav_msgs/msg/OccupancyGrid"
+    for stamp, frame, res, origin in (
+        (0, "", 0.1, (0.0, 0.0)),
+        (1_234_567_890_123, "map", 0.05, (-100.25, 37.5)),
+        (9, "odom", 1 / 3, np.array([1e-9, -7.0, 4.0])),  # a 3-vector: x, y kept
+    ):
+        want = bytes(b.ts.serialize_cdr(b.build("grid", stamp, frame, (occ, res, origin)), msgtype))
+        assert occupancy_grid_cdr(stamp, frame, occ, res, origin) == want
+    if occ.size:  # a strided view is copied as its cells
+        view = occ[::-1, ::2]
+        want = bytes(b.ts.serialize_cdr(b.build("grid", 5, "m", (view, 0.1, (1, 2))), msgtype))
+        assert occupancy_grid_cdr(5, "m", view, 0.1, (1, 2)) == want
 
 
 def test_segment_writer_writes_mcaps_unchunked_file(tmp_path):

@@ -126,3 +126,22 @@ def test_obstacle_lines_are_the_shapes_outlines(names):
         assert (ln.id, ln.ns, ln.color) == (oid, ns, color)
         np.testing.assert_array_equal(ln.points[:, :2], xy)
         assert np.all(ln.points[:, 2] == -1.5)
+        # a whole Polyline record (built without its __init__): every field, closed
+        assert vars(ln) == vars(Polyline(ns, oid, ln.points, color))
+        assert ln.closed is True and type(ln) is Polyline
+
+
+@pytest.mark.parametrize("span", [(0, 0), (-4, 0), (-4, 3), (-100, 100)])
+def test_class_counts_are_the_points_per_class(span):
+    """The frame record's per-class counts: every class present, ascending, with its number of
+    points (``np.unique``'s), for the detector's few classes and for a wide span."""
+    from navkit.runtime.capabilities import class_counts
+
+    rng = np.random.default_rng(abs(span[0]))
+    labels = rng.integers(span[0], span[1] + 1, 5000).astype(np.int8)
+    labels[labels == span[0] + 1] = span[0]  # a class in the span that is absent
+    values, counts = np.unique(labels, return_counts=True)
+    got = class_counts(labels)
+    assert list(got) == [str(v) for v in values.tolist()]
+    assert list(got.values()) == counts.tolist()
+    assert class_counts(labels[:0]) == {}

@@ -565,13 +565,14 @@ def body_points_kernel(S, R, h, out, valid, limit):  # type: ignore[no-untyped-d
 
 
 @njit(cache=True)
-def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen, mark):  # type: ignore[no-untyped-def]
+def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen, mark, box):  # type: ignore[no-untyped-def]
     """``mapper.count_scan_cells`` in one pass over the points: each counted point's cell from
     the twin's operations in its order (``((x S0 + y S1) + z S2) + o``; a cell index ``c`` is in
     the grid when ``0 <= c < W``, where ``floor(c)`` is ``int(c)``), counted at once; ``mark``
     (zero on entry and on return: 1 seen, 2 seen and obstacle) counts a cell once per scan in
-    ``seen`` and in ``hits``. Returns the obstacle cells (ascending) and the number of
-    distinct cells seen."""
+    ``seen`` and in ``hits``; ``box`` (row min, row max, column min, column max) grows to hold
+    every cell seen. Returns the obstacle cells (ascending) and the number of distinct cells
+    seen."""
     n = P.shape[0]
     obst = np.empty(n, np.int64)
     cells = np.empty(n, np.int64)
@@ -581,6 +582,7 @@ def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen, mark)
     s10, s11, s12 = S[1, 0], S[1, 1], S[1, 2]
     o0, o1 = o[0], o[1]
     fw, fh = float(W), float(H)
+    r0, r1, c0, c1 = box[0], box[1], box[2], box[3]
     for i in range(n):
         if not valid[i]:
             continue
@@ -591,13 +593,15 @@ def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen, mark)
         r = ((x * s10 + y * s11) + z * s12) + o1
         if not (c >= 0.0 and r >= 0.0 and c < fw and r < fh):  # NaN fails
             continue
-        f = int(r) * W + int(c)
+        ir, ic = int(r), int(c)
+        f = ir * W + ic
         m = mark[f]
         if m == 0:
             seen[f] += 1
             cells[n_seen] = f
             n_seen += 1
             m = 1
+            r0, r1, c0, c1 = min(r0, ir), max(r1, ir), min(c0, ic), max(c1, ic)
         if m == 1 and vlab[i] == OBSTACLE and vobs[i] > 0:
             hits[f] += 1
             obst[n_obst] = f
@@ -606,4 +610,5 @@ def map_cells_kernel(P, valid, vlab, vobs, S, o, max_r2, H, W, hits, seen, mark)
         mark[f] = m
     for k in range(n_seen):
         mark[cells[k]] = 0
+    box[0], box[1], box[2], box[3] = r0, r1, c0, c1
     return np.sort(obst[:n_obst]), n_seen

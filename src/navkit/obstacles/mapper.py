@@ -237,23 +237,44 @@ def count_scan_cells(
     hits: NDArray[np.int32],
     seen: NDArray[np.int32],
     mark: NDArray[np.uint8],
+    box: NDArray[np.int64],
 ) -> tuple[NDArray[np.intp], int]:
     """Count one scan into the flat ``(H * W,)`` grids ``hits`` and ``seen`` (in place): each
     cell an obstacle vertex fell in once in ``hits``, each cell any counted point fell in once
     in ``seen`` (points as :func:`_scan_flat`). ``mark`` ``(H * W,)`` uint8 is scratch, zero on
-    entry and on return. Returns the scan's obstacle cells (ascending, each once) and the number
-    of distinct cells seen. NumPy's buffered fancy-index increment counts a repeated index once;
-    the NumPy twin of ``map_cells_kernel``."""
+    entry and on return; ``box`` ``(4,)`` (row min, row max, column min, column max) grows in
+    place to hold every cell seen. Returns the scan's obstacle cells (ascending, each once) and
+    the number of distinct cells seen. NumPy's buffered fancy-index increment counts a repeated
+    index once; the NumPy twin of ``map_cells_kernel``."""
     flat, is_obst = _scan_flat(P, valid, vlab, vobs, S, o, max_r2, H, W)
     obst = flat[is_obst]
     hits[obst] += 1
     seen[flat] += 1
+    _grow_box(box, flat, W)
     mark[obst] = 1  # the scan's obstacle cells, once each
     cells = np.flatnonzero(mark)
     mark[flat] = 1  # and the seen ones
     n_seen = int(np.count_nonzero(mark))
     mark[flat] = 0
     return cells, n_seen
+
+
+def _grow_box(box: NDArray[np.int64], flat: NDArray[np.intp], W: int) -> None:
+    """Grow ``box`` (row min, row max, column min, column max; in place) to hold the flat
+    (row-major, width ``W``) cells ``flat``."""
+    if flat.size:
+        rows, cols = np.divmod(flat, W)
+        box[:] = (
+            min(box[0], rows.min()),
+            max(box[1], rows.max()),
+            min(box[2], cols.min()),
+            max(box[3], cols.max()),
+        )
+
+
+def _empty_box(shape: tuple[int, int]) -> NDArray[np.int64]:
+    """The box of no cell: minima past the grid's end, maxima before its start."""
+    return np.array([shape[0], -1, shape[1], -1], dtype=np.int64)
 
 
 @dataclass(frozen=True)
@@ -314,6 +335,9 @@ class ObstacleMapper:
         self.recent: deque[NDArray[np.intp]] = deque(maxlen=int(st.recent_scans))
         self.known: NDArray[np.bool_] | None = None
         self._mark: NDArray[np.uint8] | None = None
+        # rows and columns (min, max) holding every cell any scan fell in: outside it hits and
+        # seen are zero, so the map's read-outs scan this window, not the whole area
+        self._box = _empty_box(self.shape)
 
     def __getstate__(self) -> dict[str, object]:
         state = dict(self.__dict__)
@@ -334,12 +358,13 @@ class ObstacleMapper:
         mark = getattr(self, "_mark", None)  # per-scan scratch, kept zero between scans
         if mark is None or mark.size != hits.size:
             mark = self._mark = np.zeros(hits.size, dtype=np.uint8)
+        box = self._window_box()
         if kernels_enabled():
             from navkit.obstacles._kernels_grid import map_cells_kernel
 
-            cells, n_seen = map_cells_kernel(*args, hits, seen, mark)
+            cells, n_seen = map_cells_kernel(*args, hits, seen, mark, box)
         else:
-            cells, n_seen = count_scan_cells(*args, hits, seen, mark)
+            cells, n_seen = count_scan_cells(*args, hits, seen, mark, box)
         self.recent.append(cells)
         self.n_scans += 1
         return MapUpdate(self.n_scans - 1, len(cells), int(n_seen))
@@ -401,6 +426,33 @@ class ObstacleMapper:
             self.shape[1],
         )
 
+    def _window_box(self) -> NDArray[np.int64]:
+        """The box of the cells seen so far (see ``__init__``); a state restored without one
+        gets it from ``seen``."""
+        box = getattr(self, "_box", None)
+        if box is None:
+            box = self._box = _empty_box(self.shape)
+            _grow_box(box, np.flatnonzero(self.seen), self.shape[1])
+        return box
+
+    def window(self) -> tuple[slice, slice]:
+        """Rows and columns of the smallest box holding every cell any scan fell in (empty
+        before the first): ``hits`` and ``seen`` are zero outside it."""
+        r0, r1, c0, c1 = self._window_box().tolist()
+        if r1 < r0:
+            return slice(0, 0), slice(0, 0)
+        return slice(r0, r1 + 1), slice(c0, c1 + 1)
+
+    def occupancy(self) -> NDArray[np.int8]:
+        """The map as an occupancy grid ``(H, W)`` int8: -1 never seen, 0 seen and not an
+        obstacle, 100 a confirmed obstacle cell (:meth:`occupied_cells`)."""
+        occ = np.full(self.shape, -1, dtype=np.int8)
+        rows, cols = self.window()
+        # 1 seen, 0 never: minus 1 gives 0 / -1
+        np.subtract((self.seen[rows, cols] > 0).view(np.int8), 1, out=occ[rows, cols])
+        occ.reshape(-1)[self.occupied_cells()] = 100
+        return occ
+
     def grid(self) -> ObstacleGrid:
         """A snapshot of the grid (copies: later scans do not change it)."""
         return ObstacleGrid(
@@ -430,7 +482,8 @@ class ObstacleMapper:
         obstacle_xy = np.asarray(obstacle_xy, dtype=np.float64).reshape(-1, 2)
         seen_xy = np.asarray(seen_xy, dtype=np.float64).reshape(-1, 2)
         self.recent.append(self._count(self.hits, obstacle_xy))
-        self._count(self.seen, np.vstack([seen_xy, obstacle_xy]))
+        flat = self._count(self.seen, np.vstack([seen_xy, obstacle_xy]))
+        _grow_box(self._window_box(), flat, self.shape[1])
         self.n_scans += 1
 
     def cells(
@@ -470,11 +523,15 @@ class ObstacleMapper:
     def occupied_cells(self) -> NDArray[np.intp]:
         """Flat (row-major) indices of the confirmed obstacle cells, ascending: ``hits >=
         min_hits`` and ``hits / max(seen, 1) >= min_ratio``."""
-        # the ratio only where there are enough hits (a few cells of the grid)
-        h = self.hits.reshape(-1)
-        cand = np.flatnonzero(h >= self.settings.min_hits)
-        ratio = h[cand] / np.maximum(self.seen.reshape(-1)[cand], 1)
-        return cand[ratio >= self.settings.min_ratio]
+        # within the window of the cells seen (hits are zero outside it); the ratio only where
+        # there are enough hits (a few cells of the grid)
+        rows, cols = self.window()
+        h = self.hits[rows, cols]
+        r, c = np.nonzero(h >= self.settings.min_hits)
+        ratio = h[r, c] / np.maximum(self.seen[rows, cols][r, c], 1)
+        ok = ratio >= self.settings.min_ratio
+        # row-major in the window is row-major in the grid: ascending flat indices
+        return (r[ok] + rows.start) * self.shape[1] + (c[ok] + cols.start)
 
     @property
     def recent_occupied(self) -> NDArray[np.bool_]:

@@ -62,14 +62,29 @@ WALL_COLOR = (0.1, 0.1, 0.9, 1.0)
 CORNER_COLOR = (0.0, 0.7, 0.7, 1.0)
 
 
-def _outlines(shapes: list[Any], n: int = 36) -> list[NDArray[np.float64]]:
-    """``shape.outline(n)`` of each shape; rectangles (A1) and ellipses (A6, MVEE) all at once
-    (the same numbers as ``Rectangle.outline`` / ``Ellipse.outline``, without a NumPy call chain
-    per shape)."""
+def _outlines(shapes: list[Any], n: int = 36) -> tuple[NDArray[np.float64], list[int]]:
+    """``shape.outline(n)`` of each shape, one after the other in one ``(M, 2)`` array, and
+    each outline's end row; rectangles (A1) and ellipses (A6, MVEE) all at once (the same
+    numbers as ``Rectangle.outline`` / ``Ellipse.outline``, without a NumPy call chain per
+    shape), written to their rows in one assignment per kind."""
     from navkit.geometry.shapes import Ellipse, Rectangle
 
-    out: list[Any] = [None] * len(shapes)
-    ell = [i for i, shp in enumerate(shapes) if type(shp) is Ellipse]
+    ell, rect, other = [], [], {}
+    lens = []
+    for i, shp in enumerate(shapes):
+        kind = type(shp)
+        if kind is Ellipse:
+            ell.append(i)
+            lens.append(n)
+        elif kind is Rectangle:
+            rect.append(i)
+            lens.append(4)
+        else:
+            other[i] = shp.outline(n)
+            lens.append(len(other[i]))
+    ends = np.cumsum(lens)
+    starts = ends - lens
+    XY = np.empty((int(ends[-1]) if len(ends) else 0, 2))
     if ell:
         t = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
         ct, st = np.cos(t), np.sin(t)
@@ -82,21 +97,17 @@ def _outlines(shapes: list[Any], n: int = 36) -> list[NDArray[np.float64]]:
         )
         x, y, a, b, c, s = (A[:, k : k + 1] for k in range(6))
         u, v = a * ct, b * st
-        XY = np.empty((len(ell), n, 2))
-        XY[:, :, 0], XY[:, :, 1] = x + c * u - s * v, y + s * u + c * v
-        for k, i in enumerate(ell):
-            out[i] = XY[k]
-    rect = [i for i, shp in enumerate(shapes) if type(shp) is Rectangle]
+        rows = (starts[ell][:, None] + np.arange(n)).reshape(-1)
+        XY[rows, 0] = (x + c * u - s * v).reshape(-1)
+        XY[rows, 1] = (y + s * u + c * v).reshape(-1)
     if rect:
         # the four corners counter-clockwise: (xmin, ymin) (xmax, ymin) (xmax, ymax) (xmin, ymax)
         B = np.array([(r.xmin, r.xmax, r.ymin, r.ymax) for r in (shapes[i] for i in rect)])
-        XY = B[:, [[0, 2], [1, 2], [1, 3], [0, 3]]]
-        for k, i in enumerate(rect):
-            out[i] = XY[k]
-    for i, shp in enumerate(shapes):
-        if out[i] is None:
-            out[i] = shp.outline(n)
-    return out
+        rows = (starts[rect][:, None] + np.arange(4)).reshape(-1)
+        XY[rows] = B[:, [[0, 2], [1, 2], [1, 3], [0, 3]]].reshape(-1, 2)
+    for i, xy in other.items():
+        XY[starts[i] : ends[i]] = xy
+    return XY, ends.tolist()
 
 
 def obstacle_lines(
@@ -124,27 +135,53 @@ def obstacle_lines(
             items += [(ob.id, f"shape/A7:{n}", shp, A7_COLOR) for n, shp in ob.guaranteed.items()]
     if not items:
         return []
-    xys = _outlines([it[2] for it in items])
+    XY, ends = _outlines([it[2] for it in items])
+    bounds = zip([0, *ends[:-1]], ends, strict=True)
     if T is None:
-        ends = np.cumsum([len(xy) for xy in xys])
-        P = np.empty((int(ends[-1]), 3))
-        P[:, :2], P[:, 2] = np.concatenate(xys), z
-        pts = [P[a:b] for a, b in zip([0, *ends[:-1].tolist()], ends.tolist(), strict=True)]
+        P = np.empty((len(XY), 3))
+        P[:, :2], P[:, 2] = XY, z
+        pts = [P[a:b] for a, b in bounds]
     else:
         pts = []
-        for xy in xys:
-            Q = np.empty((len(xy), 3))
-            Q[:, :2], Q[:, 2] = xy, z
+        for a, b in bounds:
+            Q = np.empty((b - a, 3))
+            Q[:, :2], Q[:, 2] = XY[a:b], z
             pts.append(Q @ T[:3, :3].T + T[:3, 3])
-    return [Polyline(ns, oid, Q, color) for (oid, ns, _, color), Q in zip(items, pts, strict=True)]
+    # the records built without the frozen dataclass's __init__ (its per-field
+    # object.__setattr__ is most of the cost of a KITTI frame's ~130 outlines); Polyline has
+    # no __post_init__
+    new = object.__new__
+    out = []
+    for (oid, ns, _, color), Q in zip(items, pts, strict=True):
+        ln = new(Polyline)
+        d = ln.__dict__
+        d["ns"] = ns
+        d["id"] = oid
+        d["points"] = Q
+        d["color"] = color
+        d["closed"] = True
+        out.append(ln)
+    return out
+
+
+def class_counts(labels: NDArray[np.int8]) -> dict[str, int]:
+    """Points per class ``{"-2": n, "0": m, ...}`` (ascending, classes present only) of per-point
+    int8 classes: one comparison pass per value between the smallest and the largest (the
+    classes are a handful of values; a wider span is counted by ``np.bincount``)."""
+    if not labels.size:
+        return {}
+    lo, hi = int(labels.min()), int(labels.max())
+    if hi - lo < 16:
+        counts = [int(np.count_nonzero(labels == k)) for k in range(lo, hi + 1)]
+    else:
+        counts = np.bincount(labels.astype(np.int64) - lo).tolist()
+    return {str(k + lo): int(v) for k, v in enumerate(counts) if v}
 
 
 def obstacle_map_output(mapper: Any, stamp_ns: int, frame_id: str) -> Output:
     """An :class:`~navkit.obstacles.ObstacleMapper`'s grid as ``/navkit/obstacle_map``
     (-1 never seen, 0 seen free, 100 occupied)."""
-    occ = (mapper.seen > 0).view(np.int8)  # 1 seen, 0 never: minus 1 gives 0 / -1
-    occ -= 1
-    occ.reshape(-1)[mapper.occupied_cells()] = 100
+    occ = mapper.occupancy()
     origin = np.array(mapper.origin, dtype=np.float64)
     return Output(
         "/navkit/obstacle_map", "grid", stamp_ns, frame_id, (occ, mapper.resolution, origin)
@@ -179,7 +216,7 @@ class ObstaclesStage:
         self.mapper: Any = None
         self.map_frame = "map"
         self.n = 0
-        self.files: Any = None  # the writer thread of the per-frame files (not pickled)
+        self.files: Any = None  # the writer process of the per-frame files (not pickled)
 
     def __getstate__(self) -> dict[str, Any]:
         state = dict(self.__dict__)
@@ -192,18 +229,20 @@ class ObstaclesStage:
             self.files.drain()
 
     def close(self) -> None:
-        """Stop the writer thread (after :meth:`flush`)."""
+        """Hand the writer back, everything written (:func:`~navkit.runtime.files.release_writer`)."""
         if self.files is not None:
+            from navkit.runtime.files import release_writer
+
             files, self.files = self.files, None
-            files.close()
+            release_writer(files)
 
     def _write_frame(self, seq: int, msg: Message, labels: Any, det: Any) -> None:
         """Queue the frame's ``labels.npy`` + ``obstacles.json`` (as ``navkit obstacles
         detect`` writes them) for the writer process (:mod:`navkit.runtime.files`)."""
-        from navkit.runtime.files import FileWriter
-
         if self.files is None:
-            self.files = FileWriter()
+            from navkit.runtime.files import acquire_writer
+
+            self.files = acquire_writer()
         d = self.out / f"{seq:06d}"
         doc = {
             "topic": msg.topic,
@@ -285,13 +324,11 @@ class ObstaclesStage:
         outs.append(
             Output("/navkit/obstacles/shapes", "markers", msg.stamp_ns, msg.frame_id, lines)
         )
-        lo = int(labels.min()) if labels.size else 0  # per-class counts, without a sort
-        counts = np.bincount(labels.astype(np.int64) - lo)
         record: dict[str, Any] = {
             "seq": seq,
             "n_points": int(labels.size),
             "n_obstacles": len(det.obstacles),
-            "counts": {str(k + lo): int(v) for k, v in enumerate(counts.tolist()) if v},
+            "counts": class_counts(labels),
             "triangles": det.counts,
         }
         if self.write_frames:
