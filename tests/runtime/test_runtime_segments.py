@@ -145,3 +145,27 @@ def test_class_counts_are_the_points_per_class(span):
     assert list(got) == [str(v) for v in values.tolist()]
     assert list(got.values()) == counts.tolist()
     assert class_counts(labels[:0]) == {}
+
+
+def test_the_files_writer_is_kept_between_users(tmp_path):
+    """A released writer (drained: its files on disk) is the next user's; one whose process
+    ended is not reused, and a second one released while one is kept is closed."""
+    from navkit.runtime import files
+
+    a = files.acquire_writer()
+    a.submit_files([("json", tmp_path / "1" / "a.json", {"x": 1})])
+    files.release_writer(a)
+    assert json.loads((tmp_path / "1" / "a.json").read_text()) == {"x": 1}
+    assert files.idle_writer_pid() == a._proc.pid
+    b = files.acquire_writer()
+    assert b is a and files.idle_writer_pid() is None
+    c = files.acquire_writer()  # a second user at the same time: its own process
+    assert c is not b
+    files.release_writer(b)
+    files.release_writer(c)  # one is kept already: c stops
+    assert files.idle_writer_pid() == b._proc.pid and not c._proc.is_alive()
+    b._proc.terminate()
+    b._proc.join()
+    d = files.acquire_writer()  # the kept one ended: a new one
+    assert d is not b and d.usable()
+    files.release_writer(d)
