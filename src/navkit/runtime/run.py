@@ -220,8 +220,6 @@ class _Run:
                 self.writer.write(o.topic, o.kind, o.stamp_ns, o.frame_id, o.data)
         t1 = time.perf_counter()
         for o in todo:
-            if o.kind == "tf":
-                continue
             if o.kind == "pose_cov":
                 o = Output(o.topic, "pose", o.stamp_ns, o.frame_id, o.data[0])
             self.logger.log_output(o)
