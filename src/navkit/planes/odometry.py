@@ -66,6 +66,13 @@ from navkit.planes.motion import (
     depth_consistency,
     estimate_motion,
 )
+from navkit.planes.noise import (
+    DOF_NAMES,
+    DepthNoise,
+    fit_plane,
+    free_directions,
+    plane_pair_information,
+)
 from navkit.planes.plane_map import MapView, PlaneMap
 from navkit.planes.solve import MotionEstimate, MotionFailure, normal_rank
 from navkit.results import Result, deprecated_alias
@@ -193,6 +200,11 @@ class OdometrySettings:
         window). Measured step errors against the references were 4.6x (TUM, motion capture;
         median over the frames) and 17.5x (7-Scenes; its KinectFusion reference errs by about
         as much) the uninflated sigma; 10 is between.
+    plane_free_translation, plane_free_rotation_deg : float
+        The degeneracy analysis of the plane constraints (``FrameMotion.plane_free_dof``): a
+        direction whose 3-sigma, from the information of the matched planes' noise-weighted
+        fits, exceeds this many metres (degrees) is one the planes leave free. 5 cm / 2 deg:
+        the bound of a wrong motion (a frame tracked but off by more is an error).
     max_history : int
         Poses and results kept (:attr:`PlaneOdometry.poses`, ``results``), and frame numbers
         kept per map plane (``MapPlane.observations``): the most recent ones; 0 = all (the
@@ -221,6 +233,8 @@ class OdometrySettings:
     map_keyframe_distance: float = domain_field(0.05, NON_NEGATIVE)
     map_keyframe_angle_deg: float = domain_field(5.0, Domain(lo=0.0, hi=180.0, note="degrees"))
     covariance_scale: float = domain_field(10.0, POSITIVE)
+    plane_free_translation: float = domain_field(0.05, POSITIVE)
+    plane_free_rotation_deg: float = domain_field(2.0, Domain(lo=0.0, lo_open=True, note="degrees"))
     max_history: int = domain_field(0, Domain(integer=True, lo=0, note="0 = all"))
     max_map_planes: int = domain_field(0, Domain(integer=True, lo=0, note="0 = all"))
 
@@ -274,6 +288,24 @@ class FrameMotion(Result):
         (:attr:`~navkit.planes.dense.DenseResult.information` inverted, moved to world axes,
         times ``OdometrySettings.covariance_scale`` squared). It grows per keyframe, as the
         drift does. None for a motion without a dense step.
+    plane_information : (6, 6) array
+        What the matched planes alone say about the motion: the information (inverse
+        covariance, perturbation ``(v, w)`` in frame axes) of their constraints, each plane's
+        fit weighted by the depth noise (:func:`~navkit.planes.noise.fit_plane`,
+        :func:`~navkit.planes.noise.plane_pair_information`; the frame's fit stands for both
+        sides of a pair). Zero when no plane was matched (a motion the dense step found from
+        the prediction) and for the first frame. It counts the depth noise only: the plane
+        solutions' actual errors on the shared sequences are about 100 times its sigmas (the
+        fits' systematic errors - segmentation edges, depth distortion - are not noise),
+        which is why the dense step refines all six degrees of freedom rather than only the
+        free ones (docs/planes.md).
+    plane_free_dof : tuple of str
+        **Degeneracy analysis**: the degrees of freedom (``tx ty tz rx ry rz``, the frame axes
+        each free direction leans on most) that ``plane_information`` leaves free
+        (:func:`~navkit.planes.noise.free_directions`, limits
+        ``OdometrySettings.plane_free_translation`` / ``plane_free_rotation_deg``): e.g. the
+        translation along a corridor's walls and floor. What fixed them is in
+        ``dof_sources`` (texture, image, prior).
     """
 
     index: int
@@ -288,6 +320,8 @@ class FrameMotion(Result):
     dense: DenseResult | None = None
     reference: int = -1
     covariance: NDArray[np.float64] | None = None
+    plane_information: NDArray[np.float64] = field(default_factory=lambda: np.zeros((6, 6)))
+    plane_free_dof: tuple[str, ...] = DOF_NAMES
 
     @property
     def prior_dof(self) -> tuple[str, ...]:
@@ -527,7 +561,27 @@ class PlaneOdometry:
             m.dense,
             m.reference,
             cov,
+            *self._plane_information(obs, m.motion),
         )
+
+    def _plane_information(
+        self, obs: PlaneObservation, motion: MotionEstimate | None
+    ) -> tuple[NDArray[np.float64], tuple[str, ...]]:
+        """``FrameMotion.plane_information`` and ``plane_free_dof`` of a measured motion."""
+        s = self.settings
+        H = np.zeros((6, 6))
+        if motion is not None and motion.pairs:
+            noise = s.dense.noise if s.dense is not None else DepthNoise()
+            X = np.asarray(obs.points).reshape(-1, 3)
+            I3, z3 = np.eye(3), np.zeros(3)
+            for _, j in motion.pairs:
+                f = _segment_fit(X, obs.segments[j].inliers, noise)
+                if f is not None:
+                    H += plane_pair_information(f, f, I3, z3)
+        if not H.any():
+            return H, DOF_NAMES
+        free, _, _ = free_directions(H, s.plane_free_translation, s.plane_free_rotation_deg)
+        return H, free
 
     def _covariance(self, idx: int, m: _Measured) -> NDArray[np.float64] | None:
         """``FrameMotion.covariance`` of frame ``idx``; kept while the frame can be a reference
@@ -836,6 +890,22 @@ class PlaneOdometry:
     def relative(self, i: int, j: int) -> NDArray[np.float64]:
         """``T_i_j`` from the chained poses."""
         return se3_inverse(self.poses[i]) @ self.poses[j]
+
+
+_FIT_POINTS = 2000  # points per plane fit of the degeneracy analysis
+
+
+def _segment_fit(X: NDArray[np.float64], inliers: NDArray[np.int64], noise: DepthNoise):
+    """The noise-weighted fit of a segment's points (every k-th of them, at most about
+    ``_FIT_POINTS``: a regular subsample's covariance divided by the step is the whole set's
+    in expectation, at a fraction of the CPU); None with fewer than 3 finite points."""
+    step = max(1, len(inliers) // _FIT_POINTS)
+    P = X[inliers[::step]]
+    P = P[np.isfinite(P).all(axis=1)]
+    if len(P) < 3:
+        return None
+    f = fit_plane(P, noise)
+    return replace(f, cov=f.cov / step, count=len(P) * step)
 
 
 def _differs(Ta: NDArray[np.float64], Tb: NDArray[np.float64], dist: float, deg: float) -> bool:
