@@ -7,8 +7,9 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from navkit.geometry import se3_from_rt
-from navkit.planes import FrameMotion, PlaneOdometry, observe_rgbd
+from navkit.planes import FrameMotion, MotionPrior, OdometrySettings, PlaneOdometry, observe_rgbd
 from navkit.planes.noise import DepthNoise, fit_plane, plane_pair_information
+from navkit.planes.odometry import DenseGates
 from navkit.sensors import PinholeCamera, RGBDFrame
 from navkit.sim import Box, Ground, Scene, Texture, Wall, render_rgbd
 from navkit.sim.scanners import RangeNoise
@@ -18,31 +19,45 @@ R0 = np.array([[0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], [0.0, -1.0, 0.0]])
 CAM = PinholeCamera(262.5, 262.5, 159.5, 119.5, 320, 240)
 
 
-def _track(scene: Scene) -> list:
-    """Three frames 1.5 cm apart along world x (the camera's optical axis), yaw 0.5 deg."""
-    odo = PlaneOdometry()
+def _poses(n: int, step: float) -> list[np.ndarray]:
+    """Camera poses ``step`` metres apart along world x (the optical axis), yaw 0.5 deg each."""
     out = []
-    for k in range(3):
+    for k in range(n):
         R = Rotation.from_euler("z", 0.5 * k, degrees=True).as_matrix() @ R0
-        T = se3_from_rt(R, [0.015 * k, 0.0, 1.2])
-        f = render_rgbd(scene, CAM, T, noise=RangeNoise(quadratic_sigma=0.0016), rng=k).frame
-        out.append(odo.update(observe_rgbd(RGBDFrame(f.color, f.depth, f.camera, k / 30.0))))
+        out.append(se3_from_rt(R, [step * k, 0.0, 1.2]))
     return out
 
 
-def test_a_corridor_leaves_the_translation_along_it_free():
-    """Floor and two parallel walls along world x: two plane directions, so the planes fix
-    the rotation and the translation across the corridor, and leave the translation along it
-    (the camera's z) free; the texture / dense step fixes it."""
+def _frames(scene: Scene, poses: list[np.ndarray]) -> list:
+    out = []
+    for k, T in enumerate(poses):
+        f = render_rgbd(scene, CAM, T, noise=RangeNoise(quadratic_sigma=0.0016), rng=k).frame
+        out.append(observe_rgbd(RGBDFrame(f.color, f.depth, f.camera, k / 30.0)))
+    return out
+
+
+def _track(scene: Scene) -> list:
+    """Three frames 1.5 cm apart."""
+    odo = PlaneOdometry()
+    return [odo.update(obs) for obs in _frames(scene, _poses(3, 0.015))]
+
+
+def _corridor() -> Scene:
     tex = Texture("noise", scale=0.3, seed=5)
-    corridor = Scene(
+    return Scene(
         [
             Ground(texture=tex, name="floor"),
             Wall(origin=(-1, 1.2, 0), u=(12, 0, 0), v=(0, 0, 2.8), texture=tex, name="left"),
             Wall(origin=(11, -1.2, 0), u=(-12, 0, 0), v=(0, 0, 2.8), texture=tex, name="right"),
         ]
     )
-    res = _track(corridor)
+
+
+def test_a_corridor_leaves_the_translation_along_it_free():
+    """Floor and two parallel walls along world x: two plane directions, so the planes fix
+    the rotation and the translation across the corridor, and leave the translation along it
+    (the camera's z) free; the texture / dense step fixes it."""
+    res = _track(_corridor())
     moved = [r for r in res[1:] if isinstance(r, FrameMotion)]
     assert moved, res
     for r in moved:
@@ -85,3 +100,56 @@ def test_the_information_of_a_fit_matches_its_scatter():
     var_tz = np.linalg.pinv(H)[2, 2]  # the camera's z is the normal
     # the two-fit variance is twice one fit's; the sample variance of 300 fits is within 20 %
     assert abs(var_tz / 2 / np.var(offs) - 1) < 0.2, (var_tz / 2, np.var(offs))
+
+
+def _prior_run(
+    poses: list[np.ndarray], monkeypatch, texture_allowed: bool, gates: DenseGates | None = None
+) -> tuple[list, list]:
+    """Track the corridor with a motion prior (the true step moved by 3 cm along the corridor
+    and 0.5 deg, as a visual odometry would give it); counts the texture searches."""
+    import navkit.planes.motion as motion
+
+    calls: list[str] = []
+    real = motion.solve_two_planes
+
+    def counted(*a, **k):
+        calls.append("two planes")
+        assert texture_allowed, "a texture search ran where the dense step measures the motion"
+        return real(*a, **k)
+
+    monkeypatch.setattr(motion, "solve_two_planes", counted)
+    odo = PlaneOdometry(OdometrySettings(gates=gates or DenseGates()))
+    obs = _frames(_corridor(), poses)
+    out = [odo.update(obs[0])]
+    off = se3_from_rt(Rotation.from_euler("y", 0.5, degrees=True).as_matrix(), [0, 0, 0.03])
+    for k in range(1, len(obs)):
+        step = np.linalg.inv(poses[k - 1]) @ poses[k]
+        out.append(odo.update(obs[k], MotionPrior(step @ off, 1.0, 0.03)))
+    return out, calls
+
+
+def test_with_a_prior_the_image_measures_what_the_planes_leave_free(monkeypatch):
+    """Two plane directions and a motion prior: no texture search runs; the planes fix their
+    degrees of freedom, the prior starts the free one (along the corridor) and the dense step
+    measures it - to the accuracy of the dense step, not the prior's 3 cm."""
+    poses = _poses(4, 0.015)
+    res, calls = _prior_run(poses, monkeypatch, texture_allowed=False)
+    assert not calls
+    for k in range(1, len(res)):
+        r = res[k]
+        assert isinstance(r, FrameMotion) and r.source.endswith("+dense"), r
+        assert r.plane_free_dof == ("tz",) and r.prior_dof == ()
+        step_true = np.linalg.inv(poses[k - 1]) @ poses[k]
+        err = np.linalg.norm((np.linalg.inv(step_true) @ r.motion.T)[:3, 3])
+        # the dense step on noise-free texture and Kinect-noise depth at 1-3 m: millimetres
+        assert err < 0.005, err
+
+
+def test_the_texture_searches_run_when_the_dense_step_rejects(monkeypatch):
+    """When the dense step rejects every start (here: a photometric gate no alignment can
+    pass), the frame is measured again with the texture searches."""
+    res, calls = _prior_run(
+        _poses(3, 0.015), monkeypatch, True, DenseGates(max_photometric_sigmas=1e-6)
+    )
+    assert calls
+    assert all(not isinstance(r, FrameMotion) for r in res[1:])  # still no silent pose

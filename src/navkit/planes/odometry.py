@@ -28,6 +28,11 @@ step per stage:
 Tracking against the map bounds the drift: while a map plane stays in view, every frame is
 referred to the same fused plane (and texture) instead of to the previous frame's noisy one.
 
+With a motion prior and the dense step, stages 3-4 first run without the planes' texture
+searches: the planes fix what they can, the prior fills the free degrees of freedom and the
+dense step measures them (:meth:`PlaneOdometry._measure`); the texture searches run only when
+that fails.
+
 A tracked frame is a :class:`FrameMotion`. When a motion cannot be determined the frame is a
 :class:`~navkit.planes.solve.MotionFailure` naming its reason and free degrees of freedom, the
 prediction is used for the trajectory, and its planes are not merged into the map; neither are
@@ -414,8 +419,7 @@ class PlaneOdometry:
             m = _Measured(np.eye(4), np.eye(4), None, 0, source="first")  # the world frame
         else:
             pred = self._predict(prior)  # 2
-            plane, failure = self._planes(obs, pred)  # 3-4
-            m = self._verify(idx, obs, dframe, pred, plane, failure)  # 5
+            m = self._measure(idx, obs, dframe, pred)  # 3-5
             self._velocity = rigid(m.step)
             self._velocity_known = isinstance(m.motion, MotionEstimate)
         T = rigid(m.T)  # 6: chained products stay rotations
@@ -442,6 +446,20 @@ class PlaneOdometry:
         step = self._velocity if mprior is None else mprior.T
         T_prev = self.poses[-1]
         return _Prediction(T_prev, step, T_prev @ step, mprior)
+
+    def _measure(
+        self, idx: int, obs: PlaneObservation, dframe: DenseFrame | None, pred: _Prediction
+    ) -> _Measured:
+        """Stages 3-5. With a motion prior and the dense step to come, the planes' texture
+        searches are left out first: the planes fix what they can, the prior starts the rest
+        and the dense alignment measures it (the image solves what the planes leave free).
+        Only when that fails - e.g. too little overlap for the pixels to judge - are the
+        texture searches run and the frame measured again."""
+        if pred.prior is not None and dframe is not None and self._keyframe is not None:
+            m = self._verify(idx, obs, dframe, pred, *self._planes(obs, pred, texture=False))
+            if not isinstance(m.motion, MotionFailure):
+                return m
+        return self._verify(idx, obs, dframe, pred, *self._planes(obs, pred))
 
     def _verify(
         self,
@@ -635,11 +653,13 @@ class PlaneOdometry:
             self.map.planes = [mp for mp in self.map.planes if id(mp) in kept]
 
     def _planes(
-        self, obs: PlaneObservation, pred: _Prediction
+        self, obs: PlaneObservation, pred: _Prediction, texture: bool = True
     ) -> tuple[_Plane | None, MotionFailure | None]:
         """Stages 3-4: the plane solution (source, estimate, ``T_world_frame``) - frame-to-map
-        first, frame-to-frame when the map gives less - and the last failure met."""
+        first, frame-to-frame when the map gives less - and the last failure met (``texture``:
+        run the 1-2 plane texture searches, :attr:`MotionSettings.texture`)."""
         T_prev, T_pred, step_pred, mprior = pred.T_prev, pred.T, pred.step, pred.prior
+        ms = self.settings.motion if texture else replace(self.settings.motion, texture=False)
         # without a prior and a measured last motion (second frame, after a failure) the
         # prediction is weak: frame-to-frame then uses the global (prior-free) association,
         # whose solution is verified on the points; the map is still tried (it is what
@@ -661,14 +681,14 @@ class PlaneOdometry:
         found: list[_Plane] = []
         failure: MotionFailure | None = None
         if self.settings.frame_to_map and self.map.planes:  # 3
-            r_map = self._track_map(obs, T_pred, mprior)
+            r_map = self._track_map(obs, T_pred, mprior, ms)
             if isinstance(r_map, MotionEstimate):
                 found.append(("map", r_map, T_pred @ r_map.T))
             else:
                 failure = r_map
         if not found or found[0][1].prior_dof or found[0][1].case < self._rank(obs):  # 4
             try:
-                r_f = estimate_motion(ref_obs, obs, f2f_prior, self.settings.motion)
+                r_f = estimate_motion(ref_obs, obs, f2f_prior, ms)
             except NavkitError as exc:
                 r_f = MotionFailure(0, ("rotation", "translation"), f"frame-to-frame: {exc}")
             if isinstance(r_f, MotionEstimate):
@@ -843,7 +863,11 @@ class PlaneOdometry:
         return normal_rank(N.reshape(-1, 3), m.solver.parallel_deg)[0]
 
     def _track_map(
-        self, obs: PlaneObservation, T_pred: NDArray[np.float64], prior: MotionPrior | None
+        self,
+        obs: PlaneObservation,
+        T_pred: NDArray[np.float64],
+        prior: MotionPrior | None,
+        motion: MotionSettings | None = None,
     ) -> MotionEstimate | MotionFailure:
         """Stage 3: the correction ``T_pred_frame`` against the map (identity = the prediction).
 
@@ -852,9 +876,8 @@ class PlaneOdometry:
         its pose is measured, unlike that of a failed previous frame), the map view having no
         camera of its own.
         """
-        s = self.settings
         view = self.map_view(obs, T_pred)
-        ms = replace(s.motion, global_search=False)
+        ms = replace(motion or self.settings.motion, global_search=False)
         p: MotionPrior | NDArray[np.float64] = np.eye(4)
         if prior is not None:
             p = MotionPrior(np.eye(4), prior.sigma_rotation_deg, prior.sigma_translation)
