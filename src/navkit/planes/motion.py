@@ -461,7 +461,9 @@ def _estimate(
     else:
         if not has_tex:
             return MotionFailure(
-                1, ("lambda", "mu", "eta"), "one plane direction and no texture (no camera image, or texture searches off)"
+                1,
+                ("lambda", "mu", "eta"),
+                "one plane direction and no texture (no camera image, or texture searches off)",
             )
         i, j = pairs[0]
         res = solve_one_plane(p1[0], p2[0], obs1.texture, obs2.texture, i, j, s.solver)
@@ -586,7 +588,9 @@ def _estimate_with_prior(
             )
         else:
             res = MotionFailure(
-                1, ("lambda", "mu", "eta"), "one plane direction and no texture (no camera image, or texture searches off)"
+                1,
+                ("lambda", "mu", "eta"),
+                "one plane direction and no texture (no camera image, or texture searches off)",
             )
     if isinstance(res, MotionEstimate):
         res = _confirm_by_depth(obs1, obs2, res, res.T @ Tp, pairs, s)
