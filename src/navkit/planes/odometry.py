@@ -537,6 +537,12 @@ class PlaneOdometry:
             only_new=not key,
         )
         if key:
+            self.map.consolidate(
+                angle_deg=s.merge_angle_deg,
+                distance_m=s.merge_distance,
+                margin_m=s.merge_margin,
+                max_points=20 * s.map_points,
+            )
             self._merged_at = T
         self._anchor = (obs, T)
         if dframe is not None:
