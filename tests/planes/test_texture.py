@@ -135,3 +135,19 @@ def test_range_sensor_with_a_separate_camera(pairs):
     ).texture(0)
     m = a.mask & wrong.mask
     assert np.corrcoef(a.image[m], wrong.image[m])[0, 1] < 0.5
+
+
+def test_a_shared_pyramid_gives_the_same_textures(pairs):
+    """The frame's textures share one brightness pyramid (``PlaneObservation.texture``); each
+    equals the texture sampled from the image alone, at every pyramid level the texel size
+    asks for (1, 2, 4 cm)."""
+    from navkit.planes.texture import texture_from_rgbd
+
+    obs = observe_rgbd(pairs[1].f1.frame, ES)
+    for nu in (0.01, 0.02, 0.04):
+        shared = obs.texture(0, nu=nu)
+        alone = texture_from_rgbd(
+            obs.gray, obs.points, obs.extraction.labels, 0, obs.segments[0], obs.camera, nu
+        )
+        assert np.array_equal(shared.mask, alone.mask)
+        assert np.array_equal(shared.image, alone.image, equal_nan=True)

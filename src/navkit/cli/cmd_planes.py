@@ -318,6 +318,7 @@ def _frame_row(i: int, stamp: float, r, t_extract: float) -> dict[str, Any]:
         "texture_dof": list(getattr(motion, "texture_dof", ())),
         "free_dof": list(getattr(motion, "free_dof", ())),
         "prior_dof": list(getattr(motion, "prior_dof", ())),
+        "plane_free_dof": [] if failed else list(r.plane_free_dof),
     }
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import logging
 from dataclasses import dataclass
 
@@ -17,7 +18,13 @@ from navkit.planes.extract import (
     extract_planes_organized,
 )
 from navkit.planes.segments import ExtractionResult, PlaneSegment
-from navkit.planes.texture import PlaneTexture, texture_from_camera, texture_from_rgbd, to_gray
+from navkit.planes.texture import (
+    PlaneTexture,
+    gray_levels,
+    texture_from_camera,
+    texture_from_rgbd,
+    to_gray,
+)
 from navkit.sensors import PinholeCamera, RGBDFrame
 
 __all__ = ["PlaneObservation", "observe_points", "observe_rgbd", "reproject_rgbd"]
@@ -54,6 +61,12 @@ class PlaneObservation:
     def segments(self) -> tuple[PlaneSegment, ...]:
         return self.extraction.segments
 
+    @functools.cached_property
+    def _gray_levels(self) -> list[NDArray[np.float32]]:
+        """The brightness pyramid the frame's textures share (built on demand)."""
+        assert self.gray is not None
+        return gray_levels(self.gray)
+
     @property
     def has_texture(self) -> bool:
         return self.gray is not None and self.camera is not None
@@ -80,6 +93,7 @@ class PlaneObservation:
                 nu,
                 axes=axes,
                 ref=ref,
+                levels=self._gray_levels,
             )
         return texture_from_camera(
             self.gray, self.camera, self.T_camera_sensor, seg, self.points, nu, axes=axes, ref=ref

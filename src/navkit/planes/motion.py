@@ -61,6 +61,11 @@ class MotionSettings:
     """Without a prior, also try :func:`~navkit.planes.associate.associate_global` (large
     motions); its >= 3-plane solution replaces the gated one when it puts more of frame 2's
     points onto frame 1's (:func:`point_fit`)."""
+    texture: bool = True
+    """Run the texture searches of the 1- and 2-plane cases (paper 2, eqs. 3-11). False: the
+    degrees of freedom the planes leave free are the prior's (``MotionEstimate.prior_dof``) or
+    the frame fails without one, as without a camera image. :class:`~navkit.planes.odometry.
+    PlaneOdometry` turns it off for a frame its dense step will measure from a motion prior."""
     max_depth_violation: float = domain_field(0.35, Domain(lo=0.0, hi=1.0, note="a fraction"))
     """A motion whose degrees of freedom came from texture (1 or 2 plane directions) is rejected
     (:class:`MotionFailure` naming them) when more than this fraction of the tested off-plane
@@ -431,7 +436,7 @@ def _estimate(
     # planes with rho >= 0 flip their normal if the sensor crosses them: align frame 2's signs
     prior = np.eye(4) if T_1_2_prior is None else np.asarray(T_1_2_prior, float)
     rank, _ = normal_rank(np.array([p.normal for p in p1]), s.solver.parallel_deg)
-    has_tex = obs1.has_texture and obs2.has_texture
+    has_tex = s.texture and obs1.has_texture and obs2.has_texture
     if rank >= 3:
         res = solve_three_planes(p1, p2, s.solver)
     elif rank == 2:
@@ -439,7 +444,8 @@ def _estimate(
             return MotionFailure(
                 2,
                 ("mu",),
-                "two plane directions and no camera image: the position along the "
+                "two plane directions and no texture (no camera image, or texture searches "
+                "off): the position along the "
                 "planes' intersection line is free",
             )
         idx1 = [i for i, _ in pairs]
@@ -455,7 +461,9 @@ def _estimate(
     else:
         if not has_tex:
             return MotionFailure(
-                1, ("lambda", "mu", "eta"), "one plane direction and no camera image"
+                1,
+                ("lambda", "mu", "eta"),
+                "one plane direction and no texture (no camera image, or texture searches off)",
             )
         i, j = pairs[0]
         res = solve_one_plane(p1[0], p2[0], obs1.texture, obs2.texture, i, j, s.solver)
@@ -543,7 +551,7 @@ def _estimate_with_prior(
     p1 = [segs1[i].plane for i in idx1]
     p2m = [_moved_plane(segs2[j].plane, Tp) for j in idx2]  # 2. frame 2' (prior-centred)
     rank, _ = normal_rank(np.array([p.normal for p in p1]), s.solver.parallel_deg)
-    has_tex = obs1.has_texture and obs2.has_texture
+    has_tex = s.texture and obs1.has_texture and obs2.has_texture
 
     def tex2m(k: int, ax, ref, nu):  # frame 2' lattice -> frame 2's sampler
         return obs2.texture(k, np.asarray(ax) @ Rp, Rp.T @ (np.asarray(ref) - tp), nu)
@@ -562,7 +570,11 @@ def _estimate_with_prior(
                 prior_translation=np.zeros(3),
             )
         else:
-            res = MotionFailure(2, ("mu",), "two plane directions and no camera image")
+            res = MotionFailure(
+                2,
+                ("mu",),
+                "two plane directions and no texture (no camera image, or texture searches off)",
+            )
     else:
         if has_tex:
             res = solve_one_plane(
@@ -576,7 +588,9 @@ def _estimate_with_prior(
             )
         else:
             res = MotionFailure(
-                1, ("lambda", "mu", "eta"), "one plane direction and no camera image"
+                1,
+                ("lambda", "mu", "eta"),
+                "one plane direction and no texture (no camera image, or texture searches off)",
             )
     if isinstance(res, MotionEstimate):
         res = _confirm_by_depth(obs1, obs2, res, res.T @ Tp, pairs, s)

@@ -28,6 +28,11 @@ step per stage:
 Tracking against the map bounds the drift: while a map plane stays in view, every frame is
 referred to the same fused plane (and texture) instead of to the previous frame's noisy one.
 
+With a motion prior and the dense step, stages 3-4 first run without the planes' texture
+searches: the planes fix what they can, the prior fills the free degrees of freedom and the
+dense step measures them (:meth:`PlaneOdometry._measure`); the texture searches run only when
+that fails.
+
 A tracked frame is a :class:`FrameMotion`. When a motion cannot be determined the frame is a
 :class:`~navkit.planes.solve.MotionFailure` naming its reason and free degrees of freedom, the
 prediction is used for the trajectory, and its planes are not merged into the map; neither are
@@ -65,6 +70,13 @@ from navkit.planes.motion import (
     as_prior,
     depth_consistency,
     estimate_motion,
+)
+from navkit.planes.noise import (
+    DOF_NAMES,
+    DepthNoise,
+    fit_plane,
+    free_directions,
+    plane_pair_information,
 )
 from navkit.planes.plane_map import MapView, PlaneMap
 from navkit.planes.solve import MotionEstimate, MotionFailure, normal_rank
@@ -193,6 +205,11 @@ class OdometrySettings:
         window). Measured step errors against the references were 4.6x (TUM, motion capture;
         median over the frames) and 17.5x (7-Scenes; its KinectFusion reference errs by about
         as much) the uninflated sigma; 10 is between.
+    plane_free_translation, plane_free_rotation_deg : float
+        The degeneracy analysis of the plane constraints (``FrameMotion.plane_free_dof``): a
+        direction whose 3-sigma, from the information of the matched planes' noise-weighted
+        fits, exceeds this many metres (degrees) is one the planes leave free. 5 cm / 2 deg:
+        the bound of a wrong motion (a frame tracked but off by more is an error).
     max_history : int
         Poses and results kept (:attr:`PlaneOdometry.poses`, ``results``), and frame numbers
         kept per map plane (``MapPlane.observations``): the most recent ones; 0 = all (the
@@ -221,6 +238,8 @@ class OdometrySettings:
     map_keyframe_distance: float = domain_field(0.05, NON_NEGATIVE)
     map_keyframe_angle_deg: float = domain_field(5.0, Domain(lo=0.0, hi=180.0, note="degrees"))
     covariance_scale: float = domain_field(10.0, POSITIVE)
+    plane_free_translation: float = domain_field(0.05, POSITIVE)
+    plane_free_rotation_deg: float = domain_field(2.0, Domain(lo=0.0, lo_open=True, note="degrees"))
     max_history: int = domain_field(0, Domain(integer=True, lo=0, note="0 = all"))
     max_map_planes: int = domain_field(0, Domain(integer=True, lo=0, note="0 = all"))
 
@@ -274,6 +293,24 @@ class FrameMotion(Result):
         (:attr:`~navkit.planes.dense.DenseResult.information` inverted, moved to world axes,
         times ``OdometrySettings.covariance_scale`` squared). It grows per keyframe, as the
         drift does. None for a motion without a dense step.
+    plane_information : (6, 6) array
+        What the matched planes alone say about the motion: the information (inverse
+        covariance, perturbation ``(v, w)`` in frame axes) of their constraints, each plane's
+        fit weighted by the depth noise (:func:`~navkit.planes.noise.fit_plane`,
+        :func:`~navkit.planes.noise.plane_pair_information`; the frame's fit stands for both
+        sides of a pair). Zero when no plane was matched (a motion the dense step found from
+        the prediction) and for the first frame. It counts the depth noise only: the plane
+        solutions' actual errors on the shared sequences are about 100 times its sigmas (the
+        fits' systematic errors - segmentation edges, depth distortion - are not noise),
+        which is why the dense step refines all six degrees of freedom rather than only the
+        free ones (docs/planes.md).
+    plane_free_dof : tuple of str
+        **Degeneracy analysis**: the degrees of freedom (``tx ty tz rx ry rz``, the frame axes
+        each free direction leans on most) that ``plane_information`` leaves free
+        (:func:`~navkit.planes.noise.free_directions`, limits
+        ``OdometrySettings.plane_free_translation`` / ``plane_free_rotation_deg``): e.g. the
+        translation along a corridor's walls and floor. What fixed them is in
+        ``dof_sources`` (texture, image, prior).
     """
 
     index: int
@@ -288,6 +325,8 @@ class FrameMotion(Result):
     dense: DenseResult | None = None
     reference: int = -1
     covariance: NDArray[np.float64] | None = None
+    plane_information: NDArray[np.float64] = field(default_factory=lambda: np.zeros((6, 6)))
+    plane_free_dof: tuple[str, ...] = DOF_NAMES
 
     @property
     def prior_dof(self) -> tuple[str, ...]:
@@ -380,8 +419,7 @@ class PlaneOdometry:
             m = _Measured(np.eye(4), np.eye(4), None, 0, source="first")  # the world frame
         else:
             pred = self._predict(prior)  # 2
-            plane, failure = self._planes(obs, pred)  # 3-4
-            m = self._verify(idx, obs, dframe, pred, plane, failure)  # 5
+            m = self._measure(idx, obs, dframe, pred)  # 3-5
             self._velocity = rigid(m.step)
             self._velocity_known = isinstance(m.motion, MotionEstimate)
         T = rigid(m.T)  # 6: chained products stay rotations
@@ -408,6 +446,20 @@ class PlaneOdometry:
         step = self._velocity if mprior is None else mprior.T
         T_prev = self.poses[-1]
         return _Prediction(T_prev, step, T_prev @ step, mprior)
+
+    def _measure(
+        self, idx: int, obs: PlaneObservation, dframe: DenseFrame | None, pred: _Prediction
+    ) -> _Measured:
+        """Stages 3-5. With a motion prior and the dense step to come, the planes' texture
+        searches are left out first: the planes fix what they can, the prior starts the rest
+        and the dense alignment measures it (the image solves what the planes leave free).
+        Only when that fails - e.g. too little overlap for the pixels to judge - are the
+        texture searches run and the frame measured again."""
+        if pred.prior is not None and dframe is not None and self._keyframe is not None:
+            m = self._verify(idx, obs, dframe, pred, *self._planes(obs, pred, texture=False))
+            if not isinstance(m.motion, MotionFailure):
+                return m
+        return self._verify(idx, obs, dframe, pred, *self._planes(obs, pred))
 
     def _verify(
         self,
@@ -485,6 +537,12 @@ class PlaneOdometry:
             only_new=not key,
         )
         if key:
+            self.map.consolidate(
+                angle_deg=s.merge_angle_deg,
+                distance_m=s.merge_distance,
+                margin_m=s.merge_margin,
+                max_points=20 * s.map_points,
+            )
             self._merged_at = T
         self._anchor = (obs, T)
         if dframe is not None:
@@ -527,7 +585,27 @@ class PlaneOdometry:
             m.dense,
             m.reference,
             cov,
+            *self._plane_information(obs, m.motion),
         )
+
+    def _plane_information(
+        self, obs: PlaneObservation, motion: MotionEstimate | None
+    ) -> tuple[NDArray[np.float64], tuple[str, ...]]:
+        """``FrameMotion.plane_information`` and ``plane_free_dof`` of a measured motion."""
+        s = self.settings
+        H = np.zeros((6, 6))
+        if motion is not None and motion.pairs:
+            noise = s.dense.noise if s.dense is not None else DepthNoise()
+            X = np.asarray(obs.points).reshape(-1, 3)
+            I3, z3 = np.eye(3), np.zeros(3)
+            for _, j in motion.pairs:
+                f = _segment_fit(X, obs.segments[j].inliers, noise)
+                if f is not None:
+                    H += plane_pair_information(f, f, I3, z3)
+        if not H.any():
+            return H, DOF_NAMES
+        free, _, _ = free_directions(H, s.plane_free_translation, s.plane_free_rotation_deg)
+        return H, free
 
     def _covariance(self, idx: int, m: _Measured) -> NDArray[np.float64] | None:
         """``FrameMotion.covariance`` of frame ``idx``; kept while the frame can be a reference
@@ -581,11 +659,13 @@ class PlaneOdometry:
             self.map.planes = [mp for mp in self.map.planes if id(mp) in kept]
 
     def _planes(
-        self, obs: PlaneObservation, pred: _Prediction
+        self, obs: PlaneObservation, pred: _Prediction, texture: bool = True
     ) -> tuple[_Plane | None, MotionFailure | None]:
         """Stages 3-4: the plane solution (source, estimate, ``T_world_frame``) - frame-to-map
-        first, frame-to-frame when the map gives less - and the last failure met."""
+        first, frame-to-frame when the map gives less - and the last failure met (``texture``:
+        run the 1-2 plane texture searches, :attr:`MotionSettings.texture`)."""
         T_prev, T_pred, step_pred, mprior = pred.T_prev, pred.T, pred.step, pred.prior
+        ms = self.settings.motion if texture else replace(self.settings.motion, texture=False)
         # without a prior and a measured last motion (second frame, after a failure) the
         # prediction is weak: frame-to-frame then uses the global (prior-free) association,
         # whose solution is verified on the points; the map is still tried (it is what
@@ -607,14 +687,14 @@ class PlaneOdometry:
         found: list[_Plane] = []
         failure: MotionFailure | None = None
         if self.settings.frame_to_map and self.map.planes:  # 3
-            r_map = self._track_map(obs, T_pred, mprior)
+            r_map = self._track_map(obs, T_pred, mprior, ms)
             if isinstance(r_map, MotionEstimate):
                 found.append(("map", r_map, T_pred @ r_map.T))
             else:
                 failure = r_map
         if not found or found[0][1].prior_dof or found[0][1].case < self._rank(obs):  # 4
             try:
-                r_f = estimate_motion(ref_obs, obs, f2f_prior, self.settings.motion)
+                r_f = estimate_motion(ref_obs, obs, f2f_prior, ms)
             except NavkitError as exc:
                 r_f = MotionFailure(0, ("rotation", "translation"), f"frame-to-frame: {exc}")
             if isinstance(r_f, MotionEstimate):
@@ -789,7 +869,11 @@ class PlaneOdometry:
         return normal_rank(N.reshape(-1, 3), m.solver.parallel_deg)[0]
 
     def _track_map(
-        self, obs: PlaneObservation, T_pred: NDArray[np.float64], prior: MotionPrior | None
+        self,
+        obs: PlaneObservation,
+        T_pred: NDArray[np.float64],
+        prior: MotionPrior | None,
+        motion: MotionSettings | None = None,
     ) -> MotionEstimate | MotionFailure:
         """Stage 3: the correction ``T_pred_frame`` against the map (identity = the prediction).
 
@@ -798,9 +882,8 @@ class PlaneOdometry:
         its pose is measured, unlike that of a failed previous frame), the map view having no
         camera of its own.
         """
-        s = self.settings
         view = self.map_view(obs, T_pred)
-        ms = replace(s.motion, global_search=False)
+        ms = replace(motion or self.settings.motion, global_search=False)
         p: MotionPrior | NDArray[np.float64] = np.eye(4)
         if prior is not None:
             p = MotionPrior(np.eye(4), prior.sigma_rotation_deg, prior.sigma_translation)
@@ -836,6 +919,22 @@ class PlaneOdometry:
     def relative(self, i: int, j: int) -> NDArray[np.float64]:
         """``T_i_j`` from the chained poses."""
         return se3_inverse(self.poses[i]) @ self.poses[j]
+
+
+_FIT_POINTS = 2000  # points per plane fit of the degeneracy analysis
+
+
+def _segment_fit(X: NDArray[np.float64], inliers: NDArray[np.int64], noise: DepthNoise):
+    """The noise-weighted fit of a segment's points (every k-th of them, at most about
+    ``_FIT_POINTS``: a regular subsample's covariance divided by the step is the whole set's
+    in expectation, at a fraction of the CPU); None with fewer than 3 finite points."""
+    step = max(1, len(inliers) // _FIT_POINTS)
+    P = X[inliers[::step]]
+    P = P[np.isfinite(P).all(axis=1)]
+    if len(P) < 3:
+        return None
+    f = fit_plane(P, noise)
+    return replace(f, cov=f.cov / step, count=len(P) * step)
 
 
 def _differs(Ta: NDArray[np.float64], Tb: NDArray[np.float64], dist: float, deg: float) -> bool:

@@ -228,6 +228,55 @@ class PlaneMap:
                     continue
                 mp.add_texture(tex.image, tex.mask, tex.index0)
 
+    def consolidate(
+        self, *, angle_deg: float, distance_m: float, margin_m: float, max_points: int
+    ) -> int:
+        """Join map planes that are one surface: two map planes the merge rule would join
+        (:meth:`_find`: normals within ``angle_deg``, distances within ``distance_m``, one's
+        points within ``margin_m`` of the other's outline) become one. Such duplicates appear
+        when a surface is first seen in parts - split by an occluder or a segmentation
+        (over-segmentation), or its new part more than ``margin_m`` beyond the map plane's
+        outline - and the parts grow together. The plane observed more often keeps its id and
+        texture (the other's lattice differs; its texture is rebuilt by the next merges),
+        gains the other's points (a random ``max_points`` of both at most) and observations,
+        and is refitted. Returns the number of planes joined away."""
+        joined = 0
+        k = 0
+        while k < len(self.planes):
+            mp = self.planes[k]
+            rest = PlaneMap(self.planes[k + 1 :], self.nu)
+            other = rest._find(
+                mp.plane.normal,
+                mp.plane.rho,
+                mp.points[:: max(1, len(mp.points) // 300)],
+                angle_deg,
+                distance_m,
+                margin_m,
+            )
+            if other is None:
+                k += 1
+                continue
+            keep, drop = (
+                (mp, other) if len(mp.observations) >= len(other.observations) else (other, mp)
+            )
+            pts = np.vstack([keep.points, drop.points])
+            if len(pts) > max_points:
+                rng = np.random.default_rng(keep.id)
+                pts = pts[rng.choice(len(pts), max_points, replace=False)]
+            keep.points = pts
+            keep.observations = sorted(set(keep.observations) | set(drop.observations))
+            if keep.tex_sum.size == 0 and drop.tex_sum.size:
+                keep.tex_ref, keep.tex_axes = drop.tex_ref, drop.tex_axes
+                keep.tex_index0, keep.tex_sum, keep.tex_count = (
+                    drop.tex_index0,
+                    drop.tex_sum,
+                    drop.tex_count,
+                )
+            _refit(keep)
+            self.planes = [p for p in self.planes if p is not drop]
+            joined += 1  # k stays: the joined plane may now meet another
+        return joined
+
     def _find(
         self,
         n: NDArray[np.float64],
