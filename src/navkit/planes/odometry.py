@@ -74,6 +74,7 @@ from navkit.planes.motion import (
 from navkit.planes.noise import (
     DOF_NAMES,
     DepthNoise,
+    PlaneFit,
     fit_plane,
     free_directions,
     plane_pair_information,
@@ -459,7 +460,12 @@ class PlaneOdometry:
             m = self._verify(idx, obs, dframe, pred, *self._planes(obs, pred, texture=False))
             if not isinstance(m.motion, MotionFailure):
                 return m
-        return self._verify(idx, obs, dframe, pred, *self._planes(obs, pred))
+        m = self._verify(idx, obs, dframe, pred, *self._planes(obs, pred))
+        if isinstance(m.motion, MotionFailure):
+            log.warning(
+                "frame %d: motion not determined (%s); using the prediction", idx, m.motion.reason
+            )
+        return m
 
     def _verify(
         self,
@@ -507,9 +513,6 @@ class PlaneOdometry:
             motion = replace(est, T=step)  # always reported as T_prev_curr
             return _Measured(T, step, motion, est.case, source, note, _plane_dof_sources(est))
         assert failure is not None
-        log.warning(
-            "frame %d: motion not determined (%s); using the prediction", idx, failure.reason
-        )
         return _Measured(pred.T, pred.step, failure, failure.case)
 
     def _update_map(
@@ -924,7 +927,9 @@ class PlaneOdometry:
 _FIT_POINTS = 2000  # points per plane fit of the degeneracy analysis
 
 
-def _segment_fit(X: NDArray[np.float64], inliers: NDArray[np.int64], noise: DepthNoise):
+def _segment_fit(
+    X: NDArray[np.float64], inliers: NDArray[np.int64], noise: DepthNoise
+) -> PlaneFit | None:
     """The noise-weighted fit of a segment's points (every k-th of them, at most about
     ``_FIT_POINTS``: a regular subsample's covariance divided by the step is the whole set's
     in expectation, at a fraction of the CPU); None with fewer than 3 finite points."""
