@@ -16,21 +16,6 @@ from navkit.errors import NavkitError
 
 PACKAGES = ("obstacles", "planes", "stereo", "localization", "path")
 
-#: Settings classes whose numeric fields do not declare domains yet (their ranges are still
-#: hand-written checks in ``__post_init__``); each entry is a gap to close, not a design choice.
-PENDING: frozenset[str] = frozenset(
-    {
-        "AssociationSettings",
-        "CloudExtractionSettings",
-        "DetourSettings",
-        "GlobalAssociationSettings",
-        "ObstacleMapperSettings",
-        "PathFollowerSettings",
-        "ReturnTripSettings",
-        "UnorganisedSettings",
-    }
-)
-
 
 def _settings_classes() -> list[type]:
     found: dict[str, type] = {}
@@ -89,23 +74,12 @@ def test_the_walk_finds_the_settings_classes() -> None:
 
 @pytest.mark.parametrize("cls", CLASSES, ids=lambda c: c.__name__)
 def test_every_numeric_field_declares_a_domain(cls: type) -> None:
-    if cls.__name__ in PENDING:
-        pytest.skip(f"{cls.__name__}: domains not declared yet (PENDING)")
     missing = [
         f.name
         for f in dataclasses.fields(cls)
         if _kind(f) is not None and not isinstance(f.metadata.get(DOMAIN_KEY), Domain)
     ]
     assert not missing, f"{cls.__name__}: numeric fields without a declared domain: {missing}"
-
-
-def test_pending_list_is_current() -> None:
-    """A class in PENDING that declares every domain must leave the list."""
-    for cls in CLASSES:
-        if cls.__name__ not in PENDING:
-            continue
-        numeric = [f for f in dataclasses.fields(cls) if _kind(f) is not None]
-        assert any(DOMAIN_KEY not in f.metadata for f in numeric), cls.__name__
 
 
 def _typed(kind: str, v: float, default: object) -> object:
@@ -163,6 +137,9 @@ _RULES = {
     # a height band needs min_height < max_height (0.3 .. 2 m by default)
     ("FloorplanSettings", "min_height"): lambda v: v < 2.0,
     ("FloorplanSettings", "max_height"): lambda v: v > 0.3,
+    # a tile's overlap must hold the widest opening window (48 m >= 18 m by default)
+    ("UnorganisedSettings", "max_object_m"): lambda v: v <= 48.0,
+    ("UnorganisedSettings", "overlap_m"): lambda v: v >= 18.0,
 }
 
 
@@ -178,6 +155,11 @@ def test_rules_beyond_ranges_name_the_field_and_the_rule() -> None:
         DisparitySettings(subpixel_window=8)
     with pytest.raises(NavkitError, match=r"max_depth.*min_depth < max_depth"):
         DenseSettings(min_depth=2.0, max_depth=1.0)
+    from navkit.obstacles.unorganised_settings import UnorganisedSettings
+
+    with pytest.raises(NavkitError, match=r"UnorganisedSettings.*overlap_m.*>= max_object_m"):
+        UnorganisedSettings(max_object_m=30.0, overlap_m=20.0)
+    assert UnorganisedSettings(max_object_m=20.0, overlap_m=20.0).overlap_m == 20.0
 
 
 def test_an_error_names_the_domain() -> None:
@@ -187,3 +169,35 @@ def test_an_error_names_the_domain() -> None:
         ObstacleSettings(c0_deg=90.0)
     # "inf disables": a declared allow_inf
     assert math.isinf(ObstacleSettings(jump_range_ratio=math.inf).jump_range_ratio)
+    # the class, the field, the value, the range and the unit
+    from navkit.obstacles import ObstacleMapperSettings
+    from navkit.path import ReturnTripSettings
+    from navkit.path.control import PathFollowerSettings
+
+    with pytest.raises(
+        NavkitError, match=r"ObstacleMapperSettings.*min_ratio.*is 1.5.*\[0, 1\] \(a fraction\)"
+    ):
+        ObstacleMapperSettings(min_ratio=1.5)
+    with pytest.raises(NavkitError, match=r"PathFollowerSettings.*v_max.*is 0.*> 0 \(m/s\)"):
+        PathFollowerSettings(v_max=0.0)
+    assert math.isinf(ReturnTripSettings(wait=math.inf).wait)  # "wait for ever"
+    with pytest.raises(NavkitError, match=r"ReturnTripSettings.*controller"):
+        ReturnTripSettings(controller={"delta": 0.3})  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("cls", CLASSES, ids=lambda c: c.__name__)
+def test_the_defaults_lie_in_their_domains_and_pickle(cls: type) -> None:
+    """Every class builds with its defaults (each in its declared domain) and survives a pickle
+    round trip (worker processes get their settings pickled), field by field."""
+    import pickle
+
+    obj = cls()
+    for f in dataclasses.fields(cls):
+        domain = f.metadata.get(DOMAIN_KEY)
+        value = getattr(obj, f.name)
+        if isinstance(domain, Domain) and value is not None and not isinstance(value, tuple):
+            assert domain.contains(value), (cls.__name__, f.name, value)
+    back = pickle.loads(pickle.dumps(obj))
+    assert type(back) is cls
+    for f in dataclasses.fields(cls):
+        assert repr(getattr(back, f.name)) == repr(getattr(obj, f.name)), (cls.__name__, f.name)

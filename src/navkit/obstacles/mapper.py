@@ -33,8 +33,9 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
-from navkit.errors import ConfigError, InputError
-from navkit.geometry._validate import check_grid_size
+from navkit.domains import POSITIVE_INT, Domain, domain_field
+from navkit.errors import InputError
+from navkit.geometry._validate import check_grid_size, check_settings
 from navkit.jit import kernels_enabled
 from navkit.obstacles.detector import ObstacleDetection
 from navkit.obstacles.rules import OBSTACLE
@@ -69,25 +70,14 @@ class ObstacleMapperSettings:
         Points farther than this from the sensor (horizontally) are not fused, metres.
     """
 
-    resolution: float = 0.1
-    min_hits: int = 2
-    min_ratio: float = 0.3
-    recent_scans: int = 4
-    max_range: float = 15.0
+    resolution: float = domain_field(0.1, Domain(lo=0.0, lo_open=True, note="metres"))
+    min_hits: int = domain_field(2, POSITIVE_INT)
+    min_ratio: float = domain_field(0.3, Domain(lo=0.0, hi=1.0, note="a fraction"))
+    recent_scans: int = domain_field(4, POSITIVE_INT)
+    max_range: float = domain_field(15.0, Domain(lo=0.0, lo_open=True, note="metres"))
 
     def __post_init__(self) -> None:
-        for name in ("resolution", "max_range"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"is {v}", field=name, expected="a positive number (SI units)")
-        if int(self.min_hits) < 1 or int(self.recent_scans) < 1:
-            raise ConfigError(
-                f"min_hits={self.min_hits}, recent_scans={self.recent_scans}",
-                field="min_hits/recent_scans",
-                expected="integers >= 1",
-            )
-        if not 0 <= self.min_ratio <= 1:
-            raise ConfigError(f"is {self.min_ratio}", field="min_ratio", expected="in [0, 1]")
+        check_settings(self)
 
 
 @dataclass(frozen=True)

@@ -6,10 +6,15 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from navkit.domains import NON_NEGATIVE, POSITIVE, POSITIVE_INT, Domain, domain_field
 from navkit.errors import ConfigError
-from navkit.obstacles.settings import DEFAULT_SHAPES
+from navkit.geometry._validate import check_settings
+from navkit.obstacles.settings import _DEGREES_OPEN, DEFAULT_SHAPES
 
 __all__ = ["UnorganisedSettings"]
+
+#: A length in multiples of the data's point spacing.
+_SPACINGS = Domain(lo=0.0, lo_open=True, note="point spacings")
 
 
 @dataclass(frozen=True)
@@ -66,56 +71,46 @@ class UnorganisedSettings:
     build_map, shapes, guaranteed_shapes : see :class:`~navkit.obstacles.ObstacleSettings`.
     """
 
-    c0_deg: float = 35.0
-    c1_deg: float | None = None
-    grid_spacings: float = 1.0
-    thin_spacings: float = 1.0
-    max_object_m: float = 18.0
-    opening_slope: float = 0.15
-    band_noise: float = 3.0
-    band_min_m: float = 0.5
-    slope_scale_m: float = 1.25
-    low_factor: float = 3.0
-    gap_spacings: float = 20.0
-    tile_m: float = 512.0
-    overlap_m: float = 48.0
-    min_obstacle_triangles: int = 4
-    min_obstacle_height_m: float = 1.0
+    c0_deg: float = domain_field(35.0, _DEGREES_OPEN)
+    c1_deg: float | None = domain_field(None, _DEGREES_OPEN)
+    grid_spacings: float = domain_field(1.0, _SPACINGS)
+    thin_spacings: float = domain_field(1.0, _SPACINGS)
+    max_object_m: float = domain_field(18.0, POSITIVE)
+    opening_slope: float = domain_field(0.15, Domain(lo=0.0, lo_open=True, note="rise over run"))
+    band_noise: float = domain_field(
+        3.0, Domain(lo=0.0, lo_open=True, note="multiples of the height noise")
+    )
+    band_min_m: float = domain_field(0.5, POSITIVE)
+    slope_scale_m: float = domain_field(1.25, POSITIVE)
+    low_factor: float = domain_field(
+        3.0, Domain(lo=0.0, lo_open=True, note="multiples of the ground band")
+    )
+    gap_spacings: float = domain_field(20.0, _SPACINGS)
+    tile_m: float = domain_field(512.0, POSITIVE)
+    overlap_m: float = domain_field(48.0, NON_NEGATIVE)
+    min_obstacle_triangles: int = domain_field(4, POSITIVE_INT)
+    min_obstacle_height_m: float = domain_field(1.0, POSITIVE)
     build_map: bool = True
     shapes: tuple[str, ...] = DEFAULT_SHAPES
     guaranteed_shapes: tuple[str, ...] = ("A1", "MEC")
 
     def __post_init__(self) -> None:
+        check_settings(self)
+
         def check(name: str, ok: bool, expected: str) -> None:
             if not ok:
-                raise ConfigError(f"= {getattr(self, name)!r}", field=name, expected=expected)
+                raise ConfigError(
+                    f"is {getattr(self, name)!r}",
+                    source=type(self).__name__,
+                    field=name,
+                    expected=expected,
+                )
 
-        for name in (
-            "grid_spacings",
-            "thin_spacings",
-            "max_object_m",
-            "opening_slope",
-            "band_noise",
-            "band_min_m",
-            "slope_scale_m",
-            "low_factor",
-            "gap_spacings",
-            "tile_m",
-            "min_obstacle_height_m",
-        ):
-            v = getattr(self, name)
-            check(name, isinstance(v, (int, float)) and math.isfinite(v) and v > 0, "a number > 0")
-        check("c0_deg", 0.0 < self.c0_deg < 90.0, "degrees in (0, 90)")
-        check(
-            "c1_deg", self.c1_deg is None or 0.0 < self.c1_deg < 90.0, "None or degrees in (0, 90)"
-        )
-        check("overlap_m", math.isfinite(self.overlap_m) and self.overlap_m >= 0, "metres >= 0")
         check(
             "overlap_m",
             self.overlap_m >= self.max_object_m,
             f"metres >= max_object_m ({self.max_object_m}): a tile must hold the widest window",
         )
-        check("min_obstacle_triangles", self.min_obstacle_triangles >= 1, "an integer >= 1")
         object.__setattr__(self, "shapes", tuple(self.shapes))
         object.__setattr__(self, "guaranteed_shapes", tuple(self.guaranteed_shapes))
         from navkit.geometry.shapes import SHAPES

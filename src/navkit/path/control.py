@@ -25,11 +25,16 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from navkit.errors import ConfigError, InputError
+from navkit.domains import Domain, domain_field
+from navkit.errors import InputError
 from navkit.geometry._validate import check_settings
 from navkit.path.spline import PathSpline
 
 __all__ = ["PathFollowerSettings", "ReturnCommand", "ReturnController"]
+
+
+#: A distance along or around the path, metres (0 would stall the controller).
+_METRES = Domain(lo=0.0, lo_open=True, note="metres")
 
 
 @dataclass(frozen=True)
@@ -56,39 +61,20 @@ class PathFollowerSettings:
         Search window of the nearest point around the previous one, metres.
     """
 
-    delta: float = 0.3
-    v_max: float = 0.3
-    k_omega: float = 2.0
-    omega_max: float = 1.0
-    stop_radius: float = 0.05
-    approach_radius: float = 0.3
-    min_speed_fraction: float = 0.1
-    window_back: float = 1.0
-    window_ahead: float = 0.5
+    delta: float = domain_field(0.3, _METRES)
+    v_max: float = domain_field(0.3, Domain(lo=0.0, lo_open=True, note="m/s"))
+    k_omega: float = domain_field(2.0, Domain(lo=0.0, lo_open=True, note="1/s"))
+    omega_max: float = domain_field(1.0, Domain(lo=0.0, lo_open=True, note="rad/s"))
+    stop_radius: float = domain_field(0.05, _METRES)
+    approach_radius: float = domain_field(0.3, _METRES)
+    min_speed_fraction: float = domain_field(
+        0.1, Domain(lo=0.0, hi=1.0, lo_open=True, note="a fraction of v_max")
+    )
+    window_back: float = domain_field(1.0, _METRES)
+    window_ahead: float = domain_field(0.5, _METRES)
 
     def __post_init__(self) -> None:
         check_settings(self)
-        for name in (
-            "delta",
-            "v_max",
-            "k_omega",
-            "omega_max",
-            "stop_radius",
-            "approach_radius",
-            "window_back",
-            "window_ahead",
-        ):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value > 0):
-                raise ConfigError(
-                    f"is {value}", field=name, expected="a positive number (SI units)"
-                )
-        if not 0 < self.min_speed_fraction <= 1:
-            raise ConfigError(
-                f"is {self.min_speed_fraction}",
-                field="min_speed_fraction",
-                expected="a fraction in (0, 1]",
-            )
 
 
 @dataclass(frozen=True)

@@ -47,7 +47,8 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from navkit.errors import ConfigError, InputError
+from navkit.domains import Domain, domain_field
+from navkit.errors import InputError
 from navkit.geometry._validate import check_settings
 from navkit.path.spline import PathSpline
 
@@ -89,6 +90,12 @@ class DetourFailure:
         return f"no detour: {self.reason}" + (f" ({self.detail})" if self.detail else "")
 
 
+#: A length or distance, metres, that must be positive (a radius, a search length).
+_METRES = Domain(lo=0.0, lo_open=True, note="metres")
+#: A clearance or offset, metres, that may be 0.
+_METRES_OR_0 = Domain(lo=0.0, note="metres")
+
+
 @dataclass(frozen=True)
 class DetourSettings:
     """Settings of the detour planner (SI units).
@@ -114,28 +121,16 @@ class DetourSettings:
         Cost factor of a step inside the inflated zone (escape only).
     """
 
-    robot_radius: float = 0.3
-    margin: float = 0.1
-    rejoin_offset: float = 0.5
-    search_length: float = 8.0
-    window_pad: float = 3.0
-    escape_radius: float = 0.6
-    escape_penalty: float = 5.0
+    robot_radius: float = domain_field(0.3, _METRES)
+    margin: float = domain_field(0.1, _METRES_OR_0)
+    rejoin_offset: float = domain_field(0.5, _METRES_OR_0)
+    search_length: float = domain_field(8.0, _METRES)
+    window_pad: float = domain_field(3.0, _METRES)
+    escape_radius: float = domain_field(0.6, _METRES_OR_0)
+    escape_penalty: float = domain_field(5.0, Domain(lo=1.0, note="a cost factor"))
 
     def __post_init__(self) -> None:
         check_settings(self)
-        for name in ("robot_radius", "search_length", "window_pad", "escape_penalty"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ConfigError(f"is {v}", field=name, expected="a positive number (SI units)")
-        for name in ("margin", "rejoin_offset", "escape_radius"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v >= 0):
-                raise ConfigError(f"is {v}", field=name, expected="a number >= 0 (SI units)")
-        if self.escape_penalty < 1:
-            raise ConfigError(
-                f"is {self.escape_penalty}", field="escape_penalty", expected="a factor >= 1"
-            )
 
     @property
     def inflation(self) -> float:

@@ -28,8 +28,19 @@ from typing import Any, Protocol, overload
 import numpy as np
 from numpy.typing import NDArray
 
+from navkit.domains import Domain, domain_field
+from navkit.errors import ConfigError
+from navkit.geometry._validate import check_settings
 from navkit.path.control import PathFollowerSettings, ReturnController
-from navkit.path.detour import Detour, DetourFailure, DetourSettings, plan_detour, polyline_spline
+from navkit.path.detour import (
+    _METRES,
+    _METRES_OR_0,
+    Detour,
+    DetourFailure,
+    DetourSettings,
+    plan_detour,
+    polyline_spline,
+)
 from navkit.path.spline import PathSpline
 from navkit.results import Failure, Result, deprecated_alias
 from navkit.timing import Timings, timed
@@ -71,7 +82,7 @@ class ReturnTripSettings:
     lookahead : float
         Length of the way ahead checked for a block, metres.
     wait : float
-        Give up when the way stays blocked this long, seconds.
+        Give up when the way stays blocked this long, seconds (``inf``: never give up).
     detour : bool
         Go round a blocked stretch (else stop in front of it).
     detour_margin : float
@@ -85,14 +96,26 @@ class ReturnTripSettings:
     """
 
     controller: PathFollowerSettings = field(default_factory=PathFollowerSettings)
-    half_width: float = 0.3
-    lookahead: float = 2.0
-    wait: float = 3.0
+    half_width: float = domain_field(0.3, _METRES)
+    lookahead: float = domain_field(2.0, _METRES)
+    wait: float = domain_field(
+        3.0, Domain(lo=0.0, allow_inf=True, note="seconds, inf = wait for ever")
+    )
     detour: bool = True
-    detour_margin: float = 0.2
-    detour_search: float = 8.0
-    detour_delta: float = 0.4
-    rejoin_offset: float = 0.5
+    detour_margin: float = domain_field(0.2, _METRES_OR_0)
+    detour_search: float = domain_field(8.0, _METRES)
+    detour_delta: float = domain_field(0.4, _METRES)
+    rejoin_offset: float = domain_field(0.5, _METRES_OR_0)
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+        if not isinstance(self.controller, PathFollowerSettings):
+            raise ConfigError(
+                f"is {self.controller!r} ({type(self.controller).__name__})",
+                source=type(self).__name__,
+                field="controller",
+                expected="a PathFollowerSettings",
+            )
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import linear_sum_assignment
 
+from navkit.domains import (
+    NON_NEGATIVE,
+    NON_NEGATIVE_INT,
+    POSITIVE_INT,
+    Domain,
+    domain_field,
+)
 from navkit.geometry._validate import check_settings
 from navkit.geometry.polygons import points_in_polygon
 from navkit.planes.extract_cloud import voxelize
@@ -42,22 +49,52 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 
+#: A tolerance between two plane normals taken with either sign (at most 90 deg apart), degrees;
+#: 0 would refuse every pair.
+_NORMAL_ANGLE = Domain(lo=0.0, hi=90.0, lo_open=True, note="degrees")
+#: A distance gate or tolerance, metres (0 would refuse everything).
+_METRES = Domain(lo=0.0, lo_open=True, note="metres")
+
+
 @dataclass(frozen=True)
 class AssociationSettings:
-    """Gates of :func:`associate` (angles in degrees, distances in metres)."""
+    """Gates of :func:`associate` (angles in degrees, distances in metres).
 
-    max_angle_deg: float = 12.0
-    max_distance: float = 0.25
-    overlap_margin: float = 0.3
-    consistency_deg: float = 4.0
-    parallel_deg: float = 15.0
+    Attributes
+    ----------
+    max_angle_deg : float
+        Largest angle between the normals of a candidate pair after the predicted motion
+        (either sign of the normal); 90 or more gates nothing.
+    max_distance : float
+        Largest difference of the distances ``rho`` of a candidate pair after the motion.
+    overlap_margin : float
+        Outlines of a candidate pair must come within this of each other.
+    consistency_deg : float
+        A match agrees with a rotation when its normals are within this after it.
+    parallel_deg : float
+        Normals closer than this are parallel (a pair of them proposes no rotation).
+    require_overlap : bool
+        Test the outlines' overlap (else only normals and distances gate).
+    consistency_m, max_rms : float
+        See each attribute.
+    """
+
+    max_angle_deg: float = domain_field(
+        12.0, Domain(lo=0.0, lo_open=True, note="degrees; 90 or more gates nothing")
+    )
+    max_distance: float = domain_field(0.25, _METRES)
+    overlap_margin: float = domain_field(0.3, Domain(lo=0.0, note="metres"))
+    consistency_deg: float = domain_field(
+        4.0, Domain(lo=0.0, hi=180.0, lo_open=True, note="degrees")
+    )
+    parallel_deg: float = domain_field(15.0, _NORMAL_ANGLE)
     require_overlap: bool = True
-    consistency_m: float = 0.05
+    consistency_m: float = domain_field(0.05, Domain(lo=0.0, note="metres, 0 = no check"))
     """A match whose distance disagrees with the least-squares translation of all matches by more
     than this (metres) is dropped, worst first (0 disables). Real planes agree to 1-4 cm (Kinect
     at 2.5-3 m, pcl-kinect and slambook under their reference motions); a stair tread matched
     to its neighbour is off by its ~20 cm rise."""
-    max_rms: float = 0.08
+    max_rms: float = domain_field(0.08, _METRES)
     """Planes with a larger TLS residual (metres) are not matched: on real Kinect frames the
     organised extraction returns a few 10-13 cm "planes" (mixed surfaces), whose normals and
     distances bias the closed form (slambook 2 -> 3: 27 cm / 3.0 deg with them, 16.6 cm /
@@ -265,20 +302,22 @@ class GlobalAssociationSettings:
         Hypotheses refined (the best by the point score).
     """
 
-    max_planes: int = 12
-    per_direction: int = 4
-    direction_deg: float = 10.0
-    angle_tol_deg: float = 4.0
-    distance_tol: float = 0.08
-    min_triple_sin: float = 0.3
-    verify: int = 60
-    verify_points: int = 3000
-    verify_distance: float = 0.05
-    distinct_deg: float = 2.0
-    distinct_m: float = 0.1
+    max_planes: int = domain_field(12, Domain(integer=True, lo=3, note="a triple needs 3"))
+    per_direction: int = domain_field(4, POSITIVE_INT)
+    direction_deg: float = domain_field(10.0, Domain(lo=0.0, hi=90.0, note="degrees"))
+    angle_tol_deg: float = domain_field(4.0, _NORMAL_ANGLE)
+    distance_tol: float = domain_field(0.08, _METRES)
+    min_triple_sin: float = domain_field(
+        0.3, Domain(lo=0.0, hi=1.0, hi_open=True, note="|det| of three unit normals")
+    )
+    verify: int = domain_field(60, POSITIVE_INT)
+    verify_points: int = domain_field(3000, POSITIVE_INT)
+    verify_distance: float = domain_field(0.05, _METRES)
+    distinct_deg: float = domain_field(2.0, Domain(lo=0.0, hi=180.0, note="degrees"))
+    distinct_m: float = domain_field(0.1, NON_NEGATIVE)
     refine: bool = True
-    refine_top: int = 8
-    max_rms: float = 0.08
+    refine_top: int = domain_field(8, NON_NEGATIVE_INT)
+    max_rms: float = domain_field(0.08, _METRES)
 
     def __post_init__(self) -> None:
         check_settings(self)

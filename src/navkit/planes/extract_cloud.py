@@ -36,6 +36,13 @@ from scipy import ndimage
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from navkit.domains import (
+    NON_NEGATIVE_INT,
+    POSITIVE_INT,
+    SEED,
+    Domain,
+    domain_field,
+)
 from navkit.errors import InputError
 from navkit.geometry._validate import check_coordinates, check_grid_size, check_settings
 from navkit.geometry.fitting import Plane, canonical_plane
@@ -107,18 +114,22 @@ class CloudExtractionSettings:
         Seed of the hypothesis sampling (the result is deterministic).
     """
 
-    distance: float | None = None
-    voxel: float | None = None
-    neighbours: int = 16
-    normal_deg: float = 20.0
-    min_points: int = 500
-    min_area: float = 0.25
-    max_planes: int = 20
-    hypotheses: int = 256
-    score_sample: int = 4000
-    connect_cell: float = 0.3
-    outline_cell: float = 0.05
-    seed: int = 0
+    distance: float | None = domain_field(
+        None, Domain(lo=0.0, lo_open=True, note="metres, None = from the data")
+    )
+    voxel: float | None = domain_field(
+        None, Domain(lo=0.0, note="metres, 0 = no voxel grid, None = from the data")
+    )
+    neighbours: int = domain_field(16, Domain(integer=True, lo=3, note="a plane needs 3"))
+    normal_deg: float = domain_field(20.0, Domain(lo=0.0, hi=90.0, lo_open=True, note="degrees"))
+    min_points: int = domain_field(500, NON_NEGATIVE_INT)
+    min_area: float = domain_field(0.25, Domain(lo=0.0, note="m^2"))
+    max_planes: int = domain_field(20, POSITIVE_INT)
+    hypotheses: int = domain_field(256, POSITIVE_INT)
+    score_sample: int = domain_field(4000, POSITIVE_INT)
+    connect_cell: float = domain_field(0.3, Domain(lo=0.0, note="metres, 0 = no connectivity step"))
+    outline_cell: float = domain_field(0.05, Domain(lo=0.0, lo_open=True, note="metres"))
+    seed: int = domain_field(0, SEED)
 
     def __post_init__(self) -> None:
         check_settings(self)
