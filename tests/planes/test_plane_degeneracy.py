@@ -153,3 +153,43 @@ def test_the_texture_searches_run_when_the_dense_step_rejects(monkeypatch):
     )
     assert calls
     assert all(not isinstance(r, FrameMotion) for r in res[1:])  # still no silent pose
+
+
+def test_without_a_prior_the_dense_step_measures_a_corridor_walk(monkeypatch):
+    """No motion prior (a hand-held sequence): the dense step, started from the
+    constant-velocity prediction, measures the corridor's free direction; no texture search
+    runs while it succeeds (they cost 0.1-0.6 s a frame at 640 x 480)."""
+    import navkit.planes.motion as motion
+
+    calls: list[str] = []
+    monkeypatch.setattr(motion, "solve_two_planes", lambda *a, **k: calls.append("2"))
+    monkeypatch.setattr(motion, "solve_one_plane", lambda *a, **k: calls.append("1"))
+    poses = _poses(5, 0.015)
+    odo = PlaneOdometry()
+    res = [odo.update(obs) for obs in _frames(_corridor(), poses)]
+    assert not calls
+    for k in range(1, len(res)):
+        r = res[k]
+        assert isinstance(r, FrameMotion) and r.source.endswith("+dense"), r
+        step_true = np.linalg.inv(poses[k - 1]) @ poses[k]
+        assert np.linalg.norm((np.linalg.inv(step_true) @ r.motion.T)[:3, 3]) < 0.005
+
+
+def test_tracking_restarts_after_the_view_leaves_every_keyframe():
+    """The camera jumps 4 m down the corridor and turns 40 deg (nothing it saw overlaps the
+    new view), then walks on: the jump is a failure, the frame becomes the new reference at
+    its predicted pose, and the steps after it are measured again (without the restart every
+    later frame failed against the old keyframes)."""
+    poses = _poses(3, 0.015)
+    turn = se3_from_rt(Rotation.from_euler("y", 40, degrees=True).as_matrix(), [0, 0, 0])
+    jump = poses[-1] @ se3_from_rt(np.eye(3), [0.0, 0.0, 4.0]) @ turn
+    poses += [jump @ se3_from_rt(np.eye(3), [0.0, 0.0, 0.015 * k]) for k in range(4)]
+    odo = PlaneOdometry()
+    res = [odo.update(obs) for obs in _frames(_corridor(), poses)]
+    assert all(isinstance(r, FrameMotion) for r in res[:3])
+    assert not isinstance(res[3], FrameMotion) and "restarts" in res[3].reason
+    for k in range(4, len(res)):
+        r = res[k]
+        assert isinstance(r, FrameMotion), r
+        step_true = np.linalg.inv(poses[k - 1]) @ poses[k]
+        assert np.linalg.norm((np.linalg.inv(step_true) @ r.motion.T)[:3, 3]) < 0.005

@@ -386,6 +386,7 @@ class PlaneOdometry:
         self._covariances: dict[int, NDArray[np.float64]] = {}  # reference frames' covariance
         self._dense_reason = ""
         self._plane_overlap = 0.0
+        self._any_overlap = 1.0  # the largest overlap of any dense run of the frame
         self._depth_note = ""
         self.n_frames = 0  # frames registered (frame numbers: poses may keep only the last ones)
 
@@ -428,6 +429,8 @@ class PlaneOdometry:
         cov = None if isinstance(m.motion, MotionFailure) else self._covariance(idx, m)
         if m.motion is None or (isinstance(m.motion, MotionEstimate) and not m.motion.prior_dof):
             self._update_map(idx, obs, dframe, T, m)  # 7: only measured poses
+        elif isinstance(m.motion, MotionFailure) and self._lost(dframe):
+            m = replace(m, motion=self._restart(idx, obs, dframe, T, m.motion))
         self._prev = obs
         res = self._result(idx, obs, T, m, t0, cov)
         self.results.append(res)
@@ -456,7 +459,7 @@ class PlaneOdometry:
         and the dense alignment measures it (the image solves what the planes leave free).
         Only when that fails - e.g. too little overlap for the pixels to judge - are the
         texture searches run and the frame measured again."""
-        if pred.prior is not None and dframe is not None and self._keyframe is not None:
+        if dframe is not None and self._keyframe is not None:
             m = self._verify(idx, obs, dframe, pred, *self._planes(obs, pred, texture=False))
             if not isinstance(m.motion, MotionFailure):
                 return m
@@ -515,6 +518,38 @@ class PlaneOdometry:
         assert failure is not None
         return _Measured(pred.T, pred.step, failure, failure.case)
 
+    def _lost(self, dframe: DenseFrame | None) -> bool:
+        """Did the dense step find no reference it could judge the frame against: every
+        start on every reference overlapped less than ``gates.min_overlap`` (the view has left
+        the keyframes, e.g. a robot's camera at 1 Hz)? Then the next frames would fail the
+        same way, however well they could be measured against this one."""
+        return dframe is not None and self._any_overlap < self.settings.gates.min_overlap
+
+    def _restart(
+        self,
+        idx: int,
+        obs: PlaneObservation,
+        dframe: DenseFrame | None,
+        T: NDArray[np.float64],
+        failure: MotionFailure,
+    ) -> MotionFailure:
+        """Tracking restarts from a lost frame: it becomes the keyframe and the frame-to-frame
+        reference at its predicted pose (it stays a failure, not merged into the map, and its
+        covariance is unknown), so the next frames' motions are measured against it: their
+        steps are right, their poses carry this frame's prediction error."""
+        assert dframe is not None
+        log.info("frame %d: no reference overlaps the view; tracking restarts from it", idx)
+        self._anchor = (obs, T)
+        self._last_good = (idx, dframe, T)
+        self._keyframe = (idx, dframe, T)
+        self._keyframes.append(self._keyframe)
+        if len(self._keyframes) > self.settings.max_keyframes:
+            dropped = self._keyframes.pop(1)
+            self._keyframe_best_overlap.pop(dropped[0], None)
+        return replace(
+            failure, reason=f"{failure.reason}; tracking restarts from this frame's prediction"
+        )
+
     def _update_map(
         self,
         idx: int,
@@ -527,7 +562,7 @@ class PlaneOdometry:
         with dense data, of the keyframes; a *map keyframe* (:meth:`_is_map_keyframe`) merges
         all its planes into the map, any other frame only its planes the map does not have."""
         s = self.settings
-        key = self._is_map_keyframe(T, m)
+        key = self._is_map_keyframe(T)
         self.map.merge(
             obs,
             T,
@@ -552,13 +587,14 @@ class PlaneOdometry:
             self._last_good = (idx, dframe, T)
             self._update_keyframe(idx, dframe, T, m.dense, m.reference)
 
-    def _is_map_keyframe(self, T: NDArray[np.float64], m: _Measured) -> bool:
-        """Does the measured frame merge into the map's existing planes? The first frame; a
-        frame the map did not track (frame-to-frame or dense from the prediction: the map
-        lacks what it sees); a frame ``map_keyframe_distance`` / ``map_keyframe_angle_deg``
-        from the last such frame. Any other frame adds only its new planes."""
+    def _is_map_keyframe(self, T: NDArray[np.float64]) -> bool:
+        """Does the measured frame merge into the map's existing planes? The first frame, and
+        a frame ``map_keyframe_distance`` / ``map_keyframe_angle_deg`` from the last such
+        frame, however it was tracked (a frame the map planes did not track - frame-to-frame,
+        or dense from the prediction in a view of 1-2 plane directions - still adds the
+        planes the map lacks). Any other frame adds only its new planes."""
         s = self.settings
-        if self._merged_at is None or not m.source.startswith("map"):
+        if self._merged_at is None:
             return True
         return _differs(self._merged_at, T, s.map_keyframe_distance, s.map_keyframe_angle_deg)
 
@@ -814,6 +850,7 @@ class PlaneOdometry:
             refs.append(self._last_good)
         reasons = []
         self._plane_overlap = 0.0
+        self._any_overlap = 0.0
         for ridx, rframe, T_ref in refs:
             best: tuple[str, DenseResult] | None = None
             for name, T0 in starts:
@@ -821,6 +858,7 @@ class PlaneOdometry:
                 if best is not None and not _differs(best[1].T, T1, 0.02, 1.0):
                     continue  # starts within 2 cm / 1 deg of an accepted result end there
                 r = _dense_align(rframe, dframe, T1, ds, compiled=self.compiled)
+                self._any_overlap = max(self._any_overlap, r.overlap)
                 if name == "planes":
                     self._plane_overlap = max(self._plane_overlap, r.overlap)
                 why = gates.check(r) or self._outside_prior(pred, T_ref @ r.T)
