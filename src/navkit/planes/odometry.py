@@ -28,10 +28,11 @@ step per stage:
 Tracking against the map bounds the drift: while a map plane stays in view, every frame is
 referred to the same fused plane (and texture) instead of to the previous frame's noisy one.
 
-With a motion prior and the dense step, stages 3-4 first run without the planes' texture
-searches: the planes fix what they can, the prior fills the free degrees of freedom and the
-dense step measures them (:meth:`PlaneOdometry._measure`); the texture searches run only when
-that fails.
+Where the dense step will run, stages 3-4 first run without the planes' texture searches:
+the planes fix what they can, the prior (or the constant-velocity prediction) fills the free
+degrees of freedom and the dense step measures them (:meth:`PlaneOdometry._measure`); the
+texture searches run only when that fails. A frame that no reference overlaps restarts the
+tracking (:meth:`PlaneOdometry._restart`).
 
 A tracked frame is a :class:`FrameMotion`. When a motion cannot be determined the frame is a
 :class:`~navkit.planes.solve.MotionFailure` naming its reason and free degrees of freedom, the
@@ -192,9 +193,10 @@ class OdometrySettings:
     max_keyframes : int
         Keyframes kept for revisits (a pyramid is ~4 MB at 640 x 480; the first one is kept).
     map_keyframe_distance, map_keyframe_angle_deg : float
-        A frame the map tracked merges into the map's planes only once it is this far
-        (metres, degrees) from the last frame that did (:meth:`PlaneOdometry._is_map_keyframe`);
-        in between a frame adds only its planes the map does not have. Between such *map keyframes* a frame
+        A measured frame merges into the map's planes only once it is this far (metres,
+        degrees) from the last frame that did (:meth:`PlaneOdometry._is_map_keyframe`); in
+        between a frame adds only its planes the map does not have. Between such *map
+        keyframes* a frame
         sees the same surfaces from nearly the same place: merging it adds CPU (the map
         update is the costliest step after the dense one), not information. 5 cm / 5 deg:
         at 1-4 m the view then shifts by 1-9 % of a 58 deg field of view, so new parts of the
@@ -454,11 +456,11 @@ class PlaneOdometry:
     def _measure(
         self, idx: int, obs: PlaneObservation, dframe: DenseFrame | None, pred: _Prediction
     ) -> _Measured:
-        """Stages 3-5. With a motion prior and the dense step to come, the planes' texture
-        searches are left out first: the planes fix what they can, the prior starts the rest
-        and the dense alignment measures it (the image solves what the planes leave free).
-        Only when that fails - e.g. too little overlap for the pixels to judge - are the
-        texture searches run and the frame measured again."""
+        """Stages 3-5. With the dense step to come, the planes' texture searches are left out
+        first: the planes fix what they can, the prior or the prediction starts the rest and
+        the dense alignment measures it (the image solves what the planes leave free). Only
+        when that fails - e.g. too little overlap for the pixels to judge - are the texture
+        searches run and the frame measured again."""
         if dframe is not None and self._keyframe is not None:
             m = self._verify(idx, obs, dframe, pred, *self._planes(obs, pred, texture=False))
             if not isinstance(m.motion, MotionFailure):
