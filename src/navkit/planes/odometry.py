@@ -388,7 +388,6 @@ class PlaneOdometry:
         self._covariances: dict[int, NDArray[np.float64]] = {}  # reference frames' covariance
         self._dense_reason = ""
         self._plane_overlap = 0.0
-        self._any_overlap = 1.0  # the largest overlap of any dense run of the frame
         self._depth_note = ""
         self.n_frames = 0  # frames registered (frame numbers: poses may keep only the last ones)
 
@@ -431,7 +430,7 @@ class PlaneOdometry:
         cov = None if isinstance(m.motion, MotionFailure) else self._covariance(idx, m)
         if m.motion is None or (isinstance(m.motion, MotionEstimate) and not m.motion.prior_dof):
             self._update_map(idx, obs, dframe, T, m)  # 7: only measured poses
-        elif isinstance(m.motion, MotionFailure) and self._lost(dframe):
+        elif isinstance(m.motion, MotionFailure) and prior is not None and dframe is not None:
             m = replace(m, motion=self._restart(idx, obs, dframe, T, m.motion))
         self._prev = obs
         res = self._result(idx, obs, T, m, t0, cov)
@@ -492,12 +491,15 @@ class PlaneOdometry:
             if (
                 plane is not None
                 and not plane[1].prior_dof
+                and pred.prior is None
                 and self._plane_overlap < self.settings.gates.min_overlap
                 and self._depth_agrees(obs, plane[2])
             ):
                 # a large motion: the frames share too few pixels for the dense step to
                 # judge; the plane solution stands on the planes' own checks (depth
-                # consistency, association) and says so
+                # consistency, association) and says so. Not with a motion prior: that
+                # measured the motion already, and the frame fails to it (and restarts from
+                # it) rather than rest on an unverified plane solution
                 note = (
                     f"dense check inconclusive (overlap {self._plane_overlap:.2f}): "
                     f"planes only, depth check {self._depth_note}"
@@ -520,27 +522,24 @@ class PlaneOdometry:
         assert failure is not None
         return _Measured(pred.T, pred.step, failure, failure.case)
 
-    def _lost(self, dframe: DenseFrame | None) -> bool:
-        """Did the dense step find no reference it could judge the frame against: every
-        start on every reference overlapped less than ``gates.min_overlap`` (the view has left
-        the keyframes, e.g. a robot's camera at 1 Hz)? Then the next frames would fail the
-        same way, however well they could be measured against this one."""
-        return dframe is not None and self._any_overlap < self.settings.gates.min_overlap
-
     def _restart(
         self,
         idx: int,
         obs: PlaneObservation,
-        dframe: DenseFrame | None,
+        dframe: DenseFrame,
         T: NDArray[np.float64],
         failure: MotionFailure,
     ) -> MotionFailure:
-        """Tracking restarts from a lost frame: it becomes the keyframe and the frame-to-frame
-        reference at its predicted pose (it stays a failure, not merged into the map, and its
-        covariance is unknown), so the next frames' motions are measured against it: their
-        steps are right, their poses carry this frame's prediction error."""
-        assert dframe is not None
-        log.info("frame %d: no reference overlaps the view; tracking restarts from it", idx)
+        """Tracking restarts from a failed frame that has a motion prior: it becomes the
+        keyframe and the frame-to-frame reference at the pose the prior put it (it stays a
+        failure, not merged into the map, and its covariance is unknown), so the next frames'
+        motions are measured against it - their steps are right, their poses carry the prior's
+        error of this one step - instead of failing against references the view has left
+        (the older keyframes stay for revisits). Without a prior the pose would be a
+        constant-velocity guess, and every later pose would be off by that guess while
+        reported tracked: such a frame stays failed, and the next frames keep trying the old
+        references."""
+        log.info("frame %d: motion failed; tracking restarts from the prior's pose", idx)
         self._anchor = (obs, T)
         self._last_good = (idx, dframe, T)
         self._keyframe = (idx, dframe, T)
@@ -852,7 +851,6 @@ class PlaneOdometry:
             refs.append(self._last_good)
         reasons = []
         self._plane_overlap = 0.0
-        self._any_overlap = 0.0
         for ridx, rframe, T_ref in refs:
             best: tuple[str, DenseResult] | None = None
             for name, T0 in starts:
@@ -860,7 +858,6 @@ class PlaneOdometry:
                 if best is not None and not _differs(best[1].T, T1, 0.02, 1.0):
                     continue  # starts within 2 cm / 1 deg of an accepted result end there
                 r = _dense_align(rframe, dframe, T1, ds, compiled=self.compiled)
-                self._any_overlap = max(self._any_overlap, r.overlap)
                 if name == "planes":
                     self._plane_overlap = max(self._plane_overlap, r.overlap)
                 why = gates.check(r) or self._outside_prior(pred, T_ref @ r.T)
