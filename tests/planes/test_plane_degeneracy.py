@@ -153,3 +153,55 @@ def test_the_texture_searches_run_when_the_dense_step_rejects(monkeypatch):
     )
     assert calls
     assert all(not isinstance(r, FrameMotion) for r in res[1:])  # still no silent pose
+
+
+def test_without_a_prior_the_dense_step_measures_a_corridor_walk(monkeypatch):
+    """No motion prior (a hand-held sequence): the dense step, started from the
+    constant-velocity prediction, measures the corridor's free direction; no texture search
+    runs while it succeeds (they cost 0.1-0.6 s a frame at 640 x 480)."""
+    import navkit.planes.motion as motion
+
+    calls: list[str] = []
+    monkeypatch.setattr(motion, "solve_two_planes", lambda *a, **k: calls.append("2"))
+    monkeypatch.setattr(motion, "solve_one_plane", lambda *a, **k: calls.append("1"))
+    poses = _poses(5, 0.015)
+    odo = PlaneOdometry()
+    res = [odo.update(obs) for obs in _frames(_corridor(), poses)]
+    assert not calls
+    for k in range(1, len(res)):
+        r = res[k]
+        assert isinstance(r, FrameMotion) and r.source.endswith("+dense"), r
+        step_true = np.linalg.inv(poses[k - 1]) @ poses[k]
+        assert np.linalg.norm((np.linalg.inv(step_true) @ r.motion.T)[:3, 3]) < 0.005
+
+
+def test_tracking_restarts_after_the_view_leaves_every_keyframe():
+    """With a motion prior (a robot's odometry: the true step moved by 3 cm and 0.5 deg), the
+    view changes to one nothing seen before overlaps (frames 0-2 in the corridor, then the
+    camera is in a room - a kidnapped robot, or a camera that was covered): that frame is a
+    failure, it becomes the new reference at the prior's pose, and the steps after it are
+    measured again. Without the restart every later frame failed against the old keyframes."""
+    tex = Texture("noise", scale=0.3, seed=5)
+    room = Scene(
+        [
+            Ground(texture=tex, name="floor"),
+            Wall(origin=(-1, 0.9, 0), u=(4, 0, 0), v=(0, 0, 2.8), texture=tex, name="left"),
+            Wall(origin=(2.2, 0.9, 0), u=(0, -3, 0), v=(0, 0, 2.8), texture=tex, name="end"),
+            Box((1.5, -0.5, 0.2), (0.4, 0.4, 0.4), texture=tex, name="box"),
+        ]
+    )
+    poses = _poses(7, 0.015)
+    obs = _frames(_corridor(), poses[:3]) + _frames(room, poses[3:])
+    off = se3_from_rt(Rotation.from_euler("y", 0.5, degrees=True).as_matrix(), [0, 0, 0.03])
+    odo = PlaneOdometry()
+    res = [odo.update(obs[0])]
+    for k in range(1, len(obs)):
+        step = np.linalg.inv(poses[k - 1]) @ poses[k]
+        res.append(odo.update(obs[k], MotionPrior(step @ off, 1.0, 0.03)))
+    assert all(isinstance(r, FrameMotion) for r in res[:3])
+    assert not isinstance(res[3], FrameMotion) and "restarts" in res[3].reason
+    for k in range(4, len(res)):
+        r = res[k]
+        assert isinstance(r, FrameMotion), r
+        step_true = np.linalg.inv(poses[k - 1]) @ poses[k]
+        assert np.linalg.norm((np.linalg.inv(step_true) @ r.motion.T)[:3, 3]) < 0.005

@@ -79,6 +79,11 @@ class PlaneMotionFusion:
     T_body_camera : (4, 4) array
     record : PlaneRecord
     timings : Timings, optional
+    vo_model : VisualOdometryNoise, optional
+        The VO's noise model: the motion prior's uncertainty over each camera interval comes
+        from it (:meth:`~navkit.sensors.VisualOdometryNoise.increment_sigma`; floors 1 cm and
+        0.2 deg, a real VO is not exact at standstill as the model is). Without it, the fusion
+        gate's third (``gate_m / 3``, ``gate_deg / 3``).
     """
 
     def __init__(
@@ -87,11 +92,14 @@ class PlaneMotionFusion:
         T_body_camera: NDArray[np.float64],
         record: PlaneRecord,
         timings: Timings | None = None,
+        vo_model: Any = None,
     ) -> None:
         self.F, self.rec, self.timings = fusion, record, timings
+        self.vo_model = vo_model
         self.T_bc = T_body_camera
         self.T_cb = se3_inverse(T_body_camera)
         self.prev: Any = None  # (vo pose, truth pose) at the previous frame
+        self.prev_t: float | None = None  # its time, seconds
         from navkit.planes import PlaneOdometry
 
         self.odometry = PlaneOdometry()
@@ -120,6 +128,7 @@ class PlaneMotionFusion:
         if outbound:
             self._add_plane_map(obs, pose3(est, ground_z) @ self.T_bc)
         self.prev = (vo.copy(), truth.copy())
+        self.prev_t = t
         return est
 
     def _motion(
@@ -137,10 +146,10 @@ class PlaneMotionFusion:
         vo0, truth0 = self.prev
         vo_int = relative(vo0, vo)
         true_int = relative(truth0, truth)
-        # T_c1_c2 predicted by the VO, with the fusion gate as its 3-sigma bound: it gates the
-        # association, starts the texture search and fills what the planes cannot fix
+        # T_c1_c2 predicted by the VO with its uncertainty: it gates the association, starts
+        # the dense step where the planes leave freedom, and bounds what the pixels may say
         prior = MotionPrior(
-            self.T_cb @ pose3(vo_int, 0.0) @ self.T_bc, F.gate_deg / 3.0, F.gate_m / 3.0
+            self.T_cb @ pose3(vo_int, 0.0) @ self.T_bc, *self._prior_sigmas(vo_int, t)
         )
         with timed(self.timings, "planes_motion"):
             res = self.odometry.update(obs, prior)
@@ -168,6 +177,16 @@ class PlaneMotionFusion:
             case = int(getattr(mot, "case", 0))
         self.rec.steps.append(PlaneStep(t, len(obs.segments), case, status, pinc, vo_int, true_int))
         return est
+
+    def _prior_sigmas(self, vo_int: NDArray[np.float64], t: float) -> tuple[float, float]:
+        """``(sigma_rotation_deg, sigma_translation)`` of the VO increment since the last
+        frame (class docstring)."""
+        F = self.F
+        if self.vo_model is None or self.prev_t is None:
+            return F.gate_deg / 3.0, F.gate_m / 3.0
+        steps = round((t - self.prev_t) * self.vo_model.rate_hz)
+        sig_t, sig_h = self.vo_model.increment_sigma(float(np.hypot(vo_int[0], vo_int[1])), steps)
+        return max(float(np.degrees(sig_h)), 0.2), max(sig_t, 0.01)
 
     def _add_plane_map(
         self,

@@ -214,7 +214,9 @@ class Mission:
         self.rooms = RoomRecord()
         self.localizer = MissionLocalizer(route, s.fusion, M.resolution, self.rooms, lg.timings)
         self.planes = PlaneRecord()
-        self.plane_fusion = PlaneMotionFusion(s.fusion, self.robot.T_bc, self.planes, lg.timings)
+        self.plane_fusion = PlaneMotionFusion(
+            s.fusion, self.robot.T_bc, self.planes, lg.timings, self.robot.vo_model
+        )
         self.ret: Return | None = None
         self.n_stereo = 0
         self.rows: list[tuple[float, int, Any, Any, Any]] = []

@@ -63,9 +63,10 @@ class MotionSettings:
     points onto frame 1's (:func:`point_fit`)."""
     texture: bool = True
     """Run the texture searches of the 1- and 2-plane cases (paper 2, eqs. 3-11). False: the
-    degrees of freedom the planes leave free are the prior's (``MotionEstimate.prior_dof``) or
-    the frame fails without one, as without a camera image. :class:`~navkit.planes.odometry.
-    PlaneOdometry` turns it off for a frame its dense step will measure from a motion prior."""
+    degrees of freedom the planes leave free are taken from the prior or the prediction
+    (``MotionEstimate.prior_dof``), or the frame fails without either.
+    :class:`~navkit.planes.odometry.PlaneOdometry` turns it off for a frame its dense step will
+    measure."""
     max_depth_violation: float = domain_field(0.35, Domain(lo=0.0, hi=1.0, note="a fraction"))
     """A motion whose degrees of freedom came from texture (1 or 2 plane directions) is rejected
     (:class:`MotionFailure` naming them) when more than this fraction of the tested off-plane
@@ -437,6 +438,13 @@ def _estimate(
     prior = np.eye(4) if T_1_2_prior is None else np.asarray(T_1_2_prior, float)
     rank, _ = normal_rank(np.array([p.normal for p in p1]), s.solver.parallel_deg)
     has_tex = s.texture and obs1.has_texture and obs2.has_texture
+    if rank < 3 and not s.texture and T_1_2_prior is not None:
+        # texture searches off (the caller's dense step measures what the planes leave
+        # free): the planes' degrees of freedom, the rest from the prediction, and say so
+        T, geo = _fill_from_prior(p1, p2, rank, prior, s)
+        free = ("mu",) if rank == 2 else ("lambda", "mu", "eta")
+        resid = _residuals(T[:3, :3], T[:3, 3], p1, p2)
+        return MotionEstimate(T, rank, geo, (), resid, tuple(pairs), prior_dof=free)
     if rank >= 3:
         res = solve_three_planes(p1, p2, s.solver)
     elif rank == 2:

@@ -28,10 +28,11 @@ step per stage:
 Tracking against the map bounds the drift: while a map plane stays in view, every frame is
 referred to the same fused plane (and texture) instead of to the previous frame's noisy one.
 
-With a motion prior and the dense step, stages 3-4 first run without the planes' texture
-searches: the planes fix what they can, the prior fills the free degrees of freedom and the
-dense step measures them (:meth:`PlaneOdometry._measure`); the texture searches run only when
-that fails.
+Where the dense step will run, stages 3-4 first run without the planes' texture searches:
+the planes fix what they can, the prior (or the constant-velocity prediction) fills the free
+degrees of freedom and the dense step measures them (:meth:`PlaneOdometry._measure`); the
+texture searches run only when that fails. A frame that no reference overlaps restarts the
+tracking (:meth:`PlaneOdometry._restart`).
 
 A tracked frame is a :class:`FrameMotion`. When a motion cannot be determined the frame is a
 :class:`~navkit.planes.solve.MotionFailure` naming its reason and free degrees of freedom, the
@@ -192,9 +193,10 @@ class OdometrySettings:
     max_keyframes : int
         Keyframes kept for revisits (a pyramid is ~4 MB at 640 x 480; the first one is kept).
     map_keyframe_distance, map_keyframe_angle_deg : float
-        A frame the map tracked merges into the map's planes only once it is this far
-        (metres, degrees) from the last frame that did (:meth:`PlaneOdometry._is_map_keyframe`);
-        in between a frame adds only its planes the map does not have. Between such *map keyframes* a frame
+        A measured frame merges into the map's planes only once it is this far (metres,
+        degrees) from the last frame that did (:meth:`PlaneOdometry._is_map_keyframe`); in
+        between a frame adds only its planes the map does not have. Between such *map
+        keyframes* a frame
         sees the same surfaces from nearly the same place: merging it adds CPU (the map
         update is the costliest step after the dense one), not information. 5 cm / 5 deg:
         at 1-4 m the view then shifts by 1-9 % of a 58 deg field of view, so new parts of the
@@ -428,6 +430,8 @@ class PlaneOdometry:
         cov = None if isinstance(m.motion, MotionFailure) else self._covariance(idx, m)
         if m.motion is None or (isinstance(m.motion, MotionEstimate) and not m.motion.prior_dof):
             self._update_map(idx, obs, dframe, T, m)  # 7: only measured poses
+        elif isinstance(m.motion, MotionFailure) and prior is not None and dframe is not None:
+            m = replace(m, motion=self._restart(idx, obs, dframe, T, m.motion))
         self._prev = obs
         res = self._result(idx, obs, T, m, t0, cov)
         self.results.append(res)
@@ -451,12 +455,12 @@ class PlaneOdometry:
     def _measure(
         self, idx: int, obs: PlaneObservation, dframe: DenseFrame | None, pred: _Prediction
     ) -> _Measured:
-        """Stages 3-5. With a motion prior and the dense step to come, the planes' texture
-        searches are left out first: the planes fix what they can, the prior starts the rest
-        and the dense alignment measures it (the image solves what the planes leave free).
-        Only when that fails - e.g. too little overlap for the pixels to judge - are the
-        texture searches run and the frame measured again."""
-        if pred.prior is not None and dframe is not None and self._keyframe is not None:
+        """Stages 3-5. With the dense step to come, the planes' texture searches are left out
+        first: the planes fix what they can, the prior or the prediction starts the rest and
+        the dense alignment measures it (the image solves what the planes leave free). Only
+        when that fails - e.g. too little overlap for the pixels to judge - are the texture
+        searches run and the frame measured again."""
+        if dframe is not None and self._keyframe is not None:
             m = self._verify(idx, obs, dframe, pred, *self._planes(obs, pred, texture=False))
             if not isinstance(m.motion, MotionFailure):
                 return m
@@ -487,12 +491,15 @@ class PlaneOdometry:
             if (
                 plane is not None
                 and not plane[1].prior_dof
+                and pred.prior is None
                 and self._plane_overlap < self.settings.gates.min_overlap
                 and self._depth_agrees(obs, plane[2])
             ):
                 # a large motion: the frames share too few pixels for the dense step to
                 # judge; the plane solution stands on the planes' own checks (depth
-                # consistency, association) and says so
+                # consistency, association) and says so. Not with a motion prior: that
+                # measured the motion already, and the frame fails to it (and restarts from
+                # it) rather than rest on an unverified plane solution
                 note = (
                     f"dense check inconclusive (overlap {self._plane_overlap:.2f}): "
                     f"planes only, depth check {self._depth_note}"
@@ -515,6 +522,35 @@ class PlaneOdometry:
         assert failure is not None
         return _Measured(pred.T, pred.step, failure, failure.case)
 
+    def _restart(
+        self,
+        idx: int,
+        obs: PlaneObservation,
+        dframe: DenseFrame,
+        T: NDArray[np.float64],
+        failure: MotionFailure,
+    ) -> MotionFailure:
+        """Tracking restarts from a failed frame that has a motion prior: it becomes the
+        keyframe and the frame-to-frame reference at the pose the prior put it (it stays a
+        failure, not merged into the map, and its covariance is unknown), so the next frames'
+        motions are measured against it - their steps are right, their poses carry the prior's
+        error of this one step - instead of failing against references the view has left
+        (the older keyframes stay for revisits). Without a prior the pose would be a
+        constant-velocity guess, and every later pose would be off by that guess while
+        reported tracked: such a frame stays failed, and the next frames keep trying the old
+        references."""
+        log.info("frame %d: motion failed; tracking restarts from the prior's pose", idx)
+        self._anchor = (obs, T)
+        self._last_good = (idx, dframe, T)
+        self._keyframe = (idx, dframe, T)
+        self._keyframes.append(self._keyframe)
+        if len(self._keyframes) > self.settings.max_keyframes:
+            dropped = self._keyframes.pop(1)
+            self._keyframe_best_overlap.pop(dropped[0], None)
+        return replace(
+            failure, reason=f"{failure.reason}; tracking restarts from this frame's prediction"
+        )
+
     def _update_map(
         self,
         idx: int,
@@ -527,7 +563,7 @@ class PlaneOdometry:
         with dense data, of the keyframes; a *map keyframe* (:meth:`_is_map_keyframe`) merges
         all its planes into the map, any other frame only its planes the map does not have."""
         s = self.settings
-        key = self._is_map_keyframe(T, m)
+        key = self._is_map_keyframe(T)
         self.map.merge(
             obs,
             T,
@@ -552,13 +588,14 @@ class PlaneOdometry:
             self._last_good = (idx, dframe, T)
             self._update_keyframe(idx, dframe, T, m.dense, m.reference)
 
-    def _is_map_keyframe(self, T: NDArray[np.float64], m: _Measured) -> bool:
-        """Does the measured frame merge into the map's existing planes? The first frame; a
-        frame the map did not track (frame-to-frame or dense from the prediction: the map
-        lacks what it sees); a frame ``map_keyframe_distance`` / ``map_keyframe_angle_deg``
-        from the last such frame. Any other frame adds only its new planes."""
+    def _is_map_keyframe(self, T: NDArray[np.float64]) -> bool:
+        """Does the measured frame merge into the map's existing planes? The first frame, and
+        a frame ``map_keyframe_distance`` / ``map_keyframe_angle_deg`` from the last such
+        frame, however it was tracked (a frame the map planes did not track - frame-to-frame,
+        or dense from the prediction in a view of 1-2 plane directions - still adds the
+        planes the map lacks). Any other frame adds only its new planes."""
         s = self.settings
-        if self._merged_at is None or not m.source.startswith("map"):
+        if self._merged_at is None:
             return True
         return _differs(self._merged_at, T, s.map_keyframe_distance, s.map_keyframe_angle_deg)
 
