@@ -63,7 +63,14 @@ from navkit.geometry import se3_inverse
 from navkit.geometry._validate import check_settings
 from navkit.geometry.transforms import se3_adjoint
 from navkit.jit import kernels_enabled
-from navkit.planes.dense import DenseFrame, DenseResult, DenseSettings, _dense_align, rigid
+from navkit.planes.dense import (
+    DenseFrame,
+    DenseGates,
+    DenseResult,
+    DenseSettings,
+    _dense_align,
+    rigid,
+)
 from navkit.planes.frame import PlaneObservation
 from navkit.planes.motion import (
     MotionPrior,
@@ -72,14 +79,7 @@ from navkit.planes.motion import (
     depth_consistency,
     estimate_motion,
 )
-from navkit.planes.noise import (
-    DOF_NAMES,
-    DepthNoise,
-    PlaneFit,
-    fit_plane,
-    free_directions,
-    plane_pair_information,
-)
+from navkit.planes.noise import DOF_NAMES, DepthNoise, free_directions, segments_information
 from navkit.planes.plane_map import MapView, PlaneMap
 from navkit.planes.solve import MotionEstimate, MotionFailure, normal_rank
 from navkit.results import Result, deprecated_alias
@@ -87,66 +87,6 @@ from navkit.results import Result, deprecated_alias
 __all__ = ["DenseGates", "FrameMotion", "OdometrySettings", "PlaneOdometry", "ros_pose_covariance"]
 
 log = logging.getLogger(__name__)
-
-
-@dataclass(frozen=True)
-class DenseGates:
-    """When a densely refined motion (:func:`~navkit.planes.dense.dense_align`) is accepted.
-
-    All must hold at the finest level, else the frame becomes an explicit failure (never a
-    silent pose). The residual gates are in the sensor's own noise units
-    (:mod:`navkit.planes.noise`): the point-to-plane RMS in sigmas of the depth noise at each
-    point's depth (``sqrt(2) k z^2``), the brightness RMS in sigmas of the images' own
-    brightness noise; overlap and inliers are fractions. One set serves every sequence.
-
-    Calibration (``docs/planes.md``, "How the gates were chosen"; ``python -m
-    benchmarks.planes_gates``): the dense step was started from the reference motion spoiled
-    by 0-80 cm (0-20 deg) on pairs 1 and 10 frames apart of both shared sequences. Right
-    results (within 3 cm / 1.5 deg) left <= 1.01 depth sigmas on 7-Scenes and <= 0.84 on TUM,
-    overlap >= 0.84 and inliers >= 0.99 on both, <= 14.9 brightness sigmas on 7-Scenes (colour
-    not registered with depth) and <= 3.4 on TUM; all pass these gates. Of the results off by
-    more than 5 cm or 2 deg, 1 of 31 passes on 7-Scenes (5.2 cm) and 2 of 17 on TUM (at most
-    10.2 cm / 0.6 deg, from starts 80 cm / 20 deg off in its repeating zig-zag; no odometry
-    start is that far off).
-
-    Attributes
-    ----------
-    max_geometric_sigmas : float
-        RMS of the inliers' point-to-plane residuals, in depth-noise sigmas.
-    max_photometric_sigmas : float
-        RMS of the inliers' brightness residuals, in brightness-noise sigmas.
-    min_overlap : float
-        Fraction of the frame's points landing on the reference frame with agreeing depth.
-    min_inliers : float
-        Fraction of those within 3 robust sigmas.
-    """
-
-    max_geometric_sigmas: float = 1.5
-    max_photometric_sigmas: float = 20.0
-    min_overlap: float = 0.3
-    min_inliers: float = 0.6
-
-    def __post_init__(self) -> None:
-        check_settings(self)
-
-    def check(self, r: DenseResult) -> str:
-        """Empty when ``r`` passes, else the reason."""
-        bad = []
-        if not r.photometric_sigmas <= self.max_photometric_sigmas:
-            bad.append(
-                f"photometric rms {r.photometric_sigmas:.1f} sigma > "
-                f"{self.max_photometric_sigmas} (brightness sigma {r.brightness_sigma:.4f})"
-            )
-        if not r.geometric_sigmas <= self.max_geometric_sigmas:
-            bad.append(
-                f"geometric rms {r.geometric_sigmas:.2f} sigma_depth > "
-                f"{self.max_geometric_sigmas} ({100 * r.rms_geometric:.1f} cm)"
-            )
-        if not r.overlap >= self.min_overlap:
-            bad.append(f"overlap {r.overlap:.2f} < {self.min_overlap}")
-        if not r.inliers >= self.min_inliers:
-            bad.append(f"inliers {r.inliers:.2f} < {self.min_inliers}")
-        return "; ".join(bad)
 
 
 @dataclass(frozen=True)
@@ -636,12 +576,8 @@ class PlaneOdometry:
         H = np.zeros((6, 6))
         if motion is not None and motion.pairs:
             noise = s.dense.noise if s.dense is not None else DepthNoise()
-            X = np.asarray(obs.points).reshape(-1, 3)
-            I3, z3 = np.eye(3), np.zeros(3)
-            for _, j in motion.pairs:
-                f = _segment_fit(X, obs.segments[j].inliers, noise)
-                if f is not None:
-                    H += plane_pair_information(f, f, I3, z3)
+            inliers = [obs.segments[j].inliers for _, j in motion.pairs]
+            H = segments_information(np.asarray(obs.points).reshape(-1, 3), inliers, noise)
         if not H.any():
             return H, DOF_NAMES
         free, _, _ = free_directions(H, s.plane_free_translation, s.plane_free_rotation_deg)
@@ -959,24 +895,6 @@ class PlaneOdometry:
     def relative(self, i: int, j: int) -> NDArray[np.float64]:
         """``T_i_j`` from the chained poses."""
         return se3_inverse(self.poses[i]) @ self.poses[j]
-
-
-_FIT_POINTS = 2000  # points per plane fit of the degeneracy analysis
-
-
-def _segment_fit(
-    X: NDArray[np.float64], inliers: NDArray[np.int64], noise: DepthNoise
-) -> PlaneFit | None:
-    """The noise-weighted fit of a segment's points (every k-th of them, at most about
-    ``_FIT_POINTS``: a regular subsample's covariance divided by the step is the whole set's
-    in expectation, at a fraction of the CPU); None with fewer than 3 finite points."""
-    step = max(1, len(inliers) // _FIT_POINTS)
-    P = X[inliers[::step]]
-    P = P[np.isfinite(P).all(axis=1)]
-    if len(P) < 3:
-        return None
-    f = fit_plane(P, noise)
-    return replace(f, cov=f.cov / step, count=len(P) * step)
 
 
 def _differs(Ta: NDArray[np.float64], Tb: NDArray[np.float64], dist: float, deg: float) -> bool:
