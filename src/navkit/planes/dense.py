@@ -658,13 +658,13 @@ def _dense_align(
             rG, JG, rI, JI, idx, _ = _terms(tgt, src, T, s, lev, sigma_b, compiled, gain)
             if len(rG) < 50:
                 break
-            gain = _exposure(src.src_gray[idx], rI, sigma_b, gain, s.huber)
             # residuals are in noise sigmas; the robust scale (never below one sigma) absorbs
             # what the noise model misses (misalignment at coarse levels, model error)
             sG = _robust_scale(rG, 1.0)
             sI = _robust_scale(rI, 1.0)
             wG = _huber(rG / sG, s.huber) / sG**2
             wI = s.photometric_weight * _huber(rI / sI, s.huber) / sI**2
+            gain_next = _exposure(src.src_gray[idx], rI, sigma_b, gain, wI)
             H_G, g_G = _normal_equations(JG, wG, rG, compiled)
             H_I, g_I = _normal_equations(JI, wI, rI, compiled)
             g = g_G + g_I
@@ -674,6 +674,7 @@ def _dense_align(
             except np.linalg.LinAlgError:
                 break
             T = _exp_se3(xi) @ T
+            gain = gain_next  # pose and exposure, both from this step's residuals
             moved_px = f * (np.abs(xi[3:]).max() + np.abs(xi[:3]).max() / max(z_typ, 0.1))
             converged = bool(moved_px < tol_px)
             if converged:
@@ -705,27 +706,29 @@ def _dense_align(
 
 
 def _exposure(
-    g: NDArray[np.float64], rI: NDArray[np.float64], sigma_b: float, current: float, huber: float
+    g: NDArray[np.float64],
+    rI: NDArray[np.float64],
+    sigma_b: float,
+    current: float,
+    w: NDArray[np.float64],
 ) -> float:
     """The exposure gain with which the source brightness ``g`` of the correspondences best
     predicts the target's (``gain g``; the target's brightness is ``current g + rI sigma_b``):
-    a robust fit through the origin (Huber weights on the residuals in their robust scale, two
-    reweightings). Auto-exposure scales a camera's brightness from frame to frame; without
-    this the photometric term reads the change as motion. A gain, not gain and offset: an
-    exposure change multiplies the light a pixel collects, and an offset free to move takes up
-    other misfits too (on 7-Scenes, whose colour is not registered with its depth, it cost
+    the least-squares fit through the origin with the photometric term's robust weights ``w``
+    of this Gauss-Newton step (refitted at every step, it is reweighted as the alignment
+    converges). Auto-exposure scales a camera's brightness from frame to frame; without this
+    the photometric term reads the change as motion. A gain, not gain and offset: an exposure
+    change multiplies the light a pixel collects, and an offset free to move takes up other
+    misfits too (on 7-Scenes, whose colour is not registered with its depth, it cost
     accuracy). The gain stays within [0.5, 2] (a larger jump is a scene change, not an
     exposure step); with fewer than 50 correspondences it stays ``current``."""
     if len(g) < 50:
         return current
-    y = current * g + rI * sigma_b
-    w = np.ones_like(g)
-    a = current
-    for _ in range(3):
-        wg = w * g
-        a = float(wg @ y / max(float(wg @ g), 1e-12))
-        r = y - a * g
-        w = _huber(r / _robust_scale(r, sigma_b), huber)
+    wg = w * g
+    den = float(wg @ g)
+    if den <= 0.0:
+        return current
+    a = float(wg @ (current * g + rI * sigma_b)) / den
     return float(np.clip(a, 0.5, 2.0))
 
 
