@@ -91,8 +91,8 @@ class DenseSettings:
         on 7-Scenes, colour not registered with the depth). Measured with ``PlaneOdometry``
         on every frame of three sequences - 7-Scenes, TUM fr3 structure-notexture-far and the
         simulated Kinect room of ``tests/planes/test_sequences.py`` - RPE median (cm) at
-        weights 0.2, 0.3, 0.4, 0.5, 1.0: 7-Scenes 0.191, 0.184, 0.192, 0.199, 0.225; TUM 0.167,
-        0.151, 0.161, 0.165, 0.170; simulated 0.230, 0.260, 0.230, 0.255, 0.411 (ATEs in
+        weights 0.2, 0.3, 0.4, 0.5, 1.0: 7-Scenes 0.193, 0.189, 0.193, 0.194, 0.225; TUM 0.166,
+        0.155, 0.160, 0.165, 0.170; simulated 0.230, 0.260, 0.230, 0.255, 0.411 (ATEs in
         docs/planes.md). 0.3 has the lowest RPE on both real sequences; on the simulated room
         0.2-0.5 are within 0.03 cm of each other, and 1.0 is worst everywhere.
     noise : DepthNoise
