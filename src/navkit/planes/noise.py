@@ -205,8 +205,9 @@ def free_directions(
     return tuple(free), sig_t, sig_r
 
 
-_FIT_POINTS = 2000
-"""Points per plane fit of :func:`segments_information` (a regular subsample)."""
+_FIT_POINTS = 500
+"""Points per plane fit of :func:`segments_information` (a regular subsample: the fit is a
+report - which directions the planes leave free - and 500 points give its covariance to ~6 %)."""
 
 
 def segments_information(
@@ -214,7 +215,7 @@ def segments_information(
 ) -> NDArray[np.float64]:
     """``(6, 6)`` information the planes of one frame give about its motion: each segment's
     points (``points[inliers[k]]``, ``(N, 3)`` sensor frame) fitted with the depth noise
-    (:func:`fit_plane`; every k-th point, at most about 2000: a regular subsample's covariance
+    (:func:`fit_plane`; every k-th point, at most about 500: a regular subsample's covariance
     divided by the step is the whole set's in expectation, at a fraction of the CPU), each fit
     standing for both sides of its pair (:func:`plane_pair_information` at the identity).
     Segments with fewer than 3 finite points add nothing."""
