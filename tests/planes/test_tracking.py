@@ -329,7 +329,7 @@ def test_slambook_sequence_is_flagged_and_recovers_the_second_motion(data_path):
     onto frame 2's predicted pose (that gave a 52 cm / 28 deg error reported as tracked): it is
     tracked within 5 cm / 2 deg or an explicit failure (measured: a failure). The pair 2 -> 3
     alone (73 cm / 5.6 deg, >= 3 planes, global association, then the dense step from the
-    plane solution) is within 5 cm / 2 deg (measured 2.5 cm / 0.67 deg; planes alone 9.3 cm /
+    plane solution) is within 5 cm / 2 deg (measured 2.5 cm / 0.73 deg; planes alone 9.3 cm /
     2.96 deg)."""
     from navkit.geometry import se3_from_xyz_quat
     from navkit.io.rgbd import read_simple_rgbd
