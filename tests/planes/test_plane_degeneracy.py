@@ -65,17 +65,31 @@ def test_a_corridor_leaves_the_translation_along_it_free():
         assert r.plane_information.any()
 
 
-def test_a_room_corner_leaves_nothing_free():
-    """Floor, end wall and side wall: three plane directions fix all six."""
+def _corner(y_left: float, x_end: float, end_len: float, box_at, box: float) -> Scene:
+    """A floor, a side wall at ``y = y_left`` and an end wall at ``x = x_end`` (``end_len``
+    long), and a cube of side ``box``: three plane directions."""
     tex = Texture("noise", scale=0.3, seed=5)
-    room = Scene(
+    return Scene(
         [
             Ground(texture=tex, name="floor"),
-            Wall(origin=(-1, 1.5, 0), u=(6, 0, 0), v=(0, 0, 2.8), texture=tex, name="left"),
-            Wall(origin=(5, 1.5, 0), u=(0, -4, 0), v=(0, 0, 2.8), texture=tex, name="end"),
-            Box((3.0, -0.6, 0.3), (0.6, 0.6, 0.6), texture=tex, name="box"),
+            Wall(
+                origin=(-1, y_left, 0), u=(x_end + 1, 0, 0), v=(0, 0, 2.8), texture=tex, name="left"
+            ),
+            Wall(
+                origin=(x_end, y_left, 0),
+                u=(0, -end_len, 0),
+                v=(0, 0, 2.8),
+                texture=tex,
+                name="end",
+            ),
+            Box(box_at, (box, box, box), texture=tex, name="box"),
         ]
     )
+
+
+def test_a_room_corner_leaves_nothing_free():
+    """Floor, end wall and side wall: three plane directions fix all six."""
+    room = _corner(1.5, 5.0, 4.0, (3.0, -0.6, 0.3), 0.6)
     res = _track(room)
     moved = [r for r in res[1:] if isinstance(r, FrameMotion)]
     assert len(moved) == 2, res
@@ -181,15 +195,7 @@ def test_tracking_restarts_after_the_view_leaves_every_keyframe():
     camera is in a room - a kidnapped robot, or a camera that was covered): that frame is a
     failure, it becomes the new reference at the prior's pose, and the steps after it are
     measured again. Without the restart every later frame failed against the old keyframes."""
-    tex = Texture("noise", scale=0.3, seed=5)
-    room = Scene(
-        [
-            Ground(texture=tex, name="floor"),
-            Wall(origin=(-1, 0.9, 0), u=(4, 0, 0), v=(0, 0, 2.8), texture=tex, name="left"),
-            Wall(origin=(2.2, 0.9, 0), u=(0, -3, 0), v=(0, 0, 2.8), texture=tex, name="end"),
-            Box((1.5, -0.5, 0.2), (0.4, 0.4, 0.4), texture=tex, name="box"),
-        ]
-    )
+    room = _corner(0.9, 2.2, 3.0, (1.5, -0.5, 0.2), 0.4)
     poses = _poses(7, 0.015)
     obs = _frames(_corridor(), poses[:3]) + _frames(room, poses[3:])
     off = se3_from_rt(Rotation.from_euler("y", 0.5, degrees=True).as_matrix(), [0, 0, 0.03])
