@@ -337,12 +337,12 @@ class DenseGates:
     Calibration (``docs/planes.md``, "How the gates were chosen"; ``python -m
     benchmarks.planes_gates``): the dense step was started from the reference motion spoiled
     by 0-80 cm (0-20 deg) on pairs 1 and 10 frames apart of both shared sequences. Right
-    results (within 3 cm / 1.5 deg) left <= 0.94 depth sigmas on 7-Scenes and <= 0.83 on TUM,
-    overlap >= 0.84 and inliers >= 0.98 on both, <= 15.3 brightness sigmas on 7-Scenes (colour
-    not registered with depth) and <= 2.2 on TUM; all pass these gates. Of the results off by
-    more than 5 cm or 2 deg, none passes on 7-Scenes (29) and 4 of 19 on TUM (at most 18.3 cm /
-    0.9 deg, from starts 40-80 cm / 10-20 deg off in its repeating zig-zag; no odometry start
-    is that far off).
+    results (within 3 cm / 1.5 deg) left <= 0.98 depth sigmas on 7-Scenes and <= 0.83 on TUM,
+    overlap >= 0.84 and inliers >= 0.99 on both, <= 13.1 brightness sigmas on 7-Scenes (colour
+    not registered with depth) and <= 2.0 on TUM; all pass these gates. Of the results off by
+    more than 5 cm or 2 deg, 1 of 30 passes on 7-Scenes (7.2 cm) and 4 of 19 on TUM (at most
+    16.7 cm / 1.0 deg, from starts 40-80 cm / 10-20 deg off in its repeating zig-zag; no
+    odometry start is that far off).
 
     Attributes
     ----------
