@@ -642,15 +642,7 @@ def _detect_tile(
             xy, z, v, simp, comp, owner, vid, boundary, nc, settings, offset
         )
     _tick(clock, "shapes", t)
-    return {
-        "labels": labels,
-        "ground_z": zg,
-        "point_obstacle": point_obstacle,
-        "obstacles": obstacles,
-        "centres": centres,
-        "counts": counts,
-        "info": info,
-    }
+    return {**no_mesh, "obstacles": obstacles, "centres": centres}
 
 
 def _csr_offsets(counts: NDArray[np.int64]) -> NDArray[np.int64]:
